@@ -1,0 +1,297 @@
+//! One fit: a model, a dataset, a loss, multi-start optimisation on a backend, and the
+//! report of DESIGN §8 (best loss, χ²_red, parameters with standard uncertainties).
+
+use crate::backend::{Backend, Evaluator, Problem};
+use crate::dataset::Dataset;
+use crate::loss::{chi2, Loss};
+use crate::model::Model;
+use crate::optim::{compass, lm, random_starts, BatchObjective, BatchResiduals, RestartResult};
+use crate::uncertainty::{covariance, Covariance};
+use serde::Serialize;
+use serde_json::{Map, Value};
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Compass search (Kolda, Lewis, Torczon 2003), BBM's optimizer; any loss.
+    Compass,
+    /// Levenberg–Marquardt; sum-of-squares losses only.
+    Lm,
+}
+
+impl std::fmt::Display for Optimizer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Optimizer::Compass => "compass",
+            Optimizer::Lm => "lm",
+        })
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    pub optimizer: Optimizer,
+    pub restarts: usize,
+    pub seed: u64,
+    pub compass: compass::CompassOptions,
+    pub lm: lm::LmOptions,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            optimizer: Optimizer::Compass,
+            restarts: 32,
+            seed: 1,
+            compass: Default::default(),
+            lm: Default::default(),
+        }
+    }
+}
+
+/// The best parameters of a fit (DESIGN §8 `best`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Best {
+    pub loss: f64,
+    pub chi2_red: f64,
+    /// Parameter name → value (an array per channel for rgb parameters).
+    pub params: Map<String, Value>,
+    /// Standard uncertainties, same shape; null where the data does not determine it.
+    pub param_std: Map<String, Value>,
+}
+
+/// The JSON report of one fit (DESIGN §8), with extras after the contract's fields.
+#[derive(Clone, Debug, Serialize)]
+pub struct FitReport {
+    pub model: String,
+    pub loss: String,
+    pub weights: String,
+    pub optimizer: String,
+    pub backend: String,
+    pub restarts: usize,
+    pub evaluations: u64,
+    pub seconds: f64,
+    pub best: Best,
+    pub data: String,
+    pub material: String,
+    pub samples: usize,
+    pub channels: Vec<f64>,
+    pub seed: u64,
+    /// Restarts whose final loss is within 1% of the best (a multi-modality signal).
+    pub restarts_within_1pct: usize,
+    /// Parameter names of the flat vector (rgb parameters as `name[c]`).
+    pub flat_names: Vec<String>,
+    pub flat_params: Vec<f64>,
+    pub flat_std: Vec<Option<f64>>,
+    /// Correlation matrix of the flat parameters (null entries where undetermined).
+    pub correlation: Vec<Vec<Option<f64>>>,
+    pub warnings: Vec<String>,
+}
+
+/// Adapts an evaluator (physical parameters) to the optimizers' unit box.
+pub struct UnitBox<'m, 'e> {
+    pub model: &'m Model,
+    pub eval: &'m mut (dyn Evaluator + 'e),
+    pub loss_terms: Option<crate::loss::LossTerms>,
+}
+
+impl UnitBox<'_, '_> {
+    fn to_physical(&self, points: &[f64]) -> Vec<f64> {
+        points.chunks(self.model.dim).flat_map(|u| self.model.from_unit(u)).collect()
+    }
+}
+
+impl BatchObjective for UnitBox<'_, '_> {
+    fn dim(&self) -> usize {
+        self.model.dim
+    }
+    fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let phys = self.to_physical(points);
+        self.eval.costs(&phys)
+    }
+}
+
+impl BatchResiduals for UnitBox<'_, '_> {
+    fn residuals(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let phys = self.to_physical(points);
+        let values = self.eval.values(&phys)?;
+        let t = self.loss_terms.as_ref().expect("residuals need loss terms");
+        let k = t.y.len();
+        Ok(values
+            .chunks(k)
+            .flat_map(|row| row.iter().enumerate().map(|(j, &v)| t.residual(j, v)))
+            .collect())
+    }
+    fn residual_count(&self) -> usize {
+        self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0)
+    }
+}
+
+/// Fit `model` to `data` under `loss`.
+pub fn fit(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<FitReport> {
+    anyhow::ensure!(
+        model.kind == data.kind,
+        "model {} is a {} model but {} holds {} data",
+        model.spec,
+        model.kind,
+        data.source.display(),
+        data.kind
+    );
+    anyhow::ensure!(
+        data.len() > model.dim,
+        "{}: {} samples cannot determine the {} parameters of {}",
+        data.source.display(),
+        data.len(),
+        model.dim,
+        model.spec
+    );
+    anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
+    let t0 = Instant::now();
+    let problem = Problem { model, data, loss };
+    let mut eval = backend.prepare(problem)?;
+    let starts = random_starts(model.dim, opts.restarts, opts.seed);
+    let results: Vec<RestartResult> = {
+        let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
+        let mut obj = UnitBox { model, eval: eval.as_mut(), loss_terms: terms };
+        match opts.optimizer {
+            Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
+            Optimizer::Lm => {
+                anyhow::ensure!(
+                    loss.is_sum_of_squares(),
+                    "--optimizer lm needs a sum-of-squares loss; {} is not one (use compass)",
+                    loss.metric
+                );
+                let finish = loss.terms(data);
+                lm::minimize(&mut obj, &starts, &opts.lm, &|s| finish.finish_sum(s), progress)?
+            }
+        }
+    };
+    let best_r = results
+        .iter()
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .expect("at least one restart");
+    let tol = best_r.cost.abs() * 0.01 + 1e-300;
+    let within = results.iter().filter(|r| r.cost <= best_r.cost + tol).count();
+    let best_flat = model.from_unit(&best_r.x);
+    let values = eval.values(&best_flat)?;
+    let chi2_red = chi2(data, &values) / (data.len() - model.dim) as f64;
+    let cov = covariance(model, data, loss, eval.as_mut(), &best_flat)?;
+    let evaluations = eval.evaluations();
+    drop(eval);
+    Ok(make_report(
+        model,
+        data,
+        loss,
+        opts,
+        backend,
+        best_r.cost,
+        chi2_red,
+        &best_flat,
+        cov,
+        within,
+        evaluations,
+        t0.elapsed().as_secs_f64(),
+    ))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn make_report(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    opts: &FitOptions,
+    backend: &dyn Backend,
+    best_loss: f64,
+    chi2_red: f64,
+    flat: &[f64],
+    cov: Covariance,
+    within: usize,
+    evaluations: u64,
+    seconds: f64,
+) -> FitReport {
+    let group = |vals: &[Option<f64>]| -> Map<String, Value> {
+        let mut m = Map::new();
+        for p in &model.params {
+            let w = p.width(model.channels);
+            let slice = &vals[p.index..p.index + w];
+            let v = if p.decl.rgb {
+                Value::Array(slice.iter().map(|x| json_num(*x)).collect())
+            } else {
+                json_num(slice[0])
+            };
+            m.insert(p.name.clone(), v);
+        }
+        m
+    };
+    let params = group(&flat.iter().map(|&v| Some(v)).collect::<Vec<_>>());
+    let param_std = group(&cov.std);
+    FitReport {
+        model: model.spec.clone(),
+        loss: loss.metric.to_string(),
+        weights: loss.weights.to_string(),
+        optimizer: opts.optimizer.to_string(),
+        backend: backend.id().to_string(),
+        restarts: opts.restarts,
+        evaluations,
+        seconds,
+        best: Best { loss: best_loss, chi2_red, params, param_std },
+        data: data.source.display().to_string(),
+        material: data.material.clone(),
+        samples: data.len(),
+        channels: data.channels.clone(),
+        seed: opts.seed,
+        restarts_within_1pct: within,
+        flat_names: model.flat_names(),
+        flat_params: flat.to_vec(),
+        flat_std: cov.std,
+        correlation: cov.correlation,
+        warnings: cov.warnings,
+    }
+}
+
+fn json_num(v: Option<f64>) -> Value {
+    match v {
+        Some(x) if x.is_finite() => serde_json::Number::from_f64(x).map(Value::Number).unwrap_or(Value::Null),
+        _ => Value::Null,
+    }
+}
+
+impl FitReport {
+    /// A compact human-readable summary.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "{} on {} ({} samples, {} channel(s)) — loss {}/{} = {:.6e}, χ²_red = {:.3}\n",
+            self.model,
+            self.material,
+            self.samples,
+            self.channels.len(),
+            self.loss,
+            self.weights,
+            self.best.loss,
+            self.best.chi2_red
+        );
+        for (i, name) in self.flat_names.iter().enumerate() {
+            let std = match self.flat_std[i] {
+                Some(s) => format!("± {s:.3e}"),
+                None => "(not determined)".into(),
+            };
+            s += &format!("  {name:<14} = {:<12.6} {std}\n", self.flat_params[i]);
+        }
+        s += &format!(
+            "  {} restarts ({} within 1% of best), {} evaluations, {:.2} s on {}\n",
+            self.restarts, self.restarts_within_1pct, self.evaluations, self.seconds, self.backend
+        );
+        for w in &self.warnings {
+            s += &format!("  warning: {w}\n");
+        }
+        s
+    }
+}

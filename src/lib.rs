@@ -1,0 +1,19 @@
+//! bsdfit: fit BRDF and BTDF models to measured goniometric data with uncertainties.
+//!
+//! - [`dataset`]: the v1 CSV format, validation, channels.
+//! - [`model`]: the catalogue (one file per model, each with a WGSL twin in `shaders/`).
+//! - [`loss`]: the benchmark's losses and χ².
+//! - [`backend`]: the CPU reference and the GPU engine behind one trait.
+//! - [`optim`]: compass search and Levenberg–Marquardt, all restarts in lockstep.
+//! - [`fit`]: one fit and its report; [`uncertainty`]: parameter covariances.
+//! - [`synth`]: synthetic data from known parameters.
+
+pub mod backend;
+pub mod dataset;
+pub mod fit;
+pub mod loss;
+pub mod math;
+pub mod model;
+pub mod optim;
+pub mod synth;
+pub mod uncertainty;

@@ -1,0 +1,204 @@
+//! The `bsdfit` command line (DESIGN §8).
+
+use anyhow::{Context, Result};
+use bsdfit::backend::{self, BackendChoice};
+use bsdfit::dataset::{Dataset, Kind, ReadOptions};
+use bsdfit::fit::{fit, FitOptions, Optimizer};
+use bsdfit::loss::{Loss, Metric, Weights};
+use bsdfit::model::{self, Model};
+use bsdfit::synth;
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "bsdfit", version, about = "Fit BRDF/BTDF models to measured data with uncertainties (GPU batch fitter with a CPU reference)")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Fit one model to one dataset.
+    Fit(FitArgs),
+    /// Write a synthetic dataset from a model with known parameters.
+    Synth(SynthArgs),
+    /// List the model catalogue with its parameters, the losses and the geometries.
+    Models,
+}
+
+#[derive(Args, Clone)]
+struct DataArgs {
+    /// Keep the channels nearest these wavelengths (nm), e.g. 450,550,650.
+    #[arg(long, value_delimiter = ',')]
+    wavelengths: Option<Vec<f64>>,
+    /// Replace zero uncertainties by a floor (max(1%·|value|, 1e-6)) instead of rejecting them.
+    #[arg(long)]
+    allow_zero_uncertainty: bool,
+}
+
+impl DataArgs {
+    fn read(&self, path: &PathBuf) -> Result<Dataset> {
+        let opts = ReadOptions { allow_zero_uncertainty: self.allow_zero_uncertainty, wavelengths: self.wavelengths.clone() };
+        let ds = Dataset::read(path, &opts)?;
+        for n in &ds.notices {
+            eprintln!("note: {n}");
+        }
+        Ok(ds)
+    }
+}
+
+#[derive(Args)]
+struct FitArgs {
+    /// Dataset file (bsdfit CSV v1).
+    data: PathBuf,
+    /// Model spec, e.g. lambert, on, fa(eon), rmg(ggx), btdf(tr)+scale.
+    #[arg(long)]
+    model: String,
+    /// Loss: smape rmse ngan low (BRDF), f cosf logf logcosf (BTDF), chi2 (any).
+    #[arg(long, default_value = "rmse")]
+    loss: String,
+    /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2).
+    #[arg(long, default_value = "uniform")]
+    weights: String,
+    #[arg(long, value_enum, default_value = "compass")]
+    optimizer: Optimizer,
+    /// Number of random restarts (stepped in lockstep).
+    #[arg(long, default_value_t = 32)]
+    restarts: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendChoice,
+    /// Write the fit report (DESIGN §8) as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    #[command(flatten)]
+    data_args: DataArgs,
+}
+
+#[derive(Args)]
+struct SynthArgs {
+    #[arg(long)]
+    model: String,
+    /// Parameter values, e.g. rho=0.5,sigma=0.7 or rho=0.4:0.5:0.6 (one per channel).
+    #[arg(long, default_value = "")]
+    params: String,
+    /// Geometry name (see `bsdfit models`).
+    #[arg(long)]
+    geometry: Option<String>,
+    /// Noise as REL,ABS: u = sqrt((REL·f)² + ABS²).
+    #[arg(long, default_value = "0.015,0.0001")]
+    noise: String,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Wavelengths (nm), one per channel; default 450,550,650 (BRDF) or 633 (BTDF).
+    #[arg(long, value_delimiter = ',')]
+    wavelengths: Option<Vec<f64>>,
+    /// Material name written in the file.
+    #[arg(long)]
+    material: Option<String>,
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Fit(a) => cmd_fit(a),
+        Command::Synth(a) => cmd_synth(a),
+        Command::Models => cmd_models(),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
+    let metric: Metric = loss.parse().map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+    let weights: Weights = weights.parse().map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
+    anyhow::ensure!(metric.applies_to(kind), "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)", Metric::for_kind(kind).iter().map(|m| m.to_string()).collect::<Vec<_>>());
+    Ok(Loss::new(metric, weights))
+}
+
+fn cmd_fit(a: FitArgs) -> Result<()> {
+    let data = a.data_args.read(&a.data)?;
+    let model = Model::parse(&a.model, data.channel_count()).context("--model")?;
+    let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
+    let backend = backend::select(a.backend, &mut |m| eprintln!("{m}"))?;
+    let opts = FitOptions { optimizer: a.optimizer, restarts: a.restarts, seed: a.seed, ..Default::default() };
+    let bar = indicatif::ProgressBar::new(a.restarts as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+    bar.set_message(format!("fitting {}", model.spec));
+    let report = fit(&model, &data, loss, backend.as_ref(), &opts, &mut |active| bar.set_position((a.restarts - active) as u64))?;
+    bar.finish_and_clear();
+    print!("{}", report.summary());
+    if let Some(path) = &a.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn cmd_synth(a: SynthArgs) -> Result<()> {
+    let ast_kind = if a.model.trim_start().starts_with("btdf") { Kind::Btdf } else { Kind::Brdf };
+    let wavelengths = a.wavelengths.clone().unwrap_or_else(|| match ast_kind {
+        Kind::Brdf => vec![450.0, 550.0, 650.0],
+        Kind::Btdf => vec![633.0],
+    });
+    let model = Model::parse(&a.model, wavelengths.len()).context("--model")?;
+    let geometry = a.geometry.clone().unwrap_or_else(|| match model.kind {
+        Kind::Brdf => "inplane10".into(),
+        Kind::Btdf => "oblique".into(),
+    });
+    let (gkind, rows) = synth::geometry(&geometry).map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    anyhow::ensure!(gkind == model.kind, "--geometry {geometry} is a {gkind} geometry but {} is a {} model", model.spec, model.kind);
+    let flat = model.params_from_assignments(&a.params)?;
+    let (rel, abs) = a
+        .noise
+        .split_once(',')
+        .and_then(|(r, s)| Some((r.trim().parse::<f64>().ok()?, s.trim().parse::<f64>().ok()?)))
+        .ok_or_else(|| anyhow::anyhow!("--noise: expected REL,ABS such as 0.015,0.0001, got '{}'", a.noise))?;
+    let material = a.material.clone().unwrap_or_else(|| format!("synthetic {}", model.spec));
+    let mut ds = synth::synthesize(&model, &flat, &rows, &wavelengths, synth::Noise { rel, abs }, a.seed, &material).map_err(|e| anyhow::anyhow!(e))?;
+    ds.meta.insert("synth_geometry".into(), geometry.clone());
+    ds.write(&a.out)?;
+    eprintln!("wrote {} ({} samples, {} channel(s), geometry {geometry})", a.out.display(), ds.len(), ds.channel_count());
+    Ok(())
+}
+
+fn cmd_models() -> Result<()> {
+    println!("Models (spec strings; nested parameters are prefixed by role, rgb = one value per channel):");
+    let mut examples: Vec<String> = model::catalogue(Kind::Brdf);
+    examples.push("lambert+retro".into());
+    examples.extend(model::catalogue(Kind::Btdf));
+    for (name, _, doc) in model::TERMS {
+        println!("  {name:<8} {doc}");
+    }
+    for (name, _, doc) in model::SUFFIXES {
+        println!("  +{name:<7} {doc}");
+    }
+    println!("\nCatalogue:");
+    for spec in examples {
+        match Model::parse(&spec, 3) {
+            Ok(m) => {
+                let ps: Vec<String> = m
+                    .params
+                    .iter()
+                    .map(|p| format!("{}{} [{}, {}]", p.name, if p.decl.rgb { " rgb" } else { "" }, p.decl.lo, p.decl.hi))
+                    .collect();
+                println!("  {spec:<22} {}", ps.join("; "));
+            }
+            Err(e) => println!("  {spec:<22} unavailable: {e}"),
+        }
+    }
+    println!("\nLosses: smape rmse ngan low (BRDF); f cosf logf logcosf (BTDF); chi2 (any)");
+    println!("Weights: uniform relunc invunc");
+    println!("\nSynthetic geometries:");
+    for g in synth::GEOMETRIES {
+        println!("  {:<10} {:<5} {}", g.name, g.kind.to_string(), g.doc);
+    }
+    Ok(())
+}

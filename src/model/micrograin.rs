@@ -1,0 +1,1 @@
+//! Micrograin layer shared math (placeholder).
