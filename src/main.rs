@@ -103,6 +103,11 @@ struct SynthArgs {
 }
 
 fn main() {
+    // Mesa's Vulkan loader complains on stderr when XDG_RUNTIME_DIR is unset (headless
+    // machines, CI); we never present to a window, so any existing directory will do.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit(a) => cmd_fit(a),

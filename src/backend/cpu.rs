@@ -74,12 +74,7 @@ impl Evaluator for CpuEvaluator<'_> {
             .map(|flat| {
                 let mut sum = 0.0;
                 self.for_each_value(flat, |k, v| sum += self.terms.term_at(k, v));
-                let c = self.terms.finish_sum(sum);
-                if c.is_nan() {
-                    f64::INFINITY
-                } else {
-                    c
-                }
+                self.terms.finish_sum(sum)
             })
             .collect();
         self.evaluations

@@ -10,6 +10,7 @@ use crate::model::Model;
 
 pub mod cpu;
 pub mod gpu;
+pub mod wgsl;
 
 /// One fitting problem: a model compiled for the dataset's channels, the data, the loss.
 #[derive(Clone, Copy)]
@@ -32,7 +33,8 @@ pub trait Backend: Send + Sync {
 pub trait Evaluator {
     /// P, the length of one parameter vector.
     fn dim(&self) -> usize;
-    /// The loss of each of the N candidates.
+    /// The loss of each of the N candidates (NaN where the model is not finite; the
+    /// optimizers treat NaN as +∞).
     fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;
     /// Model values y′ for each candidate and sample (N × K, row-major).
     fn values(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;

@@ -105,6 +105,10 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
         true
     }
     fn wgsl(&self) -> WgslFn;
+    /// A lookup table the WGSL twin reads as `LUT` (f32 copy of the CPU's f64 table), if any.
+    fn lut(&self) -> Option<Vec<f32>> {
+        None
+    }
 }
 
 /// A node with its children and its offset into the per-channel scalar view.

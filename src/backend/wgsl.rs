@@ -1,0 +1,94 @@
+//! Composition of one WGSL module per (model tree, loss shape): WGSL has no function
+//! pointers, so the host writes `eval_model` for the tree, calling each node's function
+//! (from its `shaders/<model>.wgsl`) with its offset into the scalar view.
+
+use crate::loss::{Finish, Term};
+use crate::model::{Model, Node};
+
+pub const COMMON: &str = include_str!("../../shaders/common.wgsl");
+pub const LOSS: &str = include_str!("../../shaders/loss.wgsl");
+pub const KERNEL: &str = include_str!("../../shaders/kernel.wgsl");
+
+/// Threads per workgroup (one workgroup per candidate).
+pub const WORKGROUP_SIZE: u32 = 64;
+
+fn term_code(t: Term) -> u32 {
+    match t {
+        Term::AbsRatio => 0,
+        Term::Square => 1,
+        Term::LogSquare => 2,
+    }
+}
+
+fn finish_code(f: Finish) -> u32 {
+    match f {
+        Finish::Mean => 0,
+        Finish::SqrtMean => 1,
+        Finish::Sum => 2,
+    }
+}
+
+/// The generated `eval_model`: children first (post-order), then each combinator.
+pub fn eval_model_source(model: &Model) -> String {
+    fn emit(node: &Node, body: &mut String, counter: &mut usize) -> String {
+        let args: Vec<String> = node.children.iter().map(|c| emit(c, body, counter)).collect();
+        let name = format!("v{}", *counter);
+        *counter += 1;
+        let w = node.bsdf.wgsl();
+        let mut call = format!("{}(b + {}u, wi, wo", w.function, node.offset);
+        for a in &args {
+            call += ", ";
+            call += a;
+        }
+        call += ")";
+        body.push_str(&format!("    let {name} = {call};\n"));
+        name
+    }
+    let mut body = String::new();
+    let mut counter = 0;
+    let root = emit(&model.root, &mut body, &mut counter);
+    format!(
+        "// Generated for `{}`: b is the channel's base index into P.\nfn eval_model(wi: vec3<f32>, wo: vec3<f32>, b: u32) -> f32 {{\n{body}    return {root};\n}}\n",
+        model.spec
+    )
+}
+
+/// The full module for a model and a loss shape.
+pub fn compose(model: &Model, term: Term, finish: Finish) -> String {
+    let s = model.scalar_count();
+    let c = model.channels;
+    let mut src = format!(
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst WG: u32 = {WORKGROUP_SIZE}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        model.spec,
+        c,
+        term_code(term),
+        finish_code(finish),
+        (s * c).max(1)
+    );
+    src += COMMON;
+    let mut included: Vec<&str> = Vec::new();
+    for node in model.nodes() {
+        for (name, text) in node.bsdf.wgsl().sources {
+            if !included.contains(&name) {
+                included.push(name);
+                src += &format!("\n// ---- shaders/{name}.wgsl\n");
+                src += text;
+            }
+        }
+    }
+    src += "\n";
+    src += &eval_model_source(model);
+    src += "\n";
+    src += LOSS;
+    src += "\n";
+    src += KERNEL;
+    src
+}
+
+/// Parse and validate a module with naga (no device needed).
+pub fn validate(source: &str) -> Result<naga::Module, String> {
+    let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
+    let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty());
+    v.validate(&module).map_err(|e| e.emit_to_string(source))?;
+    Ok(module)
+}
