@@ -1,13 +1,20 @@
-// Batched evaluation kernels. One workgroup per candidate parameter vector: its threads
-// stride over every (sample, channel) pair, then reduce in workgroup memory to one cost —
-// no per-sample read-back. `values` writes y′ per sample instead (LM, diagnostics).
-// The host composes this file after common.wgsl, the model files, the generated
-// `eval_model`, and loss.wgsl (src/backend/wgsl.rs).
+// Batched evaluation kernels. A workgroup is CL candidate lanes × SL sample slices:
+// thread (lane, slice) evaluates candidate `lane` on samples slice, slice + SL, …, then
+// the SL partial sums of each candidate are reduced in workgroup memory to one cost — no
+// per-sample read-back. `values` writes y′ per sample instead (LM, diagnostics).
+//
+// Why this shape: neighbouring threads (x = lane) hold different candidates but read the
+// same sample at the same time, so sample loads are broadcasts and only the parameters
+// differ per thread. On a SIMD CPU device (lavapipe) SL = 1: each thread walks all
+// samples with a loop counter the compiler sees as uniform, the fastest form there; on a
+// GPU SL > 1 keeps enough threads in flight when candidates are few.
+// Samples arrive sorted by channel and the channel loop is outermost, so a thread's
+// parameter reads P[ch * S + j] use the same offsets in every thread.
 
 struct Sample {
     wi: vec4<f32>,   // xyz: incident direction; w: loss weight
     wo: vec4<f32>,   // xyz: outgoing direction; w: inner factor a
-    ext: vec4<f32>,  // x: y, y: g(y), z: channel, w: unused
+    ext: vec4<f32>,  // x: y, y: g(y), z: channel, w: original sample index (bits of a u32)
 }
 
 struct Dims {
@@ -19,16 +26,17 @@ struct Dims {
 
 @group(0) @binding(0) var<uniform> dims: Dims;
 @group(0) @binding(1) var<storage, read> samples: array<Sample>;
-// slots[ch * S + j]: index in a candidate's flat vector of scalar j for channel ch.
+// slots[ch * S + j]: index in a candidate's flat vector of scalar j for channel ch;
+// then slots[S * C + ch] = first sample of channel ch, slots[S * C + C] = sample count.
 @group(0) @binding(2) var<storage, read> slots: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
 // Lookup table of models that need one (GG's Smith Λ); a single zero otherwise.
 @group(0) @binding(5) var<storage, read> LUT: array<f32>;
 
-var<workgroup> partial: array<f32, WG>;
+var<workgroup> partial: array<f32, CL * SL>;
 
-// Resolve the candidate's flat vector into the per-channel scalar views P[ch * S + j].
+// Resolve candidate c's flat vector into this thread's per-channel scalar views.
 fn load_params(c: u32) {
     let base = c * dims.dim;
     for (var j = 0u; j < S * C; j = j + 1u) {
@@ -36,43 +44,54 @@ fn load_params(c: u32) {
     }
 }
 
-@compute @workgroup_size(WG)
-fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let c = wg.x + wg.y * dims.groups_x;
-    if (c >= dims.n_candidates) {
-        return;
-    }
-    load_params(c);
+fn candidate(wg: vec3<u32>, lid: vec3<u32>) -> u32 {
+    return (wg.x + wg.y * dims.groups_x) * CL + lid.x;
+}
+
+@compute @workgroup_size(CL, SL)
+fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let c = candidate(wg, lid);
+    let live = c < dims.n_candidates;
     var acc = 0.0;
-    for (var k = lid; k < dims.n_samples; k = k + WG) {
-        let s = samples[k];
-        let ch = u32(s.ext.z);
-        let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
-        acc = acc + loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
-    }
-    partial[lid] = acc;
-    workgroupBarrier();
-    for (var stride = WG / 2u; stride > 0u; stride = stride / 2u) {
-        if (lid < stride) {
-            partial[lid] = partial[lid] + partial[lid + stride];
+    if (live) {
+        load_params(c);
+        for (var ch = 0u; ch < C; ch = ch + 1u) {
+            let end = slots[S * C + ch + 1u];
+            for (var k = slots[S * C + ch] + lid.y; k < end; k = k + SL) {
+                let s = samples[k];
+                let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+                acc = acc + loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
+            }
         }
-        workgroupBarrier();
     }
-    if (lid == 0u) {
-        out[c] = loss_finish(partial[0], f32(dims.n_samples));
+    if (SL > 1u) {
+        partial[lid.y * CL + lid.x] = acc;
+        workgroupBarrier();
+        for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
+            if (lid.y < stride) {
+                partial[lid.y * CL + lid.x] = partial[lid.y * CL + lid.x] + partial[(lid.y + stride) * CL + lid.x];
+            }
+            workgroupBarrier();
+        }
+        acc = partial[lid.x];
+    }
+    if (live && lid.y == 0u) {
+        out[c] = loss_finish(acc, f32(dims.n_samples));
     }
 }
 
-@compute @workgroup_size(WG)
-fn values(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let c = wg.x + wg.y * dims.groups_x;
+@compute @workgroup_size(CL, SL)
+fn values(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let c = candidate(wg, lid);
     if (c >= dims.n_candidates) {
         return;
     }
     load_params(c);
-    for (var k = lid; k < dims.n_samples; k = k + WG) {
-        let s = samples[k];
-        let ch = u32(s.ext.z);
-        out[c * dims.n_samples + k] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+    for (var ch = 0u; ch < C; ch = ch + 1u) {
+        let end = slots[S * C + ch + 1u];
+        for (var k = slots[S * C + ch] + lid.y; k < end; k = k + SL) {
+            let s = samples[k];
+            out[c * dims.n_samples + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+        }
     }
 }

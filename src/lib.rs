@@ -9,6 +9,7 @@
 //! - [`synth`]: synthetic data from known parameters.
 
 pub mod backend;
+pub mod bench;
 pub mod dataset;
 pub mod fit;
 pub mod loss;

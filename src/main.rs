@@ -25,6 +25,27 @@ enum Command {
     Synth(SynthArgs),
     /// List the model catalogue with its parameters, the losses and the geometries.
     Models,
+    /// Measure CPU and GPU throughput (model-sample evaluations per second).
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Models to measure (default: the whole catalogue, BRDF and BTDF).
+    #[arg(long, value_delimiter = ';')]
+    models: Option<Vec<String>>,
+    /// Restarts per batch; a batch holds restarts × (2P + 1) candidates (one compass poll).
+    #[arg(long, default_value_t = 256)]
+    restarts: usize,
+    /// Minimum measuring time per model and backend (seconds).
+    #[arg(long, default_value_t = 1.0)]
+    seconds: f64,
+    /// Backends to compare: auto (CPU and, if present, GPU), cpu, gpu.
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendChoice,
+    /// Write the rows as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args, Clone)]
@@ -103,16 +124,12 @@ struct SynthArgs {
 }
 
 fn main() {
-    // Mesa's Vulkan loader complains on stderr when XDG_RUNTIME_DIR is unset (headless
-    // machines, CI); we never present to a window, so any existing directory will do.
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
-    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit(a) => cmd_fit(a),
         Command::Synth(a) => cmd_synth(a),
         Command::Models => cmd_models(),
+        Command::Bench(a) => cmd_bench(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -204,6 +221,64 @@ fn cmd_models() -> Result<()> {
     println!("\nSynthetic geometries:");
     for g in synth::GEOMETRIES {
         println!("  {:<10} {:<5} {}", g.name, g.kind.to_string(), g.doc);
+    }
+    Ok(())
+}
+
+fn cmd_bench(a: BenchArgs) -> Result<()> {
+    use bsdfit::bench::{measure, median_speedup};
+    let specs: Vec<(Kind, String)> = match &a.models {
+        Some(list) => list
+            .iter()
+            .map(|s| {
+                let kind = if s.trim_start().starts_with("btdf") { Kind::Btdf } else { Kind::Brdf };
+                (kind, s.trim().to_string())
+            })
+            .collect(),
+        None => model::catalogue(Kind::Brdf)
+            .into_iter()
+            .map(|s| (Kind::Brdf, s))
+            .chain(model::catalogue(Kind::Btdf).into_iter().map(|s| (Kind::Btdf, s)))
+            .collect(),
+    };
+    let mut backends: Vec<Box<dyn backend::Backend>> = Vec::new();
+    if a.backend != BackendChoice::Gpu {
+        backends.push(Box::new(backend::cpu::CpuBackend::new()));
+    }
+    if a.backend != BackendChoice::Cpu {
+        match backend::gpu::GpuBackend::new() {
+            Ok(g) => backends.push(Box::new(g)),
+            Err(e) if a.backend == BackendChoice::Auto => eprintln!("no GPU ({e}); measuring the CPU only"),
+            Err(e) => return Err(e.context("--backend gpu")),
+        }
+    }
+    for b in &backends {
+        eprintln!("backend: {}", b.name());
+    }
+    let bar = indicatif::ProgressBar::new((specs.len() * backends.len()) as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template("{msg:30} [{elapsed_precise}] {bar:30} {pos}/{len} (ETA {eta})").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+    let mut rows = Vec::new();
+    for (kind, spec) in &specs {
+        for b in &backends {
+            bar.set_message(format!("{spec} on {}", b.id()));
+            match measure(spec, *kind, b.as_ref(), a.restarts, a.seconds) {
+                Ok(r) => rows.push(r),
+                Err(e) => bar.println(format!("skipping {spec} on {}: {e:#}", b.id())),
+            }
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    println!("{:<24} {:>8} {:>8} {:>10} {:>14}", "model", "backend", "samples", "candidates", "evals/s");
+    for r in &rows {
+        println!("{:<24} {:>8} {:>8} {:>10} {:>14.3e}", r.model, r.backend, r.samples, r.candidates, r.evals_per_s);
+    }
+    if let Some(s) = median_speedup(&rows) {
+        println!("median GPU/CPU speed-up over models: {s:.2}x");
+    }
+    if let Some(path) = &a.json {
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?).with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
     }
     Ok(())
 }

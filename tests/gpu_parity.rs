@@ -11,6 +11,7 @@
 
 use bsdfit::backend::cpu::CpuBackend;
 use bsdfit::backend::gpu::GpuBackend;
+use bsdfit::backend::wgsl::Shape;
 use bsdfit::backend::{Backend, Problem};
 use bsdfit::dataset::{Dataset, Kind, RawRow, ReadOptions};
 use bsdfit::loss::{Loss, Metric, Weights};
@@ -168,6 +169,31 @@ fn every_loss_matches_the_cpu_reference() {
         }
     }
     assert!(failures.is_empty(), "loss parity failures:\n{}", failures.join("\n"));
+}
+
+#[test]
+fn the_workgroup_reduced_shape_matches_too() {
+    // lavapipe picks the one-slice shape; force the GPU shape (32 lanes × 8 slices with the
+    // workgroup-memory reduction) so both kernel paths are checked on every machine.
+    let forced = GpuBackend::new().expect("GPU adapter").with_shape(Shape::GPU_DEVICE);
+    let data = random_dataset(Kind::Brdf, 3, 333, 21);
+    for spec in ["lambert", "fa(eon)", "ggx+retro"] {
+        let model = Model::parse(spec, 3).unwrap();
+        let params = random_params(&model, 70, 22);
+        for metric in [Metric::Rmse, Metric::Smape, Metric::Chi2] {
+            let problem = Problem { model: &model, data: &data, loss: Loss::new(metric, Weights::Relunc) };
+            let c = CpuBackend::new().prepare(problem).unwrap().costs(&params).unwrap();
+            let g = forced.prepare(problem).unwrap().costs(&params).unwrap();
+            for (n, (cv, gv)) in c.iter().zip(&g).enumerate() {
+                assert!(cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-12, "{spec} {metric}: candidate {n}: gpu {gv} cpu {cv}");
+            }
+            let cv = CpuBackend::new().prepare(problem).unwrap().values(&params).unwrap();
+            let gv = forced.prepare(problem).unwrap().values(&params).unwrap();
+            for (a, b) in cv.iter().zip(&gv) {
+                assert!(a.is_finite() && (a - b).abs() <= REL * a.abs() + 1e-6, "{spec} values: gpu {b} cpu {a}");
+            }
+        }
+    }
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! Every generated WGSL module (each catalogue spec × each loss shape) parses and
 //! validates with naga — no device needed.
 
-use bsdfit::backend::wgsl::{compose, validate};
+use bsdfit::backend::wgsl::{compose, validate, Shape};
 use bsdfit::dataset::Kind;
 use bsdfit::loss::{Finish, Term};
 use bsdfit::model::{catalogue, Model};
@@ -23,8 +23,10 @@ fn every_generated_module_validates() {
             };
             for term in [Term::AbsRatio, Term::Square, Term::LogSquare] {
                 for finish in [Finish::Mean, Finish::SqrtMean, Finish::Sum] {
-                    if let Err(e) = validate(&compose(&model, term, finish)) {
-                        failures.push(format!("{spec} ({channels} ch, {term:?}, {finish:?}):\n{e}"));
+                    for shape in [Shape::CPU_DEVICE, Shape::GPU_DEVICE] {
+                        if let Err(e) = validate(&compose(&model, term, finish, shape)) {
+                            failures.push(format!("{spec} ({channels} ch, {term:?}, {finish:?}, {shape:?}):\n{e}"));
+                        }
                     }
                 }
             }

@@ -4,7 +4,7 @@
 //! and cached; the dataset is uploaded once per problem; parameter and output buffers are
 //! reused across optimizer iterations and grown only when a larger batch arrives.
 
-use super::wgsl::{compose, validate};
+use super::wgsl::{compose, validate, Shape};
 use super::{Backend, Evaluator, Problem};
 use crate::loss::{Finish, Term};
 use anyhow::{anyhow, bail, Context, Result};
@@ -43,6 +43,7 @@ pub struct GpuBackend {
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: Mutex<HashMap<String, Arc<Pipelines>>>,
+    shape: Shape,
     /// Errors wgpu reports asynchronously; checked after each submission so they become
     /// `Err` values instead of the default handler's panic.
     errors: Arc<Mutex<Vec<String>>>,
@@ -60,6 +61,11 @@ impl GpuBackend {
     }
 
     async fn new_async() -> Result<Self> {
+        // Mesa's Vulkan loader prints an error when XDG_RUNTIME_DIR is unset (headless
+        // machines, CI); compute never presents to a window, so any directory will do.
+        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+            std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+        }
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
             backends: wgpu::Backends::VULKAN,
             ..wgpu::InstanceDescriptor::new_without_display_handle()
@@ -126,7 +132,9 @@ impl GpuBackend {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
+        let shape = if info.device_type == wgpu::DeviceType::Cpu { Shape::CPU_DEVICE } else { Shape::GPU_DEVICE };
         Ok(GpuBackend {
+            shape,
             device,
             queue,
             info,
@@ -136,6 +144,12 @@ impl GpuBackend {
             pipelines: Mutex::default(),
             errors,
         })
+    }
+
+    /// Override the workgroup shape (benchmarks and tests of both code paths).
+    pub fn with_shape(mut self, shape: Shape) -> Self {
+        self.shape = shape;
+        self
     }
 
     pub fn adapter_name(&self) -> String {
@@ -153,12 +167,12 @@ impl GpuBackend {
     }
 
     fn pipelines(&self, problem: &Problem, term: Term, finish: Finish) -> Result<Arc<Pipelines>> {
-        let key = format!("{}|{}|{:?}|{:?}", problem.model.spec, problem.model.channels, term, finish);
+        let key = format!("{}|{}|{:?}|{:?}|{:?}", problem.model.spec, problem.model.channels, term, finish, self.shape);
         let mut cache = self.pipelines.lock().map_err(|_| anyhow!("pipeline cache poisoned"))?;
         if let Some(p) = cache.get(&key) {
             return Ok(p.clone());
         }
-        let source = compose(problem.model, term, finish);
+        let source = compose(problem.model, term, finish, self.shape);
         validate(&source).map_err(|e| anyhow!("generated WGSL for {} does not validate:\n{e}", problem.model.spec))?;
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(&problem.model.spec),
@@ -197,26 +211,30 @@ impl Backend for GpuBackend {
     fn prepare<'a>(&'a self, problem: Problem<'a>) -> Result<Box<dyn Evaluator + 'a>> {
         let terms = problem.loss.terms(problem.data);
         let pipes = self.pipelines(&problem, terms.term, terms.finish)?;
-        let samples: Vec<GpuSample> = problem
-            .data
-            .samples
+        let model = problem.model;
+        // Sort by channel (stable) so the kernel's channel loop is outermost; the original
+        // index travels with each sample for the `values` output.
+        let mut order: Vec<usize> = (0..problem.data.len()).collect();
+        order.sort_by_key(|&k| problem.data.samples[k].channel);
+        let samples: Vec<GpuSample> = order
             .iter()
-            .enumerate()
-            .map(|(k, s)| GpuSample {
-                wi: [s.wi.x as f32, s.wi.y as f32, s.wi.z as f32, terms.w[k] as f32],
-                wo: [s.wo.x as f32, s.wo.y as f32, s.wo.z as f32, terms.a[k] as f32],
-                ext: [s.value as f32, terms.transform(k, s.value) as f32, s.channel as f32, 0.0],
+            .map(|&k| {
+                let s = &problem.data.samples[k];
+                GpuSample {
+                    wi: [s.wi.x as f32, s.wi.y as f32, s.wi.z as f32, terms.w[k] as f32],
+                    wo: [s.wo.x as f32, s.wo.y as f32, s.wo.z as f32, terms.a[k] as f32],
+                    ext: [s.value as f32, terms.transform(k, s.value) as f32, s.channel as f32, f32::from_bits(k as u32)],
+                }
             })
             .collect();
-        let model = problem.model;
-        let mut slots = Vec::with_capacity(model.scalar_count() * model.channels);
+        let mut slots = Vec::with_capacity(model.scalar_count() * model.channels + model.channels + 1);
         for ch in 0..model.channels {
             for j in 0..model.scalar_count() {
                 slots.push(model.slot(j, ch) as u32);
             }
         }
-        if slots.is_empty() {
-            slots.push(0);
+        for ch in 0..=model.channels {
+            slots.push(problem.data.samples.iter().filter(|s| s.channel < ch).count() as u32);
         }
         let lut: Vec<f32> = model.nodes().iter().find_map(|n| n.bsdf.lut()).unwrap_or_else(|| vec![0.0]);
         let init = |label: &str, bytes: &[u8], usage: wgpu::BufferUsages| {
@@ -331,8 +349,9 @@ impl GpuEvaluator<'_> {
             self.ensure_io(p_bytes, o_bytes);
             let io = self.io.as_ref().expect("io buffers allocated");
             let host: Vec<f32> = params[start * p..(start + m) * p].iter().map(|&v| v as f32).collect();
-            let groups_x = (m as u32).min(MAX_GROUPS_X);
-            let groups_y = (m as u32).div_ceil(groups_x);
+            let total_groups = (m as u32).div_ceil(self.gpu.shape.lanes);
+            let groups_x = total_groups.min(MAX_GROUPS_X);
+            let groups_y = total_groups.div_ceil(groups_x);
             let dims = Dims { n_candidates: m as u32, n_samples: k as u32, dim: p as u32, groups_x };
             let q = &self.gpu.queue;
             q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));

@@ -9,8 +9,19 @@ pub const COMMON: &str = include_str!("../../shaders/common.wgsl");
 pub const LOSS: &str = include_str!("../../shaders/loss.wgsl");
 pub const KERNEL: &str = include_str!("../../shaders/kernel.wgsl");
 
-/// Threads per workgroup (one workgroup per candidate).
-pub const WORKGROUP_SIZE: u32 = 64;
+/// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Shape {
+    pub lanes: u32,
+    pub slices: u32,
+}
+
+impl Shape {
+    /// SIMD CPU devices (lavapipe): one thread walks all samples of its candidate.
+    pub const CPU_DEVICE: Shape = Shape { lanes: 64, slices: 1 };
+    /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
+    pub const GPU_DEVICE: Shape = Shape { lanes: 32, slices: 8 };
+}
 
 fn term_code(t: Term) -> u32 {
     match t {
@@ -54,13 +65,15 @@ pub fn eval_model_source(model: &Model) -> String {
 }
 
 /// The full module for a model and a loss shape.
-pub fn compose(model: &Model, term: Term, finish: Finish) -> String {
+pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
     let c = model.channels;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst WG: u32 = {WORKGROUP_SIZE}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         c,
+        shape.lanes,
+        shape.slices,
         term_code(term),
         finish_code(finish),
         (s * c).max(1)
