@@ -26,8 +26,9 @@ struct Dims {
 
 @group(0) @binding(0) var<uniform> dims: Dims;
 @group(0) @binding(1) var<storage, read> samples: array<Sample>;
-// slots[ch * S + j]: index in a candidate's flat vector of scalar j for channel ch;
-// then slots[S * C + ch] = first sample of channel ch, slots[S * C + C] = sample count.
+// slots[g * S + j]: index in a candidate's flat vector of scalar j for group g (a channel,
+// or a (plane, channel) pair under `+peraxis`; C counts the groups);
+// then slots[S * C + g] = first sample of group g, slots[S * C + C] = sample count.
 @group(0) @binding(2) var<storage, read> slots: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;

@@ -53,6 +53,9 @@ pub struct Sample {
     pub uncertainty: f64,
     /// Index into [`Dataset::channels`].
     pub channel: usize,
+    /// Index into [`Dataset::axes`]: the φ plane of the outgoing direction (a sample at
+    /// θo = 0 lies on every plane and is given plane 0).
+    pub axis: usize,
     /// Incident direction, pointing away from the surface (upper hemisphere).
     pub wi: DVec3,
     /// Outgoing direction: upper hemisphere for a BRDF, lower for a BTDF.
@@ -72,6 +75,9 @@ pub struct Dataset {
     /// Wavelengths in nm, one per channel, in channel order.
     pub channels: Vec<f64>,
     pub samples: Vec<Sample>,
+    /// Measurement planes: distinct φo mod 180° (degrees) of the samples with θo > 0,
+    /// ascending; `[0.0]` when there is none. Anisotropic diffusers are measured on two.
+    pub axes: Vec<f64>,
     /// Where the data came from (for messages); empty for in-memory data.
     pub source: PathBuf,
     /// Human-readable notices produced while reading (e.g. uncertainty floors applied).
@@ -254,8 +260,10 @@ impl Dataset {
                 chosen
             }
         };
+        let axes = measurement_planes(tmp.iter().map(|t| (t.3, t.4)));
         let mut samples = Vec::new();
         for (line, ti, pi, to, po, wl, value, u) in tmp {
+            let axis = plane_index(&axes, to, po);
             let Some(channel) = channels.iter().position(|&c| c == wl) else {
                 continue;
             };
@@ -274,6 +282,7 @@ impl Dataset {
                 value,
                 uncertainty: u,
                 channel,
+                axis,
                 wi,
                 wo,
                 line,
@@ -291,6 +300,7 @@ impl Dataset {
             meta: BTreeMap::new(),
             channels,
             samples,
+            axes,
             source: PathBuf::from(file),
             notices,
         })
@@ -311,10 +321,12 @@ impl Dataset {
         let mut meta = BTreeMap::new();
         let mut header_line = None;
         let mut offset = 0usize; // byte offset of the header line
-        for (idx, line) in text.lines().enumerate() {
+        // split_inclusive keeps each line's terminator in its length, so the offset is
+        // right for CRLF files too.
+        for (idx, line) in text.split_inclusive('\n').enumerate() {
             let t = line.trim();
             if t.is_empty() {
-                offset += line.len() + 1;
+                offset += line.len();
                 continue;
             }
             if let Some(rest) = t.strip_prefix('#') {
@@ -323,7 +335,7 @@ impl Dataset {
                     // "# bsdfit dataset v1" has no colon; a free-text remark after the value is kept.
                     meta.insert(key, v.trim().to_string());
                 }
-                offset += line.len() + 1;
+                offset += line.len();
                 continue;
             }
             header_line = Some(idx + 1);
@@ -348,6 +360,17 @@ impl Dataset {
             })?,
         };
         let body = &text[offset.min(text.len())..];
+        // File line of each record. csv's own positions point at the first comment or empty
+        // line skipped before a record, and lag by one line in CRLF files, so count the lines
+        // csv reads as records ourselves (v1 has no multi-line quoted cells).
+        let record_lines: Vec<usize> = body
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+            .map(|(i, _)| i + header_line)
+            .skip(1) // the header
+            .collect();
+        let record_line = |k: usize| record_lines.get(k).copied().unwrap_or(header_line);
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
             .flexible(true)
@@ -387,10 +410,10 @@ impl Dataset {
         for rec in rdr.records() {
             let rec = rec.map_err(|e| DataError::Line {
                 file: file.into(),
-                line: e.position().map(|p| p.line() as usize + header_line - 1).unwrap_or(header_line),
+                line: record_line(rows.len()),
                 msg: format!("malformed CSV: {e}"),
             })?;
-            let line = rec.position().map(|p| p.line() as usize).unwrap_or(1) + header_line - 1;
+            let line = record_line(rows.len());
             if rec.len() != 7 {
                 return Err(DataError::Line {
                     file: file.into(),
@@ -483,6 +506,47 @@ impl Dataset {
         } else {
             self.material.clone()
         }
+    }
+}
+
+/// The plane of an outgoing direction (θ ≥ 0, degrees): φ mod 180, or None at θ = 0.
+fn plane_of(theta_deg: f64, phi_deg: f64) -> Option<f64> {
+    if theta_deg == 0.0 {
+        return None;
+    }
+    let p = (phi_deg.rem_euclid(180.0) * 1e6).round() / 1e6;
+    Some(if p >= 180.0 { 0.0 } else { p })
+}
+
+/// Distinct measurement planes of (θo, φo) pairs in degrees (θ ≥ 0), ascending.
+pub fn measurement_planes(pairs: impl Iterator<Item = (f64, f64)>) -> Vec<f64> {
+    let mut planes: Vec<f64> = pairs.filter_map(|(t, p)| plane_of(t, p)).collect();
+    planes.sort_by(|a, b| a.total_cmp(b));
+    planes.dedup();
+    if planes.is_empty() {
+        planes.push(0.0);
+    }
+    planes
+}
+
+fn plane_index(planes: &[f64], theta_deg: f64, phi_deg: f64) -> usize {
+    match plane_of(theta_deg, phi_deg) {
+        None => 0,
+        Some(p) => planes.iter().position(|&q| q == p).unwrap_or(0),
+    }
+}
+
+impl Dataset {
+    /// The samples of one measurement plane (and those at θo = 0, which lie on every
+    /// plane), as a dataset of its own with that single axis.
+    pub fn axis_subset(&self, axis: usize) -> Dataset {
+        let mut d = self.clone();
+        d.samples.retain(|s| s.axis == axis || s.theta_o == 0.0);
+        for s in &mut d.samples {
+            s.axis = 0;
+        }
+        d.axes = vec![self.axes[axis]];
+        d
     }
 }
 

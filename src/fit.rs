@@ -77,6 +77,8 @@ pub struct FitReport {
     pub material: String,
     pub samples: usize,
     pub channels: Vec<f64>,
+    /// Measurement planes (φ, degrees) with parameters of their own (`+peraxis`), else [0].
+    pub axes: Vec<f64>,
     pub seed: u64,
     /// Restarts whose final loss is within 1% of the best (a multi-modality signal).
     pub restarts_within_1pct: usize,
@@ -222,7 +224,8 @@ fn make_report(
         for p in &model.params {
             let w = p.width(model.channels);
             let slice = &vals[p.index..p.index + w];
-            let v = if p.decl.rgb {
+            // rgb and per-plane parameters are arrays (plane-major, then channel).
+            let v = if w > 1 {
                 Value::Array(slice.iter().map(|x| json_num(*x)).collect())
             } else {
                 json_num(slice[0])
@@ -247,6 +250,7 @@ fn make_report(
         material: data.material.clone(),
         samples: data.len(),
         channels: data.channels.clone(),
+        axes: model.axes.clone(),
         seed: opts.seed,
         restarts_within_1pct: within,
         flat_names: model.flat_names(),

@@ -94,6 +94,10 @@ struct FitArgs {
     /// Write the fit report (DESIGN §8) as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Fit each measured φ plane separately (anisotropic samples, paper §2.3.2); the JSON
+    /// is then {"per_axis": [{"phi": …, "fit": report}, …]}.
+    #[arg(long)]
+    per_axis: bool,
     #[command(flatten)]
     data_args: DataArgs,
 }
@@ -105,9 +109,13 @@ struct SynthArgs {
     /// Parameter values, e.g. rho=0.5,sigma=0.7 or rho=0.4:0.5:0.6 (one per channel).
     #[arg(long, default_value = "")]
     params: String,
-    /// Geometry name (see `bsdfit models`).
+    /// Geometry name (see `bsdfit models`), or names joined by `+` for their union.
     #[arg(long)]
     geometry: Option<String>,
+    /// Angular standard uncertainty (degrees) of θi and θo, propagated through the model's
+    /// slope into each sample's uncertainty (larger on the flanks of peaks).
+    #[arg(long, default_value_t = 0.0)]
+    angular_unc: f64,
     /// Noise as REL,ABS: u = sqrt((REL·f)² + ABS²).
     #[arg(long, default_value = "0.015,0.0001")]
     noise: String,
@@ -146,18 +154,42 @@ fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
 
 fn cmd_fit(a: FitArgs) -> Result<()> {
     let data = a.data_args.read(&a.data)?;
-    let model = Model::parse(&a.model, data.channel_count()).context("--model")?;
     let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
     let backend = backend::select(a.backend, &mut |m| eprintln!("{m}"))?;
     let opts = FitOptions { optimizer: a.optimizer, restarts: a.restarts, seed: a.seed, ..Default::default() };
-    let bar = indicatif::ProgressBar::new(a.restarts as u64);
-    bar.set_style(indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
-    bar.set_message(format!("fitting {}", model.spec));
-    let report = fit(&model, &data, loss, backend.as_ref(), &opts, &mut |active| bar.set_position((a.restarts - active) as u64))?;
-    bar.finish_and_clear();
-    print!("{}", report.summary());
+    let run = |data: &Dataset| -> Result<bsdfit::fit::FitReport> {
+        let model = Model::for_data(&a.model, data).context("--model")?;
+        let bar = indicatif::ProgressBar::new(a.restarts as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.set_message(format!("fitting {}", model.spec));
+        let report = fit(&model, data, loss, backend.as_ref(), &opts, &mut |active| bar.set_position((a.restarts - active) as u64))?;
+        bar.finish_and_clear();
+        print!("{}", report.summary());
+        Ok(report)
+    };
+    let json = if a.per_axis {
+        // The paper's approach for anisotropic samples (§2.3.2): one fit per φ plane.
+        anyhow::ensure!(
+            data.axes.len() > 1,
+            "--per-axis: {} is measured on a single plane (φ = {}°)",
+            a.data.display(),
+            data.axes[0]
+        );
+        let mut fits = Vec::new();
+        for (i, phi) in data.axes.iter().enumerate() {
+            println!("== plane φ = {phi}° ==");
+            let report = run(&data.axis_subset(i))?;
+            fits.push(serde_json::json!({ "phi": phi, "fit": report }));
+        }
+        serde_json::json!({ "per_axis": fits })
+    } else {
+        serde_json::to_value(run(&data)?)?
+    };
     if let Some(path) = &a.json {
-        let text = serde_json::to_string_pretty(&report)?;
+        let text = serde_json::to_string_pretty(&json)?;
         std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
@@ -170,12 +202,13 @@ fn cmd_synth(a: SynthArgs) -> Result<()> {
         Kind::Brdf => vec![450.0, 550.0, 650.0],
         Kind::Btdf => vec![633.0],
     });
-    let model = Model::parse(&a.model, wavelengths.len()).context("--model")?;
-    let geometry = a.geometry.clone().unwrap_or_else(|| match model.kind {
+    let geometry = a.geometry.clone().unwrap_or_else(|| match ast_kind {
         Kind::Brdf => "inplane10".into(),
         Kind::Btdf => "oblique".into(),
     });
-    let (gkind, rows) = synth::geometry(&geometry).map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    let (gkind, rows) = synth::geometry_expr(&geometry).map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    let planes = bsdfit::dataset::measurement_planes(rows.iter().map(|r| bsdfit::dataset::normalise_angles(r[2], r[3])));
+    let model = Model::parse_for(&a.model, wavelengths.len(), &planes).context("--model")?;
     anyhow::ensure!(gkind == model.kind, "--geometry {geometry} is a {gkind} geometry but {} is a {} model", model.spec, model.kind);
     let flat = model.params_from_assignments(&a.params)?;
     let (rel, abs) = a
@@ -184,7 +217,7 @@ fn cmd_synth(a: SynthArgs) -> Result<()> {
         .and_then(|(r, s)| Some((r.trim().parse::<f64>().ok()?, s.trim().parse::<f64>().ok()?)))
         .ok_or_else(|| anyhow::anyhow!("--noise: expected REL,ABS such as 0.015,0.0001, got '{}'", a.noise))?;
     let material = a.material.clone().unwrap_or_else(|| format!("synthetic {}", model.spec));
-    let mut ds = synth::synthesize(&model, &flat, &rows, &wavelengths, synth::Noise { rel, abs }, a.seed, &material).map_err(|e| anyhow::anyhow!(e))?;
+    let mut ds = synth::synthesize_angular(&model, &flat, &rows, &wavelengths, synth::Noise { rel, abs }, a.angular_unc, a.seed, &material).map_err(|e| anyhow::anyhow!(e))?;
     ds.meta.insert("synth_geometry".into(), geometry.clone());
     ds.write(&a.out)?;
     eprintln!("wrote {} ({} samples, {} channel(s), geometry {geometry})", a.out.display(), ds.len(), ds.channel_count());

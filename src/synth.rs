@@ -19,6 +19,7 @@ pub const GEOMETRIES: &[Geometry] = &[
     Geometry { name: "inplane5", kind: Kind::Brdf, doc: "in-plane, θi 0…70° in 10° steps, θo −85…85° in 5° steps" },
     Geometry { name: "specular", kind: Kind::Brdf, doc: "inplane10 plus near-specular θo = −θi ± 1, 2, 3, 5°" },
     Geometry { name: "hemi", kind: Kind::Brdf, doc: "out-of-plane: θi 0, 20, 40, 60°; θo 10…80° by 10°; φo every 30°" },
+    Geometry { name: "offplane", kind: Kind::Brdf, doc: "sparse out-of-plane set: θi 20, 40, 60°; θo 20…80° by 20°; φo 45, 90, 135° (combine: specular+offplane)" },
     Geometry { name: "retro", kind: Kind::Brdf, doc: "inplane10 plus near-retro θo = θi ± 1, 2, 3° (retroreflective materials)" },
     Geometry { name: "ptb5", kind: Kind::Btdf, doc: "normal incidence, θt −20…20° in 5° steps, φt = 0 (PTB set 1)" },
     Geometry { name: "ptb1", kind: Kind::Btdf, doc: "normal incidence, θt −20…20° in 1° steps on φt = 0 and 90° (PTB, anisotropic samples A, D)" },
@@ -78,6 +79,13 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                 }
             }
         }
+        "offplane" => {
+            for ti in [20.0, 40.0, 60.0] {
+                for to in [20.0, 40.0, 60.0, 80.0] {
+                    rows.extend([45.0, 90.0, 135.0].map(|po| [ti, 0.0, to, po]));
+                }
+            }
+        }
         "ptb5" => rows.extend(steps(-20.0, 20.0, 5.0).into_iter().map(|t| [0.0, 0.0, t, 0.0])),
         "ptb1" => {
             for phi in [0.0, 90.0] {
@@ -93,6 +101,29 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
         _ => unreachable!("every listed geometry has rows"),
     }
     Ok((g.kind, rows))
+}
+
+/// Rows of a geometry expression: one name, or names joined by `+` (their union; a
+/// geometry listed twice, after the signed-angle convention, is kept once).
+pub fn geometry_expr(expr: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
+    let mut kind = None;
+    let mut rows: Vec<[f64; 4]> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for name in expr.split('+').map(str::trim) {
+        let (k, part) = geometry(name)?;
+        if kind.is_some_and(|k0| k0 != k) {
+            return Err(format!("'{expr}' mixes BRDF and BTDF geometries"));
+        }
+        kind = Some(k);
+        for r in part {
+            let (ti, pi) = crate::dataset::normalise_angles(r[0], r[1]);
+            let (to, po) = crate::dataset::normalise_angles(r[2], r[3]);
+            if seen.insert([ti, pi, to, po].map(|x| (x * 1e6).round() as i64)) {
+                rows.push(r);
+            }
+        }
+    }
+    Ok((kind.expect("split yields at least one name"), rows))
 }
 
 /// Noise model: u = sqrt((rel·f)² + abs²), value = f + u·n with n ~ N(0,1) clipped to ±3
@@ -113,6 +144,31 @@ pub fn synthesize(
     seed: u64,
     material: &str,
 ) -> Result<Dataset, String> {
+    synthesize_angular(model, flat, rows, wavelengths, noise, 0.0, seed, material)
+}
+
+/// [`synthesize`] with a goniometer's angular uncertainty: a standard uncertainty of
+/// `angle_deg` degrees on θi and on θo propagates as u_θ² = (δ·∂f/∂θi)² + (δ·∂f/∂θo)²
+/// (central differences), added in quadrature to the relative and absolute terms — so
+/// the uncertainty grows on the flanks of specular and transmission peaks, as in
+/// metrology data. With `angle_deg = 0` this is exactly [`synthesize`].
+#[allow(clippy::too_many_arguments)]
+pub fn synthesize_angular(
+    model: &Model,
+    flat: &[f64],
+    rows: &[[f64; 4]],
+    wavelengths: &[f64],
+    noise: Noise,
+    angle_deg: f64,
+    seed: u64,
+    material: &str,
+) -> Result<Dataset, String> {
+    if !(angle_deg >= 0.0 && angle_deg < 10.0) {
+        return Err(format!("angular uncertainty {angle_deg}° must be in [0, 10)"));
+    }
+    if wavelengths.windows(2).any(|w| w[0] >= w[1]) {
+        return Err("give the wavelengths in ascending order (channels are numbered by wavelength)".into());
+    }
     if wavelengths.len() != model.channels {
         return Err(format!(
             "{} wavelengths given for a model compiled for {} channels",
@@ -135,16 +191,40 @@ pub fn synthesize(
     }
     let opts = ReadOptions::default();
     let mut ds = Dataset::from_rows(model.kind, material, &raw, "<synth>", &opts).map_err(|e| e.to_string())?;
+    if model.axes.len() > 1 && model.axes != ds.axes {
+        return Err(format!("model compiled for planes {:?} but the geometry has {:?}", model.axes, ds.axes));
+    }
     // Channels come back sorted; map each to the model's channel of the same wavelength.
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     for s in &mut ds.samples {
         let ch = wavelengths.iter().position(|&w| w == s.wavelength_nm).expect("wavelength present");
-        let f = model.eval(flat, ch, s.wi, s.wo);
+        let group = if model.axes.len() > 1 { s.axis * model.channels + ch } else { ch };
+        let f = model.eval(flat, group, s.wi, s.wo);
         if !f.is_finite() {
             return Err(format!("model {} is not finite at line {}", model.spec, s.line));
         }
-        let u = ((noise.rel * f).powi(2) + noise.abs.powi(2)).sqrt();
+        let mut u2 = (noise.rel * f).powi(2) + noise.abs.powi(2);
+        if angle_deg > 0.0 {
+            let h = 0.05f64.to_radians();
+            let dir = |t: f64, p: f64, below: bool| {
+                let mut d = crate::math::direction(t, p);
+                if below {
+                    d.z = -d.z;
+                }
+                d
+            };
+            let below = model.kind == Kind::Btdf;
+            let at = |ti: f64, to: f64| model.eval(flat, group, dir(ti, s.phi_i, false), dir(to, s.phi_o, below));
+            let dfo = (at(s.theta_i, s.theta_o + h) - at(s.theta_i, s.theta_o - h)) / (2.0 * h);
+            let dfi = (at(s.theta_i + h, s.theta_o) - at(s.theta_i - h, s.theta_o)) / (2.0 * h);
+            let d = angle_deg.to_radians();
+            let ua2 = (d * dfo).powi(2) + (d * dfi).powi(2);
+            if ua2.is_finite() {
+                u2 += ua2;
+            }
+        }
+        let u = u2.sqrt();
         let n: f64 = normal.sample(&mut rng);
         s.value = f + u * n.clamp(-3.0, 3.0);
         s.uncertainty = u;
@@ -159,7 +239,8 @@ pub fn synthesize(
         "synth_params".into(),
         model.flat_names().iter().zip(flat).map(|(n, v)| format!("{n}={v}")).collect::<Vec<_>>().join(" "),
     );
-    ds.meta.insert("synth_noise".into(), format!("rel={} abs={}", noise.rel, noise.abs));
+    let angular = if angle_deg > 0.0 { format!(" angle_deg={angle_deg}") } else { String::new() };
+    ds.meta.insert("synth_noise".into(), format!("rel={} abs={}{angular}", noise.rel, noise.abs));
     ds.meta.insert("synth_seed".into(), seed.to_string());
     Ok(ds)
 }

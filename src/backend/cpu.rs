@@ -41,8 +41,8 @@ impl CpuEvaluator<'_> {
     /// Calls `f(k, y′_k)` for every sample of one candidate.
     fn for_each_value(&self, flat: &[f64], mut f: impl FnMut(usize, f64)) {
         let model = self.problem.model;
-        // Resolve the scalar view once per channel, not once per sample.
-        let views: Vec<Vec<f64>> = (0..model.channels)
+        // Resolve the scalar view once per (plane, channel) group, not once per sample.
+        let views: Vec<Vec<f64>> = (0..model.groups())
             .map(|c| {
                 let mut v = Vec::new();
                 model.scalars_into(flat, c, &mut v);
@@ -50,7 +50,7 @@ impl CpuEvaluator<'_> {
             })
             .collect();
         for (k, s) in self.problem.data.samples.iter().enumerate() {
-            f(k, model.root.eval(&views[s.channel], s.wi, s.wo));
+            f(k, model.root.eval(&views[model.group_of(s)], s.wi, s.wo));
         }
     }
 

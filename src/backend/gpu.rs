@@ -167,7 +167,7 @@ impl GpuBackend {
     }
 
     fn pipelines(&self, problem: &Problem, term: Term, finish: Finish) -> Result<Arc<Pipelines>> {
-        let key = format!("{}|{}|{:?}|{:?}|{:?}", problem.model.spec, problem.model.channels, term, finish, self.shape);
+        let key = format!("{}|{}|{}|{:?}|{:?}|{:?}", problem.model.spec, problem.model.channels, problem.model.axes.len(), term, finish, self.shape);
         let mut cache = self.pipelines.lock().map_err(|_| anyhow!("pipeline cache poisoned"))?;
         if let Some(p) = cache.get(&key) {
             return Ok(p.clone());
@@ -215,7 +215,7 @@ impl Backend for GpuBackend {
         // Sort by channel (stable) so the kernel's channel loop is outermost; the original
         // index travels with each sample for the `values` output.
         let mut order: Vec<usize> = (0..problem.data.len()).collect();
-        order.sort_by_key(|&k| problem.data.samples[k].channel);
+        order.sort_by_key(|&k| model.group_of(&problem.data.samples[k]));
         let samples: Vec<GpuSample> = order
             .iter()
             .map(|&k| {
@@ -223,18 +223,19 @@ impl Backend for GpuBackend {
                 GpuSample {
                     wi: [s.wi.x as f32, s.wi.y as f32, s.wi.z as f32, terms.w[k] as f32],
                     wo: [s.wo.x as f32, s.wo.y as f32, s.wo.z as f32, terms.a[k] as f32],
-                    ext: [s.value as f32, terms.transform(k, s.value) as f32, s.channel as f32, f32::from_bits(k as u32)],
+                    ext: [s.value as f32, terms.transform(k, s.value) as f32, model.group_of(s) as f32, f32::from_bits(k as u32)],
                 }
             })
             .collect();
-        let mut slots = Vec::with_capacity(model.scalar_count() * model.channels + model.channels + 1);
-        for ch in 0..model.channels {
+        let groups = model.groups();
+        let mut slots = Vec::with_capacity(model.scalar_count() * groups + groups + 1);
+        for g in 0..groups {
             for j in 0..model.scalar_count() {
-                slots.push(model.slot(j, ch) as u32);
+                slots.push(model.slot(j, g) as u32);
             }
         }
-        for ch in 0..=model.channels {
-            slots.push(problem.data.samples.iter().filter(|s| s.channel < ch).count() as u32);
+        for g in 0..=groups {
+            slots.push(problem.data.samples.iter().filter(|s| model.group_of(s) < g).count() as u32);
         }
         let lut: Vec<f32> = model.nodes().iter().find_map(|n| n.bsdf.lut()).unwrap_or_else(|| vec![0.0]);
         let init = |label: &str, bytes: &[u8], usage: wgpu::BufferUsages| {

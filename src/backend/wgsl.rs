@@ -67,7 +67,8 @@ pub fn eval_model_source(model: &Model) -> String {
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
-    let c = model.channels;
+    // C counts scalar-view groups: channels, times planes under `+peraxis`.
+    let c = model.groups();
     let mut src = format!(
         "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,

@@ -20,6 +20,7 @@ pub mod ggx;
 pub mod lambert;
 pub mod micrograin;
 pub mod on;
+pub mod peraxis;
 pub mod retro;
 pub mod rmg;
 pub mod vmf;
@@ -153,15 +154,14 @@ pub struct FlatParam {
     pub decl: ParamDecl,
     /// First index in the flat parameter vector (rgb parameters take `channels` entries).
     pub index: usize,
+    /// Number of measurement planes with a value of their own (1 unless under `+peraxis`).
+    pub axes: usize,
 }
 
 impl FlatParam {
+    /// Entries in the flat vector: channels (if rgb) × axes (if per-axis), axis-major.
     pub fn width(&self, channels: usize) -> usize {
-        if self.decl.rgb {
-            channels
-        } else {
-            1
-        }
+        (if self.decl.rgb { channels } else { 1 }) * self.axes
     }
 }
 
@@ -173,6 +173,9 @@ pub struct Model {
     pub root: Node,
     pub kind: Kind,
     pub channels: usize,
+    /// Measurement planes (φ, degrees) with parameters of their own: several only for a
+    /// `+peraxis` model compiled for data measured on several planes.
+    pub axes: Vec<f64>,
     /// Declared parameters in scalar-view order (node pre-order, own before children).
     pub params: Vec<FlatParam>,
     /// Length P of the flat parameter vector.
@@ -189,43 +192,75 @@ pub enum SpecError {
 }
 
 impl Model {
-    /// Parse `spec` and compile it for `channels` channels.
+    /// Parse `spec` and compile it for `channels` channels (one measurement plane).
     pub fn parse(spec: &str, channels: usize) -> Result<Model, SpecError> {
+        Model::parse_for(spec, channels, &[0.0])
+    }
+
+    /// Parse `spec` and compile it for the channels and measurement planes of `data`.
+    pub fn for_data(spec: &str, data: &crate::dataset::Dataset) -> Result<Model, SpecError> {
+        Model::parse_for(spec, data.channel_count(), &data.axes)
+    }
+
+    /// Parse `spec` and compile it for `channels` channels and the planes `axes` (degrees;
+    /// they matter only under `+peraxis`).
+    pub fn parse_for(spec: &str, channels: usize, axes: &[f64]) -> Result<Model, SpecError> {
         let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
         let ast = Ast::parse(&clean)?;
         let root = build(&ast).map_err(|msg| SpecError::Parse { spec: clean.clone(), msg })?;
-        Model::compile(&clean, root, channels)
+        Model::compile_for(&clean, root, channels, axes)
     }
 
     /// Lay out the scalar view and the flat vector of a built tree.
-    pub fn compile(spec: &str, mut root: Node, channels: usize) -> Result<Model, SpecError> {
+    pub fn compile(spec: &str, root: Node, channels: usize) -> Result<Model, SpecError> {
+        Model::compile_for(spec, root, channels, &[0.0])
+    }
+
+    fn compile_for(spec: &str, mut root: Node, channels: usize, axes: &[f64]) -> Result<Model, SpecError> {
         if channels == 0 {
             return Err(SpecError::Other("a model needs at least one channel".into()));
         }
+        let mut has_peraxis = false;
+        root.visit(&mut |n| has_peraxis |= n.bsdf.name() == "peraxis");
+        let axes: Vec<f64> = if has_peraxis && !axes.is_empty() { axes.to_vec() } else { vec![0.0] };
+        let n_axes = axes.len();
         let kind = root.bsdf.kind();
         let mut params = Vec::new();
-        let mut dim = 0usize;
-        let mut kinds_ok = true;
-        fn lay(node: &mut Node, prefix: &str, params: &mut Vec<FlatParam>, dim: &mut usize, channels: usize, kind: Kind, ok: &mut bool) {
-            if node.bsdf.kind() != kind {
-                *ok = false;
+        let dim;
+        let kinds_ok;
+        struct Layout<'a> {
+            params: &'a mut Vec<FlatParam>,
+            dim: usize,
+            channels: usize,
+            axes: usize,
+            kind: Kind,
+            ok: bool,
+        }
+        fn lay(node: &mut Node, prefix: &str, per_axis: bool, l: &mut Layout) {
+            if node.bsdf.kind() != l.kind {
+                l.ok = false;
             }
-            node.offset = params.len();
+            node.offset = l.params.len();
             let decls = node.bsdf.params();
             node.nparams = decls.len();
             for decl in decls {
-                let p = FlatParam { name: format!("{prefix}{}", decl.name), decl, index: *dim };
-                *dim += p.width(channels);
-                params.push(p);
+                let axes = if per_axis && peraxis::PER_AXIS.contains(&decl.name) { l.axes } else { 1 };
+                let p = FlatParam { name: format!("{prefix}{}", decl.name), decl, index: l.dim, axes };
+                l.dim += p.width(l.channels);
+                l.params.push(p);
             }
             let roles = node.bsdf.child_roles();
+            let below = per_axis || node.bsdf.name() == "peraxis";
             for (k, child) in node.children.iter_mut().enumerate() {
                 let role = roles.get(k).copied().unwrap_or("");
                 let pre = if role.is_empty() { prefix.to_string() } else { format!("{prefix}{role}.") };
-                lay(child, &pre, params, dim, channels, kind, ok);
+                lay(child, &pre, below, l);
             }
         }
-        lay(&mut root, "", &mut params, &mut dim, channels, kind, &mut kinds_ok);
+        let mut layout = Layout { params: &mut params, dim: 0, channels, axes: n_axes, kind, ok: true };
+        lay(&mut root, "", false, &mut layout);
+        dim = layout.dim;
+        kinds_ok = layout.ok;
         if !kinds_ok {
             return Err(SpecError::Parse { spec: spec.into(), msg: "mixes BRDF and BTDF nodes".into() });
         }
@@ -234,7 +269,21 @@ impl Model {
         if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
             return Err(SpecError::Parse { spec: spec.into(), msg: format!("parameter '{}' appears twice", w[0]) });
         }
-        Ok(Model { spec: spec.to_string(), root, kind, channels, params, dim })
+        Ok(Model { spec: spec.to_string(), root, kind, channels, axes, params, dim })
+    }
+
+    /// Number of (plane, channel) groups, each with its own scalar view.
+    pub fn groups(&self) -> usize {
+        self.channels * self.axes.len()
+    }
+
+    /// The scalar-view group of a sample: its channel, and its plane under `+peraxis`.
+    pub fn group_of(&self, s: &crate::dataset::Sample) -> usize {
+        if self.axes.len() > 1 {
+            s.axis.min(self.axes.len() - 1) * self.channels + s.channel
+        } else {
+            s.channel
+        }
     }
 
     /// Number of scalars in the per-channel view.
@@ -242,22 +291,26 @@ impl Model {
         self.params.len()
     }
 
-    /// Index in the flat vector of scalar `j` for channel `ch`.
-    pub fn slot(&self, j: usize, ch: usize) -> usize {
+    /// Index in the flat vector of scalar `j` for group `g` (= channel, unless `+peraxis`
+    /// splits groups by plane: g = axis · channels + channel).
+    pub fn slot(&self, j: usize, g: usize) -> usize {
         let p = &self.params[j];
-        p.index + if p.decl.rgb { ch } else { 0 }
+        let (axis, ch) = (g / self.channels, g % self.channels);
+        let rgb_width = if p.decl.rgb { self.channels } else { 1 };
+        p.index + if p.axes > 1 { axis * rgb_width } else { 0 } + if p.decl.rgb { ch } else { 0 }
     }
 
-    /// Resolve the flat vector into the scalar view for channel `ch`.
-    pub fn scalars_into(&self, flat: &[f64], ch: usize, out: &mut Vec<f64>) {
+    /// Resolve the flat vector into the scalar view of group `g`.
+    pub fn scalars_into(&self, flat: &[f64], g: usize, out: &mut Vec<f64>) {
         out.clear();
-        out.extend((0..self.params.len()).map(|j| flat[self.slot(j, ch)]));
+        out.extend((0..self.params.len()).map(|j| flat[self.slot(j, g)]));
     }
 
-    /// Evaluate the model for one flat parameter vector at one geometry and channel.
-    pub fn eval(&self, flat: &[f64], ch: usize, wi: DVec3, wo: DVec3) -> f64 {
+    /// Evaluate the model for one flat parameter vector at one geometry and group (the
+    /// channel index when there is one plane).
+    pub fn eval(&self, flat: &[f64], g: usize, wi: DVec3, wo: DVec3) -> f64 {
         let mut s = Vec::with_capacity(self.params.len());
-        self.scalars_into(flat, ch, &mut s);
+        self.scalars_into(flat, g, &mut s);
         self.root.eval(&s, wi, wo)
     }
 
@@ -272,16 +325,20 @@ impl Model {
         v
     }
 
-    /// Human-readable name of each flat entry (`rho[1]` for channel 1 of an rgb parameter).
+    /// Human-readable name of each flat entry: `rho[1]` for channel 1 of an rgb parameter,
+    /// `alpha@phi90` for the plane φ = 90° of a per-axis parameter.
     pub fn flat_names(&self) -> Vec<String> {
         let mut v = Vec::with_capacity(self.dim);
         for p in &self.params {
-            if p.decl.rgb {
-                for c in 0..self.channels {
-                    v.push(format!("{}[{c}]", p.name));
+            for a in 0..p.axes {
+                let axis = if p.axes > 1 { format!("@phi{}", self.axes[a]) } else { String::new() };
+                if p.decl.rgb {
+                    for c in 0..self.channels {
+                        v.push(format!("{}[{c}]{axis}", p.name));
+                    }
+                } else {
+                    v.push(format!("{}{axis}", p.name));
                 }
-            } else {
-                v.push(p.name.clone());
             }
         }
         v
@@ -430,6 +487,7 @@ pub const SUFFIXES: &[(&str, SuffixBuilder, &str)] = &[
     ("scale", btdf::build_scale, "multiplies a BTDF by S"),
     ("absorb", btdf::build_absorb, "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)"),
     ("diffuse", btdf::build_diffuse, "adds a Lambertian transmission kd/pi (BTDF)"),
+    ("peraxis", peraxis::build, "roughness (alpha, beta) gets one value per measured phi plane"),
 ];
 
 /// Build a node tree from syntax.
