@@ -34,6 +34,10 @@ pub struct FitOptions {
     pub optimizer: Optimizer,
     pub restarts: usize,
     pub seed: u64,
+    /// Draw this many random points per restart, evaluate them in one batch and start
+    /// from the best (1 = plain random starts). Cheap, and it keeps restarts out of the
+    /// flat, hopeless corners of the box that local optimizers cannot leave.
+    pub screen: usize,
     pub compass: compass::CompassOptions,
     pub lm: lm::LmOptions,
 }
@@ -44,6 +48,7 @@ impl Default for FitOptions {
             optimizer: Optimizer::Compass,
             restarts: 32,
             seed: 1,
+            screen: 8,
             compass: Default::default(),
             lm: Default::default(),
         }
@@ -130,6 +135,19 @@ impl BatchResiduals for UnitBox<'_, '_> {
     }
 }
 
+/// Random starting points, screened: the best `restarts` of `restarts × screen` draws.
+fn screened_starts(obj: &mut dyn BatchObjective, opts: &FitOptions) -> anyhow::Result<Vec<Vec<f64>>> {
+    let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
+    if opts.screen <= 1 {
+        return Ok(pool);
+    }
+    let flat: Vec<f64> = pool.iter().flatten().copied().collect();
+    let costs = obj.costs(&flat)?;
+    let mut order: Vec<usize> = (0..pool.len()).collect();
+    order.sort_by(|&a, &b| crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b])));
+    Ok(order.into_iter().take(opts.restarts).map(|i| pool[i].clone()).collect())
+}
+
 /// Fit `model` to `data` under `loss`.
 pub fn fit(
     model: &Model,
@@ -159,10 +177,10 @@ pub fn fit(
     let t0 = Instant::now();
     let problem = Problem { model, data, loss };
     let mut eval = backend.prepare(problem)?;
-    let starts = random_starts(model.dim, opts.restarts, opts.seed);
     let results: Vec<RestartResult> = {
         let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
         let mut obj = UnitBox { model, eval: eval.as_mut(), loss_terms: terms };
+        let starts = screened_starts(&mut obj, opts)?;
         match opts.optimizer {
             Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
             Optimizer::Lm => {

@@ -225,6 +225,13 @@ pub fn synthesize_angular(
             }
         }
         let u = u2.sqrt();
+        if u <= 0.0 {
+            return Err(format!(
+                "the model is 0 at θi = {:.1}°, θo = {:.1}°, so the noise gives a zero uncertainty there: use an absolute floor (--noise REL,ABS with ABS > 0)",
+                s.theta_i.to_degrees(),
+                s.theta_o.to_degrees()
+            ));
+        }
         let n: f64 = normal.sample(&mut rng);
         s.value = f + u * n.clamp(-3.0, 3.0);
         s.uncertainty = u;

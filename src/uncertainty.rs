@@ -1,18 +1,22 @@
-//! Parameter standard uncertainties and correlations at an optimum (DESIGN §5, issue 4):
-//! cov = s² (JᵀWJ)⁻¹ with J the Jacobian of the weighted residuals by central differences.
+//! Parameter standard uncertainties and correlations at an optimum (DESIGN §5, issue 4).
 //!
-//! - χ² loss (W = 1/u²): s² = 1, the metrological covariance.
-//! - other sum-of-squares losses: s² = Σ w r² / (K − P), the usual weighted-least-squares
-//!   scaling, since their weights are not 1/u².
-//! - SMAPE (not a sum of squares): the χ² form is reported.
+//! With r_k = √w_k (g(y′_k) − g(y_k)) the loss's weighted residuals and J their Jacobian
+//! (central differences), the estimator's covariance propagated from the measurement
+//! uncertainties is the sandwich
+//!     cov = B⁺ M B⁺,  B = JᵀJ,  M = Jᵀ diag(w_k σ_k²) J,  σ_k = |g′(y_k)| u_k,
+//! which reduces to the textbook (JᵀWJ)⁻¹ for the χ² loss (w = 1/u², g = identity). For
+//! the paper's other weightings (uniform, relunc, 1/u) this propagates the stated
+//! uncertainties correctly, where the plain (JᵀWJ)⁻¹ would not even carry the right
+//! units. When the model misses the data (χ²_red > 1) the covariance is scaled by χ²_red
+//! (the Birge ratio squared). SMAPE is not a sum of squares: its fits report the χ² form.
 //!
-//! The inverse is a pseudo-inverse by SVD; a parameter that lies along a direction the
-//! data does not determine gets no standard uncertainty and a warning, as does a pair with
+//! B⁺ is a pseudo-inverse by SVD: a parameter along a direction the data does not
+//! determine gets no standard uncertainty and a warning, as does a pair with
 //! |correlation| > 0.99 or a standard uncertainty larger than the parameter's range.
 
 use crate::backend::Evaluator;
 use crate::dataset::Dataset;
-use crate::loss::{Loss, Metric};
+use crate::loss::{Loss, Metric, Term};
 use crate::model::Model;
 use nalgebra::DMatrix;
 
@@ -29,8 +33,9 @@ const DU: f64 = 1e-4;
 /// Relative singular-value threshold of the pseudo-inverse.
 const RCOND: f64 = 1e-10;
 
-/// Weighted residual vectors of a batch of physical parameter vectors.
-fn residual_rows(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, batch: &[f64]) -> anyhow::Result<(Vec<Vec<f64>>, bool)> {
+/// Weighted residual vectors of a batch, with each sample's w_k σ_k² (see module doc)
+/// and the χ² of the first point.
+fn residual_rows(data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, batch: &[f64]) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
     let values = eval.values(batch)?;
     let k = data.len();
     let use_loss = loss.is_sum_of_squares() && loss.metric != Metric::Chi2;
@@ -51,8 +56,23 @@ fn residual_rows(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Evalu
                 .collect()
         })
         .collect();
-    let _ = model;
-    Ok((rows, use_loss))
+    let w_sigma2 = data
+        .samples
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            if !use_loss {
+                return 1.0; // w = 1/u², σ = u
+            }
+            let slope = match terms.term {
+                Term::LogSquare => terms.a[j] / (1.0 + terms.a[j] * s.value),
+                _ => terms.a[j],
+            };
+            terms.w[j] * (slope * s.uncertainty).powi(2)
+        })
+        .collect();
+    let chi2 = crate::loss::chi2(data, &values[..k]);
+    Ok((rows, w_sigma2, chi2))
 }
 
 pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, flat: &[f64]) -> anyhow::Result<Covariance> {
@@ -74,8 +94,7 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
         batch.extend(plus);
         batch.extend(minus);
     }
-    let (rows, scaled) = residual_rows(model, data, loss, eval, &batch)?;
-    let r0 = &rows[0];
+    let (rows, w_sigma2, chi2) = residual_rows(data, loss, eval, &batch)?;
     let mut jac = DMatrix::<f64>::zeros(k, p);
     for j in 0..p {
         let (plus, minus) = (&rows[1 + 2 * j], &rows[2 + 2 * j]);
@@ -84,8 +103,13 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
         }
     }
     let dof = (k.saturating_sub(p)).max(1) as f64;
-    let s2 = if scaled { r0.iter().map(|r| r * r).sum::<f64>() / dof } else { 1.0 };
+    let birge = (chi2 / dof).max(1.0);
     let jtj = jac.transpose() * &jac;
+    let mut weighted = jac.clone();
+    for (i, ws) in w_sigma2.iter().enumerate() {
+        weighted.row_mut(i).scale_mut(*ws);
+    }
+    let meat = jac.transpose() * weighted;
     let names = model.flat_names();
     let mut out = Covariance { std: vec![None; p], correlation: vec![vec![None; p]; p], warnings: vec![] };
     if jtj.iter().any(|v| !v.is_finite()) {
@@ -112,7 +136,7 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
             }
         }
     }
-    let cov = inv * s2;
+    let cov = &inv * meat * &inv * birge;
     for j in 0..p {
         let v = cov[(j, j)];
         if !undetermined[j] && v.is_finite() && v >= 0.0 {
@@ -153,6 +177,28 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
                     out.warnings.push(format!(
                         "{} and {} are not separately determined (correlation {c:+.4})",
                         names[a], names[b]
+                    ));
+                }
+            }
+        }
+    }
+    // A trade-off among three or more parameters can hide behind moderate pairwise
+    // correlations: the multiple correlation R_j of each parameter with all the others,
+    // R_j² = 1 − 1/(C⁻¹)_jj, exposes it (e.g. α, η_t and S at normal incidence).
+    let det: Vec<usize> = (0..p).filter(|&j| out.std[j].is_some_and(|s| s > 0.0)).collect();
+    if det.len() > 2 {
+        let c = DMatrix::from_fn(det.len(), det.len(), |a, b| out.correlation[det[a]][det[b]].unwrap_or(0.0));
+        if let Some(ci) = c.try_inverse() {
+            for (a, &j) in det.iter().enumerate() {
+                let vif = ci[(a, a)];
+                let r = if vif > 1.0 { (1.0 - 1.0 / vif).sqrt() } else { 0.0 };
+                let pairwise = det.iter().any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
+                if r > 0.99 && !pairwise {
+                    let others: Vec<&str> = det.iter().filter(|&&o| o != j).map(|&o| names[o].as_str()).collect();
+                    out.warnings.push(format!(
+                        "{} is not separately determined from {} (multiple correlation {r:.4}): the data constrain only a combination",
+                        names[j],
+                        others.join(", ")
                     ));
                 }
             }
