@@ -290,7 +290,7 @@ impl FitReport {
     /// A compact human-readable summary.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "{} on {} ({} samples, {} channel(s)) — loss {}/{} = {:.6e}, χ²_red = {:.3}\n",
+            "model {} fitted to '{}' ({} samples, {} channel(s)): loss {}/{} = {:.6e}, χ²_red = {:.3}\n",
             self.model,
             self.material,
             self.samples,
