@@ -45,6 +45,15 @@ fn load_params(c: u32) {
     }
 }
 
+// The thread's sample slice; a constant 0 when SL = 1, so the sample index is a plain
+// uniform loop counter the compiler can see (broadcast loads on SIMD CPU devices).
+fn slice(lid: vec3<u32>) -> u32 {
+    if (SL == 1u) {
+        return 0u;
+    }
+    return lid.y;
+}
+
 fn candidate(wg: vec3<u32>, lid: vec3<u32>) -> u32 {
     return (wg.x + wg.y * dims.groups_x) * CL + lid.x;
 }
@@ -58,7 +67,7 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
         load_params(c);
         for (var ch = 0u; ch < C; ch = ch + 1u) {
             let end = slots[S * C + ch + 1u];
-            for (var k = slots[S * C + ch] + lid.y; k < end; k = k + SL) {
+            for (var k = slots[S * C + ch] + slice(lid); k < end; k = k + SL) {
                 let s = samples[k];
                 let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
                 acc = acc + loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
@@ -90,7 +99,7 @@ fn values(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
     load_params(c);
     for (var ch = 0u; ch < C; ch = ch + 1u) {
         let end = slots[S * C + ch + 1u];
-        for (var k = slots[S * C + ch] + lid.y; k < end; k = k + SL) {
+        for (var k = slots[S * C + ch] + slice(lid); k < end; k = k + SL) {
             let s = samples[k];
             out[c * dims.n_samples + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
         }
