@@ -1,0 +1,131 @@
+// Micrograin layer shared math (Lucas, Ribardière, Pacanowski, Barla 2023, ACM TOG 42(6)):
+// visibility weight (Eqs. 21–23), NDF (Eq. 17), Smith Λ series (supplemental) and the rough
+// dielectric grain. f32 twin of src/model/micrograin.rs (same clamps, same 32-term series).
+// Uses PI, INV_PI and fresnel_dielectric from common.wgsl.
+
+const MG_MU_MIN: f32 = 1e-6;
+const MG_TAU_MIN: f32 = 1e-6;
+const MG_TAU_MAX: f32 = 0.9999;
+const MG_BETA_MIN: f32 = 1e-4;
+const MG_LAMBDA_TERMS: i32 = 32; // the authors' shader stops at 7 (see micrograin.rs)
+const MG_LAMBDA_TAIL_EPS: f32 = 1e-9; // early exit once the series' tail is negligible
+
+fn mg_clamp_tau(t: f32) -> f32 {
+    return clamp(t, MG_TAU_MIN, MG_TAU_MAX);
+}
+
+fn mg_clamp_beta(b: f32) -> f32 {
+    return clamp(b, MG_BETA_MIN, 1.0);
+}
+
+// Λ0/τ0 = −ln(1 − τ0)/τ0 without cancellation at small τ0 (WGSL has no log1p).
+fn mg_l0_over_tau(t: f32) -> f32 {
+    if (t < 0.05) {
+        return 1.0 + t * (0.5 + t * (1.0 / 3.0 + t * (0.25 + t * (0.2 + t * (1.0 / 6.0)))));
+    }
+    return -log(1.0 - t) / t;
+}
+
+// 1 − e^{−x} for x ≥ 0 without cancellation at small x (WGSL has no expm1).
+fn mg_one_minus_exp_neg(x: f32) -> f32 {
+    if (x < 0.1) {
+        return x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0 - x * (1.0 / 120.0 - x * (1.0 / 720.0))))));
+    }
+    return 1.0 - exp(-x);
+}
+
+// γβ(θ) = √(β² sin²θ + cos²θ).
+fn mg_gamma_beta(beta: f32, mu: f32) -> f32 {
+    let s2 = max(1.0 - mu * mu, 0.0);
+    return sqrt(beta * beta * s2 + mu * mu);
+}
+
+// Visibility weight w = 1 − (1 − τ0)^{½(γβ(θi)/μi + γβ(θo)/μo)} (Eqs. 21–23).
+fn mg_weight(tau0_in: f32, beta_in: f32, mu_i: f32, mu_o: f32) -> f32 {
+    let tau0 = mg_clamp_tau(tau0_in);
+    let beta = mg_clamp_beta(beta_in);
+    let mi = clamp(abs(mu_i), MG_MU_MIN, 1.0);
+    let mo = clamp(abs(mu_o), MG_MU_MIN, 1.0);
+    let e = 0.5 * (mg_gamma_beta(beta, mi) / mi + mg_gamma_beta(beta, mo) / mo);
+    let l0 = mg_l0_over_tau(tau0) * tau0;
+    return clamp(mg_one_minus_exp_neg(l0 * e), 0.0, 1.0);
+}
+
+// Micrograin NDF (Eq. 17) at the unit micro-normal h.
+fn mg_ndf(tau0_in: f32, beta_in: f32, h: vec3<f32>) -> f32 {
+    if (h.z <= 0.0) {
+        return 0.0;
+    }
+    let tau0 = mg_clamp_tau(tau0_in);
+    let beta = mg_clamp_beta(beta_in);
+    let lt = mg_l0_over_tau(tau0);
+    let l0 = lt * tau0;
+    let b2 = beta * beta;
+    let s2 = h.x * h.x + h.y * h.y;
+    let d = b2 * h.z * h.z + s2;
+    let u = s2 / d;
+    return lt * exp(-l0 * u) * b2 * INV_PI / (d * d);
+}
+
+// vec2(σ, S): σ = μ/γβ, S = Λ·σ, so G1 = σ/(σ + S). Expects clamped τ0, β.
+fn mg_lambda_parts(tau0: f32, beta: f32, mu_in: f32) -> vec2<f32> {
+    let mu = clamp(mu_in, 0.0, 1.0);
+    let s2 = max(1.0 - mu * mu, 0.0);
+    let g = sqrt(beta * beta * s2 + mu * mu);
+    let sn = mu / g;
+    let c2 = beta * beta * s2 / (g * g);
+    let lt = mg_l0_over_tau(tau0);
+    let l0 = lt * tau0;
+    var wk = lt * (1.0 - tau0); // Λ0/(e^{Λ0} − 1)
+    var kk = 0.5;
+    var c2k = 1.0;
+    var j = c2 / (1.0 + sn); // J_0 = 1 − σ
+    var sum = wk * kk * (c2 - sn * j);
+    for (var k: i32 = 1; k < MG_LAMBDA_TERMS; k = k + 1) {
+        let kf = f32(k);
+        wk = wk * l0 / kf;
+        kk = kk * (kf + 0.5) / (kf + 1.0);
+        c2k = c2k * c2;
+        j = (2.0 * kf * j - c2k * sn) / (2.0 * kf + 1.0);
+        sum = sum + wk * kk * (c2k * c2 / (2.0 * kf + 1.0) - sn * j);
+        // tail ≤ w_k c^{2k+2}/2 once k + 1 ≥ 2Λ0 (see micrograin.rs)
+        if (kf + 1.0 >= 2.0 * l0 && wk * c2k * c2 <= MG_LAMBDA_TAIL_EPS * sum) {
+            break;
+        }
+    }
+    return vec2<f32>(sn, max(sum, 0.0));
+}
+
+// Smith G1 = 1/(1 + Λ).
+fn mg_g1(tau0: f32, beta: f32, mu: f32) -> f32 {
+    let p = mg_lambda_parts(mg_clamp_tau(tau0), mg_clamp_beta(beta), mu);
+    return p.x / (p.x + p.y);
+}
+
+// G1(μ)/μ = 1/(γβ (σ + S)), finite at μ → 0.
+fn mg_g1_over_mu(tau0: f32, beta: f32, mu: f32) -> f32 {
+    let b = mg_clamp_beta(beta);
+    let p = mg_lambda_parts(mg_clamp_tau(tau0), b, mu);
+    return 1.0 / (mg_gamma_beta(b, clamp(mu, 0.0, 1.0)) * (p.x + p.y));
+}
+
+// Rough dielectric grain: F(ωi·h) D G1i G1o/(4 μi μo) + (1 − F(μi))(1 − F(μo)) ρ_g/π.
+fn mg_rough_grain(tau0: f32, beta: f32, eta_g: f32, rho_g: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    let mu_i = wi.z;
+    let mu_o = wo.z;
+    if (mu_i <= 0.0 || mu_o <= 0.0) {
+        return 0.0;
+    }
+    let eta = max(eta_g, 1.0);
+    let diffuse = (1.0 - fresnel_dielectric(mu_i, eta)) * (1.0 - fresnel_dielectric(mu_o, eta)) * rho_g * INV_PI;
+    let hs = wi + wo;
+    let hl2 = dot(hs, hs);
+    if (hl2 < 1e-30) {
+        return diffuse;
+    }
+    let h = hs * inverseSqrt(hl2);
+    let cd = clamp(dot(wi, h), 0.0, 1.0);
+    let spec = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
+        * mg_g1_over_mu(tau0, beta, mu_i) * mg_g1_over_mu(tau0, beta, mu_o) * 0.25;
+    return spec + diffuse;
+}
