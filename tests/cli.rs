@@ -1,0 +1,392 @@
+//! The command line end to end (DESIGN §8): `synth` then `fit --json`, and clear errors
+//! (exit code 1, file and line named, never a panic) for bad input.
+
+mod common;
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bsdfit(args: &[&str]) -> Output {
+    Command::new(common::bin())
+        .args(args)
+        .output()
+        .expect("run bsdfit")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn assert_ok(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed ({:?})\nstdout:\n{}\nstderr:\n{}",
+        out.status.code(),
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
+
+/// The command must fail with exit code 1, no panic, and a message containing every needle.
+fn assert_clear_error(out: &Output, needles: &[&str]) -> String {
+    let err = text(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "expected exit code 1, got {:?}; stderr:\n{err}",
+        out.status.code()
+    );
+    assert!(
+        !err.contains("panicked"),
+        "panic instead of an error:\n{err}"
+    );
+    for n in needles {
+        assert!(err.contains(n), "expected '{n}' in stderr:\n{err}");
+    }
+    err
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// An Oren–Nayar dataset (σ = 0.7 rad, 3 channels, inplane10, 1.5% noise) in `dir`.
+fn synth_on(dir: &Path) -> PathBuf {
+    let data = dir.join("on.csv");
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--params",
+        "rho=0.3:0.5:0.7,sigma=0.7",
+        "--geometry",
+        "inplane10",
+        "--noise",
+        "0.015,0.0001",
+        "--seed",
+        "5",
+        "--out",
+        p(&data),
+    ]);
+    assert_ok(&out, "synth");
+    let written = std::fs::read_to_string(&data).unwrap();
+    assert!(
+        written.starts_with("# bsdfit dataset v1\n"),
+        "{}",
+        &written[..written.len().min(200)]
+    );
+    assert!(written.contains("# kind: brdf"));
+    data
+}
+
+const BTDF_FILE: &str = "# bsdfit dataset v1\n# kind: btdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n\
+0,0,0,0,633,5.0,0.1\n0,0,5,0,633,2.0,0.05\n0,0,10,0,633,0.8,0.02\n0,0,-5,0,633,2.1,0.05\n0,0,-10,0,633,0.7,0.02\n";
+
+#[test]
+fn synth_then_fit_recovers_sigma_and_writes_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let json = dir.path().join("fit.json");
+    let out = bsdfit(&[
+        "fit",
+        p(&data),
+        "--model",
+        "on",
+        "--loss",
+        "rmse",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "8",
+        "--json",
+        p(&json),
+    ]);
+    assert_ok(&out, "fit");
+    assert!(!text(&out.stderr).contains("panicked"));
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in [
+        "model",
+        "loss",
+        "weights",
+        "optimizer",
+        "backend",
+        "restarts",
+        "evaluations",
+        "seconds",
+        "best",
+    ] {
+        assert!(r.get(key).is_some(), "missing key {key} in {r:#}");
+    }
+    assert_eq!(r["model"], "on");
+    assert_eq!(r["loss"], "rmse");
+    assert_eq!(r["weights"], "uniform");
+    assert_eq!(r["optimizer"], "compass");
+    assert_eq!(r["backend"], "cpu");
+    assert_eq!(r["restarts"], 8);
+    assert!(
+        r["evaluations"].as_u64().is_some_and(|e| e > 0),
+        "{}",
+        r["evaluations"]
+    );
+    assert!(
+        r["seconds"]
+            .as_f64()
+            .is_some_and(|s| s.is_finite() && s >= 0.0),
+        "{}",
+        r["seconds"]
+    );
+    let best = &r["best"];
+    for key in ["loss", "chi2_red", "params", "param_std"] {
+        assert!(best.get(key).is_some(), "missing best.{key}");
+    }
+    let loss = best["loss"].as_f64().unwrap();
+    assert!(loss.is_finite() && loss > 0.0, "loss {loss}");
+    let chi = best["chi2_red"].as_f64().unwrap();
+    assert!(chi.is_finite() && chi > 0.0 && chi < 2.0, "chi2_red {chi}");
+    let rho = best["params"]["rho"].as_array().expect("rho is an array");
+    assert_eq!(rho.len(), 3);
+    for (v, want) in rho.iter().zip([0.3, 0.5, 0.7]) {
+        let v = v.as_f64().unwrap();
+        assert!((v - want).abs() < 0.02, "rho {v} vs {want}");
+    }
+    let sigma = best["params"]["sigma"].as_f64().unwrap();
+    assert!((sigma - 0.7).abs() < 0.05, "sigma {sigma}");
+    let std_rho = best["param_std"]["rho"]
+        .as_array()
+        .expect("param_std.rho is an array");
+    assert_eq!(std_rho.len(), 3);
+    assert!(
+        std_rho
+            .iter()
+            .all(|v| v.as_f64().is_some_and(|s| s.is_finite() && s > 0.0)),
+        "{std_rho:?}"
+    );
+    let std_sigma = best["param_std"]["sigma"].as_f64().unwrap();
+    assert!(
+        std_sigma.is_finite() && std_sigma > 0.0 && std_sigma < 0.05,
+        "std sigma {std_sigma}"
+    );
+    // The human summary names the parameters.
+    let so = text(&out.stdout);
+    assert!(so.contains("sigma") && so.contains("rho[2]"), "{so}");
+}
+
+#[test]
+fn nan_cell_names_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("bad.csv");
+    std::fs::write(
+        &f,
+        "# bsdfit dataset v1\n# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n\
+0,0,10,0,550,0.25,0.01\n0,0,20,0,550,0.24,0.01\n10,0,30,0,550,0.23,0.01\n10,0,40,0,550,NaN,0.01\n10,0,50,0,550,0.2,0.01\n",
+    )
+    .unwrap();
+    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
+    assert_clear_error(&out, &["bad.csv:7", "value"]);
+}
+
+#[test]
+fn unknown_model_spec() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let out = bsdfit(&["fit", p(&data), "--model", "lambret", "--backend", "cpu"]);
+    assert_clear_error(&out, &["unknown model 'lambret'", "lambert"]);
+    let out = bsdfit(&["fit", p(&data), "--model", "fa(eon", "--backend", "cpu"]);
+    assert_clear_error(&out, &["fa(eon", "')'"]);
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "nope",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    assert_clear_error(&out, &["unknown model 'nope'"]);
+}
+
+#[test]
+fn unknown_loss_and_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let out = bsdfit(&[
+        "fit",
+        p(&data),
+        "--model",
+        "on",
+        "--loss",
+        "l3",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["unknown loss 'l3'"]);
+    let out = bsdfit(&[
+        "fit",
+        p(&data),
+        "--model",
+        "on",
+        "--weights",
+        "heavy",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["unknown weights 'heavy'"]);
+}
+
+#[test]
+fn brdf_loss_on_btdf_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("t.csv");
+    std::fs::write(&f, BTDF_FILE).unwrap();
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--loss",
+        "rmse",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["rmse", "btdf"]);
+    // A BRDF model on BTDF data, with a loss valid for both.
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--loss",
+        "chi2",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["brdf", "btdf"]);
+}
+
+#[test]
+fn lm_with_a_non_sum_of_squares_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let out = bsdfit(&[
+        "fit",
+        p(&data),
+        "--model",
+        "on",
+        "--loss",
+        "smape",
+        "--optimizer",
+        "lm",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["lm", "smape"]);
+}
+
+#[test]
+fn data_errors_are_clear() {
+    let dir = tempfile::tempdir().unwrap();
+    // Missing file.
+    let missing = dir.path().join("missing.csv");
+    let out = bsdfit(&["fit", p(&missing), "--model", "lambert", "--backend", "cpu"]);
+    assert_clear_error(&out, &["missing.csv"]);
+    // Two requested wavelengths map to the same channel.
+    let data = synth_on(dir.path());
+    let out = bsdfit(&[
+        "fit",
+        p(&data),
+        "--model",
+        "on",
+        "--wavelengths",
+        "640,660",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["on.csv", "650"]);
+    // Fewer samples than parameters (DESIGN §2).
+    let f = dir.path().join("two.csv");
+    std::fs::write(
+        &f,
+        "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n0,0,10,0,550,0.25,0.01\n0,0,20,0,550,0.24,0.01\n",
+    )
+    .unwrap();
+    let out = bsdfit(&["fit", p(&f), "--model", "on", "--backend", "cpu"]);
+    assert_clear_error(&out, &["two.csv", "2 samples"]);
+    // Duplicate written with a signed angle.
+    let f = dir.path().join("dup.csv");
+    std::fs::write(
+        &f,
+        "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n10,0,-20,0,550,0.25,0.01\n10,0,20,180,550,0.24,0.01\n",
+    )
+    .unwrap();
+    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
+    assert_clear_error(&out, &["dup.csv:4", "duplicate"]);
+}
+
+#[test]
+fn zero_uncertainty_needs_the_flag_and_is_announced() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("z.csv");
+    let mut s =
+        String::from("# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n");
+    for (k, t) in [10, 20, 30, 40, 50, 60].iter().enumerate() {
+        s += &format!(
+            "0,0,{t},0,550,0.2{k},{}\n",
+            if k == 2 { "0" } else { "0.01" }
+        );
+    }
+    std::fs::write(&f, s).unwrap();
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+    ]);
+    assert_clear_error(&out, &["z.csv:5", "allow-zero-uncertainty"]);
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+        "--allow-zero-uncertainty",
+    ]);
+    assert_ok(&out, "fit --allow-zero-uncertainty");
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("zero uncertaint"),
+        "the floor is announced:\n{err}"
+    );
+}
+
+#[test]
+fn synth_rejects_out_of_bounds_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--params",
+        "sigma=3",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    assert_clear_error(&out, &["sigma", "bounds"]);
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--params",
+        "rho=0.5",
+        "--noise",
+        "0,0",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    assert_clear_error(&out, &["noise"]);
+}
