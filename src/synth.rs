@@ -37,7 +37,11 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
     let g = GEOMETRIES.iter().find(|g| g.name == name).ok_or_else(|| {
         format!(
             "unknown geometry '{name}' (known: {})",
-            GEOMETRIES.iter().map(|g| g.name).collect::<Vec<_>>().join(", ")
+            GEOMETRIES
+                .iter()
+                .map(|g| g.name)
+                .collect::<Vec<_>>()
+                .join(", ")
         )
     })?;
     let mut rows = Vec::new();
@@ -58,9 +62,17 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
         "specular" | "retro" => {
             inplane(&mut rows, &steps(-80.0, 80.0, 10.0));
             for ti in steps(10.0, 70.0, 10.0) {
-                let offsets: &[f64] = if g.name == "specular" { &[-5.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 5.0] } else { &[-3.0, -2.0, -1.0, 1.0, 2.0, 3.0] };
+                let offsets: &[f64] = if g.name == "specular" {
+                    &[-5.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 5.0]
+                } else {
+                    &[-3.0, -2.0, -1.0, 1.0, 2.0, 3.0]
+                };
                 for d in offsets {
-                    let to = if g.name == "specular" { -ti + d } else { ti + d };
+                    let to = if g.name == "specular" {
+                        -ti + d
+                    } else {
+                        ti + d
+                    };
                     if to.abs() <= 89.0 && (to.round() as i64) % 10 != 0 {
                         rows.push([ti, 0.0, to, 0.0]);
                     }
@@ -86,16 +98,33 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                 }
             }
         }
-        "ptb5" => rows.extend(steps(-20.0, 20.0, 5.0).into_iter().map(|t| [0.0, 0.0, t, 0.0])),
+        "ptb5" => rows.extend(
+            steps(-20.0, 20.0, 5.0)
+                .into_iter()
+                .map(|t| [0.0, 0.0, t, 0.0]),
+        ),
         "ptb1" => {
             for phi in [0.0, 90.0] {
-                rows.extend(steps(-20.0, 20.0, 1.0).into_iter().filter(|&t| phi == 0.0 || t != 0.0).map(|t| [0.0, 0.0, t, phi]));
+                rows.extend(
+                    steps(-20.0, 20.0, 1.0)
+                        .into_iter()
+                        .filter(|&t| phi == 0.0 || t != 0.0)
+                        .map(|t| [0.0, 0.0, t, phi]),
+                );
             }
         }
-        "csic" => rows.extend(steps(0.0, 80.0, 10.0).into_iter().map(|t| [0.0, 0.0, t, 0.0])),
+        "csic" => rows.extend(
+            steps(0.0, 80.0, 10.0)
+                .into_iter()
+                .map(|t| [0.0, 0.0, t, 0.0]),
+        ),
         "oblique" => {
             for ti in [0.0, 30.0, 60.0] {
-                rows.extend(steps(-80.0, 80.0, 2.5).into_iter().map(|t| [ti, 0.0, t, 0.0]));
+                rows.extend(
+                    steps(-80.0, 80.0, 2.5)
+                        .into_iter()
+                        .map(|t| [ti, 0.0, t, 0.0]),
+                );
             }
         }
         _ => unreachable!("every listed geometry has rows"),
@@ -163,11 +192,15 @@ pub fn synthesize_angular(
     seed: u64,
     material: &str,
 ) -> Result<Dataset, String> {
-    if !(angle_deg >= 0.0 && angle_deg < 10.0) {
-        return Err(format!("angular uncertainty {angle_deg}° must be in [0, 10)"));
+    if !(0.0..10.0).contains(&angle_deg) {
+        return Err(format!(
+            "angular uncertainty {angle_deg}° must be in [0, 10)"
+        ));
     }
     if wavelengths.windows(2).any(|w| w[0] >= w[1]) {
-        return Err("give the wavelengths in ascending order (channels are numbered by wavelength)".into());
+        return Err(
+            "give the wavelengths in ascending order (channels are numbered by wavelength)".into(),
+        );
     }
     if wavelengths.len() != model.channels {
         return Err(format!(
@@ -177,7 +210,10 @@ pub fn synthesize_angular(
         ));
     }
     if !(noise.rel >= 0.0 && noise.abs >= 0.0) || noise.rel + noise.abs <= 0.0 {
-        return Err("--noise needs REL,ABS ≥ 0 with at least one positive (uncertainties must be > 0)".into());
+        return Err(
+            "--noise needs REL,ABS ≥ 0 with at least one positive (uncertainties must be > 0)"
+                .into(),
+        );
     }
     let mut raw = Vec::new();
     for (i, r) in rows.iter().enumerate() {
@@ -185,24 +221,46 @@ pub fn synthesize_angular(
             let _ = c;
             raw.push((
                 i * wavelengths.len() + c + 1,
-                RawRow { theta_i: r[0], phi_i: r[1], theta_o: r[2], phi_o: r[3], wavelength_nm: wl, value: 0.0, uncertainty: 1.0 },
+                RawRow {
+                    theta_i: r[0],
+                    phi_i: r[1],
+                    theta_o: r[2],
+                    phi_o: r[3],
+                    wavelength_nm: wl,
+                    value: 0.0,
+                    uncertainty: 1.0,
+                },
             ));
         }
     }
     let opts = ReadOptions::default();
-    let mut ds = Dataset::from_rows(model.kind, material, &raw, "<synth>", &opts).map_err(|e| e.to_string())?;
+    let mut ds = Dataset::from_rows(model.kind, material, &raw, "<synth>", &opts)
+        .map_err(|e| e.to_string())?;
     if model.axes.len() > 1 && model.axes != ds.axes {
-        return Err(format!("model compiled for planes {:?} but the geometry has {:?}", model.axes, ds.axes));
+        return Err(format!(
+            "model compiled for planes {:?} but the geometry has {:?}",
+            model.axes, ds.axes
+        ));
     }
     // Channels come back sorted; map each to the model's channel of the same wavelength.
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     for s in &mut ds.samples {
-        let ch = wavelengths.iter().position(|&w| w == s.wavelength_nm).expect("wavelength present");
-        let group = if model.axes.len() > 1 { s.axis * model.channels + ch } else { ch };
+        let ch = wavelengths
+            .iter()
+            .position(|&w| w == s.wavelength_nm)
+            .expect("wavelength present");
+        let group = if model.axes.len() > 1 {
+            s.axis * model.channels + ch
+        } else {
+            ch
+        };
         let f = model.eval(flat, group, s.wi, s.wo);
         if !f.is_finite() {
-            return Err(format!("model {} is not finite at line {}", model.spec, s.line));
+            return Err(format!(
+                "model {} is not finite at line {}",
+                model.spec, s.line
+            ));
         }
         let mut u2 = (noise.rel * f).powi(2) + noise.abs.powi(2);
         if angle_deg > 0.0 {
@@ -215,7 +273,14 @@ pub fn synthesize_angular(
                 d
             };
             let below = model.kind == Kind::Btdf;
-            let at = |ti: f64, to: f64| model.eval(flat, group, dir(ti, s.phi_i, false), dir(to, s.phi_o, below));
+            let at = |ti: f64, to: f64| {
+                model.eval(
+                    flat,
+                    group,
+                    dir(ti, s.phi_i, false),
+                    dir(to, s.phi_o, below),
+                )
+            };
             let dfo = (at(s.theta_i, s.theta_o + h) - at(s.theta_i, s.theta_o - h)) / (2.0 * h);
             let dfi = (at(s.theta_i + h, s.theta_o) - at(s.theta_i - h, s.theta_o)) / (2.0 * h);
             let d = angle_deg.to_radians();
@@ -240,14 +305,28 @@ pub fn synthesize_angular(
     ds.source = std::path::PathBuf::from(material);
     ds.meta.insert("material".into(), material.into());
     ds.meta.insert("kind".into(), model.kind.to_string());
-    ds.meta.insert("source".into(), "synthetic (bsdfit synth)".into());
+    ds.meta
+        .insert("source".into(), "synthetic (bsdfit synth)".into());
     ds.meta.insert("synth_model".into(), model.spec.clone());
     ds.meta.insert(
         "synth_params".into(),
-        model.flat_names().iter().zip(flat).map(|(n, v)| format!("{n}={v}")).collect::<Vec<_>>().join(" "),
+        model
+            .flat_names()
+            .iter()
+            .zip(flat)
+            .map(|(n, v)| format!("{n}={v}"))
+            .collect::<Vec<_>>()
+            .join(" "),
     );
-    let angular = if angle_deg > 0.0 { format!(" angle_deg={angle_deg}") } else { String::new() };
-    ds.meta.insert("synth_noise".into(), format!("rel={} abs={}{angular}", noise.rel, noise.abs));
+    let angular = if angle_deg > 0.0 {
+        format!(" angle_deg={angle_deg}")
+    } else {
+        String::new()
+    };
+    ds.meta.insert(
+        "synth_noise".into(),
+        format!("rel={} abs={}{angular}", noise.rel, noise.abs),
+    );
     ds.meta.insert("synth_seed".into(), seed.to_string());
     Ok(ds)
 }
