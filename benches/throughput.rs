@@ -15,7 +15,9 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 const RESTARTS: usize = 64;
 
 fn throughput(c: &mut Criterion) {
-    let gpu = GpuBackend::new().map_err(|e| eprintln!("GPU not measured: {e}")).ok();
+    let gpu = GpuBackend::new()
+        .map_err(|e| eprintln!("GPU not measured: {e}"))
+        .ok();
     let mut backends: Vec<(&str, &dyn Backend)> = vec![];
     let cpu = CpuBackend::new();
     backends.push(("cpu", &cpu));
@@ -29,13 +31,23 @@ fn throughput(c: &mut Criterion) {
         (Kind::Brdf, "rmg(eon)"),
         (Kind::Btdf, "btdf(gg)+scale"),
     ] {
-        let Ok(data) = bench_dataset(spec, kind) else { continue };
+        let Ok(data) = bench_dataset(spec, kind) else {
+            continue;
+        };
         let model = Model::parse(spec, data.channel_count()).expect("catalogue spec");
         let candidates = RESTARTS * (2 * model.dim + 1);
         let starts = bsdfit::optim::random_starts(model.dim, candidates, 3);
         let params: Vec<f64> = starts.iter().flat_map(|u| model.from_unit(u)).collect();
-        let metric = if kind == Kind::Brdf { Metric::Rmse } else { Metric::F };
-        let problem = Problem { model: &model, data: &data, loss: Loss::new(metric, Weights::Uniform) };
+        let metric = if kind == Kind::Brdf {
+            Metric::Rmse
+        } else {
+            Metric::F
+        };
+        let problem = Problem {
+            model: &model,
+            data: &data,
+            loss: Loss::new(metric, Weights::Uniform),
+        };
         let mut group = c.benchmark_group(spec);
         group.throughput(Throughput::Elements((candidates * data.len()) as u64));
         group.sample_size(10);

@@ -28,16 +28,42 @@ pub fn bench_dataset(model_spec: &str, kind: Kind) -> anyhow::Result<Dataset> {
     };
     let model = Model::parse(model_spec, wl.len())?;
     let (_, rows) = geometry(geo).map_err(anyhow::Error::msg)?;
-    synthesize(&model, &model.defaults(), &rows, &wl, Noise { rel: 0.01, abs: 1e-4 }, 1, "bench").map_err(anyhow::Error::msg)
+    synthesize(
+        &model,
+        &model.defaults(),
+        &rows,
+        &wl,
+        Noise {
+            rel: 0.01,
+            abs: 1e-4,
+        },
+        1,
+        "bench",
+    )
+    .map_err(anyhow::Error::msg)
 }
 
 /// Measure one model on one backend: repeat the batch until `min_seconds` have passed.
-pub fn measure(model_spec: &str, kind: Kind, backend: &dyn Backend, restarts: usize, min_seconds: f64) -> anyhow::Result<BenchRow> {
+pub fn measure(
+    model_spec: &str,
+    kind: Kind,
+    backend: &dyn Backend,
+    restarts: usize,
+    min_seconds: f64,
+) -> anyhow::Result<BenchRow> {
     let data = bench_dataset(model_spec, kind)?;
     let model = Model::parse(model_spec, data.channel_count())?;
     let candidates = restarts * (2 * model.dim + 1);
-    let metric = if kind == Kind::Brdf { Metric::Rmse } else { Metric::F };
-    let problem = Problem { model: &model, data: &data, loss: Loss::new(metric, Weights::Uniform) };
+    let metric = if kind == Kind::Brdf {
+        Metric::Rmse
+    } else {
+        Metric::F
+    };
+    let problem = Problem {
+        model: &model,
+        data: &data,
+        loss: Loss::new(metric, Weights::Uniform),
+    };
     let mut eval = backend.prepare(problem)?;
     let starts = crate::optim::random_starts(model.dim, candidates, 7);
     let params: Vec<f64> = starts.iter().flat_map(|u| model.from_unit(u)).collect();
@@ -46,7 +72,11 @@ pub fn measure(model_spec: &str, kind: Kind, backend: &dyn Backend, restarts: us
     let mut reps = 0u64;
     while reps == 0 || t0.elapsed().as_secs_f64() < min_seconds {
         let c = eval.costs(&params)?;
-        anyhow::ensure!(c.len() == candidates, "backend returned {} costs for {candidates} candidates", c.len());
+        anyhow::ensure!(
+            c.len() == candidates,
+            "backend returned {} costs for {candidates} candidates",
+            c.len()
+        );
         reps += 1;
     }
     let secs = t0.elapsed().as_secs_f64();
@@ -75,5 +105,9 @@ pub fn median_speedup(rows: &[BenchRow]) -> Option<f64> {
     }
     ratios.sort_by(|a, b| a.total_cmp(b));
     let n = ratios.len();
-    Some(if n % 2 == 1 { ratios[n / 2] } else { 0.5 * (ratios[n / 2 - 1] + ratios[n / 2]) })
+    Some(if n % 2 == 1 {
+        ratios[n / 2]
+    } else {
+        0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
+    })
 }

@@ -90,7 +90,11 @@ pub enum DataError {
     #[error("{file}: {msg}")]
     File { file: String, msg: String },
     #[error("{file}:{line}: {msg}")]
-    Line { file: String, line: usize, msg: String },
+    Line {
+        file: String,
+        line: usize,
+        msg: String,
+    },
 }
 
 /// Options that relax or shape reading.
@@ -132,7 +136,11 @@ pub struct RawRow {
 /// Signed-angle convention (DESIGN §1): a negative θ is the same angle at φ + 180°.
 /// Returns (θ, φ) in degrees with θ ≥ 0 and φ in [0, 360).
 pub fn normalise_angles(theta: f64, phi: f64) -> (f64, f64) {
-    let (t, p) = if theta < 0.0 { (-theta, phi + 180.0) } else { (theta, phi) };
+    let (t, p) = if theta < 0.0 {
+        (-theta, phi + 180.0)
+    } else {
+        (theta, phi)
+    };
     let p = p.rem_euclid(360.0);
     // Azimuth is meaningless at the pole; fold it so duplicates are detected.
     if t == 0.0 {
@@ -177,16 +185,25 @@ impl Dataset {
                 ("uncertainty", r.uncertainty),
             ] {
                 if !v.is_finite() {
-                    return Err(line_err(line, format!("column {name} is not a finite number ({v})")));
+                    return Err(line_err(
+                        line,
+                        format!("column {name} is not a finite number ({v})"),
+                    ));
                 }
             }
             for (name, v) in [("theta_i", r.theta_i), ("theta_o", r.theta_o)] {
                 if !(-90.0..=90.0).contains(&v) {
-                    return Err(line_err(line, format!("{name} = {v}° is outside [-90, 90]")));
+                    return Err(line_err(
+                        line,
+                        format!("{name} = {v}° is outside [-90, 90]"),
+                    ));
                 }
             }
             if r.wavelength_nm <= 0.0 {
-                return Err(line_err(line, format!("wavelength_nm = {} must be positive", r.wavelength_nm)));
+                return Err(line_err(
+                    line,
+                    format!("wavelength_nm = {} must be positive", r.wavelength_nm),
+                ));
             }
             let mut u = r.uncertainty;
             if u < 0.0 {
@@ -205,7 +222,10 @@ impl Dataset {
             if r.value < -3.0 * u {
                 return Err(line_err(
                     line,
-                    format!("value = {} is negative beyond 3 uncertainties ({u})", r.value),
+                    format!(
+                        "value = {} is negative beyond 3 uncertainties ({u})",
+                        r.value
+                    ),
                 ));
             }
             let (ti, pi) = normalise_angles(r.theta_i, r.phi_i);
@@ -253,7 +273,9 @@ impl Dataset {
                         });
                     }
                     if nearest != w {
-                        notices.push(format!("{file}: wavelength {w} nm → nearest present {nearest} nm"));
+                        notices.push(format!(
+                            "{file}: wavelength {w} nm → nearest present {nearest} nm"
+                        ));
                     }
                     chosen.push(nearest);
                 }
@@ -267,7 +289,12 @@ impl Dataset {
             let Some(channel) = channels.iter().position(|&c| c == wl) else {
                 continue;
             };
-            let (ti, pi, to, po) = (ti.to_radians(), pi.to_radians(), to.to_radians(), po.to_radians());
+            let (ti, pi, to, po) = (
+                ti.to_radians(),
+                pi.to_radians(),
+                to.to_radians(),
+                po.to_radians(),
+            );
             let wi = direction(ti, pi);
             let mut wo = direction(to, po);
             if kind == Kind::Btdf {
@@ -321,8 +348,8 @@ impl Dataset {
         let mut meta = BTreeMap::new();
         let mut header_line = None;
         let mut offset = 0usize; // byte offset of the header line
-        // split_inclusive keeps each line's terminator in its length, so the offset is
-        // right for CRLF files too.
+                                 // split_inclusive keeps each line's terminator in its length, so the offset is
+                                 // right for CRLF files too.
         for (idx, line) in text.split_inclusive('\n').enumerate() {
             let t = line.trim();
             if t.is_empty() {

@@ -105,7 +105,10 @@ pub struct UnitBox<'m, 'e> {
 
 impl UnitBox<'_, '_> {
     fn to_physical(&self, points: &[f64]) -> Vec<f64> {
-        points.chunks(self.model.dim).flat_map(|u| self.model.from_unit(u)).collect()
+        points
+            .chunks(self.model.dim)
+            .flat_map(|u| self.model.from_unit(u))
+            .collect()
     }
 }
 
@@ -136,7 +139,10 @@ impl BatchResiduals for UnitBox<'_, '_> {
 }
 
 /// Random starting points, screened: the best `restarts` of `restarts × screen` draws.
-fn screened_starts(obj: &mut dyn BatchObjective, opts: &FitOptions) -> anyhow::Result<Vec<Vec<f64>>> {
+fn screened_starts(
+    obj: &mut dyn BatchObjective,
+    opts: &FitOptions,
+) -> anyhow::Result<Vec<Vec<f64>>> {
     let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
     if opts.screen <= 1 {
         return Ok(pool);
@@ -144,8 +150,14 @@ fn screened_starts(obj: &mut dyn BatchObjective, opts: &FitOptions) -> anyhow::R
     let flat: Vec<f64> = pool.iter().flatten().copied().collect();
     let costs = obj.costs(&flat)?;
     let mut order: Vec<usize> = (0..pool.len()).collect();
-    order.sort_by(|&a, &b| crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b])));
-    Ok(order.into_iter().take(opts.restarts).map(|i| pool[i].clone()).collect())
+    order.sort_by(|&a, &b| {
+        crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
+    });
+    Ok(order
+        .into_iter()
+        .take(opts.restarts)
+        .map(|i| pool[i].clone())
+        .collect())
 }
 
 /// Fit `model` to `data` under `loss`.
@@ -179,7 +191,11 @@ pub fn fit(
     let mut eval = backend.prepare(problem)?;
     let results: Vec<RestartResult> = {
         let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
-        let mut obj = UnitBox { model, eval: eval.as_mut(), loss_terms: terms };
+        let mut obj = UnitBox {
+            model,
+            eval: eval.as_mut(),
+            loss_terms: terms,
+        };
         let starts = screened_starts(&mut obj, opts)?;
         match opts.optimizer {
             Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
@@ -190,7 +206,13 @@ pub fn fit(
                     loss.metric
                 );
                 let finish = loss.terms(data);
-                lm::minimize(&mut obj, &starts, &opts.lm, &|s| finish.finish_sum(s), progress)?
+                lm::minimize(
+                    &mut obj,
+                    &starts,
+                    &opts.lm,
+                    &|s| finish.finish_sum(s),
+                    progress,
+                )?
             }
         }
     };
@@ -199,7 +221,10 @@ pub fn fit(
         .min_by(|a, b| a.cost.total_cmp(&b.cost))
         .expect("at least one restart");
     let tol = best_r.cost.abs() * 0.01 + 1e-300;
-    let within = results.iter().filter(|r| r.cost <= best_r.cost + tol).count();
+    let within = results
+        .iter()
+        .filter(|r| r.cost <= best_r.cost + tol)
+        .count();
     let best_flat = model.from_unit(&best_r.x);
     let values = eval.values(&best_flat)?;
     let chi2_red = chi2(data, &values) / (data.len() - model.dim) as f64;
@@ -263,7 +288,12 @@ fn make_report(
         restarts: opts.restarts,
         evaluations,
         seconds,
-        best: Best { loss: best_loss, chi2_red, params, param_std },
+        best: Best {
+            loss: best_loss,
+            chi2_red,
+            params,
+            param_std,
+        },
         data: data.source.display().to_string(),
         material: data.material.clone(),
         samples: data.len(),
@@ -281,7 +311,9 @@ fn make_report(
 
 fn json_num(v: Option<f64>) -> Value {
     match v {
-        Some(x) if x.is_finite() => serde_json::Number::from_f64(x).map(Value::Number).unwrap_or(Value::Null),
+        Some(x) if x.is_finite() => serde_json::Number::from_f64(x)
+            .map(Value::Number)
+            .unwrap_or(Value::Null),
         _ => Value::Null,
     }
 }

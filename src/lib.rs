@@ -7,14 +7,21 @@
 //! - [`optim`]: compass search and Levenberg–Marquardt, all restarts in lockstep.
 //! - [`fit`]: one fit and its report; [`uncertainty`]: parameter covariances.
 //! - [`synth`]: synthetic data from known parameters.
+//! - [`sweep`]: the benchmark sweep (resumable, shardable); [`plot`], [`render`],
+//!   [`report`]: its angular plots, sphere renders and report.html.
 
 pub mod backend;
 pub mod bench;
 pub mod dataset;
+pub mod diagnose;
 pub mod fit;
 pub mod loss;
 pub mod math;
 pub mod model;
 pub mod optim;
+pub mod plot;
+pub mod render;
+pub mod report;
+pub mod sweep;
 pub mod synth;
 pub mod uncertainty;

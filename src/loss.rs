@@ -217,7 +217,11 @@ impl Loss {
                 Metric::Cosf | Metric::Logcosf => (1.0, ct),
                 Metric::Chi2 => (1.0 / (u * u), 1.0),
             };
-            let uw = if self.metric == Metric::Chi2 { 1.0 } else { unc_w };
+            let uw = if self.metric == Metric::Chi2 {
+                1.0
+            } else {
+                unc_w
+            };
             w.push(uw * geo);
             a.push(inner);
         }
@@ -271,7 +275,11 @@ impl LossTerms {
 
     /// The loss of a whole vector of model values.
     pub fn loss(&self, values: &[f64]) -> f64 {
-        let s: f64 = values.iter().enumerate().map(|(k, &v)| self.term_at(k, v)).sum();
+        let s: f64 = values
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| self.term_at(k, v))
+            .sum();
         self.finish_sum(s)
     }
 }
@@ -290,5 +298,9 @@ pub fn chi2(data: &Dataset, values: &[f64]) -> f64 {
 
 /// Normalised residuals z = (y′ − y)/u.
 pub fn normalised_residuals(data: &Dataset, values: &[f64]) -> Vec<f64> {
-    data.samples.iter().zip(values).map(|(s, &v)| (v - s.value) / s.uncertainty).collect()
+    data.samples
+        .iter()
+        .zip(values)
+        .map(|(s, &v)| (v - s.value) / s.uncertainty)
+        .collect()
 }

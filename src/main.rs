@@ -11,7 +11,11 @@ use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
 #[derive(Parser)]
-#[command(name = "bsdfit", version, about = "Fit BRDF/BTDF models to measured data with uncertainties (GPU batch fitter with a CPU reference)")]
+#[command(
+    name = "bsdfit",
+    version,
+    about = "Fit BRDF/BTDF models to measured data with uncertainties (GPU batch fitter with a CPU reference)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -27,6 +31,16 @@ enum Command {
     Models,
     /// Measure CPU and GPU throughput (model-sample evaluations per second).
     Bench(BenchArgs),
+    /// Run the benchmark: every data set × model × loss × weighting (resumable, shardable),
+    /// then results tables, angular plots, sphere renders and report.html.
+    Sweep(bsdfit::sweep::SweepArgs),
+    /// Combine the results of sweep shards (`sweep --shard I/N`) and write the report.
+    Merge(bsdfit::sweep::MergeArgs),
+    /// Render a sphere with a fitted BRDF, the tabulated measurement and their error image.
+    Render(bsdfit::render::RenderArgs),
+    /// Find where a model and the measurement disagree, name the missing effect, add it,
+    /// and repeat while the improvement is significant (DESIGN §7).
+    Diagnose(bsdfit::diagnose::DiagnoseArgs),
 }
 
 #[derive(Args)]
@@ -59,8 +73,11 @@ struct DataArgs {
 }
 
 impl DataArgs {
-    fn read(&self, path: &PathBuf) -> Result<Dataset> {
-        let opts = ReadOptions { allow_zero_uncertainty: self.allow_zero_uncertainty, wavelengths: self.wavelengths.clone() };
+    fn read(&self, path: &std::path::Path) -> Result<Dataset> {
+        let opts = ReadOptions {
+            allow_zero_uncertainty: self.allow_zero_uncertainty,
+            wavelengths: self.wavelengths.clone(),
+        };
         let ds = Dataset::read(path, &opts)?;
         for n in &ds.notices {
             eprintln!("note: {n}");
@@ -138,6 +155,10 @@ fn main() {
         Command::Synth(a) => cmd_synth(a),
         Command::Models => cmd_models(),
         Command::Bench(a) => cmd_bench(a),
+        Command::Sweep(a) => bsdfit::sweep::run_sweep(&a),
+        Command::Merge(a) => bsdfit::sweep::run_merge(&a),
+        Command::Render(a) => bsdfit::render::run_render(&a),
+        Command::Diagnose(a) => bsdfit::diagnose::run_diagnose(&a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -146,9 +167,20 @@ fn main() {
 }
 
 fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
-    let metric: Metric = loss.parse().map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
-    let weights: Weights = weights.parse().map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
-    anyhow::ensure!(metric.applies_to(kind), "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)", Metric::for_kind(kind).iter().map(|m| m.to_string()).collect::<Vec<_>>());
+    let metric: Metric = loss
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+    let weights: Weights = weights
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
+    anyhow::ensure!(
+        metric.applies_to(kind),
+        "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)",
+        Metric::for_kind(kind)
+            .iter()
+            .map(|m| m.to_string())
+            .collect::<Vec<_>>()
+    );
     Ok(Loss::new(metric, weights))
 }
 
@@ -156,16 +188,25 @@ fn cmd_fit(a: FitArgs) -> Result<()> {
     let data = a.data_args.read(&a.data)?;
     let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
     let backend = backend::select(a.backend, &mut |m| eprintln!("{m}"))?;
-    let opts = FitOptions { optimizer: a.optimizer, restarts: a.restarts, seed: a.seed, ..Default::default() };
+    let opts = FitOptions {
+        optimizer: a.optimizer,
+        restarts: a.restarts,
+        seed: a.seed,
+        ..Default::default()
+    };
     let run = |data: &Dataset| -> Result<bsdfit::fit::FitReport> {
         let model = Model::for_data(&a.model, data).context("--model")?;
         let bar = indicatif::ProgressBar::new(a.restarts as u64);
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar.set_message(format!("fitting {}", model.spec));
-        let report = fit(&model, data, loss, backend.as_ref(), &opts, &mut |active| bar.set_position((a.restarts - active) as u64))?;
+        let report = fit(&model, data, loss, backend.as_ref(), &opts, &mut |active| {
+            bar.set_position((a.restarts - active) as u64)
+        })?;
         bar.finish_and_clear();
         print!("{}", report.summary());
         Ok(report)
@@ -197,7 +238,11 @@ fn cmd_fit(a: FitArgs) -> Result<()> {
 }
 
 fn cmd_synth(a: SynthArgs) -> Result<()> {
-    let ast_kind = if a.model.trim_start().starts_with("btdf") { Kind::Btdf } else { Kind::Brdf };
+    let ast_kind = if a.model.trim_start().starts_with("btdf") {
+        Kind::Btdf
+    } else {
+        Kind::Brdf
+    };
     let wavelengths = a.wavelengths.clone().unwrap_or_else(|| match ast_kind {
         Kind::Brdf => vec![450.0, 550.0, 650.0],
         Kind::Btdf => vec![633.0],
@@ -206,21 +251,53 @@ fn cmd_synth(a: SynthArgs) -> Result<()> {
         Kind::Brdf => "inplane10".into(),
         Kind::Btdf => "oblique".into(),
     });
-    let (gkind, rows) = synth::geometry_expr(&geometry).map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
-    let planes = bsdfit::dataset::measurement_planes(rows.iter().map(|r| bsdfit::dataset::normalise_angles(r[2], r[3])));
+    let (gkind, rows) =
+        synth::geometry_expr(&geometry).map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    let planes = bsdfit::dataset::measurement_planes(
+        rows.iter()
+            .map(|r| bsdfit::dataset::normalise_angles(r[2], r[3])),
+    );
     let model = Model::parse_for(&a.model, wavelengths.len(), &planes).context("--model")?;
-    anyhow::ensure!(gkind == model.kind, "--geometry {geometry} is a {gkind} geometry but {} is a {} model", model.spec, model.kind);
+    anyhow::ensure!(
+        gkind == model.kind,
+        "--geometry {geometry} is a {gkind} geometry but {} is a {} model",
+        model.spec,
+        model.kind
+    );
     let flat = model.params_from_assignments(&a.params)?;
     let (rel, abs) = a
         .noise
         .split_once(',')
         .and_then(|(r, s)| Some((r.trim().parse::<f64>().ok()?, s.trim().parse::<f64>().ok()?)))
-        .ok_or_else(|| anyhow::anyhow!("--noise: expected REL,ABS such as 0.015,0.0001, got '{}'", a.noise))?;
-    let material = a.material.clone().unwrap_or_else(|| format!("synthetic {}", model.spec));
-    let mut ds = synth::synthesize_angular(&model, &flat, &rows, &wavelengths, synth::Noise { rel, abs }, a.angular_unc, a.seed, &material).map_err(|e| anyhow::anyhow!(e))?;
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "--noise: expected REL,ABS such as 0.015,0.0001, got '{}'",
+                a.noise
+            )
+        })?;
+    let material = a
+        .material
+        .clone()
+        .unwrap_or_else(|| format!("synthetic {}", model.spec));
+    let mut ds = synth::synthesize_angular(
+        &model,
+        &flat,
+        &rows,
+        &wavelengths,
+        synth::Noise { rel, abs },
+        a.angular_unc,
+        a.seed,
+        &material,
+    )
+    .map_err(|e| anyhow::anyhow!(e))?;
     ds.meta.insert("synth_geometry".into(), geometry.clone());
     ds.write(&a.out)?;
-    eprintln!("wrote {} ({} samples, {} channel(s), geometry {geometry})", a.out.display(), ds.len(), ds.channel_count());
+    eprintln!(
+        "wrote {} ({} samples, {} channel(s), geometry {geometry})",
+        a.out.display(),
+        ds.len(),
+        ds.channel_count()
+    );
     Ok(())
 }
 
@@ -242,7 +319,15 @@ fn cmd_models() -> Result<()> {
                 let ps: Vec<String> = m
                     .params
                     .iter()
-                    .map(|p| format!("{}{} [{}, {}]", p.name, if p.decl.rgb { " rgb" } else { "" }, p.decl.lo, p.decl.hi))
+                    .map(|p| {
+                        format!(
+                            "{}{} [{}, {}]",
+                            p.name,
+                            if p.decl.rgb { " rgb" } else { "" },
+                            p.decl.lo,
+                            p.decl.hi
+                        )
+                    })
                     .collect();
                 println!("  {spec:<22} {}", ps.join("; "));
             }
@@ -264,14 +349,22 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         Some(list) => list
             .iter()
             .map(|s| {
-                let kind = if s.trim_start().starts_with("btdf") { Kind::Btdf } else { Kind::Brdf };
+                let kind = if s.trim_start().starts_with("btdf") {
+                    Kind::Btdf
+                } else {
+                    Kind::Brdf
+                };
                 (kind, s.trim().to_string())
             })
             .collect(),
         None => model::catalogue(Kind::Brdf)
             .into_iter()
             .map(|s| (Kind::Brdf, s))
-            .chain(model::catalogue(Kind::Btdf).into_iter().map(|s| (Kind::Btdf, s)))
+            .chain(
+                model::catalogue(Kind::Btdf)
+                    .into_iter()
+                    .map(|s| (Kind::Btdf, s)),
+            )
             .collect(),
     };
     let mut backends: Vec<Box<dyn backend::Backend>> = Vec::new();
@@ -281,7 +374,9 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     if a.backend != BackendChoice::Cpu {
         match backend::gpu::GpuBackend::new() {
             Ok(g) => backends.push(Box::new(g)),
-            Err(e) if a.backend == BackendChoice::Auto => eprintln!("no GPU ({e}); measuring the CPU only"),
+            Err(e) if a.backend == BackendChoice::Auto => {
+                eprintln!("no GPU ({e}); measuring the CPU only")
+            }
             Err(e) => return Err(e.context("--backend gpu")),
         }
     }
@@ -289,7 +384,12 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         eprintln!("backend: {}", b.name());
     }
     let bar = indicatif::ProgressBar::new((specs.len() * backends.len()) as u64);
-    bar.set_style(indicatif::ProgressStyle::with_template("{msg:30} [{elapsed_precise}] {bar:30} {pos}/{len} (ETA {eta})").unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()));
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg:30} [{elapsed_precise}] {bar:30} {pos}/{len} (ETA {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
     let mut rows = Vec::new();
     for (kind, spec) in &specs {
         for b in &backends {
@@ -302,15 +402,22 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         }
     }
     bar.finish_and_clear();
-    println!("{:<24} {:>8} {:>8} {:>10} {:>14}", "model", "backend", "samples", "candidates", "evals/s");
+    println!(
+        "{:<24} {:>8} {:>8} {:>10} {:>14}",
+        "model", "backend", "samples", "candidates", "evals/s"
+    );
     for r in &rows {
-        println!("{:<24} {:>8} {:>8} {:>10} {:>14.3e}", r.model, r.backend, r.samples, r.candidates, r.evals_per_s);
+        println!(
+            "{:<24} {:>8} {:>8} {:>10} {:>14.3e}",
+            r.model, r.backend, r.samples, r.candidates, r.evals_per_s
+        );
     }
     if let Some(s) = median_speedup(&rows) {
         println!("median GPU/CPU speed-up over models: {s:.2}x");
     }
     if let Some(path) = &a.json {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?).with_context(|| format!("cannot write {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

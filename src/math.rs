@@ -83,9 +83,17 @@ pub fn gtr_d(cos_m: f64, alpha: f64, gamma: f64) -> f64 {
 pub fn gtr_norm(a2: f64, gamma: f64) -> f64 {
     let ln_a2 = a2.ln();
     let x = (1.0 - gamma) * ln_a2; // (α²)^(1−γ) = e^x
-    // (γ−1)(α²−1) / (1 − e^x) = (α²−1)/ln α² · (x / (e^x − 1)) ... with x/(e^x−1) → 1 at x→0
-    let ratio = if x.abs() < 1e-8 { 1.0 - 0.5 * x } else { x / x.exp_m1() };
-    let a_term = if ln_a2.abs() < 1e-8 { 1.0 + 0.5 * ln_a2 } else { (a2 - 1.0) / ln_a2 };
+                                   // (γ−1)(α²−1) / (1 − e^x) = (α²−1)/ln α² · (x / (e^x − 1)) ... with x/(e^x−1) → 1 at x→0
+    let ratio = if x.abs() < 1e-8 {
+        1.0 - 0.5 * x
+    } else {
+        x / x.exp_m1()
+    };
+    let a_term = if ln_a2.abs() < 1e-8 {
+        1.0 + 0.5 * ln_a2
+    } else {
+        (a2 - 1.0) / ln_a2
+    };
     a_term * ratio / PI
 }
 
@@ -121,7 +129,10 @@ mod tests {
             for &c in &[0.05, 0.3, 0.7, 1.0] {
                 let a = gtr_d(c, alpha, 2.0);
                 let b = ggx_d(c, alpha);
-                assert!((a - b).abs() <= 1e-9 * b.max(1.0), "alpha {alpha} c {c}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.max(1.0),
+                    "alpha {alpha} c {c}: {a} vs {b}"
+                );
             }
         }
     }
@@ -132,7 +143,10 @@ mod tests {
         let n = 200_000;
         for &alpha in &[0.05, 0.3, 0.8] {
             for (name, d) in [
-                ("ggx", Box::new(move |c: f64| ggx_d(c, alpha)) as Box<dyn Fn(f64) -> f64>),
+                (
+                    "ggx",
+                    Box::new(move |c: f64| ggx_d(c, alpha)) as Box<dyn Fn(f64) -> f64>,
+                ),
                 ("beckmann", Box::new(move |c: f64| beckmann_d(c, alpha))),
                 ("gtr1.5", Box::new(move |c: f64| gtr_d(c, alpha, 1.5))),
                 ("gtr1", Box::new(move |c: f64| gtr_d(c, alpha, 1.0))),
@@ -145,7 +159,10 @@ mod tests {
                     s += d(u) * u;
                 }
                 let integral = 2.0 * PI * s / n as f64;
-                assert!((integral - 1.0).abs() < 2e-3, "{name} alpha {alpha}: {integral}");
+                assert!(
+                    (integral - 1.0).abs() < 2e-3,
+                    "{name} alpha {alpha}: {integral}"
+                );
             }
         }
     }

@@ -35,7 +35,12 @@ const RCOND: f64 = 1e-10;
 
 /// Weighted residual vectors of a batch, with each sample's w_k σ_k² (see module doc)
 /// and the χ² of the first point.
-fn residual_rows(data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, batch: &[f64]) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
+fn residual_rows(
+    data: &Dataset,
+    loss: Loss,
+    eval: &mut dyn Evaluator,
+    batch: &[f64],
+) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
     let values = eval.values(batch)?;
     let k = data.len();
     let use_loss = loss.is_sum_of_squares() && loss.metric != Metric::Chi2;
@@ -75,7 +80,13 @@ fn residual_rows(data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, batch: &[
     Ok((rows, w_sigma2, chi2))
 }
 
-pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Evaluator, flat: &[f64]) -> anyhow::Result<Covariance> {
+pub fn covariance(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    eval: &mut dyn Evaluator,
+    flat: &[f64],
+) -> anyhow::Result<Covariance> {
     let p = model.dim;
     let k = data.len();
     let decls = model.flat_decls();
@@ -99,7 +110,11 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
     for j in 0..p {
         let (plus, minus) = (&rows[1 + 2 * j], &rows[2 + 2 * j]);
         for i in 0..k {
-            jac[(i, j)] = if steps[j] != 0.0 { (plus[i] - minus[i]) / steps[j] } else { 0.0 };
+            jac[(i, j)] = if steps[j] != 0.0 {
+                (plus[i] - minus[i]) / steps[j]
+            } else {
+                0.0
+            };
         }
     }
     let dof = (k.saturating_sub(p)).max(1) as f64;
@@ -111,14 +126,20 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
     }
     let meat = jac.transpose() * weighted;
     let names = model.flat_names();
-    let mut out = Covariance { std: vec![None; p], correlation: vec![vec![None; p]; p], warnings: vec![] };
+    let mut out = Covariance {
+        std: vec![None; p],
+        correlation: vec![vec![None; p]; p],
+        warnings: vec![],
+    };
     if jtj.iter().any(|v| !v.is_finite()) {
-        out.warnings.push("the Jacobian is not finite at the optimum; no parameter uncertainties".into());
+        out.warnings
+            .push("the Jacobian is not finite at the optimum; no parameter uncertainties".into());
         return Ok(out);
     }
     let svd = jtj.clone().svd(true, true);
     let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        out.warnings.push("SVD failed; no parameter uncertainties".into());
+        out.warnings
+            .push("SVD failed; no parameter uncertainties".into());
         return Ok(out);
     };
     let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
@@ -152,7 +173,10 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
             }
         }
     }
-    let undetermined_names: Vec<&str> = (0..p).filter(|&j| undetermined[j]).map(|j| names[j].as_str()).collect();
+    let undetermined_names: Vec<&str> = (0..p)
+        .filter(|&j| undetermined[j])
+        .map(|j| names[j].as_str())
+        .collect();
     if !undetermined_names.is_empty() {
         out.warnings.push(format!(
             "not determined by the data (singular normal matrix): {}",
@@ -185,16 +209,30 @@ pub fn covariance(model: &Model, data: &Dataset, loss: Loss, eval: &mut dyn Eval
     // A trade-off among three or more parameters can hide behind moderate pairwise
     // correlations: the multiple correlation R_j of each parameter with all the others,
     // R_j² = 1 − 1/(C⁻¹)_jj, exposes it (e.g. α, η_t and S at normal incidence).
-    let det: Vec<usize> = (0..p).filter(|&j| out.std[j].is_some_and(|s| s > 0.0)).collect();
+    let det: Vec<usize> = (0..p)
+        .filter(|&j| out.std[j].is_some_and(|s| s > 0.0))
+        .collect();
     if det.len() > 2 {
-        let c = DMatrix::from_fn(det.len(), det.len(), |a, b| out.correlation[det[a]][det[b]].unwrap_or(0.0));
+        let c = DMatrix::from_fn(det.len(), det.len(), |a, b| {
+            out.correlation[det[a]][det[b]].unwrap_or(0.0)
+        });
         if let Some(ci) = c.try_inverse() {
             for (a, &j) in det.iter().enumerate() {
                 let vif = ci[(a, a)];
-                let r = if vif > 1.0 { (1.0 - 1.0 / vif).sqrt() } else { 0.0 };
-                let pairwise = det.iter().any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
+                let r = if vif > 1.0 {
+                    (1.0 - 1.0 / vif).sqrt()
+                } else {
+                    0.0
+                };
+                let pairwise = det
+                    .iter()
+                    .any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
                 if r > 0.99 && !pairwise {
-                    let others: Vec<&str> = det.iter().filter(|&&o| o != j).map(|&o| names[o].as_str()).collect();
+                    let others: Vec<&str> = det
+                        .iter()
+                        .filter(|&&o| o != j)
+                        .map(|&o| names[o].as_str())
+                        .collect();
                     out.warnings.push(format!(
                         "{} is not separately determined from {} (multiple correlation {r:.4}): the data constrain only a combination",
                         names[j],

@@ -18,12 +18,29 @@ fn oblique_data(seed: u64) -> Dataset {
     let model = Model::parse(SPEC, 1).unwrap();
     let truth = model.params_from_assignments(TRUTH).unwrap();
     let (_, rows) = geometry("oblique").unwrap();
-    synthesize(&model, &truth, &rows, &[633.0], Noise { rel: 0.01, abs: 1e-5 }, seed, "tr+scale").unwrap()
+    synthesize(
+        &model,
+        &truth,
+        &rows,
+        &[633.0],
+        Noise {
+            rel: 0.01,
+            abs: 1e-5,
+        },
+        seed,
+        "tr+scale",
+    )
+    .unwrap()
 }
 
 fn run(data: &Dataset, optimizer: Optimizer, loss: Loss) -> FitReport {
     let model = Model::for_data(SPEC, data).unwrap();
-    let opts = FitOptions { optimizer, restarts: 12, seed: 3, ..Default::default() };
+    let opts = FitOptions {
+        optimizer,
+        restarts: 12,
+        seed: 3,
+        ..Default::default()
+    };
     fit(&model, data, loss, &CpuBackend::new(), &opts, &mut |_| {}).unwrap()
 }
 
@@ -36,29 +53,56 @@ fn param(r: &FitReport, name: &str) -> (f64, f64) {
 fn lm_recovers_tr_scale_at_oblique_incidence() {
     let data = oblique_data(5);
     let r = run(&data, Optimizer::Lm, Loss::new(Metric::F, Weights::Invunc));
-    for (name, truth, tol) in [("alpha", 0.25, 0.01), ("eta", 1.45, 0.02), ("scale", 0.7, 0.02)] {
+    for (name, truth, tol) in [
+        ("alpha", 0.25, 0.01),
+        ("eta", 1.45, 0.02),
+        ("scale", 0.7, 0.02),
+    ] {
         let (v, s) = param(&r, name);
         assert!((v - truth).abs() < tol, "{name} = {v}, truth {truth}");
         assert!(s > 0.0 && s.is_finite(), "{name} has no positive std: {s}");
         // The propagated uncertainty is honest: the error is within 4 standard deviations.
-        assert!((v - truth).abs() < 4.0 * s, "{name} = {v} ± {s}, truth {truth}");
+        assert!(
+            (v - truth).abs() < 4.0 * s,
+            "{name} = {v} ± {s}, truth {truth}"
+        );
     }
-    assert!(r.best.chi2_red > 0.5 && r.best.chi2_red < 2.0, "χ²_red {}", r.best.chi2_red);
-    assert!(r.warnings.iter().all(|w| !w.contains("determined")), "unexpected warnings {:?}", r.warnings);
+    assert!(
+        r.best.chi2_red > 0.5 && r.best.chi2_red < 2.0,
+        "χ²_red {}",
+        r.best.chi2_red
+    );
+    assert!(
+        r.warnings.iter().all(|w| !w.contains("determined")),
+        "unexpected warnings {:?}",
+        r.warnings
+    );
 }
 
 #[test]
 fn lm_and_compass_agree_on_the_optimum() {
     let data = oblique_data(8);
-    for loss in [Loss::new(Metric::F, Weights::Invunc), Loss::new(Metric::Chi2, Weights::Uniform), Loss::new(Metric::Logf, Weights::Uniform)] {
+    for loss in [
+        Loss::new(Metric::F, Weights::Invunc),
+        Loss::new(Metric::Chi2, Weights::Uniform),
+        Loss::new(Metric::Logf, Weights::Uniform),
+    ] {
         let lm = run(&data, Optimizer::Lm, loss);
         let cs = run(&data, Optimizer::Compass, loss);
         let rel = (lm.best.loss - cs.best.loss).abs() / lm.best.loss.abs().max(1e-300);
-        assert!(rel < 0.01, "{loss}: LM {} vs compass {}", lm.best.loss, cs.best.loss);
+        assert!(
+            rel < 0.01,
+            "{loss}: LM {} vs compass {}",
+            lm.best.loss,
+            cs.best.loss
+        );
         for name in ["alpha", "eta", "scale"] {
             let (a, sa) = param(&lm, name);
             let (b, _) = param(&cs, name);
-            assert!((a - b).abs() < 2.0 * sa.max(1e-4), "{loss} {name}: LM {a} ± {sa} vs compass {b}");
+            assert!(
+                (a - b).abs() < 2.0 * sa.max(1e-4),
+                "{loss} {name}: LM {a} ± {sa} vs compass {b}"
+            );
         }
     }
 }
@@ -69,7 +113,13 @@ fn normal_incidence_alone_is_flagged_as_not_determined() {
     data.samples.retain(|s| s.theta_i == 0.0);
     assert!(data.len() > 40);
     let r = run(&data, Optimizer::Lm, Loss::new(Metric::F, Weights::Invunc));
-    let flagged = r.warnings.iter().any(|w| w.contains("not separately determined") || w.contains("not determined"));
-    assert!(flagged, "no identifiability warning at normal incidence; warnings {:?}, params {:?} ± {:?}", r.warnings, r.flat_params, r.flat_std);
+    let flagged = r
+        .warnings
+        .iter()
+        .any(|w| w.contains("not separately determined") || w.contains("not determined"));
+    assert!(
+        flagged,
+        "no identifiability warning at normal incidence; warnings {:?}, params {:?} ± {:?}",
+        r.warnings, r.flat_params, r.flat_std
+    );
 }
-

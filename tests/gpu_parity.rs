@@ -58,7 +58,8 @@ fn random_dataset(kind: Kind, channels: usize, n: usize, seed: u64) -> Dataset {
             },
         ));
     }
-    Dataset::from_rows(kind, "random", &rows, "<random>", &ReadOptions::default()).expect("valid random data")
+    Dataset::from_rows(kind, "random", &rows, "<random>", &ReadOptions::default())
+        .expect("valid random data")
 }
 
 fn random_params(model: &Model, n: usize, seed: u64) -> Vec<f64> {
@@ -72,12 +73,19 @@ fn random_params(model: &Model, n: usize, seed: u64) -> Vec<f64> {
 }
 
 fn all_specs() -> Vec<(Kind, String)> {
-    let mut v: Vec<(Kind, String)> = catalogue(Kind::Brdf).into_iter().map(|s| (Kind::Brdf, s)).collect();
+    let mut v: Vec<(Kind, String)> = catalogue(Kind::Brdf)
+        .into_iter()
+        .map(|s| (Kind::Brdf, s))
+        .collect();
     for extra in ["lambert+retro", "fa(eon)+retro", "rmg(ggx)+retro"] {
         v.push((Kind::Brdf, extra.into()));
     }
     v.extend(catalogue(Kind::Btdf).into_iter().map(|s| (Kind::Btdf, s)));
-    for extra in ["btdf(tr)+diffuse", "btdf(gtr)+scale+diffuse", "btdf(gg)+absorb+diffuse"] {
+    for extra in [
+        "btdf(tr)+diffuse",
+        "btdf(gtr)+scale+diffuse",
+        "btdf(gg)+absorb+diffuse",
+    ] {
         v.push((Kind::Btdf, extra.into()));
     }
     v
@@ -89,10 +97,18 @@ fn compare_values(spec: &str, kind: Kind, channels: usize, seed: u64) -> Result<
     let model = Model::parse(spec, channels).map_err(|e| e.to_string())?;
     let params = random_params(&model, CANDIDATES, seed + 1);
     let loss = Loss::new(Metric::Chi2, Weights::Uniform);
-    let problem = Problem { model: &model, data: &data, loss };
+    let problem = Problem {
+        model: &model,
+        data: &data,
+        loss,
+    };
     let cpu = CpuBackend::new();
     let c = cpu.prepare(problem).unwrap().values(&params).unwrap();
-    let g = gpu().prepare(problem).map_err(|e| format!("{e:#}"))?.values(&params).map_err(|e| format!("{e:#}"))?;
+    let g = gpu()
+        .prepare(problem)
+        .map_err(|e| format!("{e:#}"))?
+        .values(&params)
+        .map_err(|e| format!("{e:#}"))?;
     assert_eq!(c.len(), g.len());
     let k = data.len();
     let mut worst = 0.0f64;
@@ -100,13 +116,15 @@ fn compare_values(spec: &str, kind: Kind, channels: usize, seed: u64) -> Result<
         let scale = crow.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (j, (&cv, &gv)) in crow.iter().zip(grow).enumerate() {
             if !cv.is_finite() {
-                return Err(format!("CPU value not finite: candidate {n} sample {j}: {cv}"));
+                return Err(format!(
+                    "CPU value not finite: candidate {n} sample {j}: {cv}"
+                ));
             }
             let err = (gv - cv).abs();
             // TINY: values below f32's normal range (a narrow lobe seen far from its peak
             // can be 1e-70) can only come back as 0 or a subnormal.
             let bound = REL * cv.abs() + ABS * scale + TINY;
-            if !(err <= bound) {
+            if err.is_nan() || err > bound {
                 let s = &data.samples[j];
                 return Err(format!(
                     "candidate {n} sample {j} (wi {:?} wo {:?} ch {}): gpu {gv} cpu {cv} (bound {bound:.3e}); params {:?}",
@@ -136,12 +154,20 @@ fn every_model_matches_the_cpu_reference() {
             }
         }
     }
-    assert!(failures.is_empty(), "GPU/CPU parity failures:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "GPU/CPU parity failures:\n{}",
+        failures.join("\n")
+    );
 }
 
 #[test]
 fn every_loss_matches_the_cpu_reference() {
-    let cases = [(Kind::Brdf, "fa(eon)", 3usize), (Kind::Brdf, "on", 3), (Kind::Btdf, "btdf(tr)+scale", 1)];
+    let cases = [
+        (Kind::Brdf, "fa(eon)", 3usize),
+        (Kind::Brdf, "on", 3),
+        (Kind::Btdf, "btdf(tr)+scale", 1),
+    ];
     let mut failures = Vec::new();
     for (kind, spec, channels) in cases {
         let data = random_dataset(kind, channels, 300, 5);
@@ -160,8 +186,16 @@ fn every_loss_matches_the_cpu_reference() {
         ] {
             for weights in [Weights::Uniform, Weights::Relunc, Weights::Invunc] {
                 let loss = Loss::new(metric, weights);
-                let problem = Problem { model: &model, data: &data, loss };
-                let c = CpuBackend::new().prepare(problem).unwrap().costs(&params).unwrap();
+                let problem = Problem {
+                    model: &model,
+                    data: &data,
+                    loss,
+                };
+                let c = CpuBackend::new()
+                    .prepare(problem)
+                    .unwrap()
+                    .costs(&params)
+                    .unwrap();
                 let g = gpu().prepare(problem).unwrap().costs(&params).unwrap();
                 for (n, (cv, gv)) in c.iter().zip(&g).enumerate() {
                     let ok = cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-12;
@@ -172,29 +206,53 @@ fn every_loss_matches_the_cpu_reference() {
             }
         }
     }
-    assert!(failures.is_empty(), "loss parity failures:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "loss parity failures:\n{}",
+        failures.join("\n")
+    );
 }
 
 #[test]
 fn the_workgroup_reduced_shape_matches_too() {
     // lavapipe picks the one-slice shape; force the GPU shape (32 lanes × 8 slices with the
     // workgroup-memory reduction) so both kernel paths are checked on every machine.
-    let forced = GpuBackend::new().expect("GPU adapter").with_shape(Shape::GPU_DEVICE);
+    let forced = GpuBackend::new()
+        .expect("GPU adapter")
+        .with_shape(Shape::GPU_DEVICE);
     let data = random_dataset(Kind::Brdf, 3, 333, 21);
     for spec in ["lambert", "fa(eon)", "ggx+retro"] {
         let model = Model::parse(spec, 3).unwrap();
         let params = random_params(&model, 70, 22);
         for metric in [Metric::Rmse, Metric::Smape, Metric::Chi2] {
-            let problem = Problem { model: &model, data: &data, loss: Loss::new(metric, Weights::Relunc) };
-            let c = CpuBackend::new().prepare(problem).unwrap().costs(&params).unwrap();
+            let problem = Problem {
+                model: &model,
+                data: &data,
+                loss: Loss::new(metric, Weights::Relunc),
+            };
+            let c = CpuBackend::new()
+                .prepare(problem)
+                .unwrap()
+                .costs(&params)
+                .unwrap();
             let g = forced.prepare(problem).unwrap().costs(&params).unwrap();
             for (n, (cv, gv)) in c.iter().zip(&g).enumerate() {
-                assert!(cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-12, "{spec} {metric}: candidate {n}: gpu {gv} cpu {cv}");
+                assert!(
+                    cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-12,
+                    "{spec} {metric}: candidate {n}: gpu {gv} cpu {cv}"
+                );
             }
-            let cv = CpuBackend::new().prepare(problem).unwrap().values(&params).unwrap();
+            let cv = CpuBackend::new()
+                .prepare(problem)
+                .unwrap()
+                .values(&params)
+                .unwrap();
             let gv = forced.prepare(problem).unwrap().values(&params).unwrap();
             for (a, b) in cv.iter().zip(&gv) {
-                assert!(a.is_finite() && (a - b).abs() <= REL * a.abs() + 1e-6, "{spec} values: gpu {b} cpu {a}");
+                assert!(
+                    a.is_finite() && (a - b).abs() <= REL * a.abs() + 1e-6,
+                    "{spec} values: gpu {b} cpu {a}"
+                );
             }
         }
     }
@@ -208,11 +266,22 @@ fn large_batches_are_chunked_and_complete() {
     let model = Model::parse("lambert", 1).unwrap();
     let n = 70_000;
     let params: Vec<f64> = (0..n).map(|i| (i % 1000) as f64 / 1000.0).collect();
-    let problem = Problem { model: &model, data: &data, loss: Loss::new(Metric::Rmse, Weights::Uniform) };
-    let c = CpuBackend::new().prepare(problem).unwrap().costs(&params).unwrap();
+    let problem = Problem {
+        model: &model,
+        data: &data,
+        loss: Loss::new(Metric::Rmse, Weights::Uniform),
+    };
+    let c = CpuBackend::new()
+        .prepare(problem)
+        .unwrap()
+        .costs(&params)
+        .unwrap();
     let g = gpu().prepare(problem).unwrap().costs(&params).unwrap();
     assert_eq!(g.len(), n);
     for (i, (cv, gv)) in c.iter().zip(&g).enumerate() {
-        assert!(cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-7, "candidate {i}: gpu {gv} cpu {cv}");
+        assert!(
+            cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-7,
+            "candidate {i}: gpu {gv} cpu {cv}"
+        );
     }
 }

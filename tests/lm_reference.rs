@@ -65,7 +65,10 @@ impl BatchObjective for Batched<'_> {
         self.dim
     }
     fn costs(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
-        Ok(pts.chunks(self.dim).map(|x| (self.f)(x).iter().map(|r| r * r).sum()).collect())
+        Ok(pts
+            .chunks(self.dim)
+            .map(|x| (self.f)(x).iter().map(|r| r * r).sum())
+            .collect())
     }
 }
 
@@ -81,15 +84,36 @@ impl BatchResiduals for Batched<'_> {
 fn compare(name: &str, dim: usize, start: &[f64], f: &dyn Fn(&[f64]) -> Vec<f64>) {
     let k = f(start).len();
     let mut ours = Batched { dim, k, f };
-    let opts = LmOptions { fd_step: 1e-7, ..Default::default() };
+    let opts = LmOptions {
+        fd_step: 1e-7,
+        ..Default::default()
+    };
     let out = minimize(&mut ours, &[start.to_vec()], &opts, &|s| s, &mut |_| {}).unwrap();
-    let (reference, report) = LevenbergMarquardt::new().minimize(Reference { x: DVector::from_column_slice(start), f });
+    let (reference, report) = LevenbergMarquardt::new().minimize(Reference {
+        x: DVector::from_column_slice(start),
+        f,
+    });
     let ref_cost: f64 = f(reference.x.as_slice()).iter().map(|r| r * r).sum();
-    eprintln!("{name}: ours {:.6e} at {:?}; reference {ref_cost:.6e} at {:?} ({:?})", out[0].cost, out[0].x, reference.x.as_slice(), report.termination);
+    eprintln!(
+        "{name}: ours {:.6e} at {:?}; reference {ref_cost:.6e} at {:?} ({:?})",
+        out[0].cost,
+        out[0].x,
+        reference.x.as_slice(),
+        report.termination
+    );
     assert!(out[0].cost.is_finite() && ref_cost.is_finite());
-    assert!((out[0].cost - ref_cost).abs() <= 1e-6 * ref_cost + 1e-12, "{name}: cost {} vs reference {ref_cost}", out[0].cost);
+    assert!(
+        (out[0].cost - ref_cost).abs() <= 1e-6 * ref_cost + 1e-12,
+        "{name}: cost {} vs reference {ref_cost}",
+        out[0].cost
+    );
     for (a, b) in out[0].x.iter().zip(reference.x.iter()) {
-        assert!((a - b).abs() < 1e-4, "{name}: parameters {:?} vs reference {:?}", out[0].x, reference.x.as_slice());
+        assert!(
+            (a - b).abs() < 1e-4,
+            "{name}: parameters {:?} vs reference {:?}",
+            out[0].x,
+            reference.x.as_slice()
+        );
     }
 }
 
@@ -106,8 +130,16 @@ fn rosenbrock_in_the_unit_box() {
 #[test]
 fn exponential_decay_with_offset() {
     let t: Vec<f64> = (0..30).map(|i| i as f64 * 0.1).collect();
-    let y: Vec<f64> = t.iter().map(|t| 0.8 * (-1.7 * t).exp() + 0.1 + 0.002 * (7.0 * t).sin()).collect();
-    let f = move |u: &[f64]| t.iter().zip(&y).map(|(t, y)| u[0] * (-3.0 * u[1] * t).exp() + u[2] - y).collect::<Vec<f64>>();
+    let y: Vec<f64> = t
+        .iter()
+        .map(|t| 0.8 * (-1.7 * t).exp() + 0.1 + 0.002 * (7.0 * t).sin())
+        .collect();
+    let f = move |u: &[f64]| {
+        t.iter()
+            .zip(&y)
+            .map(|(t, y)| u[0] * (-3.0 * u[1] * t).exp() + u[2] - y)
+            .collect::<Vec<f64>>()
+    };
     compare("decay", 3, &[0.5, 0.5, 0.5], &f);
 }
 
@@ -116,14 +148,38 @@ fn oren_nayar_brdf_fit() {
     // A real fitting problem: Oren–Nayar on synthetic in-plane data, residuals from the
     // CPU backend through the optimizers' unit box (RMSE loss, uniform weights).
     let model = Model::parse("on", 3).unwrap();
-    let truth = model.params_from_assignments("rho=0.3:0.5:0.7,sigma=0.6").unwrap();
+    let truth = model
+        .params_from_assignments("rho=0.3:0.5:0.7,sigma=0.6")
+        .unwrap();
     let (_, rows) = bsdfit::synth::geometry("inplane10").unwrap();
-    let noise = bsdfit::synth::Noise { rel: 0.015, abs: 1e-4 };
-    let data = bsdfit::synth::synthesize(&model, &truth, &rows, &[450.0, 550.0, 650.0], noise, 4, "on").unwrap();
+    let noise = bsdfit::synth::Noise {
+        rel: 0.015,
+        abs: 1e-4,
+    };
+    let data = bsdfit::synth::synthesize(
+        &model,
+        &truth,
+        &rows,
+        &[450.0, 550.0, 650.0],
+        noise,
+        4,
+        "on",
+    )
+    .unwrap();
     let loss = Loss::new(Metric::Rmse, Weights::Uniform);
     let cpu = CpuBackend::new();
-    let mut eval = cpu.prepare(Problem { model: &model, data: &data, loss }).unwrap();
-    let obj = RefCell::new(UnitBox { model: &model, eval: eval.as_mut(), loss_terms: Some(loss.terms(&data)) });
+    let mut eval = cpu
+        .prepare(Problem {
+            model: &model,
+            data: &data,
+            loss,
+        })
+        .unwrap();
+    let obj = RefCell::new(UnitBox {
+        model: &model,
+        eval: eval.as_mut(),
+        loss_terms: Some(loss.terms(&data)),
+    });
     let f = |u: &[f64]| obj.borrow_mut().residuals(u).unwrap();
     compare("oren-nayar", model.dim, &[0.5, 0.5, 0.5, 0.5], &f);
 }

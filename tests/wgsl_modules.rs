@@ -25,7 +25,9 @@ fn every_generated_module_validates() {
                 for finish in [Finish::Mean, Finish::SqrtMean, Finish::Sum] {
                     for shape in [Shape::CPU_DEVICE, Shape::GPU_DEVICE] {
                         if let Err(e) = validate(&compose(&model, term, finish, shape)) {
-                            failures.push(format!("{spec} ({channels} ch, {term:?}, {finish:?}, {shape:?}):\n{e}"));
+                            failures.push(format!(
+                                "{spec} ({channels} ch, {term:?}, {finish:?}, {shape:?}):\n{e}"
+                            ));
                         }
                     }
                 }

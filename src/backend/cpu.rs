@@ -56,7 +56,11 @@ impl CpuEvaluator<'_> {
 
     fn check(&self, params: &[f64]) -> anyhow::Result<usize> {
         let p = self.problem.model.dim;
-        anyhow::ensure!(p > 0 && params.len() % p == 0, "parameter batch of {} values is not a multiple of P = {p}", params.len());
+        anyhow::ensure!(
+            p > 0 && params.len().is_multiple_of(p),
+            "parameter batch of {} values is not a multiple of P = {p}",
+            params.len()
+        );
         Ok(params.len() / p)
     }
 }
@@ -87,10 +91,13 @@ impl Evaluator for CpuEvaluator<'_> {
         let p = self.dim();
         let k = self.problem.data.len();
         let mut out = vec![0.0; n * k];
-        out.par_chunks_mut(k).zip(params.par_chunks(p)).for_each(|(row, flat)| {
-            self.for_each_value(flat, |j, v| row[j] = v);
-        });
-        self.evaluations.fetch_add((n * k) as u64, Ordering::Relaxed);
+        out.par_chunks_mut(k)
+            .zip(params.par_chunks(p))
+            .for_each(|(row, flat)| {
+                self.for_each_value(flat, |j, v| row[j] = v);
+            });
+        self.evaluations
+            .fetch_add((n * k) as u64, Ordering::Relaxed);
         Ok(out)
     }
 

@@ -132,7 +132,11 @@ impl GpuBackend {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let shape = if info.device_type == wgpu::DeviceType::Cpu { Shape::CPU_DEVICE } else { Shape::GPU_DEVICE };
+        let shape = if info.device_type == wgpu::DeviceType::Cpu {
+            Shape::CPU_DEVICE
+        } else {
+            Shape::GPU_DEVICE
+        };
         Ok(GpuBackend {
             shape,
             device,
@@ -153,11 +157,17 @@ impl GpuBackend {
     }
 
     pub fn adapter_name(&self) -> String {
-        format!("{} ({:?}, {})", self.info.name, self.info.device_type, self.info.driver)
+        format!(
+            "{} ({:?}, {})",
+            self.info.name, self.info.device_type, self.info.driver
+        )
     }
 
     fn check_errors(&self) -> Result<()> {
-        let mut errs = self.errors.lock().map_err(|_| anyhow!("GPU error log poisoned"))?;
+        let mut errs = self
+            .errors
+            .lock()
+            .map_err(|_| anyhow!("GPU error log poisoned"))?;
         if errs.is_empty() {
             return Ok(());
         }
@@ -167,13 +177,29 @@ impl GpuBackend {
     }
 
     fn pipelines(&self, problem: &Problem, term: Term, finish: Finish) -> Result<Arc<Pipelines>> {
-        let key = format!("{}|{}|{}|{:?}|{:?}|{:?}", problem.model.spec, problem.model.channels, problem.model.axes.len(), term, finish, self.shape);
-        let mut cache = self.pipelines.lock().map_err(|_| anyhow!("pipeline cache poisoned"))?;
+        let key = format!(
+            "{}|{}|{}|{:?}|{:?}|{:?}",
+            problem.model.spec,
+            problem.model.channels,
+            problem.model.axes.len(),
+            term,
+            finish,
+            self.shape
+        );
+        let mut cache = self
+            .pipelines
+            .lock()
+            .map_err(|_| anyhow!("pipeline cache poisoned"))?;
         if let Some(p) = cache.get(&key) {
             return Ok(p.clone());
         }
         let source = compose(problem.model, term, finish, self.shape);
-        validate(&source).map_err(|e| anyhow!("generated WGSL for {} does not validate:\n{e}", problem.model.spec))?;
+        validate(&source).map_err(|e| {
+            anyhow!(
+                "generated WGSL for {} does not validate:\n{e}",
+                problem.model.spec
+            )
+        })?;
         let desc = wgpu::ShaderModuleDescriptor {
             label: Some(&problem.model.spec),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -183,25 +209,33 @@ impl GpuBackend {
         // is either a loop counter below such a size or a slot the host computed from the
         // model layout for buffers it sized itself (`prepare`, `ensure_io`); so the
         // injected bounds checks and loop guards can be left out of the inner loop.
-        let module = unsafe { self.device.create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked()) };
-        let make = |entry: &str| {
-            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&self.pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
+        let module = unsafe {
+            self.device
+                .create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked())
         };
-        let p = Arc::new(Pipelines { costs: make("costs"), values: make("values") });
+        let make = |entry: &str| {
+            self.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&self.pipeline_layout),
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+        };
+        let p = Arc::new(Pipelines {
+            costs: make("costs"),
+            values: make("values"),
+        });
         self.check_errors()?;
         cache.insert(key, p.clone());
         Ok(p)
     }
 
     fn max_binding(&self) -> u64 {
-        (self.limits.max_storage_buffer_binding_size as u64)
+        self.limits
+            .max_storage_buffer_binding_size
             .min(self.limits.max_buffer_size)
             .min(MAX_CHUNK_BYTES)
     }
@@ -227,9 +261,24 @@ impl Backend for GpuBackend {
             .map(|&k| {
                 let s = &problem.data.samples[k];
                 GpuSample {
-                    wi: [s.wi.x as f32, s.wi.y as f32, s.wi.z as f32, terms.w[k] as f32],
-                    wo: [s.wo.x as f32, s.wo.y as f32, s.wo.z as f32, terms.a[k] as f32],
-                    ext: [s.value as f32, terms.transform(k, s.value) as f32, model.group_of(s) as f32, f32::from_bits(k as u32)],
+                    wi: [
+                        s.wi.x as f32,
+                        s.wi.y as f32,
+                        s.wi.z as f32,
+                        terms.w[k] as f32,
+                    ],
+                    wo: [
+                        s.wo.x as f32,
+                        s.wo.y as f32,
+                        s.wo.z as f32,
+                        terms.a[k] as f32,
+                    ],
+                    ext: [
+                        s.value as f32,
+                        terms.transform(k, s.value) as f32,
+                        model.group_of(s) as f32,
+                        f32::from_bits(k as u32),
+                    ],
                 }
             })
             .collect();
@@ -241,11 +290,27 @@ impl Backend for GpuBackend {
             }
         }
         for g in 0..=groups {
-            slots.push(problem.data.samples.iter().filter(|s| model.group_of(s) < g).count() as u32);
+            slots.push(
+                problem
+                    .data
+                    .samples
+                    .iter()
+                    .filter(|s| model.group_of(s) < g)
+                    .count() as u32,
+            );
         }
-        let lut: Vec<f32> = model.nodes().iter().find_map(|n| n.bsdf.lut()).unwrap_or_else(|| vec![0.0]);
+        let lut: Vec<f32> = model
+            .nodes()
+            .iter()
+            .find_map(|n| n.bsdf.lut())
+            .unwrap_or_else(|| vec![0.0]);
         let init = |label: &str, bytes: &[u8], usage: wgpu::BufferUsages| {
-            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage })
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: bytes,
+                    usage,
+                })
         };
         let storage = wgpu::BufferUsages::STORAGE;
         let samples_buf = init("samples", bytemuck::cast_slice(&samples), storage);
@@ -296,7 +361,10 @@ pub struct GpuEvaluator<'a> {
 
 impl GpuEvaluator<'_> {
     fn ensure_io(&mut self, params_bytes: u64, out_bytes: u64) {
-        let fits = self.io.as_ref().is_some_and(|io| io.params_cap >= params_bytes && io.out_cap >= out_bytes);
+        let fits = self
+            .io
+            .as_ref()
+            .is_some_and(|io| io.params_cap >= params_bytes && io.out_cap >= out_bytes);
         if fits {
             return;
         }
@@ -314,7 +382,9 @@ impl GpuEvaluator<'_> {
         let out = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("out"),
             size: oc,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let staging = dev.create_buffer(&wgpu::BufferDescriptor {
@@ -327,27 +397,57 @@ impl GpuEvaluator<'_> {
             label: Some("bsdfit kernel"),
             layout: &self.gpu.layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: self.dims_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: self.samples_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: self.slots_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: out.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: self.lut_buf.as_entire_binding() },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.dims_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.samples_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.slots_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: out.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: self.lut_buf.as_entire_binding(),
+                },
             ],
         });
-        self.io = Some(IoBuffers { params, out, staging, bind_group, params_cap: pc, out_cap: oc });
+        self.io = Some(IoBuffers {
+            params,
+            out,
+            staging,
+            bind_group,
+            params_cap: pc,
+            out_cap: oc,
+        });
     }
 
     /// Run `pipeline` over the candidates in `params`, `per_candidate` outputs each.
     fn run(&mut self, params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
         let p = self.problem.model.dim;
-        anyhow::ensure!(p > 0 && params.len() % p == 0, "parameter batch of {} values is not a multiple of P = {p}", params.len());
+        anyhow::ensure!(
+            p > 0 && params.len().is_multiple_of(p),
+            "parameter batch of {} values is not a multiple of P = {p}",
+            params.len()
+        );
         let n = params.len() / p;
         let k = self.problem.data.len();
         let per = if values_mode { k } else { 1 };
         let max = self.gpu.max_binding();
         let per_cand_bytes = ((p.max(per)) * 4) as u64;
-        let chunk = ((max / per_cand_bytes) as usize).clamp(1, MAX_GROUPS_X as usize * MAX_GROUPS_X as usize);
+        let chunk = ((max / per_cand_bytes) as usize)
+            .clamp(1, MAX_GROUPS_X as usize * MAX_GROUPS_X as usize);
         let mut result = Vec::with_capacity(n * per);
         for start in (0..n).step_by(chunk) {
             let m = chunk.min(n - start);
@@ -355,20 +455,40 @@ impl GpuEvaluator<'_> {
             let o_bytes = (m * per * 4) as u64;
             self.ensure_io(p_bytes, o_bytes);
             let io = self.io.as_ref().expect("io buffers allocated");
-            let host: Vec<f32> = params[start * p..(start + m) * p].iter().map(|&v| v as f32).collect();
+            let host: Vec<f32> = params[start * p..(start + m) * p]
+                .iter()
+                .map(|&v| v as f32)
+                .collect();
             let total_groups = (m as u32).div_ceil(self.gpu.shape.lanes);
             let groups_x = total_groups.min(MAX_GROUPS_X);
             let groups_y = total_groups.div_ceil(groups_x);
-            let dims = Dims { n_candidates: m as u32, n_samples: k as u32, dim: p as u32, groups_x };
+            let dims = Dims {
+                n_candidates: m as u32,
+                n_samples: k as u32,
+                dim: p as u32,
+                groups_x,
+            };
             let q = &self.gpu.queue;
             q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
             q.write_buffer(&io.params, 0, bytemuck::cast_slice(&host));
             // Poison the outputs so a result the kernel fails to write reads back as NaN.
             q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![f32::NAN; m * per]));
-            let mut enc = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("bsdfit") });
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("bsdfit"),
+                });
             {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("evaluate"), timestamp_writes: None });
-                pass.set_pipeline(if values_mode { &self.pipes.values } else { &self.pipes.costs });
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("evaluate"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(if values_mode {
+                    &self.pipes.values
+                } else {
+                    &self.pipes.costs
+                });
                 pass.set_bind_group(0, &io.bind_group, &[]);
                 pass.dispatch_workgroups(groups_x, groups_y, 1);
             }
@@ -383,9 +503,13 @@ impl GpuEvaluator<'_> {
                 .device
                 .poll(wgpu::PollType::wait_indefinitely())
                 .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
-            rx.recv().map_err(|_| anyhow!("GPU read-back was dropped"))?.map_err(|e| anyhow!("GPU read-back failed: {e}"))?;
+            rx.recv()
+                .map_err(|_| anyhow!("GPU read-back was dropped"))?
+                .map_err(|e| anyhow!("GPU read-back failed: {e}"))?;
             {
-                let view = slice.get_mapped_range().map_err(|e| anyhow!("GPU read-back failed: {e:?}"))?;
+                let view = slice
+                    .get_mapped_range()
+                    .map_err(|e| anyhow!("GPU read-back failed: {e:?}"))?;
                 let data: &[f32] = bytemuck::cast_slice(&view);
                 result.extend(data.iter().map(|&v| v as f64));
             }

@@ -56,7 +56,10 @@ pub enum BackendChoice {
 
 /// Pick a backend. `notice` receives one-line messages for the user (which adapter, or
 /// why the CPU is used).
-pub fn select(choice: BackendChoice, notice: &mut dyn FnMut(String)) -> anyhow::Result<Box<dyn Backend>> {
+pub fn select(
+    choice: BackendChoice,
+    notice: &mut dyn FnMut(String),
+) -> anyhow::Result<Box<dyn Backend>> {
     match choice {
         BackendChoice::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
         BackendChoice::Gpu => {

@@ -18,9 +18,15 @@ pub struct Shape {
 
 impl Shape {
     /// SIMD CPU devices (lavapipe): one thread walks all samples of its candidate.
-    pub const CPU_DEVICE: Shape = Shape { lanes: 64, slices: 1 };
+    pub const CPU_DEVICE: Shape = Shape {
+        lanes: 64,
+        slices: 1,
+    };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
-    pub const GPU_DEVICE: Shape = Shape { lanes: 32, slices: 8 };
+    pub const GPU_DEVICE: Shape = Shape {
+        lanes: 32,
+        slices: 8,
+    };
 }
 
 fn term_code(t: Term) -> u32 {
@@ -42,7 +48,11 @@ fn finish_code(f: Finish) -> u32 {
 /// The generated `eval_model`: children first (post-order), then each combinator.
 pub fn eval_model_source(model: &Model) -> String {
     fn emit(node: &Node, body: &mut String, counter: &mut usize) -> String {
-        let args: Vec<String> = node.children.iter().map(|c| emit(c, body, counter)).collect();
+        let args: Vec<String> = node
+            .children
+            .iter()
+            .map(|c| emit(c, body, counter))
+            .collect();
         let name = format!("v{}", *counter);
         *counter += 1;
         let w = node.bsdf.wgsl();
@@ -102,7 +112,10 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
 /// Parse and validate a module with naga (no device needed).
 pub fn validate(source: &str) -> Result<naga::Module, String> {
     let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
-    let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty());
+    let mut v = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    );
     v.validate(&module).map_err(|e| e.emit_to_string(source))?;
     Ok(module)
 }

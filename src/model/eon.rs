@@ -67,7 +67,10 @@ impl Bsdf for Eon {
         let af = 1.0 / (1.0 + C1_FON * r);
         let e_avg = af * (1.0 + C2_FON * r);
         let rho_ms = rho * rho * e_avg / (1.0 - rho * (1.0 - e_avg));
-        let f_ms = rho_ms * FRAC_1_PI * (1.0 - e_fon_exact(mu_o, r)).max(EPS) * (1.0 - e_fon_exact(mu_i, r)).max(EPS)
+        let f_ms = rho_ms
+            * FRAC_1_PI
+            * (1.0 - e_fon_exact(mu_o, r)).max(EPS)
+            * (1.0 - e_fon_exact(mu_i, r)).max(EPS)
             / (1.0 - e_avg).max(EPS);
         f_ss + f_ms
     }

@@ -22,9 +22,18 @@ impl Bsdf for FresnelAggregate {
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl { name: "lobe.alpha", ..ALPHA },
-            ParamDecl { name: "lobe.eta", ..ETA },
-            ParamDecl { name: "lobe.ks", ..KS },
+            ParamDecl {
+                name: "lobe.alpha",
+                ..ALPHA
+            },
+            ParamDecl {
+                name: "lobe.eta",
+                ..ETA
+            },
+            ParamDecl {
+                name: "lobe.ks",
+                ..KS
+            },
         ]
     }
     fn child_roles(&self) -> &'static [&'static str] {
@@ -35,7 +44,8 @@ impl Bsdf for FresnelAggregate {
             return 0.0;
         }
         let (alpha, eta, ks) = (p[0], p[1], p[2]);
-        let transmit = (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta));
+        let transmit =
+            (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta));
         ggx_reflect(ks, alpha, eta, wi, wo) + transmit * children[0]
     }
     fn wgsl(&self) -> WgslFn {

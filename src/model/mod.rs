@@ -48,14 +48,45 @@ pub struct ParamDecl {
 }
 
 impl ParamDecl {
-    pub const fn shared(name: &'static str, lo: f64, hi: f64, default: f64, doc: &'static str) -> Self {
-        ParamDecl { name, lo, hi, default, rgb: false, scale: Scale::Linear, doc }
+    pub const fn shared(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: false,
+            scale: Scale::Linear,
+            doc,
+        }
     }
-    pub const fn rgb(name: &'static str, lo: f64, hi: f64, default: f64, doc: &'static str) -> Self {
-        ParamDecl { name, lo, hi, default, rgb: true, scale: Scale::Linear, doc }
+    pub const fn rgb(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: true,
+            scale: Scale::Linear,
+            doc,
+        }
     }
     pub const fn log(self) -> Self {
-        ParamDecl { scale: Scale::Log, ..self }
+        ParamDecl {
+            scale: Scale::Log,
+            ..self
+        }
     }
 
     /// Unit-box coordinate → physical value.
@@ -125,10 +156,20 @@ pub struct Node {
 
 impl Node {
     pub fn leaf(bsdf: impl Bsdf + 'static) -> Node {
-        Node { bsdf: Arc::new(bsdf), children: vec![], offset: 0, nparams: 0 }
+        Node {
+            bsdf: Arc::new(bsdf),
+            children: vec![],
+            offset: 0,
+            nparams: 0,
+        }
     }
     pub fn with(bsdf: impl Bsdf + 'static, children: Vec<Node>) -> Node {
-        Node { bsdf: Arc::new(bsdf), children, offset: 0, nparams: 0 }
+        Node {
+            bsdf: Arc::new(bsdf),
+            children,
+            offset: 0,
+            nparams: 0,
+        }
     }
     /// Evaluate the subtree on the scalar view `s`.
     pub fn eval(&self, s: &[f64], wi: DVec3, wo: DVec3) -> f64 {
@@ -136,7 +177,12 @@ impl Node {
         for (k, c) in self.children.iter().enumerate() {
             child[k] = c.eval(s, wi, wo);
         }
-        self.bsdf.eval(&s[self.offset..self.offset + self.nparams], wi, wo, &child[..self.children.len()])
+        self.bsdf.eval(
+            &s[self.offset..self.offset + self.nparams],
+            wi,
+            wo,
+            &child[..self.children.len()],
+        )
     }
     fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
         f(self);
@@ -207,7 +253,10 @@ impl Model {
     pub fn parse_for(spec: &str, channels: usize, axes: &[f64]) -> Result<Model, SpecError> {
         let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
         let ast = Ast::parse(&clean)?;
-        let root = build(&ast).map_err(|msg| SpecError::Parse { spec: clean.clone(), msg })?;
+        let root = build(&ast).map_err(|msg| SpecError::Parse {
+            spec: clean.clone(),
+            msg,
+        })?;
         Model::compile_for(&clean, root, channels, axes)
     }
 
@@ -216,18 +265,27 @@ impl Model {
         Model::compile_for(spec, root, channels, &[0.0])
     }
 
-    fn compile_for(spec: &str, mut root: Node, channels: usize, axes: &[f64]) -> Result<Model, SpecError> {
+    fn compile_for(
+        spec: &str,
+        mut root: Node,
+        channels: usize,
+        axes: &[f64],
+    ) -> Result<Model, SpecError> {
         if channels == 0 {
-            return Err(SpecError::Other("a model needs at least one channel".into()));
+            return Err(SpecError::Other(
+                "a model needs at least one channel".into(),
+            ));
         }
         let mut has_peraxis = false;
         root.visit(&mut |n| has_peraxis |= n.bsdf.name() == "peraxis");
-        let axes: Vec<f64> = if has_peraxis && !axes.is_empty() { axes.to_vec() } else { vec![0.0] };
+        let axes: Vec<f64> = if has_peraxis && !axes.is_empty() {
+            axes.to_vec()
+        } else {
+            vec![0.0]
+        };
         let n_axes = axes.len();
         let kind = root.bsdf.kind();
         let mut params = Vec::new();
-        let dim;
-        let kinds_ok;
         struct Layout<'a> {
             params: &'a mut Vec<FlatParam>,
             dim: usize,
@@ -244,8 +302,17 @@ impl Model {
             let decls = node.bsdf.params();
             node.nparams = decls.len();
             for decl in decls {
-                let axes = if per_axis && peraxis::PER_AXIS.contains(&decl.name) { l.axes } else { 1 };
-                let p = FlatParam { name: format!("{prefix}{}", decl.name), decl, index: l.dim, axes };
+                let axes = if per_axis && peraxis::PER_AXIS.contains(&decl.name) {
+                    l.axes
+                } else {
+                    1
+                };
+                let p = FlatParam {
+                    name: format!("{prefix}{}", decl.name),
+                    decl,
+                    index: l.dim,
+                    axes,
+                };
                 l.dim += p.width(l.channels);
                 l.params.push(p);
             }
@@ -253,23 +320,48 @@ impl Model {
             let below = per_axis || node.bsdf.name() == "peraxis";
             for (k, child) in node.children.iter_mut().enumerate() {
                 let role = roles.get(k).copied().unwrap_or("");
-                let pre = if role.is_empty() { prefix.to_string() } else { format!("{prefix}{role}.") };
+                let pre = if role.is_empty() {
+                    prefix.to_string()
+                } else {
+                    format!("{prefix}{role}.")
+                };
                 lay(child, &pre, below, l);
             }
         }
-        let mut layout = Layout { params: &mut params, dim: 0, channels, axes: n_axes, kind, ok: true };
+        let mut layout = Layout {
+            params: &mut params,
+            dim: 0,
+            channels,
+            axes: n_axes,
+            kind,
+            ok: true,
+        };
         lay(&mut root, "", false, &mut layout);
-        dim = layout.dim;
-        kinds_ok = layout.ok;
+        let dim = layout.dim;
+        let kinds_ok = layout.ok;
         if !kinds_ok {
-            return Err(SpecError::Parse { spec: spec.into(), msg: "mixes BRDF and BTDF nodes".into() });
+            return Err(SpecError::Parse {
+                spec: spec.into(),
+                msg: "mixes BRDF and BTDF nodes".into(),
+            });
         }
         let mut names: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
         names.sort();
         if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-            return Err(SpecError::Parse { spec: spec.into(), msg: format!("parameter '{}' appears twice", w[0]) });
+            return Err(SpecError::Parse {
+                spec: spec.into(),
+                msg: format!("parameter '{}' appears twice", w[0]),
+            });
         }
-        Ok(Model { spec: spec.to_string(), root, kind, channels, axes, params, dim })
+        Ok(Model {
+            spec: spec.to_string(),
+            root,
+            kind,
+            channels,
+            axes,
+            params,
+            dim,
+        })
     }
 
     /// Number of (plane, channel) groups, each with its own scalar view.
@@ -331,7 +423,11 @@ impl Model {
         let mut v = Vec::with_capacity(self.dim);
         for p in &self.params {
             for a in 0..p.axes {
-                let axis = if p.axes > 1 { format!("@phi{}", self.axes[a]) } else { String::new() };
+                let axis = if p.axes > 1 {
+                    format!("@phi{}", self.axes[a])
+                } else {
+                    String::new()
+                };
                 if p.decl.rgb {
                     for c in 0..self.channels {
                         v.push(format!("{}[{c}]{axis}", p.name));
@@ -349,11 +445,19 @@ impl Model {
     }
 
     pub fn to_unit(&self, flat: &[f64]) -> Vec<f64> {
-        self.flat_decls().iter().zip(flat).map(|(d, &v)| d.to_unit(v)).collect()
+        self.flat_decls()
+            .iter()
+            .zip(flat)
+            .map(|(d, &v)| d.to_unit(v))
+            .collect()
     }
 
     pub fn from_unit(&self, unit: &[f64]) -> Vec<f64> {
-        self.flat_decls().iter().zip(unit).map(|(d, &u)| d.from_unit(u)).collect()
+        self.flat_decls()
+            .iter()
+            .zip(unit)
+            .map(|(d, &u)| d.from_unit(u))
+            .collect()
     }
 
     /// Parse `name=value` assignments (`rho=0.5` sets every channel, `rho=0.4:0.5:0.6`
@@ -364,14 +468,22 @@ impl Model {
             let (name, value) = item
                 .split_once('=')
                 .ok_or_else(|| SpecError::Other(format!("--params: '{item}' is not name=value")))?;
-            let p = self.params.iter().find(|p| p.name == name.trim()).ok_or_else(|| {
-                SpecError::Other(format!(
-                    "--params: model {} has no parameter '{}' (it has: {})",
-                    self.spec,
-                    name.trim(),
-                    self.params.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
-                ))
-            })?;
+            let p = self
+                .params
+                .iter()
+                .find(|p| p.name == name.trim())
+                .ok_or_else(|| {
+                    SpecError::Other(format!(
+                        "--params: model {} has no parameter '{}' (it has: {})",
+                        self.spec,
+                        name.trim(),
+                        self.params
+                            .iter()
+                            .map(|p| p.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
             let values: Vec<f64> = value
                 .split(':')
                 .map(|v| {
@@ -379,7 +491,12 @@ impl Model {
                         .parse::<f64>()
                         .ok()
                         .filter(|x| x.is_finite())
-                        .ok_or_else(|| SpecError::Other(format!("--params: '{v}' for {} is not a number", p.name)))
+                        .ok_or_else(|| {
+                            SpecError::Other(format!(
+                                "--params: '{v}' for {} is not a number",
+                                p.name
+                            ))
+                        })
                 })
                 .collect::<Result<_, _>>()?;
             let width = p.width(self.channels);
@@ -426,20 +543,28 @@ pub enum Ast {
 
 impl Ast {
     pub fn parse(s: &str) -> Result<Ast, SpecError> {
-        let err = |msg: String| SpecError::Parse { spec: s.to_string(), msg };
+        let err = |msg: String| SpecError::Parse {
+            spec: s.to_string(),
+            msg,
+        };
         if s.is_empty() {
             return Err(err("empty spec".into()));
         }
         let (ast, rest) = parse_spec(s).map_err(err)?;
         if !rest.is_empty() {
-            return Err(SpecError::Parse { spec: s.to_string(), msg: format!("unexpected '{rest}'") });
+            return Err(SpecError::Parse {
+                spec: s.to_string(),
+                msg: format!("unexpected '{rest}'"),
+            });
         }
         Ok(ast)
     }
 }
 
 fn parse_ident(s: &str) -> Result<(String, &str), String> {
-    let end = s.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).unwrap_or(s.len());
+    let end = s
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(s.len());
     if end == 0 {
         return Err(format!("expected a model name at '{s}'"));
     }
@@ -450,15 +575,23 @@ fn parse_spec(s: &str) -> Result<(Ast, &str), String> {
     let (name, mut rest) = parse_ident(s)?;
     let mut ast = if let Some(r) = rest.strip_prefix('(') {
         let (inner, r) = parse_spec(r)?;
-        let r = r.strip_prefix(')').ok_or_else(|| format!("missing ')' after '{}'", &s[..s.len() - r.len()]))?;
+        let r = r
+            .strip_prefix(')')
+            .ok_or_else(|| format!("missing ')' after '{}'", &s[..s.len() - r.len()]))?;
         rest = r;
-        Ast::Term { name, arg: Some(Box::new(inner)) }
+        Ast::Term {
+            name,
+            arg: Some(Box::new(inner)),
+        }
     } else {
         Ast::Term { name, arg: None }
     };
     while let Some(r) = rest.strip_prefix('+') {
         let (suffix, r) = parse_ident(r)?;
-        ast = Ast::Suffix { inner: Box::new(ast), name: suffix };
+        ast = Ast::Suffix {
+            inner: Box::new(ast),
+            name: suffix,
+        };
         rest = r;
     }
     Ok((ast, rest))
@@ -473,21 +606,61 @@ pub type SuffixBuilder = fn(inner: Node) -> Result<Node, String>;
 pub const TERMS: &[(&str, TermBuilder, &str)] = &[
     ("lambert", lambert::build, "Lambertian: f = rho/pi"),
     ("on", on::build, "Oren-Nayar 1994 qualitative model"),
-    ("eon", eon::build, "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)"),
+    (
+        "eon",
+        eon::build,
+        "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
+    ),
     ("vmf", vmf::build, "VMF diffuse (d'Eon & Weidlich 2024)"),
-    ("ggx", ggx::build, "GGX microfacet reflection (Walter et al. 2007)"),
-    ("dmg", dmg::build, "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)"),
-    ("rmg", rmg::build, "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)"),
-    ("fa", fa::build, "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)"),
-    ("btdf", btdf::build, "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)"),
+    (
+        "ggx",
+        ggx::build,
+        "GGX microfacet reflection (Walter et al. 2007)",
+    ),
+    (
+        "dmg",
+        dmg::build,
+        "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
+    ),
+    (
+        "rmg",
+        rmg::build,
+        "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
+    ),
+    (
+        "fa",
+        fa::build,
+        "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
+    ),
+    (
+        "btdf",
+        btdf::build,
+        "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
+    ),
 ];
 
 pub const SUFFIXES: &[(&str, SuffixBuilder, &str)] = &[
-    ("retro", retro::build, "adds a back-vector retroreflective GGX lobe (BRDF)"),
+    (
+        "retro",
+        retro::build,
+        "adds a back-vector retroreflective GGX lobe (BRDF)",
+    ),
     ("scale", btdf::build_scale, "multiplies a BTDF by S"),
-    ("absorb", btdf::build_absorb, "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)"),
-    ("diffuse", btdf::build_diffuse, "adds a Lambertian transmission kd/pi (BTDF)"),
-    ("peraxis", peraxis::build, "roughness (alpha, beta) gets one value per measured phi plane"),
+    (
+        "absorb",
+        btdf::build_absorb,
+        "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
+    ),
+    (
+        "diffuse",
+        btdf::build_diffuse,
+        "adds a Lambertian transmission kd/pi (BTDF)",
+    ),
+    (
+        "peraxis",
+        peraxis::build,
+        "roughness (alpha, beta) gets one value per measured phi plane",
+    ),
 ];
 
 /// Build a node tree from syntax.
@@ -506,7 +679,11 @@ pub fn build(ast: &Ast) -> Result<Node, String> {
             let (_, b, _) = SUFFIXES.iter().find(|(n, _, _)| n == name).ok_or_else(|| {
                 format!(
                     "unknown suffix '+{name}' (known: {})",
-                    SUFFIXES.iter().map(|t| format!("+{}", t.0)).collect::<Vec<_>>().join(", ")
+                    SUFFIXES
+                        .iter()
+                        .map(|t| format!("+{}", t.0))
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 )
             })?;
             b(build(inner)?)
@@ -525,11 +702,17 @@ pub fn no_arg(name: &str, arg: Option<&Ast>) -> Result<(), String> {
 /// Builders' helper: build the base model of a combinator and check it is allowed.
 pub fn base_arg(name: &str, arg: Option<&Ast>, allowed: &[&str]) -> Result<Node, String> {
     let Some(arg) = arg else {
-        return Err(format!("'{name}' needs a base model, e.g. {name}({})", allowed[0]));
+        return Err(format!(
+            "'{name}' needs a base model, e.g. {name}({})",
+            allowed[0]
+        ));
     };
     let node = build(arg)?;
     if !allowed.contains(&node.bsdf.name()) || !node.children.is_empty() {
-        return Err(format!("'{name}' takes a base among {}", allowed.join(", ")));
+        return Err(format!(
+            "'{name}' takes a base among {}",
+            allowed.join(", ")
+        ));
     }
     Ok(node)
 }
@@ -543,7 +726,11 @@ pub fn catalogue(kind: Kind) -> Vec<String> {
             for comb in ["dmg", "rmg"] {
                 v.extend(bases.iter().map(|b| format!("{comb}({b})")));
             }
-            v.extend(["lambert", "on", "eon", "vmf"].iter().map(|b| format!("fa({b})")));
+            v.extend(
+                ["lambert", "on", "eon", "vmf"]
+                    .iter()
+                    .map(|b| format!("fa({b})")),
+            );
             v
         }
         Kind::Btdf => {
@@ -570,7 +757,10 @@ mod tests {
             Ast::Suffix {
                 inner: Box::new(Ast::Term {
                     name: "fa".into(),
-                    arg: Some(Box::new(Ast::Term { name: "eon".into(), arg: None }))
+                    arg: Some(Box::new(Ast::Term {
+                        name: "eon".into(),
+                        arg: None
+                    }))
                 }),
                 name: "retro".into()
             }
@@ -600,12 +790,18 @@ mod tests {
 
     #[test]
     fn unit_box_round_trips() {
-        for spec in catalogue(Kind::Brdf).iter().chain(catalogue(Kind::Btdf).iter()) {
+        for spec in catalogue(Kind::Brdf)
+            .iter()
+            .chain(catalogue(Kind::Btdf).iter())
+        {
             let m = Model::parse(spec, 3).unwrap();
             let d = m.defaults();
             let back = m.from_unit(&m.to_unit(&d));
             for (a, b) in d.iter().zip(&back) {
-                assert!((a - b).abs() <= 1e-9 * a.abs().max(1.0), "{spec}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                    "{spec}: {a} vs {b}"
+                );
             }
         }
     }

@@ -25,7 +25,13 @@ impl Bsdf for OrenNayar {
     fn params(&self) -> Vec<ParamDecl> {
         vec![
             ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo"),
-            ParamDecl::shared("sigma", 0.0, FRAC_PI_2, 0.3, "facet slope standard deviation (rad)"),
+            ParamDecl::shared(
+                "sigma",
+                0.0,
+                FRAC_PI_2,
+                0.3,
+                "facet slope standard deviation (rad)",
+            ),
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {

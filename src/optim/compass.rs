@@ -19,7 +19,12 @@ pub struct CompassOptions {
 
 impl Default for CompassOptions {
     fn default() -> Self {
-        CompassOptions { initial_step: 0.25, min_step: 1e-4, max_evaluations: 20_000, expansion: 1.0 }
+        CompassOptions {
+            initial_step: 0.25,
+            min_step: 1e-4,
+            max_evaluations: 20_000,
+            expansion: 1.0,
+        }
     }
 }
 
@@ -37,7 +42,12 @@ pub fn minimize(
     let mut res: Vec<RestartResult> = starts
         .iter()
         .zip(c0)
-        .map(|(x, c)| RestartResult { x: x.clone(), cost: sanitize(c), iterations: 0, evaluations: 1 })
+        .map(|(x, c)| RestartResult {
+            x: x.clone(),
+            cost: sanitize(c),
+            iterations: 0,
+            evaluations: 1,
+        })
         .collect();
     let mut step = vec![opts.initial_step; starts.len()];
     let mut active: Vec<bool> = vec![true; starts.len()];
@@ -70,12 +80,17 @@ pub fn minimize(
         if owner.is_empty() {
             break;
         }
-        let costs = if batch.is_empty() { vec![] } else { obj.costs(&batch)? };
+        let costs = if batch.is_empty() {
+            vec![]
+        } else {
+            obj.costs(&batch)?
+        };
         for ((r, start), n) in owner.into_iter().zip(counts) {
             let st = &mut res[r];
             st.iterations += 1;
             st.evaluations += n;
-            let best = (start..start + n).min_by(|&a, &b| sanitize(costs[a]).total_cmp(&sanitize(costs[b])));
+            let best = (start..start + n)
+                .min_by(|&a, &b| sanitize(costs[a]).total_cmp(&sanitize(costs[b])));
             match best {
                 Some(b) if sanitize(costs[b]) < st.cost => {
                     st.cost = sanitize(costs[b]);
@@ -112,14 +127,22 @@ mod tests {
             self.calls += 1;
             Ok(pts
                 .chunks(self.centre.len())
-                .map(|x| x.iter().zip(&self.centre).map(|(a, b)| (a - b) * (a - b) * 3.0).sum())
+                .map(|x| {
+                    x.iter()
+                        .zip(&self.centre)
+                        .map(|(a, b)| (a - b) * (a - b) * 3.0)
+                        .sum()
+                })
                 .collect())
         }
     }
 
     #[test]
     fn finds_the_minimum_of_a_quadratic_from_every_start() {
-        let mut q = Quadratic { centre: vec![0.3, 0.71, 0.05], calls: 0 };
+        let mut q = Quadratic {
+            centre: vec![0.3, 0.71, 0.05],
+            calls: 0,
+        };
         let starts = super::super::random_starts(3, 8, 7);
         let out = minimize(&mut q, &starts, &CompassOptions::default(), &mut |_| {}).unwrap();
         for r in &out {
@@ -140,10 +163,19 @@ mod tests {
                 1
             }
             fn costs(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
-                Ok(pts.iter().map(|&x| if x < 0.5 { f64::NAN } else { (x - 0.6).powi(2) }).collect())
+                Ok(pts
+                    .iter()
+                    .map(|&x| if x < 0.5 { f64::NAN } else { (x - 0.6).powi(2) })
+                    .collect())
             }
         }
-        let out = minimize(&mut NanLeft, &[vec![0.9]], &CompassOptions::default(), &mut |_| {}).unwrap();
+        let out = minimize(
+            &mut NanLeft,
+            &[vec![0.9]],
+            &CompassOptions::default(),
+            &mut |_| {},
+        )
+        .unwrap();
         assert!((out[0].x[0] - 0.6).abs() < 1e-3, "{:?}", out[0].x);
         assert!(out[0].cost.is_finite());
     }

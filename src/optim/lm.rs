@@ -20,7 +20,13 @@ pub struct LmOptions {
 
 impl Default for LmOptions {
     fn default() -> Self {
-        LmOptions { max_iterations: 200, fd_step: 1e-6, initial_lambda: 1e-3, ftol: 1e-10, xtol: 1e-9 }
+        LmOptions {
+            max_iterations: 200,
+            fd_step: 1e-6,
+            initial_lambda: 1e-3,
+            ftol: 1e-10,
+            xtol: 1e-9,
+        }
     }
 }
 
@@ -69,7 +75,9 @@ pub fn minimize(
         })
         .collect();
     for _ in 0..opts.max_iterations {
-        let act: Vec<usize> = (0..st.len()).filter(|&i| st[i].active && st[i].ss.is_finite()).collect();
+        let act: Vec<usize> = (0..st.len())
+            .filter(|&i| st[i].active && st[i].ss.is_finite())
+            .collect();
         for (i, s) in st.iter_mut().enumerate() {
             if !s.ss.is_finite() && !act.contains(&i) {
                 s.active = false;
@@ -84,7 +92,11 @@ pub fn minimize(
         for &i in &act {
             for j in 0..p {
                 let mut x = st[i].x.clone();
-                let h = if x[j] + opts.fd_step <= 1.0 { opts.fd_step } else { -opts.fd_step };
+                let h = if x[j] + opts.fd_step <= 1.0 {
+                    opts.fd_step
+                } else {
+                    -opts.fd_step
+                };
                 x[j] += h;
                 hs.push(h);
                 jb.extend(x);
@@ -113,7 +125,10 @@ pub fn minimize(
             }
             let delta = match a_mat.clone().cholesky() {
                 Some(ch) => ch.solve(&(-&g)),
-                None => a_mat.lu().solve(&(-&g)).unwrap_or_else(|| DVector::zeros(p)),
+                None => a_mat
+                    .lu()
+                    .solve(&(-&g))
+                    .unwrap_or_else(|| DVector::zeros(p)),
             };
             for j in 0..p {
                 let v = s.x[j] + if delta[j].is_finite() { delta[j] } else { 0.0 };
@@ -129,7 +144,12 @@ pub fn minimize(
             let x_new = &trial[a * p..(a + 1) * p];
             let r_new = &tr[a * k..(a + 1) * k];
             let ss_new = sum_sq(r_new);
-            let step: f64 = x_new.iter().zip(&s.x).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+            let step: f64 = x_new
+                .iter()
+                .zip(&s.x)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt();
             if ss_new < s.ss {
                 let gain = (s.ss - ss_new) / s.ss.max(1e-300);
                 s.x.copy_from_slice(x_new);
@@ -150,7 +170,12 @@ pub fn minimize(
     }
     Ok(st
         .into_iter()
-        .map(|s| RestartResult { cost: finish(s.ss), x: s.x, iterations: s.iterations, evaluations: s.evaluations })
+        .map(|s| RestartResult {
+            cost: finish(s.ss),
+            x: s.x,
+            iterations: s.iterations,
+            evaluations: s.evaluations,
+        })
         .collect())
 }
 
@@ -169,7 +194,11 @@ mod tests {
             3
         }
         fn costs(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
-            Ok(self.residuals(pts)?.chunks(self.t.len()).map(|r| r.iter().map(|v| v * v).sum()).collect())
+            Ok(self
+                .residuals(pts)?
+                .chunks(self.t.len())
+                .map(|r| r.iter().map(|v| v * v).sum())
+                .collect())
         }
     }
     impl BatchResiduals for Decay {
@@ -191,7 +220,10 @@ mod tests {
     fn fits_an_exponential_decay_from_several_starts() {
         let truth = [0.7, 0.45, 0.12];
         let t: Vec<f64> = (0..40).map(|i| i as f64 / 20.0).collect();
-        let y = t.iter().map(|t| truth[0] * (-4.0 * truth[1] * t).exp() + truth[2]).collect();
+        let y = t
+            .iter()
+            .map(|t| truth[0] * (-4.0 * truth[1] * t).exp() + truth[2])
+            .collect();
         let mut d = Decay { t, y };
         let starts = super::super::random_starts(3, 6, 3);
         let out = minimize(&mut d, &starts, &LmOptions::default(), &|s| s, &mut |_| {}).unwrap();

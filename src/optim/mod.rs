@@ -38,7 +38,9 @@ pub struct RestartResult {
 /// Seeded uniform starting points in the unit box.
 pub fn random_starts(dim: usize, count: usize, seed: u64) -> Vec<Vec<f64>> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..count).map(|_| (0..dim).map(|_| rng.random::<f64>()).collect()).collect()
+    (0..count)
+        .map(|_| (0..dim).map(|_| rng.random::<f64>()).collect())
+        .collect()
 }
 
 /// NaN costs compare as +∞ so an invalid point never wins.
