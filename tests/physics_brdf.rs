@@ -8,6 +8,7 @@
 mod common;
 
 use bsdfit::dataset::Kind;
+use bsdfit::math::gauss_legendre;
 use bsdfit::model::eon::{e_fon_exact, f_fon, C1_FON, C2_FON};
 use bsdfit::model::ggx::ggx_reflect;
 use bsdfit::model::retro::retro_lobe;

@@ -211,33 +211,7 @@ pub(crate) mod testutil {
         DVec3::new(s * phi.cos(), s * phi.sin(), mu)
     }
 
-    /// Gauss–Legendre nodes and weights on [a, b].
-    pub fn gauss_legendre(n: usize, a: f64, b: f64) -> Vec<(f64, f64)> {
-        (0..n)
-            .map(|i| {
-                let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-                let mut dp = 1.0;
-                for _ in 0..100 {
-                    let (mut p0, mut p1) = (1.0, x);
-                    for k in 2..=n {
-                        let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                        p0 = p1;
-                        p1 = p2;
-                    }
-                    dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                    let dx = p1 / dp;
-                    x -= dx;
-                    if dx.abs() < 1e-15 {
-                        break;
-                    }
-                }
-                (
-                    0.5 * (a + b) + 0.5 * (b - a) * x,
-                    (b - a) / ((1.0 - x * x) * dp * dp),
-                )
-            })
-            .collect()
-    }
+    pub use crate::math::gauss_legendre;
 
     /// Composite Gauss–Legendre rule: `panels` panels of `n` nodes on [a, b].
     pub fn composite(panels: usize, n: usize, a: f64, b: f64) -> Vec<(f64, f64)> {

@@ -367,31 +367,7 @@ mod tests {
         dir_mu(rng.random::<f64>(), rng.random_range(0.0..2.0 * PI))
     }
 
-    /// Gauss–Legendre nodes and weights on [a, b] (Newton on P_n).
-    fn gauss_legendre(n: usize, a: f64, b: f64) -> Vec<(f64, f64)> {
-        (0..n)
-            .map(|i| {
-                let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-                let mut dp = 1.0;
-                for _ in 0..100 {
-                    let (mut p0, mut p1) = (1.0, x);
-                    for k in 2..=n {
-                        let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                        p0 = p1;
-                        p1 = p2;
-                    }
-                    dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                    let dx = p1 / dp;
-                    x -= dx;
-                    if dx.abs() < 1e-15 {
-                        break;
-                    }
-                }
-                let w = 2.0 / ((1.0 - x * x) * dp * dp);
-                (0.5 * (a + b) + 0.5 * (b - a) * x, 0.5 * (b - a) * w)
-            })
-            .collect()
-    }
+    use crate::math::gauss_legendre;
 
     /// Directional albedo ∫ f(wi, wo) μo dωo at incidence θi (wi in the xz plane): μo = x²
     /// with Gauss–Legendre in x (resolves the 1/(μi + μo) terms), midpoint in φ ∈ [0, π]
