@@ -32,18 +32,16 @@
 //! contention: 12 s instead of 3.4 s for the 7 extensions of `lambert` on 552 samples),
 //! or concurrently with `parallel` (`--parallel`).
 
-use crate::backend::{self, Backend, BackendChoice, Problem};
+use crate::backend::{self, Backend, BackendChoice};
 use crate::dataset::{Dataset, Kind, ReadOptions, Sample};
-use crate::fit::{Optimizer, UnitBox};
-use crate::loss::{chi2, normalised_residuals, Loss, Metric, Weights};
+use crate::fit::{fit_outcome, FitOptions, Optimizer};
+use crate::loss::{normalised_residuals, Loss, Metric, Weights};
 use crate::model::{Ast, Model};
-use crate::optim::{compass, lm, random_starts, sanitize, BatchObjective};
-use crate::uncertainty::{covariance, Covariance};
+use crate::uncertainty::Covariance;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 // ---------------------------------------------------------------------------------------
 // Effects (the contract's names, DESIGN §7)
@@ -568,66 +566,33 @@ pub fn fit_model(
         model.dim,
         model.spec
     );
-    let t0 = Instant::now();
-    let loss = opts.loss;
-    let mut eval = backend.prepare(Problem { model, data, loss })?;
-    let results = {
-        let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
-        let mut obj = UnitBox {
-            model,
-            eval: eval.as_mut(),
-            loss_terms: terms,
-        };
-        let mut starts: Vec<Vec<f64>> = seeds.iter().map(|f| model.to_unit(f)).collect();
-        let n = opts.restarts.max(1);
-        let pool = random_starts(model.dim, n * opts.screen.max(1), opts.seed);
-        if opts.screen > 1 {
-            let flat: Vec<f64> = pool.iter().flatten().copied().collect();
-            let costs = obj.costs(&flat)?;
-            let mut order: Vec<usize> = (0..pool.len()).collect();
-            order.sort_by(|&a, &b| sanitize(costs[a]).total_cmp(&sanitize(costs[b])));
-            starts.extend(order.into_iter().take(n).map(|i| pool[i].clone()));
-        } else {
-            starts.extend(pool);
-        }
-        if opts.optimizer == Optimizer::Lm && loss.is_sum_of_squares() {
-            let finish = loss.terms(data);
-            lm::minimize(
-                &mut obj,
-                &starts,
-                &lm::LmOptions::default(),
-                &|s| finish.finish_sum(s),
-                &mut |_| {},
-            )?
-        } else {
-            compass::minimize(
-                &mut obj,
-                &starts,
-                &compass::CompassOptions::default(),
-                &mut |_| {},
-            )?
-        }
+    // SMAPE is not a sum of squares: LM cannot fit it, compass can.
+    let optimizer = if opts.optimizer == Optimizer::Lm && !opts.loss.is_sum_of_squares() {
+        Optimizer::Compass
+    } else {
+        opts.optimizer
     };
-    let best = results
-        .iter()
-        .min_by(|a, b| a.cost.total_cmp(&b.cost))
-        .context("no restart")?;
-    let flat = model.from_unit(&best.x);
-    let values = eval.values(&flat)?;
-    let c2 = chi2(data, &values);
+    let fit_opts = FitOptions {
+        optimizer,
+        restarts: opts.restarts.max(1),
+        seed: opts.seed,
+        screen: opts.screen,
+        initial_points: seeds.to_vec(),
+        ..Default::default()
+    };
+    let o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
     let dof = data.len() - model.dim;
-    let cov = covariance(model, data, loss, eval.as_mut(), &flat)?;
     Ok(FitResult {
         model: model.clone(),
-        z: normalised_residuals(data, &values),
-        flat,
-        values,
-        chi2: c2,
+        z: normalised_residuals(data, &o.values),
+        flat: o.flat,
+        values: o.values,
+        chi2: o.chi2,
         dof,
-        chi2_red: c2 / dof as f64,
-        loss: best.cost,
-        cov,
-        seconds: t0.elapsed().as_secs_f64(),
+        chi2_red: o.chi2 / dof as f64,
+        loss: o.loss,
+        cov: o.cov,
+        seconds: o.seconds,
     })
 }
 

@@ -38,6 +38,9 @@ pub struct FitOptions {
     /// from the best (1 = plain random starts). Cheap, and it keeps restarts out of the
     /// flat, hopeless corners of the box that local optimizers cannot leave.
     pub screen: usize,
+    /// Extra starting points (physical parameter vectors), tried before the random ones;
+    /// e.g. a smaller model's optimum carried into its extension.
+    pub initial_points: Vec<Vec<f64>>,
     pub compass: compass::CompassOptions,
     pub lm: lm::LmOptions,
 }
@@ -49,6 +52,7 @@ impl Default for FitOptions {
             restarts: 32,
             seed: 1,
             screen: 8,
+            initial_points: vec![],
             compass: Default::default(),
             lm: Default::default(),
         }
@@ -138,14 +142,22 @@ impl BatchResiduals for UnitBox<'_, '_> {
     }
 }
 
-/// Random starting points, screened: the best `restarts` of `restarts × screen` draws.
+/// Starting points in the unit box: the given initial points, then the best `restarts`
+/// of `restarts × screen` random draws.
 fn screened_starts(
     obj: &mut dyn BatchObjective,
+    model: &Model,
     opts: &FitOptions,
 ) -> anyhow::Result<Vec<Vec<f64>>> {
+    let mut starts: Vec<Vec<f64>> = opts
+        .initial_points
+        .iter()
+        .map(|p| model.to_unit(p))
+        .collect();
     let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
     if opts.screen <= 1 {
-        return Ok(pool);
+        starts.extend(pool);
+        return Ok(starts);
     }
     let flat: Vec<f64> = pool.iter().flatten().copied().collect();
     let costs = obj.costs(&flat)?;
@@ -153,14 +165,34 @@ fn screened_starts(
     order.sort_by(|&a, &b| {
         crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
     });
-    Ok(order
-        .into_iter()
-        .take(opts.restarts)
-        .map(|i| pool[i].clone())
-        .collect())
+    starts.extend(
+        order
+            .into_iter()
+            .take(opts.restarts)
+            .map(|i| pool[i].clone()),
+    );
+    Ok(starts)
 }
 
-/// Fit `model` to `data` under `loss`.
+/// What a fit found, before it is dressed as a [`FitReport`].
+#[derive(Clone, Debug)]
+pub struct FitOutcome {
+    /// Best physical parameter vector.
+    pub flat: Vec<f64>,
+    /// Its loss.
+    pub loss: f64,
+    /// Model values at the best parameters, one per sample.
+    pub values: Vec<f64>,
+    /// χ² = Σ ((y′ − y)/u)² at the best parameters.
+    pub chi2: f64,
+    pub cov: Covariance,
+    /// Restarts whose final loss is within 1% of the best.
+    pub within: usize,
+    pub evaluations: u64,
+    pub seconds: f64,
+}
+
+/// Fit `model` to `data` under `loss` and report it (DESIGN §8).
 pub fn fit(
     model: &Model,
     data: &Dataset,
@@ -169,6 +201,34 @@ pub fn fit(
     opts: &FitOptions,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<FitReport> {
+    let o = fit_outcome(model, data, loss, backend, opts, progress)?;
+    let chi2_red = o.chi2 / (data.len() - model.dim) as f64;
+    Ok(make_report(
+        model,
+        data,
+        loss,
+        opts,
+        backend,
+        o.loss,
+        chi2_red,
+        &o.flat,
+        o.cov,
+        o.within,
+        o.evaluations,
+        o.seconds,
+    ))
+}
+
+/// Fit `model` to `data` under `loss`: multi-start optimisation on `backend`, then χ² and
+/// the parameter covariance at the best point.
+pub fn fit_outcome(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<FitOutcome> {
     anyhow::ensure!(
         model.kind == data.kind,
         "model {} is a {} model but {} holds {} data",
@@ -186,6 +246,12 @@ pub fn fit(
         model.spec
     );
     anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
+    anyhow::ensure!(
+        opts.initial_points.iter().all(|p| p.len() == model.dim),
+        "an initial point does not have the {} parameters of {}",
+        model.dim,
+        model.spec
+    );
     let t0 = Instant::now();
     let problem = Problem { model, data, loss };
     let mut eval = backend.prepare(problem)?;
@@ -196,7 +262,7 @@ pub fn fit(
             eval: eval.as_mut(),
             loss_terms: terms,
         };
-        let starts = screened_starts(&mut obj, opts)?;
+        let starts = screened_starts(&mut obj, model, opts)?;
         match opts.optimizer {
             Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
             Optimizer::Lm => {
@@ -225,26 +291,20 @@ pub fn fit(
         .iter()
         .filter(|r| r.cost <= best_r.cost + tol)
         .count();
-    let best_flat = model.from_unit(&best_r.x);
-    let values = eval.values(&best_flat)?;
-    let chi2_red = chi2(data, &values) / (data.len() - model.dim) as f64;
-    let cov = covariance(model, data, loss, eval.as_mut(), &best_flat)?;
-    let evaluations = eval.evaluations();
-    drop(eval);
-    Ok(make_report(
-        model,
-        data,
-        loss,
-        opts,
-        backend,
-        best_r.cost,
-        chi2_red,
-        &best_flat,
+    let flat = model.from_unit(&best_r.x);
+    let values = eval.values(&flat)?;
+    let chi2 = chi2(data, &values);
+    let cov = covariance(model, data, loss, eval.as_mut(), &flat)?;
+    Ok(FitOutcome {
+        loss: best_r.cost,
+        flat,
+        values,
+        chi2,
         cov,
         within,
-        evaluations,
-        t0.elapsed().as_secs_f64(),
-    ))
+        evaluations: eval.evaluations(),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }
 
 #[allow(clippy::too_many_arguments)]
