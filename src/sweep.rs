@@ -398,7 +398,19 @@ pub fn tasks(files: &[DataFile], args: &SweepArgs) -> Result<Vec<Task>> {
                 .map(|s| s.trim().to_string())
                 .filter(|s| !s.is_empty() && spec_kind(s) == kind)
                 .collect(),
-            None => model::catalogue(kind),
+            None => {
+                let mut v = model::catalogue(kind);
+                // Data measured on several φ planes (anisotropic diffusers, paper §2.3.2)
+                // also gets the per-plane roughness variants of the scaled BTDF models.
+                if kind == Kind::Btdf && f.data.axes.len() > 1 {
+                    v.extend(
+                        ["tr", "beckmann", "gtr", "gg"]
+                            .iter()
+                            .map(|n| format!("btdf({n})+scale+peraxis")),
+                    );
+                }
+                v
+            }
         };
         let losses: Vec<Metric> = match &args.losses {
             Some(list) => {
