@@ -503,6 +503,44 @@ pub struct Skipped {
     pub reason: String,
 }
 
+/// (data, model, loss, weights, optimizer): what identifies a fit when results and
+/// skipped lists are compared (restarts and seed are those of the sweep).
+type FitKey = (String, String, String, String, String);
+
+fn fit_key(data: &str, model: &str, loss: &str, weights: &str, optimizer: &str) -> FitKey {
+    (
+        data.into(),
+        model.into(),
+        loss.into(),
+        weights.into(),
+        optimizer.into(),
+    )
+}
+
+impl Skipped {
+    fn fit_key(&self) -> FitKey {
+        fit_key(
+            &self.data,
+            &self.model,
+            &self.loss,
+            &self.weights,
+            &self.optimizer,
+        )
+    }
+}
+
+impl Row {
+    fn fit_key(&self) -> FitKey {
+        fit_key(
+            &self.data,
+            &self.model,
+            &self.loss,
+            &self.weights,
+            &self.optimizer,
+        )
+    }
+}
+
 /// Read results.csv. An incomplete last line (a write cut off by an interruption) is cut
 /// from the file; rows that do not parse are reported and left out.
 pub fn read_results(path: &Path, repair: bool, notice: &mut dyn FnMut(String)) -> Result<Vec<Row>> {
@@ -1012,27 +1050,8 @@ fn write_skipped(out: &Path, now: &[Skipped], rows: &[Row], files: &[DataFile]) 
     let path = out.join(SKIPPED_JSON);
     let mut all: Vec<Skipped> = now.to_vec();
     let names: BTreeSet<&str> = files.iter().map(|f| f.name.as_str()).collect();
-    let have: BTreeSet<(String, String, String, String, String)> = rows
-        .iter()
-        .map(|r| {
-            (
-                r.data.clone(),
-                r.model.clone(),
-                r.loss.clone(),
-                r.weights.clone(),
-                r.optimizer.clone(),
-            )
-        })
-        .collect();
-    let id = |s: &Skipped| {
-        (
-            s.data.clone(),
-            s.model.clone(),
-            s.loss.clone(),
-            s.weights.clone(),
-            s.optimizer.clone(),
-        )
-    };
+    let have: BTreeSet<FitKey> = rows.iter().map(Row::fit_key).collect();
+    let id = Skipped::fit_key;
     if let Ok(text) = std::fs::read_to_string(&path) {
         let old: Vec<Skipped> = serde_json::from_str(&text).unwrap_or_default();
         let seen: BTreeSet<_> = all.iter().map(id).collect();
@@ -1103,45 +1122,10 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     }
     write_if_changed(&out_csv, &results_csv_text(&rows)?)?;
     write_summaries(&args.out, &rows)?;
-    let have: BTreeSet<(String, String, String, String, String)> = rows
-        .iter()
-        .map(|r| {
-            (
-                r.data.clone(),
-                r.model.clone(),
-                r.loss.clone(),
-                r.weights.clone(),
-                r.optimizer.clone(),
-            )
-        })
-        .collect();
-    skipped.retain(|s| {
-        !have.contains(&(
-            s.data.clone(),
-            s.model.clone(),
-            s.loss.clone(),
-            s.weights.clone(),
-            s.optimizer.clone(),
-        ))
-    });
-    skipped.sort_by_key(|s| {
-        (
-            s.data.clone(),
-            s.model.clone(),
-            s.loss.clone(),
-            s.weights.clone(),
-            s.optimizer.clone(),
-        )
-    });
-    skipped.dedup_by_key(|s| {
-        (
-            s.data.clone(),
-            s.model.clone(),
-            s.loss.clone(),
-            s.weights.clone(),
-            s.optimizer.clone(),
-        )
-    });
+    let have: BTreeSet<FitKey> = rows.iter().map(Row::fit_key).collect();
+    skipped.retain(|s| !have.contains(&s.fit_key()));
+    skipped.sort_by_key(Skipped::fit_key);
+    skipped.dedup_by_key(|s| s.fit_key());
     write_if_changed(
         &args.out.join(SKIPPED_JSON),
         &(serde_json::to_string_pretty(&skipped)? + "\n"),
