@@ -272,10 +272,14 @@ pub fn fit_outcome(
                     loss.metric
                 );
                 let finish = loss.terms(data);
+                // Forward differences need a step well above √ε of the backend's arithmetic
+                // (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly rounding noise).
+                let mut lm_opts = opts.lm.clone();
+                lm_opts.fd_step = lm_opts.fd_step.max(4.0 * backend.unit_roundoff().sqrt());
                 lm::minimize(
                     &mut obj,
                     &starts,
-                    &opts.lm,
+                    &lm_opts,
                     &|s| finish.finish_sum(s),
                     progress,
                 )?

@@ -248,6 +248,9 @@ impl Backend for GpuBackend {
     fn id(&self) -> &'static str {
         "gpu"
     }
+    fn unit_roundoff(&self) -> f64 {
+        f32::EPSILON as f64 / 2.0
+    }
     fn prepare<'a>(&'a self, problem: Problem<'a>) -> Result<Box<dyn Evaluator + 'a>> {
         let terms = problem.loss.terms(problem.data);
         let pipes = self.pipelines(&problem, terms.term, terms.finish)?;

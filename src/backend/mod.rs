@@ -26,6 +26,11 @@ pub trait Backend: Send + Sync {
     fn name(&self) -> String;
     /// Short machine name: `cpu` or `gpu`.
     fn id(&self) -> &'static str;
+    /// Unit roundoff of the arithmetic the backend evaluates models in (f64 or f32):
+    /// finite differences must step well above √ε of it to mean anything.
+    fn unit_roundoff(&self) -> f64 {
+        f64::EPSILON / 2.0
+    }
     fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>>;
 }
 
