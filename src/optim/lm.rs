@@ -32,21 +32,11 @@ impl Default for LmOptions {
 
 struct State {
     x: Vec<f64>,
-    r: Vec<f64>,
     ss: f64,
     lambda: f64,
     active: bool,
     iterations: usize,
     evaluations: usize,
-}
-
-fn sum_sq(r: &[f64]) -> f64 {
-    let s: f64 = r.iter().map(|v| v * v).sum();
-    if s.is_nan() {
-        f64::INFINITY
-    } else {
-        s
-    }
 }
 
 /// Minimise Σ r² from every start; costs are reported as `finish(Σ r²)`.
@@ -58,16 +48,14 @@ pub fn minimize(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<Vec<RestartResult>> {
     let p = obj.dim();
-    let k = obj.residual_count();
     let flat: Vec<f64> = starts.iter().flatten().copied().collect();
-    let r0 = obj.residuals(&flat)?;
+    let ss0 = obj.sum_squares(&flat)?;
     let mut st: Vec<State> = starts
         .iter()
-        .zip(r0.chunks(k))
-        .map(|(x, r)| State {
+        .zip(ss0)
+        .map(|(x, ss)| State {
             x: x.clone(),
-            r: r.to_vec(),
-            ss: sum_sq(r),
+            ss,
             lambda: opts.initial_lambda,
             active: true,
             iterations: 0,
@@ -86,38 +74,28 @@ pub fn minimize(
         if act.is_empty() {
             break;
         }
-        // Batch 1: Jacobian points.
-        let mut jb = Vec::with_capacity(act.len() * p * p);
+        // Batch 1: the normal equations of every active restart (the backend may reduce
+        // them where it evaluates the residuals).
+        let mut points = Vec::with_capacity(act.len() * p);
         let mut hs = Vec::with_capacity(act.len() * p);
         for &i in &act {
+            points.extend_from_slice(&st[i].x);
             for j in 0..p {
-                let mut x = st[i].x.clone();
-                let h = if x[j] + opts.fd_step <= 1.0 {
+                hs.push(if st[i].x[j] + opts.fd_step <= 1.0 {
                     opts.fd_step
                 } else {
                     -opts.fd_step
-                };
-                x[j] += h;
-                hs.push(h);
-                jb.extend(x);
+                });
             }
         }
-        let jr = obj.residuals(&jb)?;
+        let normal = obj.normal_equations(&points, &hs)?;
         // Solve each damped system.
         let mut trial = Vec::with_capacity(act.len() * p);
         for (a, &i) in act.iter().enumerate() {
             let s = &st[i];
-            let mut jac = DMatrix::<f64>::zeros(k, p);
-            for j in 0..p {
-                let row = &jr[(a * p + j) * k..(a * p + j + 1) * k];
-                let h = hs[a * p + j];
-                for m in 0..k {
-                    jac[(m, j)] = (row[m] - s.r[m]) / h;
-                }
-            }
-            let jt = jac.transpose();
-            let jtj = &jt * &jac;
-            let g = &jt * DVector::from_column_slice(&s.r);
+            let ne = &normal[a];
+            let jtj = DMatrix::from_row_slice(p, p, &ne.jtj);
+            let g = DVector::from_column_slice(&ne.jtr);
             let dmax = (0..p).map(|j| jtj[(j, j)]).fold(0.0, f64::max).max(1e-300);
             let mut a_mat = jtj.clone();
             for j in 0..p {
@@ -136,14 +114,13 @@ pub fn minimize(
             }
         }
         // Batch 2: trial points.
-        let tr = obj.residuals(&trial)?;
+        let tr = obj.sum_squares(&trial)?;
         for (a, &i) in act.iter().enumerate() {
             let s = &mut st[i];
             s.iterations += 1;
             s.evaluations += p + 1;
             let x_new = &trial[a * p..(a + 1) * p];
-            let r_new = &tr[a * k..(a + 1) * k];
-            let ss_new = sum_sq(r_new);
+            let ss_new = tr[a];
             let step: f64 = x_new
                 .iter()
                 .zip(&s.x)
@@ -153,7 +130,6 @@ pub fn minimize(
             if ss_new < s.ss {
                 let gain = (s.ss - ss_new) / s.ss.max(1e-300);
                 s.x.copy_from_slice(x_new);
-                s.r.copy_from_slice(r_new);
                 s.ss = ss_new;
                 s.lambda = (s.lambda / 3.0).max(1e-12);
                 if gain < opts.ftol || step < opts.xtol {

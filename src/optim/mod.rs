@@ -22,6 +22,85 @@ pub trait BatchResiduals: BatchObjective {
     fn residuals(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>>;
     /// K, the residual count per point.
     fn residual_count(&self) -> usize;
+
+    /// The Gauss–Newton normal equations at each of N points (N × P) with the forward-
+    /// difference Jacobian J_kj = (r_k(x + h_j e_j) − r_k(x)) / h_j, signed steps `steps`
+    /// (N × P). This default forms them on the host from `residuals`; a backend can reduce
+    /// them where the residuals are computed.
+    fn normal_equations(
+        &mut self,
+        points: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<NormalEquations>> {
+        let p = self.dim();
+        let k = self.residual_count();
+        let batch = difference_points(points, steps, p);
+        let res = self.residuals(&batch)?;
+        Ok(res
+            .chunks(k * (p + 1))
+            .zip(steps.chunks(p))
+            .map(|(rows, h)| NormalEquations::from_residuals(rows, h, k))
+            .collect())
+    }
+
+    /// Σ r² of N points (+∞ where not finite).
+    fn sum_squares(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let k = self.residual_count();
+        Ok(self
+            .residuals(points)?
+            .chunks(k)
+            .map(|r| sanitize(r.iter().map(|v| v * v).sum()))
+            .collect())
+    }
+}
+
+/// Per point: the point, then the point moved by each signed step (N × (P + 1) × P).
+pub fn difference_points(points: &[f64], steps: &[f64], p: usize) -> Vec<f64> {
+    let mut batch = Vec::with_capacity(points.len() * (p + 1));
+    for (x, h) in points.chunks(p).zip(steps.chunks(p)) {
+        batch.extend_from_slice(x);
+        for (j, hj) in h.iter().enumerate() {
+            batch.extend_from_slice(x);
+            let last = batch.len() - p + j;
+            batch[last] += hj;
+        }
+    }
+    batch
+}
+
+/// JᵀJ (P × P, row-major), Jᵀr and Σ r² of one point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalEquations {
+    pub jtj: Vec<f64>,
+    pub jtr: Vec<f64>,
+    pub ss: f64,
+}
+
+impl NormalEquations {
+    /// From the residual rows of a point and its P moved copies ((P + 1) × K).
+    pub fn from_residuals(rows: &[f64], steps: &[f64], k: usize) -> NormalEquations {
+        let p = steps.len();
+        let r0 = &rows[..k];
+        let mut jtj = vec![0.0; p * p];
+        let mut jtr = vec![0.0; p];
+        let mut jrow = vec![0.0; p];
+        for m in 0..k {
+            for j in 0..p {
+                jrow[j] = (rows[(j + 1) * k + m] - r0[m]) / steps[j];
+                jtr[j] += jrow[j] * r0[m];
+            }
+            for a in 0..p {
+                for b in 0..p {
+                    jtj[a * p + b] += jrow[a] * jrow[b];
+                }
+            }
+        }
+        NormalEquations {
+            jtj,
+            jtr,
+            ss: sanitize(r0.iter().map(|v| v * v).sum()),
+        }
+    }
 }
 
 /// Outcome of one restart.
