@@ -140,6 +140,16 @@ impl BatchResiduals for UnitBox<'_, '_> {
     fn residual_count(&self) -> usize {
         self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0)
     }
+    fn normal_equations(
+        &mut self,
+        points: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        // The backend reduces them where it evaluates the model (on the GPU: on the device).
+        let unit = crate::optim::difference_points(points, steps, self.model.dim);
+        let phys = self.to_physical(&unit);
+        self.eval.normal_equations(&phys, steps)
+    }
 }
 
 /// Starting points in the unit box: the given initial points, then the best `restarts`

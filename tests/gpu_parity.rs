@@ -285,3 +285,80 @@ fn large_batches_are_chunked_and_complete() {
         );
     }
 }
+
+#[test]
+fn lm_normal_equations_match_the_cpu_reference() {
+    // JᵀJ, Jᵀr and Σr² from the GPU's f32 model values against the CPU's f64 values, for
+    // the same forward differences (unit-box step 1e-2, large enough that f32 rounding of
+    // the residual differences stays below 1e-3 of J). Bound: 1e-2 of the matrix's largest
+    // entry for every entry; 5e-3 relative for Σr² (model values agree to REL = 2e-3, and
+    // squaring doubles a relative error). Both workgroup shapes.
+    let cases = [
+        (Kind::Brdf, "fa(eon)", 3usize, Metric::Rmse),
+        (Kind::Brdf, "rmg(eon)", 3, Metric::Rmse),
+        (Kind::Brdf, "ggx+retro", 3, Metric::Chi2),
+        (Kind::Btdf, "btdf(gg)+scale", 1, Metric::Logf),
+    ];
+    for shape in [Shape::CPU_DEVICE, Shape::GPU_DEVICE] {
+        let gpu_shaped = GpuBackend::new().expect("GPU adapter").with_shape(shape);
+        for (kind, spec, channels, metric) in cases {
+            let data = random_dataset(kind, channels, 150, 31);
+            let model = Model::parse(spec, channels).unwrap();
+            let p = model.dim;
+            let loss = Loss::new(metric, Weights::Uniform);
+            let problem = Problem {
+                model: &model,
+                data: &data,
+                loss,
+            };
+            let mut rng = ChaCha8Rng::seed_from_u64(32);
+            let n = 5;
+            let mut points = Vec::new();
+            let mut steps = Vec::new();
+            for _ in 0..n {
+                let x: Vec<f64> = (0..p).map(|_| rng.random_range(0.1..0.9)).collect();
+                points.extend(x);
+                steps.extend((0..p).map(|j| if j % 2 == 0 { 1e-2 } else { -1e-2 }));
+            }
+            let unit = bsdfit::optim::difference_points(&points, &steps, p);
+            let phys: Vec<f64> = unit.chunks(p).flat_map(|u| model.from_unit(u)).collect();
+            let c = CpuBackend::new()
+                .prepare(problem)
+                .unwrap()
+                .normal_equations(&phys, &steps)
+                .unwrap();
+            let g = gpu_shaped
+                .prepare(problem)
+                .unwrap()
+                .normal_equations(&phys, &steps)
+                .unwrap();
+            for (r, (a, b)) in c.iter().zip(&g).enumerate() {
+                let scale = a.jtj.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (i, (x, y)) in a.jtj.iter().zip(&b.jtj).enumerate() {
+                    let ok = x.is_finite() && (x - y).abs() <= 1e-2 * scale;
+                    assert!(
+                        ok,
+                        "{spec} {shape:?} restart {r} JᵀJ[{i}]: cpu {x} gpu {y} (max {scale})"
+                    );
+                }
+                let gscale = a
+                    .jtr
+                    .iter()
+                    .fold(0.0f64, |m, v| m.max(v.abs()))
+                    .max(1e-3 * scale.sqrt() * a.ss.sqrt());
+                for (x, y) in a.jtr.iter().zip(&b.jtr) {
+                    assert!(
+                        x.is_finite() && (x - y).abs() <= 1e-2 * gscale,
+                        "{spec} {shape:?} Jᵀr: cpu {x} gpu {y}"
+                    );
+                }
+                assert!(
+                    a.ss.is_finite() && (a.ss - b.ss).abs() <= 5e-3 * a.ss,
+                    "{spec} {shape:?} Σr²: cpu {} gpu {}",
+                    a.ss,
+                    b.ss
+                );
+            }
+        }
+    }
+}

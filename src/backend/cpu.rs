@@ -101,6 +101,20 @@ impl Evaluator for CpuEvaluator<'_> {
         Ok(out)
     }
 
+    fn normal_equations(
+        &mut self,
+        params: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        let values = self.values(params)?;
+        Ok(super::normal_equations_from_values(
+            &values,
+            &self.terms,
+            steps,
+            self.problem.model.dim,
+        ))
+    }
+
     fn evaluations(&self) -> u64 {
         self.evaluations.load(Ordering::Relaxed)
     }

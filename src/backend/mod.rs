@@ -43,8 +43,40 @@ pub trait Evaluator {
     fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;
     /// Model values y′ for each candidate and sample (N × K, row-major).
     fn values(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;
+    /// Levenberg–Marquardt normal equations for N groups of P + 1 candidates: `params`
+    /// (N × (P + 1) × P, physical) holds each group's point, then the point moved along
+    /// each parameter by the signed unit-box step in `steps` (N × P). Returns JᵀJ, Jᵀr and
+    /// Σr² of the loss's weighted residuals r_k = √w_k (g(y′_k) − g(y_k)), the Jacobian
+    /// J_kj = (r_k(moved_j) − r_k(point)) / step_j taken in the optimizer's coordinates.
+    fn normal_equations(
+        &mut self,
+        params: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>>;
     /// Model-sample evaluations performed so far (one model at one sample and channel).
     fn evaluations(&self) -> u64;
+}
+
+/// Normal equations of groups of P + 1 candidates from their model values (N·(P + 1) × K)
+/// and the unit-box steps (N × P), through the loss's weighted residuals.
+pub fn normal_equations_from_values(
+    values: &[f64],
+    terms: &crate::loss::LossTerms,
+    steps: &[f64],
+    p: usize,
+) -> Vec<crate::optim::NormalEquations> {
+    let k = terms.y.len();
+    values
+        .chunks(k * (p + 1))
+        .zip(steps.chunks(p))
+        .map(|(vals, h)| {
+            let rows: Vec<f64> = vals
+                .chunks(k)
+                .flat_map(|row| row.iter().enumerate().map(|(j, &v)| terms.residual(j, v)))
+                .collect();
+            crate::optim::NormalEquations::from_residuals(&rows, h, k)
+        })
+        .collect()
 }
 
 /// Which backend a command should use.
