@@ -954,23 +954,12 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
             )
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
+        // Models that cannot be built are skipped up front (cheap, sequential).
+        let mut runnable: Vec<(&Task, Model)> = Vec::new();
         for t in &todo {
             let f = &files[t.data];
-            bar.set_message(format!(
-                "{} · {} · {}/{} · {}",
-                f.name, t.model, t.loss, t.weights, t.optimizer
-            ));
-            let skip = |status: &str, reason: String| Skipped {
-                data: f.name.clone(),
-                model: t.model.clone(),
-                loss: t.loss.to_string(),
-                weights: t.weights.to_string(),
-                optimizer: t.optimizer.to_string(),
-                status: status.into(),
-                reason,
-            };
-            let model = match Model::for_data(&t.model, &f.data) {
-                Ok(m) => m,
+            match Model::for_data(&t.model, &f.data) {
+                Ok(m) => runnable.push((t, m)),
                 Err(e) => {
                     let reason = e.to_string();
                     if unavailable
@@ -979,50 +968,93 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                     {
                         say(&bar, format!("skipping {}: {reason}", t.model));
                     }
-                    skipped.push(skip("skipped", reason));
+                    skipped.push(skipped_entry(f, t, "skipped", reason));
                     bar.inc(1);
-                    continue;
-                }
-            };
-            let opts = FitOptions {
-                optimizer: t.optimizer,
-                restarts: args.restarts,
-                seed: args.seed,
-                ..Default::default()
-            };
-            let loss = Loss::new(t.loss, t.weights);
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                fit(&model, &f.data, loss, backend.as_ref(), &opts, &mut |_| {})
-            }));
-            match result {
-                Ok(Ok(report)) => {
-                    let row = Row::from_report(&report, f);
-                    app.push(&row)?;
-                    rows.push(row);
-                    new_rows += 1;
-                }
-                Ok(Err(e)) => {
-                    say(
-                        &bar,
-                        format!("fit failed: {} · {} · {loss}: {e:#}", f.name, t.model),
-                    );
-                    skipped.push(skip("failed", format!("{e:#}")));
-                }
-                Err(p) => {
-                    let msg = p
-                        .downcast_ref::<String>()
-                        .cloned()
-                        .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                        .unwrap_or_else(|| "panic".into());
-                    say(
-                        &bar,
-                        format!("fit panicked: {} · {} · {loss}: {msg}", f.name, t.model),
-                    );
-                    skipped.push(skip("failed", format!("panic: {msg}")));
                 }
             }
-            bar.inc(1);
         }
+        // Fits run on one worker per core (a fit's batches are small, so one fit alone
+        // leaves cores idle); this thread appends every finished fit to results.csv at
+        // once, so an interrupted run loses at most the fits in flight. Each fit is
+        // deterministic on its own, and results.csv is rewritten in canonical order at
+        // the end, so the outcome does not depend on which worker finished first.
+        let workers = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .clamp(1, runnable.len().max(1));
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let backend = backend.as_ref();
+        std::thread::scope(|scope| -> Result<()> {
+            let (tx, rx) = std::sync::mpsc::channel();
+            for _ in 0..workers {
+                let tx = tx.clone();
+                let (runnable, next, stop, files) = (&runnable, &next, &stop, &files);
+                scope.spawn(move || loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    if i >= runnable.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
+                        break;
+                    }
+                    let (t, model) = &runnable[i];
+                    let opts = FitOptions {
+                        optimizer: t.optimizer,
+                        restarts: args.restarts,
+                        seed: args.seed,
+                        ..Default::default()
+                    };
+                    let loss = Loss::new(t.loss, t.weights);
+                    let data = &files[t.data].data;
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        fit(model, data, loss, backend, &opts, &mut |_| {})
+                    }));
+                    if tx.send((i, result)).is_err() {
+                        break;
+                    }
+                });
+            }
+            drop(tx);
+            for (i, result) in rx {
+                let (t, _) = &runnable[i];
+                let f = &files[t.data];
+                let loss = Loss::new(t.loss, t.weights);
+                bar.set_message(format!(
+                    "{} · {} · {}/{} · {}",
+                    f.name, t.model, t.loss, t.weights, t.optimizer
+                ));
+                match result {
+                    Ok(Ok(report)) => {
+                        let row = Row::from_report(&report, f);
+                        if let Err(e) = app.push(&row) {
+                            stop.store(true, std::sync::atomic::Ordering::SeqCst);
+                            return Err(e);
+                        }
+                        rows.push(row);
+                        new_rows += 1;
+                    }
+                    Ok(Err(e)) => {
+                        say(
+                            &bar,
+                            format!("fit failed: {} · {} · {loss}: {e:#}", f.name, t.model),
+                        );
+                        skipped.push(skipped_entry(f, t, "failed", format!("{e:#}")));
+                    }
+                    Err(p) => {
+                        let msg = p
+                            .downcast_ref::<String>()
+                            .cloned()
+                            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                            .unwrap_or_else(|| "panic".into());
+                        say(
+                            &bar,
+                            format!("fit panicked: {} · {} · {loss}: {msg}", f.name, t.model),
+                        );
+                        skipped.push(skipped_entry(f, t, "failed", format!("panic: {msg}")));
+                    }
+                }
+                bar.inc(1);
+            }
+            Ok(())
+        })?;
         bar.finish_and_clear();
     }
     // Canonical results.csv (unchanged bytes when nothing new ran), then summaries.
@@ -1138,6 +1170,19 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
 }
 
 /// A line for the user above the progress bar (printed even when the bar is hidden).
+/// The skipped.json entry of a task.
+fn skipped_entry(f: &DataFile, t: &Task, status: &str, reason: String) -> Skipped {
+    Skipped {
+        data: f.name.clone(),
+        model: t.model.clone(),
+        loss: t.loss.to_string(),
+        weights: t.weights.to_string(),
+        optimizer: t.optimizer.to_string(),
+        status: status.into(),
+        reason,
+    }
+}
+
 fn say(bar: &indicatif::ProgressBar, msg: String) {
     bar.suspend(|| eprintln!("{msg}"));
 }
