@@ -3,13 +3,13 @@
 //! per second (criterion's element throughput). `bsdfit bench` measures the same thing
 //! for the whole catalogue.
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::backend::gpu::GpuBackend;
-use bsdfit::backend::{Backend, Problem};
-use bsdfit::bench::bench_dataset;
-use bsdfit::dataset::Kind;
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::Model;
+use bsdfit::bsdf::Model;
+use bsdfit::data::Kind;
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::gpu::GpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::{Backend, Problem};
+use bsdfit::workflows::bench::bench_dataset;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 const RESTARTS: usize = 64;

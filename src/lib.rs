@@ -1,27 +1,25 @@
 //! bsdfit: fit BRDF and BTDF models to measured goniometric data with uncertainties.
 //!
-//! - [`dataset`]: the v1 CSV format, validation, channels.
-//! - [`model`]: the catalogue (one file per model, each with a WGSL twin in `shaders/`).
-//! - [`loss`]: the benchmark's losses and χ².
-//! - [`backend`]: the CPU reference and the GPU engine behind one trait.
-//! - [`optim`]: compass search and Levenberg–Marquardt, all restarts in lockstep.
-//! - [`fit`]: one fit and its report; [`uncertainty`]: parameter covariances.
-//! - [`synth`]: synthetic data from known parameters.
-//! - [`sweep`]: the benchmark sweep (resumable, shardable); [`plot`], [`render`],
-//!   [`report`]: its angular plots, sphere renders and report.html.
+//! The modules follow the pipeline, in order:
+//! - [`data`]: measurements in (the v1 CSV format, validation, channels).
+//! - [`bsdf`]: the model catalogue, driven by declarations (one file per model, each the
+//!   twin of a WGSL file in `shaders/bsdf/`), the spec parser and the compiled [`bsdf::Model`].
+//! - [`engine`]: the losses, and the CPU reference and the GPU engine behind one trait.
+//! - [`optim`]: compass search and Levenberg–Marquardt, all restarts in lockstep; they know
+//!   nothing of backends.
+//! - [`inference`]: one fit and its report, covariances, χ²/F tails and information criteria.
+//! - [`workflows`]: sweep, diagnose, bench and synth.
+//! - [`output`]: angular plots, sphere renders and the sweep's report.
+//! - [`cli`]: every command's options (shared groups flattened into each command).
+//!
+//! [`math`] holds the geometry and special functions every stage uses.
 
-pub mod backend;
-pub mod bench;
-pub mod dataset;
-pub mod diagnose;
-pub mod fit;
-pub mod loss;
+pub mod bsdf;
+pub mod cli;
+pub mod data;
+pub mod engine;
+pub mod inference;
 pub mod math;
-pub mod model;
 pub mod optim;
-pub mod plot;
-pub mod render;
-pub mod report;
-pub mod sweep;
-pub mod synth;
-pub mod uncertainty;
+pub mod output;
+pub mod workflows;

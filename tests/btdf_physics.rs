@@ -5,11 +5,11 @@
 //! the accuracy of the GG Smith Λ table. No assertion lets a NaN through: every check is
 //! written `assert!(x.is_finite() && …)` or as `!(err <= tol)` → failure.
 
-use bsdfit::model::btdf::{
+use bsdfit::bsdf::btdf::{
     beckmann_d, gg_lambda_exact, gg_lambda_table, gtr_d, ln_gamma, tr_d, GgShape, GG_NA, GG_NP,
     GG_P_HI, GG_P_LO,
 };
-use bsdfit::model::Model;
+use bsdfit::bsdf::Model;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -792,7 +792,7 @@ fn gg_lambda_table_interpolation_error() {
 
 #[test]
 fn wgsl_twins_match_the_rust_constants_and_validate() {
-    let gg = include_str!("../shaders/btdf_gg.wgsl");
+    let gg = include_str!("../shaders/bsdf/btdf_gg.wgsl");
     assert!(gg.contains(&format!("const BTDF_GG_NP: u32 = {GG_NP}u;")));
     assert!(gg.contains(&format!("const BTDF_GG_NA: u32 = {GG_NA}u;")));
     let lo: f64 = grab(gg, "const BTDF_GG_LNP_LO: f32 = ");
@@ -804,8 +804,8 @@ fn wgsl_twins_match_the_rust_constants_and_validate() {
          @compute @workgroup_size(1) fn main() {{\n let wi = vec3<f32>(0.0, 0.0, 1.0); let wo = -wi;\n \
          let v = btdf_tr_eval(0u, wi, wo) + btdf_beckmann_eval(0u, wi, wo) + btdf_gtr_eval(0u, wi, wo) + btdf_gg_eval(0u, wi, wo);\n \
          P[7] = btdf_diffuse_eval(0u, wi, wo, btdf_absorb_eval(0u, wi, wo, btdf_scale_eval(0u, wi, wo, v)));\n}}\n",
-        include_str!("../shaders/common.wgsl"),
-        include_str!("../shaders/btdf.wgsl"),
+        include_str!("../shaders/bsdf/common.wgsl"),
+        include_str!("../shaders/bsdf/btdf.wgsl"),
         gg
     );
     let module =

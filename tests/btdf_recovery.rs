@@ -4,12 +4,12 @@
 //! α, η_t and S are separately identifiable; at normal incidence only they trade off
 //! (DESIGN §3), and the fit must say so instead of printing confident values.
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::dataset::Dataset;
-use bsdfit::fit::{fit, FitOptions, FitReport, Optimizer};
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::Model;
-use bsdfit::synth::{geometry, synthesize, Noise};
+use bsdfit::bsdf::Model;
+use bsdfit::data::Dataset;
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::inference::fit::{fit, FitOptions, FitReport, Optimizer};
+use bsdfit::workflows::synth::{geometry, synthesize, Noise};
 
 const SPEC: &str = "btdf(tr)+scale";
 const TRUTH: &str = "alpha=0.25,eta=1.45,scale=0.7";

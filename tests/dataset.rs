@@ -3,7 +3,7 @@
 
 mod common;
 
-use bsdfit::dataset::{normalise_angles, Dataset, Kind, ReadOptions};
+use bsdfit::data::{normalise_angles, Dataset, Kind, ReadOptions};
 use glam::DVec3;
 
 const HEADER: &str = "theta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty";
@@ -32,7 +32,7 @@ fn good_rows() -> Vec<&'static str> {
     ]
 }
 
-fn parse(text: &str) -> Result<Dataset, bsdfit::dataset::DataError> {
+fn parse(text: &str) -> Result<Dataset, bsdfit::data::DataError> {
     Dataset::parse(text, "f.csv", &ReadOptions::default())
 }
 

@@ -8,17 +8,17 @@
 //! and parameter values used nowhere else, a different noise level per test. Each
 //! geometry is chosen so the hidden effect is identifiable, as each test says.
 
-use bsdfit::backend::{self, Backend, BackendChoice};
-use bsdfit::dataset::Dataset;
-use bsdfit::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect};
-use bsdfit::model::Model;
-use bsdfit::synth::{synthesize, Noise};
+use bsdfit::bsdf::Model;
+use bsdfit::data::Dataset;
+use bsdfit::engine::{self, Backend, BackendChoice};
+use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect};
+use bsdfit::workflows::synth::{synthesize, Noise};
 use std::sync::OnceLock;
 
 /// One backend for the whole file: the GPU (lavapipe here and in CI) when present.
 fn backend() -> &'static dyn Backend {
     static B: OnceLock<Box<dyn Backend>> = OnceLock::new();
-    B.get_or_init(|| backend::select(BackendChoice::Auto, &mut |m| eprintln!("{m}")).unwrap())
+    B.get_or_init(|| engine::select(BackendChoice::Auto, &mut |m| eprintln!("{m}")).unwrap())
         .as_ref()
 }
 
@@ -88,9 +88,9 @@ fn synth(spec: &str, params: &str, rows: &[[f64; 4]], noise: (f64, f64), seed: u
     } else {
         vec![470.0, 540.0, 610.0]
     };
-    let planes = bsdfit::dataset::measurement_planes(
+    let planes = bsdfit::data::measurement_planes(
         rows.iter()
-            .map(|r| bsdfit::dataset::normalise_angles(r[2], r[3])),
+            .map(|r| bsdfit::data::normalise_angles(r[2], r[3])),
     );
     let model = Model::parse_for(spec, wl.len(), &planes).unwrap();
     let flat = model.params_from_assignments(params).unwrap();

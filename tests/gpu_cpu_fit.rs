@@ -2,12 +2,12 @@
 //! same seed reaches the same best loss within 1% on the GPU engine (f32, lavapipe in CI)
 //! and the CPU reference (f64), and the same parameters within their uncertainties.
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::backend::gpu::GpuBackend;
-use bsdfit::fit::{fit, FitOptions};
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::Model;
-use bsdfit::synth::{geometry, synthesize, Noise};
+use bsdfit::bsdf::Model;
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::gpu::GpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::inference::fit::{fit, FitOptions};
+use bsdfit::workflows::synth::{geometry, synthesize, Noise};
 
 #[test]
 fn fa_lambert_reaches_the_same_optimum_on_gpu_and_cpu() {

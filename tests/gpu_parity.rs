@@ -10,13 +10,13 @@
 //! REL = 2e-3, ABS = 1e-5, and
 //! costs (sums over all samples) with REL_COST = 1e-3. NaN never passes.
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::backend::gpu::GpuBackend;
-use bsdfit::backend::wgsl::Shape;
-use bsdfit::backend::{Backend, Problem};
-use bsdfit::dataset::{Dataset, Kind, RawRow, ReadOptions};
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::{catalogue, Model};
+use bsdfit::bsdf::{catalogue, Model};
+use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::gpu::GpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::wgsl::Shape;
+use bsdfit::engine::{Backend, Problem};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::OnceLock;

@@ -3,12 +3,12 @@
 //! Both must reach the same minimum: cost within 1e-6 relative (+1e-12 absolute) and
 //! parameters within 1e-4 in the unit box.
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::backend::Backend;
-use bsdfit::backend::Problem;
-use bsdfit::fit::UnitBox;
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::Model;
+use bsdfit::bsdf::Model;
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::Backend;
+use bsdfit::engine::Problem;
+use bsdfit::inference::fit::UnitBox;
 use bsdfit::optim::lm::{minimize, LmOptions};
 use bsdfit::optim::{BatchObjective, BatchResiduals};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -151,12 +151,12 @@ fn oren_nayar_brdf_fit() {
     let truth = model
         .params_from_assignments("rho=0.3:0.5:0.7,sigma=0.6")
         .unwrap();
-    let (_, rows) = bsdfit::synth::geometry("inplane10").unwrap();
-    let noise = bsdfit::synth::Noise {
+    let (_, rows) = bsdfit::workflows::synth::geometry("inplane10").unwrap();
+    let noise = bsdfit::workflows::synth::Noise {
         rel: 0.015,
         abs: 1e-4,
     };
-    let data = bsdfit::synth::synthesize(
+    let data = bsdfit::workflows::synth::synthesize(
         &model,
         &truth,
         &rows,

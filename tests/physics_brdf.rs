@@ -7,12 +7,12 @@
 
 mod common;
 
-use bsdfit::dataset::Kind;
+use bsdfit::bsdf::eon::{e_fon_exact, f_fon, C1_FON, C2_FON};
+use bsdfit::bsdf::ggx::ggx_reflect;
+use bsdfit::bsdf::retro::retro_lobe;
+use bsdfit::bsdf::{catalogue, Model};
+use bsdfit::data::Kind;
 use bsdfit::math::gauss_legendre;
-use bsdfit::model::eon::{e_fon_exact, f_fon, C1_FON, C2_FON};
-use bsdfit::model::ggx::ggx_reflect;
-use bsdfit::model::retro::retro_lobe;
-use bsdfit::model::{catalogue, Model};
 use common::*;
 use glam::DVec3;
 use rand::Rng;

@@ -1,9 +1,9 @@
 //! Property tests (proptest): invariants that must hold for any input, not just the
 //! hand-picked cases of the other files.
 
-use bsdfit::dataset::{Dataset, Kind, RawRow, ReadOptions};
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::{catalogue, Model};
+use bsdfit::bsdf::{catalogue, Model};
+use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::engine::loss::{Loss, Metric, Weights};
 use proptest::prelude::*;
 
 fn row() -> impl Strategy<Value = RawRow> {

@@ -8,12 +8,12 @@
 
 mod common;
 
-use bsdfit::backend::cpu::CpuBackend;
-use bsdfit::dataset::{Dataset, Kind, RawRow, ReadOptions};
-use bsdfit::fit::{fit, FitOptions, FitReport, Optimizer};
-use bsdfit::loss::{Loss, Metric, Weights};
-use bsdfit::model::{Model, Scale};
-use bsdfit::synth::{self, Noise};
+use bsdfit::bsdf::{Model, Scale};
+use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::engine::cpu::CpuBackend;
+use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::inference::fit::{fit, FitOptions, FitReport, Optimizer};
+use bsdfit::workflows::synth::{self, Noise};
 
 const WAVELENGTHS: [f64; 3] = [450.0, 550.0, 650.0];
 const NOISE: Noise = Noise {

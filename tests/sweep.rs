@@ -2,7 +2,7 @@
 //! 2 models × 1 loss × 2 weightings, few restarts, CPU backend), then resumption, shards
 //! and merge, interruption, pictures and report.
 
-use bsdfit::sweep::{read_results, Row};
+use bsdfit::output::results::{read_results, Row};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -178,7 +178,7 @@ fn sweep_resumes_shards_merge_and_reports() {
         let svg = full
             .join("plots")
             .join(&r.data)
-            .join(format!("{}.svg", bsdfit::report::slug(r)));
+            .join(format!("{}.svg", bsdfit::output::report::slug(r)));
         let text =
             std::fs::read_to_string(&svg).unwrap_or_else(|_| panic!("{} missing", svg.display()));
         assert!(
@@ -187,7 +187,11 @@ fn sweep_resumes_shards_merge_and_reports() {
             svg.display()
         );
         assert!(
-            report.contains(&format!("plots/{}/{}.svg", r.data, bsdfit::report::slug(r))),
+            report.contains(&format!(
+                "plots/{}/{}.svg",
+                r.data,
+                bsdfit::output::report::slug(r)
+            )),
             "report does not link {}",
             svg.display()
         );

@@ -1,10 +1,10 @@
 //! Every generated WGSL module (each catalogue spec × each loss shape) parses and
 //! validates with naga — no device needed.
 
-use bsdfit::backend::wgsl::{compose, validate, Shape};
-use bsdfit::dataset::Kind;
-use bsdfit::loss::{Finish, Term};
-use bsdfit::model::{catalogue, Model};
+use bsdfit::bsdf::{catalogue, Model};
+use bsdfit::data::Kind;
+use bsdfit::engine::loss::{Finish, Term};
+use bsdfit::engine::wgsl::{compose, validate, Shape};
 
 #[test]
 fn every_generated_module_validates() {
@@ -40,7 +40,7 @@ fn every_generated_module_validates() {
 #[test]
 fn eval_model_calls_nested_nodes_with_their_offsets() {
     let m = Model::parse("fa(eon)+retro", 3).unwrap();
-    let src = bsdfit::backend::wgsl::eval_model_source(&m);
+    let src = bsdfit::engine::wgsl::eval_model_source(&m);
     // retro (offset 0: kr, alpha_r) wraps fa (offset 2: alpha, eta, ks) over eon (offset 5).
     assert!(src.contains("eon_eval(b + 5u, wi, wo)"), "{src}");
     assert!(src.contains("fa_eval(b + 2u, wi, wo, v0)"), "{src}");

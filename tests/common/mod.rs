@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests: seeded randomness, directions, quadrature.
 #![allow(dead_code)]
 
-use bsdfit::model::Model;
+use bsdfit::bsdf::Model;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -98,7 +98,7 @@ pub fn get_param(model: &Model, flat: &[f64], name: &str) -> Option<f64> {
 }
 
 /// "ρ-type" parameters: per-channel albedo-like scales with bounds [0, 1].
-pub fn is_rho_type(p: &bsdfit::model::FlatParam) -> bool {
+pub fn is_rho_type(p: &bsdfit::bsdf::FlatParam) -> bool {
     p.decl.rgb && p.decl.lo == 0.0 && p.decl.hi == 1.0
 }
 

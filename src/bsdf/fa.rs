@@ -1,0 +1,65 @@
+//! Fresnel aggregate of a diffuse base and a GGX highlight (the benchmark paper §2.1.2):
+//! f = ggx(α, η, k_s) + (1 − F(μi; η)) (1 − F(μo; η)) · f_B,
+//! the base seen through the interface that makes the highlight. B is one of
+//! `lambert on eon vmf`. The lobe's parameters are named `lobe.*`, the base's `base.*`.
+//! Twin: `shaders/fa.wgsl`.
+
+use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
+use super::{base_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use crate::data::Kind;
+use crate::math::fresnel_dielectric;
+use glam::DVec3;
+
+#[derive(Debug, Clone, Copy)]
+pub struct FresnelAggregate;
+
+impl Bsdf for FresnelAggregate {
+    fn name(&self) -> &'static str {
+        "fa"
+    }
+    fn kind(&self) -> Kind {
+        Kind::Brdf
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![
+            ParamDecl {
+                name: "lobe.alpha",
+                ..ALPHA
+            },
+            ParamDecl {
+                name: "lobe.eta",
+                ..ETA
+            },
+            ParamDecl {
+                name: "lobe.ks",
+                ..KS
+            },
+        ]
+    }
+    fn child_roles(&self) -> &'static [&'static str] {
+        &["base"]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let (alpha, eta, ks) = (p[0], p[1], p[2]);
+        let transmit =
+            (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta));
+        ggx_reflect(ks, alpha, eta, wi, wo) + transmit * children[0]
+    }
+    fn wgsl(&self) -> WgslFn {
+        WgslFn {
+            sources: vec![
+                ("ggx", include_str!("../../shaders/bsdf/ggx.wgsl")),
+                ("fa", include_str!("../../shaders/bsdf/fa.wgsl")),
+            ],
+            function: "fa_eval".into(),
+        }
+    }
+}
+
+pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
+    let base = base_arg("fa", arg, &["lambert", "on", "eon", "vmf"])?;
+    Ok(Node::with(FresnelAggregate, vec![base]))
+}

@@ -1,0 +1,55 @@
+//! GGX microfacet reflection (Walter, Marschner, Li, Torrance 2007, Eq. 20 with the GGX
+//! D of Eq. 33 and the separable Smith G of Eq. 23/34):
+//! f = k_s · F(ωi·h; η) · D(h) · G1(ωi) G1(ωo) / (4 μi μo), F the exact dielectric
+//! Fresnel. Twin: `shaders/ggx.wgsl`.
+
+use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use crate::data::Kind;
+use crate::math::{fresnel_dielectric, ggx_d, ggx_g1, half_vector};
+use glam::DVec3;
+
+/// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
+pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
+    let (mu_i, mu_o) = (wi.z, wo.z);
+    if mu_i <= 0.0 || mu_o <= 0.0 {
+        return 0.0;
+    }
+    let h = half_vector(wi, wo);
+    let ih = wi.dot(h);
+    let g = ggx_g1(mu_i, ih, alpha) * ggx_g1(mu_o, wo.dot(h), alpha);
+    ks * fresnel_dielectric(ih, eta) * ggx_d(h.z, alpha) * g / (4.0 * mu_i * mu_o)
+}
+
+/// Parameters of a GGX lobe (also the `lobe.*` parameters of `fa`).
+pub const KS: ParamDecl = ParamDecl::rgb("ks", 0.0, 1.0, 0.5, "specular scale");
+pub const ALPHA: ParamDecl = ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "GGX roughness").log();
+pub const ETA: ParamDecl = ParamDecl::shared("eta", 1.0, 5.0, 1.5, "refractive index");
+
+#[derive(Debug, Clone, Copy)]
+pub struct Ggx;
+
+impl Bsdf for Ggx {
+    fn name(&self) -> &'static str {
+        "ggx"
+    }
+    fn kind(&self) -> Kind {
+        Kind::Brdf
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![KS, ALPHA, ETA]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
+        ggx_reflect(p[0], p[1], p[2], wi, wo)
+    }
+    fn wgsl(&self) -> WgslFn {
+        WgslFn {
+            sources: vec![("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))],
+            function: "ggx_eval".into(),
+        }
+    }
+}
+
+pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
+    no_arg("ggx", arg)?;
+    Ok(Node::leaf(Ggx))
+}

@@ -1,0 +1,808 @@
+//! The model catalogue (DESIGN §3): one file per model, each the twin of a WGSL file in
+//! `shaders/`, plus the spec parser and the compiled [`Model`] the backends evaluate.
+//!
+//! A model is a tree of [`Bsdf`] nodes. Each node declares its own parameters once
+//! ([`ParamDecl`]); combinators (`dmg(B)`, `fa(B)`, `M+retro`, BTDF suffixes) receive
+//! the values of their children. Compiling a tree for C channels lays out one flat
+//! parameter vector (an rgb parameter takes C entries) and, per channel, a scalar view
+//! that the node functions read — the same layout on the CPU and the GPU.
+
+use crate::data::Kind;
+use glam::DVec3;
+use std::fmt;
+use std::sync::Arc;
+
+pub mod btdf;
+pub mod dmg;
+pub mod eon;
+pub mod fa;
+pub mod ggx;
+pub mod lambert;
+pub mod micrograin;
+pub mod on;
+pub mod peraxis;
+pub mod retro;
+pub mod rmg;
+pub mod vmf;
+
+/// How a parameter is mapped to the optimizers' unit box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    Linear,
+    /// Logarithmic, for parameters spanning decades (roughness); needs lo > 0.
+    Log,
+}
+
+/// One parameter, declared once by the model that owns it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamDecl {
+    /// Stable ASCII name (DESIGN §3), without the role prefix of nested models.
+    pub name: &'static str,
+    pub lo: f64,
+    pub hi: f64,
+    pub default: f64,
+    /// One value per channel ("rgb") or shared across channels.
+    pub rgb: bool,
+    pub scale: Scale,
+    pub doc: &'static str,
+}
+
+impl ParamDecl {
+    pub const fn shared(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: false,
+            scale: Scale::Linear,
+            doc,
+        }
+    }
+    pub const fn rgb(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: true,
+            scale: Scale::Linear,
+            doc,
+        }
+    }
+    pub const fn log(self) -> Self {
+        ParamDecl {
+            scale: Scale::Log,
+            ..self
+        }
+    }
+
+    /// Unit-box coordinate → physical value.
+    pub fn from_unit(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        match self.scale {
+            Scale::Linear => self.lo + u * (self.hi - self.lo),
+            Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
+        }
+        .clamp(self.lo, self.hi)
+    }
+
+    /// Physical value → unit-box coordinate (clamped to the box).
+    pub fn to_unit(&self, v: f64) -> f64 {
+        let v = v.clamp(self.lo, self.hi);
+        match self.scale {
+            Scale::Linear => (v - self.lo) / (self.hi - self.lo),
+            Scale::Log => (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()),
+        }
+    }
+}
+
+/// WGSL side of a node: the source files it needs and the function to call.
+#[derive(Clone, Debug)]
+pub struct WgslFn {
+    /// Shader sources (beyond `common.wgsl`) this node needs, included once each.
+    pub sources: Vec<(&'static str, &'static str)>,
+    /// Function name; called as `name(offset, wi, wo, child0, child1, …)`.
+    pub function: String,
+}
+
+/// One node of a model tree: a BSDF or a combinator of its children.
+pub trait Bsdf: Send + Sync + fmt::Debug {
+    /// The spec name (`lambert`, `dmg`, `retro`, …).
+    fn name(&self) -> &'static str;
+    fn kind(&self) -> Kind;
+    /// The node's own parameters, in the order `eval` reads them.
+    fn params(&self) -> Vec<ParamDecl>;
+    /// Roles of the children (`"base"` → parameters prefixed `base.`; `""` → unprefixed).
+    fn child_roles(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Evaluate with this node's parameters `p` (already resolved for one channel) and the
+    /// values of its children, in `child_roles` order.
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64;
+    /// Whether f(i, o) = f(o, i) holds (tests check it where claimed).
+    fn reciprocal(&self) -> bool {
+        true
+    }
+    fn wgsl(&self) -> WgslFn;
+    /// A lookup table the WGSL twin reads as `LUT` (f32 copy of the CPU's f64 table), if any.
+    fn lut(&self) -> Option<Vec<f32>> {
+        None
+    }
+}
+
+/// A node with its children and its offset into the per-channel scalar view.
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub bsdf: Arc<dyn Bsdf>,
+    pub children: Vec<Node>,
+    /// Index of this node's first parameter in the scalar view (set by [`Model::compile`]).
+    pub offset: usize,
+    /// Number of this node's own parameters (set by [`Model::compile`]).
+    pub nparams: usize,
+}
+
+impl Node {
+    pub fn leaf(bsdf: impl Bsdf + 'static) -> Node {
+        Node {
+            bsdf: Arc::new(bsdf),
+            children: vec![],
+            offset: 0,
+            nparams: 0,
+        }
+    }
+    pub fn with(bsdf: impl Bsdf + 'static, children: Vec<Node>) -> Node {
+        Node {
+            bsdf: Arc::new(bsdf),
+            children,
+            offset: 0,
+            nparams: 0,
+        }
+    }
+    /// Evaluate the subtree on the scalar view `s`.
+    pub fn eval(&self, s: &[f64], wi: DVec3, wo: DVec3) -> f64 {
+        let mut child = [0.0f64; 4];
+        for (k, c) in self.children.iter().enumerate() {
+            child[k] = c.eval(s, wi, wo);
+        }
+        self.bsdf.eval(
+            &s[self.offset..self.offset + self.nparams],
+            wi,
+            wo,
+            &child[..self.children.len()],
+        )
+    }
+    fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
+        f(self);
+        for c in &self.children {
+            c.visit(f);
+        }
+    }
+}
+
+/// A parameter of a compiled model: its declaration, full name and place in the flat vector.
+#[derive(Clone, Debug)]
+pub struct FlatParam {
+    /// Full name with role prefixes, e.g. `base.rho`.
+    pub name: String,
+    pub decl: ParamDecl,
+    /// First index in the flat parameter vector (rgb parameters take `channels` entries).
+    pub index: usize,
+    /// Number of measurement planes with a value of their own (1 unless under `+peraxis`).
+    pub axes: usize,
+}
+
+impl FlatParam {
+    /// Entries in the flat vector: channels (if rgb) × axes (if per-axis), axis-major.
+    pub fn width(&self, channels: usize) -> usize {
+        (if self.decl.rgb { channels } else { 1 }) * self.axes
+    }
+}
+
+/// A model tree compiled for a number of channels: the flat layout both backends share.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// The spec string as given (whitespace removed).
+    pub spec: String,
+    pub root: Node,
+    pub kind: Kind,
+    pub channels: usize,
+    /// Measurement planes (φ, degrees) with parameters of their own: several only for a
+    /// `+peraxis` model compiled for data measured on several planes.
+    pub axes: Vec<f64>,
+    /// Declared parameters in scalar-view order (node pre-order, own before children).
+    pub params: Vec<FlatParam>,
+    /// Length P of the flat parameter vector.
+    pub dim: usize,
+}
+
+/// Errors in spec strings and parameter assignments.
+#[derive(Debug, thiserror::Error)]
+pub enum SpecError {
+    #[error("model spec '{spec}': {msg}")]
+    Parse { spec: String, msg: String },
+    #[error("{0}")]
+    Other(String),
+}
+
+impl Model {
+    /// Parse `spec` and compile it for `channels` channels (one measurement plane).
+    pub fn parse(spec: &str, channels: usize) -> Result<Model, SpecError> {
+        Model::parse_for(spec, channels, &[0.0])
+    }
+
+    /// Parse `spec` and compile it for the channels and measurement planes of `data`.
+    pub fn for_data(spec: &str, data: &crate::data::Dataset) -> Result<Model, SpecError> {
+        Model::parse_for(spec, data.channel_count(), &data.axes)
+    }
+
+    /// Parse `spec` and compile it for `channels` channels and the planes `axes` (degrees;
+    /// they matter only under `+peraxis`).
+    pub fn parse_for(spec: &str, channels: usize, axes: &[f64]) -> Result<Model, SpecError> {
+        let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
+        let ast = Ast::parse(&clean)?;
+        let root = build(&ast).map_err(|msg| SpecError::Parse {
+            spec: clean.clone(),
+            msg,
+        })?;
+        Model::compile_for(&clean, root, channels, axes)
+    }
+
+    /// Lay out the scalar view and the flat vector of a built tree.
+    pub fn compile(spec: &str, root: Node, channels: usize) -> Result<Model, SpecError> {
+        Model::compile_for(spec, root, channels, &[0.0])
+    }
+
+    fn compile_for(
+        spec: &str,
+        mut root: Node,
+        channels: usize,
+        axes: &[f64],
+    ) -> Result<Model, SpecError> {
+        if channels == 0 {
+            return Err(SpecError::Other(
+                "a model needs at least one channel".into(),
+            ));
+        }
+        let mut has_peraxis = false;
+        root.visit(&mut |n| has_peraxis |= n.bsdf.name() == "peraxis");
+        let axes: Vec<f64> = if has_peraxis && !axes.is_empty() {
+            axes.to_vec()
+        } else {
+            vec![0.0]
+        };
+        let n_axes = axes.len();
+        let kind = root.bsdf.kind();
+        let mut params = Vec::new();
+        struct Layout<'a> {
+            params: &'a mut Vec<FlatParam>,
+            dim: usize,
+            channels: usize,
+            axes: usize,
+            kind: Kind,
+            ok: bool,
+        }
+        fn lay(node: &mut Node, prefix: &str, per_axis: bool, l: &mut Layout) {
+            if node.bsdf.kind() != l.kind {
+                l.ok = false;
+            }
+            node.offset = l.params.len();
+            let decls = node.bsdf.params();
+            node.nparams = decls.len();
+            for decl in decls {
+                let axes = if per_axis && peraxis::PER_AXIS.contains(&decl.name) {
+                    l.axes
+                } else {
+                    1
+                };
+                let p = FlatParam {
+                    name: format!("{prefix}{}", decl.name),
+                    decl,
+                    index: l.dim,
+                    axes,
+                };
+                l.dim += p.width(l.channels);
+                l.params.push(p);
+            }
+            let roles = node.bsdf.child_roles();
+            let below = per_axis || node.bsdf.name() == "peraxis";
+            for (k, child) in node.children.iter_mut().enumerate() {
+                let role = roles.get(k).copied().unwrap_or("");
+                let pre = if role.is_empty() {
+                    prefix.to_string()
+                } else {
+                    format!("{prefix}{role}.")
+                };
+                lay(child, &pre, below, l);
+            }
+        }
+        let mut layout = Layout {
+            params: &mut params,
+            dim: 0,
+            channels,
+            axes: n_axes,
+            kind,
+            ok: true,
+        };
+        lay(&mut root, "", false, &mut layout);
+        let dim = layout.dim;
+        let kinds_ok = layout.ok;
+        if !kinds_ok {
+            return Err(SpecError::Parse {
+                spec: spec.into(),
+                msg: "mixes BRDF and BTDF nodes".into(),
+            });
+        }
+        let mut names: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
+        names.sort();
+        if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+            return Err(SpecError::Parse {
+                spec: spec.into(),
+                msg: format!("parameter '{}' appears twice", w[0]),
+            });
+        }
+        Ok(Model {
+            spec: spec.to_string(),
+            root,
+            kind,
+            channels,
+            axes,
+            params,
+            dim,
+        })
+    }
+
+    /// Number of (plane, channel) groups, each with its own scalar view.
+    pub fn groups(&self) -> usize {
+        self.channels * self.axes.len()
+    }
+
+    /// The scalar-view group of a sample: its channel, and its plane under `+peraxis`.
+    pub fn group_of(&self, s: &crate::data::Sample) -> usize {
+        if self.axes.len() > 1 {
+            s.axis.min(self.axes.len() - 1) * self.channels + s.channel
+        } else {
+            s.channel
+        }
+    }
+
+    /// Number of scalars in the per-channel view.
+    pub fn scalar_count(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Index in the flat vector of scalar `j` for group `g` (= channel, unless `+peraxis`
+    /// splits groups by plane: g = axis · channels + channel).
+    pub fn slot(&self, j: usize, g: usize) -> usize {
+        let p = &self.params[j];
+        let (axis, ch) = (g / self.channels, g % self.channels);
+        let rgb_width = if p.decl.rgb { self.channels } else { 1 };
+        p.index + if p.axes > 1 { axis * rgb_width } else { 0 } + if p.decl.rgb { ch } else { 0 }
+    }
+
+    /// Resolve the flat vector into the scalar view of group `g`.
+    pub fn scalars_into(&self, flat: &[f64], g: usize, out: &mut Vec<f64>) {
+        out.clear();
+        out.extend((0..self.params.len()).map(|j| flat[self.slot(j, g)]));
+    }
+
+    /// Evaluate the model for one flat parameter vector at one geometry and group (the
+    /// channel index when there is one plane).
+    pub fn eval(&self, flat: &[f64], g: usize, wi: DVec3, wo: DVec3) -> f64 {
+        let mut s = Vec::with_capacity(self.params.len());
+        self.scalars_into(flat, g, &mut s);
+        self.root.eval(&s, wi, wo)
+    }
+
+    /// The declaration of each flat entry (rgb declarations repeated per channel).
+    pub fn flat_decls(&self) -> Vec<ParamDecl> {
+        let mut v = Vec::with_capacity(self.dim);
+        for p in &self.params {
+            for _ in 0..p.width(self.channels) {
+                v.push(p.decl);
+            }
+        }
+        v
+    }
+
+    /// Human-readable name of each flat entry: `rho[1]` for channel 1 of an rgb parameter,
+    /// `alpha@phi90` for the plane φ = 90° of a per-axis parameter.
+    pub fn flat_names(&self) -> Vec<String> {
+        let mut v = Vec::with_capacity(self.dim);
+        for p in &self.params {
+            for a in 0..p.axes {
+                let axis = if p.axes > 1 {
+                    format!("@phi{}", self.axes[a])
+                } else {
+                    String::new()
+                };
+                if p.decl.rgb {
+                    for c in 0..self.channels {
+                        v.push(format!("{}[{c}]{axis}", p.name));
+                    }
+                } else {
+                    v.push(format!("{}{axis}", p.name));
+                }
+            }
+        }
+        v
+    }
+
+    pub fn defaults(&self) -> Vec<f64> {
+        self.flat_decls().iter().map(|d| d.default).collect()
+    }
+
+    pub fn to_unit(&self, flat: &[f64]) -> Vec<f64> {
+        self.flat_decls()
+            .iter()
+            .zip(flat)
+            .map(|(d, &v)| d.to_unit(v))
+            .collect()
+    }
+
+    pub fn from_unit(&self, unit: &[f64]) -> Vec<f64> {
+        self.flat_decls()
+            .iter()
+            .zip(unit)
+            .map(|(d, &u)| d.from_unit(u))
+            .collect()
+    }
+
+    /// Parse `name=value` assignments (`rho=0.5` sets every channel, `rho=0.4:0.5:0.6`
+    /// one value per channel); unnamed parameters keep their defaults.
+    pub fn params_from_assignments(&self, text: &str) -> Result<Vec<f64>, SpecError> {
+        let mut flat = self.defaults();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, value) = item
+                .split_once('=')
+                .ok_or_else(|| SpecError::Other(format!("--params: '{item}' is not name=value")))?;
+            let p = self
+                .params
+                .iter()
+                .find(|p| p.name == name.trim())
+                .ok_or_else(|| {
+                    SpecError::Other(format!(
+                        "--params: model {} has no parameter '{}' (it has: {})",
+                        self.spec,
+                        name.trim(),
+                        self.params
+                            .iter()
+                            .map(|p| p.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+            let values: Vec<f64> = value
+                .split(':')
+                .map(|v| {
+                    v.trim()
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|x| x.is_finite())
+                        .ok_or_else(|| {
+                            SpecError::Other(format!(
+                                "--params: '{v}' for {} is not a number",
+                                p.name
+                            ))
+                        })
+                })
+                .collect::<Result<_, _>>()?;
+            let width = p.width(self.channels);
+            let values = match values.len() {
+                1 => vec![values[0]; width],
+                n if n == width => values,
+                n => {
+                    return Err(SpecError::Other(format!(
+                        "--params: {} takes 1 or {width} values, got {n}",
+                        p.name
+                    )))
+                }
+            };
+            for (k, v) in values.into_iter().enumerate() {
+                if v < p.decl.lo || v > p.decl.hi {
+                    return Err(SpecError::Other(format!(
+                        "--params: {} = {v} is outside its bounds [{}, {}]",
+                        p.name, p.decl.lo, p.decl.hi
+                    )));
+                }
+                flat[p.index + k] = v;
+            }
+        }
+        Ok(flat)
+    }
+
+    /// Every node in pre-order (the order of offsets).
+    pub fn nodes(&self) -> Vec<&Node> {
+        let mut v = Vec::new();
+        self.root.visit(&mut |n| v.push(n));
+        v
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Spec strings: `term ('+' suffix)*`, `term := name ('(' spec ')')?`.
+
+/// Parsed spec syntax.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Ast {
+    Term { name: String, arg: Option<Box<Ast>> },
+    Suffix { inner: Box<Ast>, name: String },
+}
+
+impl Ast {
+    pub fn parse(s: &str) -> Result<Ast, SpecError> {
+        let err = |msg: String| SpecError::Parse {
+            spec: s.to_string(),
+            msg,
+        };
+        if s.is_empty() {
+            return Err(err("empty spec".into()));
+        }
+        let (ast, rest) = parse_spec(s).map_err(err)?;
+        if !rest.is_empty() {
+            return Err(SpecError::Parse {
+                spec: s.to_string(),
+                msg: format!("unexpected '{rest}'"),
+            });
+        }
+        Ok(ast)
+    }
+}
+
+fn parse_ident(s: &str) -> Result<(String, &str), String> {
+    let end = s
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(s.len());
+    if end == 0 {
+        return Err(format!("expected a model name at '{s}'"));
+    }
+    Ok((s[..end].to_ascii_lowercase(), &s[end..]))
+}
+
+fn parse_spec(s: &str) -> Result<(Ast, &str), String> {
+    let (name, mut rest) = parse_ident(s)?;
+    let mut ast = if let Some(r) = rest.strip_prefix('(') {
+        let (inner, r) = parse_spec(r)?;
+        let r = r
+            .strip_prefix(')')
+            .ok_or_else(|| format!("missing ')' after '{}'", &s[..s.len() - r.len()]))?;
+        rest = r;
+        Ast::Term {
+            name,
+            arg: Some(Box::new(inner)),
+        }
+    } else {
+        Ast::Term { name, arg: None }
+    };
+    while let Some(r) = rest.strip_prefix('+') {
+        let (suffix, r) = parse_ident(r)?;
+        ast = Ast::Suffix {
+            inner: Box::new(ast),
+            name: suffix,
+        };
+        rest = r;
+    }
+    Ok((ast, rest))
+}
+
+/// Builds a node from a term's optional argument.
+pub type TermBuilder = fn(arg: Option<&Ast>) -> Result<Node, String>;
+/// Wraps a node in a suffix combinator.
+pub type SuffixBuilder = fn(inner: Node) -> Result<Node, String>;
+
+/// The registry: one line per model (DESIGN: "add a file on each side and one registry line").
+pub const TERMS: &[(&str, TermBuilder, &str)] = &[
+    ("lambert", lambert::build, "Lambertian: f = rho/pi"),
+    ("on", on::build, "Oren-Nayar 1994 qualitative model"),
+    (
+        "eon",
+        eon::build,
+        "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
+    ),
+    ("vmf", vmf::build, "VMF diffuse (d'Eon & Weidlich 2024)"),
+    (
+        "ggx",
+        ggx::build,
+        "GGX microfacet reflection (Walter et al. 2007)",
+    ),
+    (
+        "dmg",
+        dmg::build,
+        "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
+    ),
+    (
+        "rmg",
+        rmg::build,
+        "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
+    ),
+    (
+        "fa",
+        fa::build,
+        "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
+    ),
+    (
+        "btdf",
+        btdf::build,
+        "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
+    ),
+];
+
+pub const SUFFIXES: &[(&str, SuffixBuilder, &str)] = &[
+    (
+        "retro",
+        retro::build,
+        "adds a back-vector retroreflective GGX lobe (BRDF)",
+    ),
+    ("scale", btdf::build_scale, "multiplies a BTDF by S"),
+    (
+        "absorb",
+        btdf::build_absorb,
+        "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
+    ),
+    (
+        "diffuse",
+        btdf::build_diffuse,
+        "adds a Lambertian transmission kd/pi (BTDF)",
+    ),
+    (
+        "peraxis",
+        peraxis::build,
+        "roughness (alpha, beta) gets one value per measured phi plane",
+    ),
+];
+
+/// Build a node tree from syntax.
+pub fn build(ast: &Ast) -> Result<Node, String> {
+    match ast {
+        Ast::Term { name, arg } => {
+            let (_, b, _) = TERMS.iter().find(|(n, _, _)| n == name).ok_or_else(|| {
+                format!(
+                    "unknown model '{name}' (known: {})",
+                    TERMS.iter().map(|t| t.0).collect::<Vec<_>>().join(", ")
+                )
+            })?;
+            b(arg.as_deref())
+        }
+        Ast::Suffix { inner, name } => {
+            let (_, b, _) = SUFFIXES.iter().find(|(n, _, _)| n == name).ok_or_else(|| {
+                format!(
+                    "unknown suffix '+{name}' (known: {})",
+                    SUFFIXES
+                        .iter()
+                        .map(|t| format!("+{}", t.0))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })?;
+            b(build(inner)?)
+        }
+    }
+}
+
+/// Builders' helper: a term that takes no argument.
+pub fn no_arg(name: &str, arg: Option<&Ast>) -> Result<(), String> {
+    match arg {
+        None => Ok(()),
+        Some(_) => Err(format!("'{name}' takes no argument")),
+    }
+}
+
+/// Builders' helper: build the base model of a combinator and check it is allowed.
+pub fn base_arg(name: &str, arg: Option<&Ast>, allowed: &[&str]) -> Result<Node, String> {
+    let Some(arg) = arg else {
+        return Err(format!(
+            "'{name}' needs a base model, e.g. {name}({})",
+            allowed[0]
+        ));
+    };
+    let node = build(arg)?;
+    if !allowed.contains(&node.bsdf.name()) || !node.children.is_empty() {
+        return Err(format!(
+            "'{name}' takes a base among {}",
+            allowed.join(", ")
+        ));
+    }
+    Ok(node)
+}
+
+/// The catalogue a sweep runs by default for a kind of data.
+pub fn catalogue(kind: Kind) -> Vec<String> {
+    match kind {
+        Kind::Brdf => {
+            let bases = ["lambert", "on", "eon", "vmf", "ggx"];
+            let mut v: Vec<String> = bases.iter().map(|s| s.to_string()).collect();
+            for comb in ["dmg", "rmg"] {
+                v.extend(bases.iter().map(|b| format!("{comb}({b})")));
+            }
+            v.extend(
+                ["lambert", "on", "eon", "vmf"]
+                    .iter()
+                    .map(|b| format!("fa({b})")),
+            );
+            v
+        }
+        Kind::Btdf => {
+            let mut v = Vec::new();
+            for ndf in ["tr", "beckmann", "gtr", "gg"] {
+                for suffix in ["", "+scale", "+absorb"] {
+                    v.push(format!("btdf({ndf}){suffix}"));
+                }
+            }
+            v
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_nested_and_suffixed_specs() {
+        let a = Ast::parse("fa(eon)+retro").unwrap();
+        assert_eq!(
+            a,
+            Ast::Suffix {
+                inner: Box::new(Ast::Term {
+                    name: "fa".into(),
+                    arg: Some(Box::new(Ast::Term {
+                        name: "eon".into(),
+                        arg: None
+                    }))
+                }),
+                name: "retro".into()
+            }
+        );
+        assert!(Ast::parse("fa(eon").is_err());
+        assert!(Ast::parse("").is_err());
+        assert!(Ast::parse("fa(eon))").is_err());
+    }
+
+    #[test]
+    fn nested_parameters_are_prefixed_and_laid_out() {
+        let m = Model::parse("dmg(eon)", 3).unwrap();
+        let names: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["tau0", "beta", "rho_g", "base.rho", "base.r"]);
+        // tau0, beta shared; rho_g and base.rho rgb: 1 + 1 + 3 + 3 + 1
+        assert_eq!(m.dim, 9);
+        assert_eq!(m.slot(3, 2), 2 + 3 + 2);
+    }
+
+    #[test]
+    fn unknown_models_are_clear_errors() {
+        let e = Model::parse("lambret", 3).unwrap_err().to_string();
+        assert!(e.contains("unknown model 'lambret'"), "{e}");
+        let e = Model::parse("dmg(fa(eon))", 3).unwrap_err().to_string();
+        assert!(e.contains("takes a base"), "{e}");
+    }
+
+    #[test]
+    fn unit_box_round_trips() {
+        for spec in catalogue(Kind::Brdf)
+            .iter()
+            .chain(catalogue(Kind::Btdf).iter())
+        {
+            let m = Model::parse(spec, 3).unwrap();
+            let d = m.defaults();
+            let back = m.from_unit(&m.to_unit(&d));
+            for (a, b) in d.iter().zip(&back) {
+                assert!(
+                    (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+                    "{spec}: {a} vs {b}"
+                );
+            }
+        }
+    }
+}

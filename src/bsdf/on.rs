@@ -1,0 +1,60 @@
+//! Oren–Nayar 1994, the "qualitative" model (Oren & Nayar, SIGGRAPH 1994, Eq. 30):
+//! f = ρ/π · (A + B · max(0, cos(φi−φo)) · sin α · tan β), α = max(θi, θo), β = min(θi, θo),
+//! A = 1 − 0.5 σ²/(σ² + 0.33), B = 0.45 σ²/(σ² + 0.09).
+//!
+//! The angular factor is written with vectors: max(0, cos Δφ) sin θi sin θo = max(0, s) with
+//! s = ωi·ωo − μiμo, and sin α tan β / (sin θi sin θo) = 1/max(μi, μo), so the term is
+//! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
+//! Twin: `shaders/on.wgsl`.
+
+use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use crate::data::Kind;
+use glam::DVec3;
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
+
+#[derive(Debug, Clone, Copy)]
+pub struct OrenNayar;
+
+impl Bsdf for OrenNayar {
+    fn name(&self) -> &'static str {
+        "on"
+    }
+    fn kind(&self) -> Kind {
+        Kind::Brdf
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![
+            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo"),
+            ParamDecl::shared(
+                "sigma",
+                0.0,
+                FRAC_PI_2,
+                0.3,
+                "facet slope standard deviation (rad)",
+            ),
+        ]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
+        let (mu_i, mu_o) = (wi.z, wo.z);
+        if mu_i <= 0.0 || mu_o <= 0.0 {
+            return 0.0;
+        }
+        let (rho, sigma) = (p[0], p[1]);
+        let s2 = sigma * sigma;
+        let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
+        let b = 0.45 * s2 / (s2 + 0.09);
+        let s = wi.dot(wo) - mu_i * mu_o;
+        rho * FRAC_1_PI * (a + b * s.max(0.0) / mu_i.max(mu_o))
+    }
+    fn wgsl(&self) -> WgslFn {
+        WgslFn {
+            sources: vec![("on", include_str!("../../shaders/bsdf/on.wgsl"))],
+            function: "on_eval".into(),
+        }
+    }
+}
+
+pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
+    no_arg("on", arg)?;
+    Ok(Node::leaf(OrenNayar))
+}

@@ -1,0 +1,61 @@
+//! `M+retro`: adds a retroreflective lobe to any BRDF M (DESIGN §3), the "back-vector"
+//! lobe of Belcour et al. 2014: k_r · D(h̄) · G1(ωi) G1(ωo) / (4 μi μo) with GGX D and Smith
+//! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z). It peaks at ωo = ωi.
+//! Twin: `shaders/retro.wgsl`.
+
+use super::{Bsdf, Node, ParamDecl, WgslFn};
+use crate::data::Kind;
+use crate::math::{ggx_d, ggx_g1, half_vector};
+use glam::DVec3;
+
+#[derive(Debug, Clone, Copy)]
+pub struct Retro;
+
+/// The back-vector retro lobe alone.
+pub fn retro_lobe(kr: f64, alpha: f64, wi: DVec3, wo: DVec3) -> f64 {
+    let (mu_i, mu_o) = (wi.z, wo.z);
+    if mu_i <= 0.0 || mu_o <= 0.0 {
+        return 0.0;
+    }
+    let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
+    let h = half_vector(wi, wo_back);
+    let g = ggx_g1(mu_i, wi.dot(h), alpha) * ggx_g1(mu_o, wo_back.dot(h), alpha);
+    kr * ggx_d(h.z, alpha) * g / (4.0 * mu_i * mu_o)
+}
+
+impl Bsdf for Retro {
+    fn name(&self) -> &'static str {
+        "retro"
+    }
+    fn kind(&self) -> Kind {
+        Kind::Brdf
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![
+            ParamDecl::rgb("kr", 0.0, 10.0, 0.1, "retroreflective lobe scale"),
+            ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness").log(),
+        ]
+    }
+    fn child_roles(&self) -> &'static [&'static str] {
+        &[""]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
+        children[0] + retro_lobe(p[0], p[1], wi, wo)
+    }
+    fn wgsl(&self) -> WgslFn {
+        WgslFn {
+            sources: vec![("retro", include_str!("../../shaders/bsdf/retro.wgsl"))],
+            function: "retro_eval".into(),
+        }
+    }
+}
+
+pub fn build(inner: Node) -> Result<Node, String> {
+    if inner.bsdf.kind() != Kind::Brdf {
+        return Err("+retro applies to BRDF models".into());
+    }
+    if inner.bsdf.name() == "retro" {
+        return Err("+retro given twice".into());
+    }
+    Ok(Node::with(Retro, vec![inner]))
+}

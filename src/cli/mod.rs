@@ -1,0 +1,111 @@
+//! The `bsdfit` command line: every command's options, and the handlers that turn them
+//! into calls of the library. Option groups shared by several commands (data selection,
+//! backend) are declared once here and flattened into each command, so every command
+//! accepts the same spelling of the same option.
+
+use crate::data::{Dataset, ReadOptions};
+use crate::engine::BackendChoice;
+use anyhow::Result;
+use clap::{Args, Parser, Subcommand};
+use std::path::Path;
+
+mod bench;
+mod diagnose;
+mod fit;
+mod models;
+mod render;
+mod sweep;
+mod synth;
+
+#[derive(Parser)]
+#[command(
+    name = "bsdfit",
+    version,
+    about = "Fit BRDF/BTDF models to measured data with uncertainties (GPU batch fitter with a CPU reference)"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Fit one model to one dataset.
+    Fit(fit::FitArgs),
+    /// Write a synthetic dataset from a model with known parameters.
+    Synth(synth::SynthArgs),
+    /// List the model catalogue with its parameters, the losses and the geometries.
+    Models,
+    /// Measure CPU and GPU throughput (model-sample evaluations per second).
+    Bench(bench::BenchArgs),
+    /// Run the benchmark: every data set × model × loss × weighting (resumable, shardable),
+    /// then results tables, angular plots, sphere renders and report.html.
+    Sweep(sweep::SweepArgs),
+    /// Combine the results of sweep shards (`sweep --shard I/N`) and write the report.
+    Merge(sweep::MergeArgs),
+    /// Render a sphere with a fitted BRDF, the tabulated measurement and their error image.
+    Render(render::RenderArgs),
+    /// Find where a model and the measurement disagree, name the missing effect, add it,
+    /// and repeat while the improvement is significant.
+    Diagnose(diagnose::DiagnoseArgs),
+}
+
+/// Data selection and validation, shared by every command that reads measurements.
+#[derive(Args, Clone, Debug, Default)]
+pub struct DataArgs {
+    /// Keep the channels nearest these wavelengths (nm), e.g. 450,550,650.
+    #[arg(long, value_delimiter = ',')]
+    pub wavelengths: Option<Vec<f64>>,
+    /// Replace zero uncertainties by a floor (max(1%·|value|, 1e-6)) instead of rejecting them.
+    #[arg(long)]
+    pub allow_zero_uncertainty: bool,
+}
+
+impl DataArgs {
+    pub fn read_options(&self) -> ReadOptions {
+        ReadOptions {
+            allow_zero_uncertainty: self.allow_zero_uncertainty,
+            wavelengths: self.wavelengths.clone(),
+        }
+    }
+
+    /// Read a dataset with these options and print its notices.
+    pub fn read(&self, path: &Path) -> Result<Dataset> {
+        let ds = Dataset::read(path, &self.read_options())?;
+        for n in &ds.notices {
+            eprintln!("note: {n}");
+        }
+        Ok(ds)
+    }
+}
+
+/// Where the models are evaluated, shared by every command that fits or measures.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct BackendArgs {
+    /// auto: the GPU engine if a Vulkan adapter is found (lavapipe counts), else the CPU
+    /// reference; gpu: the GPU engine or an error; cpu: the CPU reference.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendChoice,
+}
+
+/// Parse the command line and run the command; the process exit code.
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Fit(a) => fit::run(a),
+        Command::Synth(a) => synth::run(a),
+        Command::Models => models::run(),
+        Command::Bench(a) => bench::run(a),
+        Command::Sweep(a) => sweep::run_sweep(&a),
+        Command::Merge(a) => sweep::run_merge(&a),
+        Command::Render(a) => render::run(&a),
+        Command::Diagnose(a) => diagnose::run(&a),
+    };
+    match result {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}

@@ -1,0 +1,361 @@
+//! `bsdfit sweep` and `bsdfit merge`.
+
+use super::{BackendArgs, DataArgs};
+use crate::bsdf::Model;
+use crate::engine::{self, loss::Loss};
+use crate::inference::fit::{fit, FitOptions};
+use crate::output::results::{
+    read_results, results_csv_text, write_if_changed, write_summaries, Appender, DataFile, FitKey,
+    Key, Row, Skipped, DEFAULT_OUT, RESULTS_CSV, SKIPPED_JSON,
+};
+use crate::workflows::sweep::{
+    expand_data, parse_shard, skipped_entry, tasks, write_skipped, Selection, Task,
+};
+use anyhow::{Context, Result};
+use clap::Args;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// `bsdfit sweep` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct SweepArgs {
+    /// Data set files or directories of *.csv files (default: the bundled data/ directory).
+    pub data: Vec<PathBuf>,
+    /// Model specs, comma-separated (default: the whole catalogue for each kind of data;
+    /// a spec is used on the data sets of its kind).
+    #[arg(long, value_delimiter = ',')]
+    pub models: Option<Vec<String>>,
+    /// Losses, comma-separated (default: rmse,chi2 for BRDF, f,chi2 for BTDF — the paper's
+    /// RMSE / g₁ comparison plus the χ² fit; each loss is used on the data sets it is
+    /// defined for).
+    #[arg(long, value_delimiter = ',')]
+    pub losses: Option<Vec<String>>,
+    /// Weightings, comma-separated: uniform, relunc, invunc, or unc (the kind's
+    /// uncertainty weighting: relunc for BRDF, invunc for BTDF). Default: uniform,unc.
+    /// (chi2 weights by 1/u² by definition and is fitted once, as `uniform`.)
+    #[arg(long, value_delimiter = ',')]
+    pub weights: Option<Vec<String>>,
+    /// Optimizers, comma-separated: lm, compass, or auto (lm for sum-of-squares losses,
+    /// compass otherwise). Combinations lm × smape are left out.
+    #[arg(long, value_delimiter = ',', default_value = "auto")]
+    pub optimizer: Vec<String>,
+    /// Random restarts per fit.
+    #[arg(long, default_value_t = 8)]
+    pub restarts: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    /// Output directory (results, pictures, report.html).
+    #[arg(long, default_value = DEFAULT_OUT)]
+    pub out: PathBuf,
+    /// Run only shard I of N (1-based), e.g. 2/4; combine the shards with `bsdfit merge`.
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Skip the plots, renders and report.html (results files only).
+    #[arg(long)]
+    pub no_pictures: bool,
+    /// List the tasks (and which are done) without fitting.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+/// `bsdfit merge` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct MergeArgs {
+    /// Shard output directories (or their results.csv files).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output directory; rows already in its results.csv are kept.
+    #[arg(long, default_value = DEFAULT_OUT)]
+    pub out: PathBuf,
+    /// Skip the plots, renders and report.html (results files only).
+    #[arg(long)]
+    pub no_pictures: bool,
+}
+
+/// The `sweep` command.
+pub fn run_sweep(args: &SweepArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let shard = args.shard.as_deref().map(parse_shard).transpose()?;
+    let paths = expand_data(&args.data)?;
+    let mut files = Vec::new();
+    for p in &paths {
+        files.push(DataFile::read(p, &args.data_args.read_options())?);
+    }
+    anyhow::ensure!(args.restarts > 0, "--restarts must be at least 1");
+    let all = tasks(
+        &files,
+        &Selection {
+            models: args.models.clone(),
+            losses: args.losses.clone(),
+            weights: args.weights.clone(),
+            optimizer: args.optimizer.clone(),
+        },
+    )?;
+    let mine: Vec<(usize, &Task)> = all
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| shard.is_none_or(|(k, n)| i % n == k - 1))
+        .collect();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let csv_path = args.out.join(RESULTS_CSV);
+    let mut rows = read_results(&csv_path, !args.dry_run, &mut |m| eprintln!("note: {m}"))?;
+    let done: BTreeSet<Key> = rows.iter().map(Row::key).collect();
+    let key_of = |t: &Task| Key {
+        data_hash: files[t.data].hash.clone(),
+        model: t.model.clone(),
+        loss: t.loss.to_string(),
+        weights: t.weights.to_string(),
+        optimizer: t.optimizer.to_string(),
+        restarts: args.restarts,
+        seed: args.seed,
+    };
+    let todo: Vec<&Task> = mine
+        .iter()
+        .map(|(_, t)| *t)
+        .filter(|t| !done.contains(&key_of(t)))
+        .collect();
+    let shard_note = shard
+        .map(|(i, n)| format!(" (shard {i}/{n})"))
+        .unwrap_or_default();
+    eprintln!(
+        "sweep{shard_note}: {} data set(s), {} task(s) of {}; {} already in {}, {} to run",
+        files.len(),
+        mine.len(),
+        all.len(),
+        mine.len() - todo.len(),
+        csv_path.display(),
+        todo.len()
+    );
+    if args.dry_run {
+        for (i, t) in &mine {
+            let state = if done.contains(&key_of(t)) {
+                "done"
+            } else {
+                "todo"
+            };
+            println!(
+                "{i}\t{state}\t{}\t{}\t{}/{}\t{}",
+                files[t.data].name, t.model, t.loss, t.weights, t.optimizer
+            );
+        }
+        return Ok(());
+    }
+
+    let mut skipped: Vec<Skipped> = Vec::new();
+    let mut unavailable: HashMap<String, String> = HashMap::new();
+    let mut new_rows = 0usize;
+    if !todo.is_empty() {
+        let backend = engine::select(args.backend.backend, &mut |m| eprintln!("{m}"))?;
+        let mut app = Appender::open(&csv_path)?;
+        let bar = indicatif::ProgressBar::new(todo.len() as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} fits (ETA {eta}) {wide_msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        // Models that cannot be built are skipped up front (cheap, sequential).
+        let mut runnable: Vec<(&Task, Model)> = Vec::new();
+        for t in &todo {
+            let f = &files[t.data];
+            match Model::for_data(&t.model, &f.data) {
+                Ok(m) => runnable.push((t, m)),
+                Err(e) => {
+                    let reason = e.to_string();
+                    if unavailable
+                        .insert(t.model.clone(), reason.clone())
+                        .is_none()
+                    {
+                        say(&bar, format!("skipping {}: {reason}", t.model));
+                    }
+                    skipped.push(skipped_entry(f, t, "skipped", reason));
+                    bar.inc(1);
+                }
+            }
+        }
+        // Fits run on one worker per core (a fit's batches are small, so one fit alone
+        // leaves cores idle); this thread appends every finished fit to results.csv at
+        // once, so an interrupted run loses at most the fits in flight. Each fit is
+        // deterministic on its own, and results.csv is rewritten in canonical order at
+        // the end, so the outcome does not depend on which worker finished first.
+        let workers = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .clamp(1, runnable.len().max(1));
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let backend = backend.as_ref();
+        std::thread::scope(|scope| -> Result<()> {
+            let (tx, rx) = std::sync::mpsc::channel();
+            for _ in 0..workers {
+                let tx = tx.clone();
+                let (runnable, next, stop, files) = (&runnable, &next, &stop, &files);
+                scope.spawn(move || loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    if i >= runnable.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
+                        break;
+                    }
+                    let (t, model) = &runnable[i];
+                    let opts = FitOptions {
+                        optimizer: t.optimizer,
+                        restarts: args.restarts,
+                        seed: args.seed,
+                        ..Default::default()
+                    };
+                    let loss = Loss::new(t.loss, t.weights);
+                    let data = &files[t.data].data;
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        fit(model, data, loss, backend, &opts, &mut |_| {})
+                    }));
+                    if tx.send((i, result)).is_err() {
+                        break;
+                    }
+                });
+            }
+            drop(tx);
+            for (i, result) in rx {
+                let (t, _) = &runnable[i];
+                let f = &files[t.data];
+                let loss = Loss::new(t.loss, t.weights);
+                bar.set_message(format!(
+                    "{} · {} · {}/{} · {}",
+                    f.name, t.model, t.loss, t.weights, t.optimizer
+                ));
+                match result {
+                    Ok(Ok(report)) => {
+                        let row = Row::from_report(&report, f);
+                        if let Err(e) = app.push(&row) {
+                            stop.store(true, std::sync::atomic::Ordering::SeqCst);
+                            return Err(e);
+                        }
+                        rows.push(row);
+                        new_rows += 1;
+                    }
+                    Ok(Err(e)) => {
+                        say(
+                            &bar,
+                            format!("fit failed: {} · {} · {loss}: {e:#}", f.name, t.model),
+                        );
+                        skipped.push(skipped_entry(f, t, "failed", format!("{e:#}")));
+                    }
+                    Err(p) => {
+                        let msg = p
+                            .downcast_ref::<String>()
+                            .cloned()
+                            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                            .unwrap_or_else(|| "panic".into());
+                        say(
+                            &bar,
+                            format!("fit panicked: {} · {} · {loss}: {msg}", f.name, t.model),
+                        );
+                        skipped.push(skipped_entry(f, t, "failed", format!("panic: {msg}")));
+                    }
+                }
+                bar.inc(1);
+            }
+            Ok(())
+        })?;
+        bar.finish_and_clear();
+    }
+    // Canonical results.csv (unchanged bytes when nothing new ran), then summaries.
+    write_if_changed(&csv_path, &results_csv_text(&rows)?)?;
+    write_summaries(&args.out, &rows)?;
+    write_skipped(&args.out, &skipped, &rows, &files)?;
+    eprintln!(
+        "{} new fit(s), {} row(s) in {}, {} skipped/failed, {:.1} s",
+        new_rows,
+        rows.len(),
+        csv_path.display(),
+        skipped.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    if shard.is_some() {
+        eprintln!("shard done; combine the shards with `bsdfit merge DIR... --out DIR` (it writes the pictures and report)");
+    } else if !args.no_pictures {
+        crate::output::report::publish(&args.out, &rows, &mut |m| eprintln!("{m}"))?;
+    }
+    Ok(())
+}
+
+/// The `merge` command: union the rows of shard directories into `--out`.
+pub fn run_merge(args: &MergeArgs) -> Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let out_csv = args.out.join(RESULTS_CSV);
+    let mut rows = read_results(&out_csv, true, &mut |m| eprintln!("note: {m}"))?;
+    let mut by_key: BTreeMap<Key, usize> =
+        rows.iter().enumerate().map(|(i, r)| (r.key(), i)).collect();
+    let mut skipped: Vec<Skipped> = Vec::new();
+    for input in &args.inputs {
+        let (csv, dir) = if input.is_dir() {
+            (input.join(RESULTS_CSV), input.clone())
+        } else {
+            (
+                input.clone(),
+                input.parent().map(Path::to_path_buf).unwrap_or_default(),
+            )
+        };
+        anyhow::ensure!(csv.exists(), "{} not found", csv.display());
+        if csv.canonicalize().ok() == out_csv.canonicalize().ok() {
+            continue;
+        }
+        let part = read_results(&csv, false, &mut |m| eprintln!("note: {m}"))?;
+        let (mut added, mut same) = (0, 0);
+        for r in part {
+            match by_key.get(&r.key()) {
+                Some(&i) => {
+                    if rows[i].deterministic() != r.deterministic() {
+                        eprintln!(
+                            "warning: {} has a different result for {} · {} · {}/{} ({}); keeping the first",
+                            csv.display(),
+                            r.data,
+                            r.model,
+                            r.loss,
+                            r.weights,
+                            r.optimizer
+                        );
+                    }
+                    same += 1;
+                }
+                None => {
+                    by_key.insert(r.key(), rows.len());
+                    rows.push(r);
+                    added += 1;
+                }
+            }
+        }
+        eprintln!(
+            "{}: {added} row(s) added, {same} already present",
+            csv.display()
+        );
+        if let Ok(text) = std::fs::read_to_string(dir.join(SKIPPED_JSON)) {
+            skipped.extend(serde_json::from_str::<Vec<Skipped>>(&text).unwrap_or_default());
+        }
+    }
+    write_if_changed(&out_csv, &results_csv_text(&rows)?)?;
+    write_summaries(&args.out, &rows)?;
+    let have: BTreeSet<FitKey> = rows.iter().map(Row::fit_key).collect();
+    skipped.retain(|s| !have.contains(&s.fit_key()));
+    skipped.sort_by_key(Skipped::fit_key);
+    skipped.dedup_by_key(|s| s.fit_key());
+    write_if_changed(
+        &args.out.join(SKIPPED_JSON),
+        &(serde_json::to_string_pretty(&skipped)? + "\n"),
+    )?;
+    eprintln!("{} row(s) in {}", rows.len(), out_csv.display());
+    if !args.no_pictures {
+        crate::output::report::publish(&args.out, &rows, &mut |m| eprintln!("{m}"))?;
+    }
+    Ok(())
+}
+
+/// A line for the user above the progress bar (printed even when the bar is hidden).
+fn say(bar: &indicatif::ProgressBar, msg: String) {
+    bar.suspend(|| eprintln!("{msg}"));
+}

@@ -1,0 +1,12 @@
+//! Measurements in: the v1 CSV format, validation, channel selection.
+mod dataset;
+pub use dataset::*;
+
+/// The bundled data directory: `./data` if present, else the crate's own `data/`.
+pub fn bundled_data_dir() -> std::path::PathBuf {
+    let local = std::path::PathBuf::from("data");
+    if local.is_dir() {
+        return local;
+    }
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data")
+}

@@ -1,0 +1,306 @@
+//! Losses of the benchmark (DESIGN §4, paper §2.2 and §2.3.2) and χ².
+//!
+//! Every loss is a sum over the K (sample, channel) pairs of a per-sample term, then a
+//! finalisation. Per sample we precompute a weight `w` (uncertainty weight × geometric
+//! factor) and an inner factor `a` (cos θt for the cosine-weighted BTDF metrics), so the
+//! CPU and the GPU evaluate the same three term shapes:
+//! - `AbsRatio`:   w · |y′ − y| / (|y′| + |y| + ε)                 (SMAPE)
+//! - `Square`:     w · (a y′ − a y)²                               (RMSE, Ngan, Löw, f, cosf, χ²)
+//! - `LogSquare`:  w · (ln(1 + a y′) − ln(1 + a y))²               (logf, logcosf)
+
+use crate::data::{Dataset, Kind};
+use std::fmt;
+
+pub const EPS: f64 = 1e-6;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Metric {
+    Smape,
+    Rmse,
+    Ngan,
+    Low,
+    F,
+    Cosf,
+    Logf,
+    Logcosf,
+    Chi2,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Weights {
+    /// w = 1
+    Uniform,
+    /// w = 1/(|u|/(|y|+ε)+ε), the paper's relative-uncertainty weight (BRDF).
+    Relunc,
+    /// w = 1/u, the paper's BTDF weight.
+    Invunc,
+}
+
+/// The three per-sample term shapes shared by both backends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Term {
+    AbsRatio,
+    Square,
+    LogSquare,
+}
+
+/// How the sum of terms becomes the loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Finish {
+    /// (1/K) Σ
+    Mean,
+    /// sqrt((1/K) Σ)
+    SqrtMean,
+    /// Σ
+    Sum,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Loss {
+    pub metric: Metric,
+    pub weights: Weights,
+}
+
+impl fmt::Display for Metric {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Metric::Smape => "smape",
+            Metric::Rmse => "rmse",
+            Metric::Ngan => "ngan",
+            Metric::Low => "low",
+            Metric::F => "f",
+            Metric::Cosf => "cosf",
+            Metric::Logf => "logf",
+            Metric::Logcosf => "logcosf",
+            Metric::Chi2 => "chi2",
+        })
+    }
+}
+
+impl fmt::Display for Weights {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Weights::Uniform => "uniform",
+            Weights::Relunc => "relunc",
+            Weights::Invunc => "invunc",
+        })
+    }
+}
+
+impl std::str::FromStr for Metric {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s.trim().to_ascii_lowercase().as_str() {
+            "smape" => Metric::Smape,
+            "rmse" => Metric::Rmse,
+            "ngan" | "nganl2" => Metric::Ngan,
+            "low" | "lowl2" => Metric::Low,
+            "f" => Metric::F,
+            "cosf" => Metric::Cosf,
+            "logf" => Metric::Logf,
+            "logcosf" => Metric::Logcosf,
+            "chi2" => Metric::Chi2,
+            o => {
+                return Err(format!(
+                    "unknown loss '{o}' (BRDF: smape rmse ngan low; BTDF: f cosf logf logcosf; any: chi2)"
+                ))
+            }
+        })
+    }
+}
+
+impl std::str::FromStr for Weights {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s.trim().to_ascii_lowercase().as_str() {
+            "uniform" | "unif" => Weights::Uniform,
+            "relunc" | "ru" => Weights::Relunc,
+            "invunc" => Weights::Invunc,
+            o => return Err(format!("unknown weights '{o}' (uniform, relunc, invunc)")),
+        })
+    }
+}
+
+impl Metric {
+    pub fn term(self) -> Term {
+        match self {
+            Metric::Smape => Term::AbsRatio,
+            Metric::Logf | Metric::Logcosf => Term::LogSquare,
+            _ => Term::Square,
+        }
+    }
+    pub fn finish(self) -> Finish {
+        match self {
+            Metric::Rmse => Finish::SqrtMean,
+            Metric::Smape | Metric::Ngan | Metric::Low => Finish::Mean,
+            _ => Finish::Sum,
+        }
+    }
+    /// The kinds of data the metric was defined for.
+    pub fn applies_to(self, kind: Kind) -> bool {
+        match self {
+            Metric::Smape | Metric::Rmse | Metric::Ngan | Metric::Low => kind == Kind::Brdf,
+            Metric::F | Metric::Cosf | Metric::Logf | Metric::Logcosf => kind == Kind::Btdf,
+            Metric::Chi2 => true,
+        }
+    }
+    /// Metrics of the paper for a kind of data, in the paper's order.
+    pub fn for_kind(kind: Kind) -> &'static [Metric] {
+        match kind {
+            Kind::Brdf => &[Metric::Smape, Metric::Rmse, Metric::Ngan, Metric::Low],
+            Kind::Btdf => &[Metric::F, Metric::Cosf, Metric::Logf, Metric::Logcosf],
+        }
+    }
+}
+
+impl Weights {
+    /// The uncertainty-aware weighting the paper uses for a kind of data.
+    pub fn uncertainty_for(kind: Kind) -> Weights {
+        match kind {
+            Kind::Brdf => Weights::Relunc,
+            Kind::Btdf => Weights::Invunc,
+        }
+    }
+}
+
+impl fmt::Display for Loss {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.metric, self.weights)
+    }
+}
+
+/// Per-sample constants of a loss on a dataset.
+#[derive(Clone, Debug)]
+pub struct LossTerms {
+    pub term: Term,
+    pub finish: Finish,
+    /// Weight per sample (≥ 0).
+    pub w: Vec<f64>,
+    /// Inner factor per sample (1, or cos θt).
+    pub a: Vec<f64>,
+    /// Measured values.
+    pub y: Vec<f64>,
+}
+
+impl Loss {
+    pub fn new(metric: Metric, weights: Weights) -> Loss {
+        Loss { metric, weights }
+    }
+
+    /// Does the loss reduce to a weighted sum of squares (usable by Levenberg–Marquardt)?
+    pub fn is_sum_of_squares(&self) -> bool {
+        self.metric.term() != Term::AbsRatio
+    }
+
+    /// Precompute weights and factors for a dataset.
+    pub fn terms(&self, data: &Dataset) -> LossTerms {
+        let mut w = Vec::with_capacity(data.len());
+        let mut a = Vec::with_capacity(data.len());
+        for s in &data.samples {
+            let y = s.value;
+            let u = s.uncertainty;
+            let unc_w = match self.weights {
+                Weights::Uniform => 1.0,
+                Weights::Relunc => 1.0 / (u.abs() / (y.abs() + EPS) + EPS),
+                Weights::Invunc => 1.0 / u,
+            };
+            let (ci, si) = (s.theta_i.cos().max(0.0), s.theta_i.sin());
+            let so = s.theta_o.sin();
+            let ct = s.theta_o.cos().max(0.0);
+            let (geo, inner) = match self.metric {
+                Metric::Smape | Metric::F | Metric::Logf => (1.0, 1.0),
+                Metric::Rmse => (ci * ci, 1.0),
+                Metric::Ngan => (ci * ci * si * so, 1.0),
+                Metric::Low => (ci * ci * si, 1.0),
+                Metric::Cosf | Metric::Logcosf => (1.0, ct),
+                Metric::Chi2 => (1.0 / (u * u), 1.0),
+            };
+            let uw = if self.metric == Metric::Chi2 {
+                1.0
+            } else {
+                unc_w
+            };
+            w.push(uw * geo);
+            a.push(inner);
+        }
+        LossTerms {
+            term: self.metric.term(),
+            finish: self.metric.finish(),
+            w,
+            a,
+            y: data.samples.iter().map(|s| s.value).collect(),
+        }
+    }
+}
+
+impl LossTerms {
+    /// g(v) of the term shape, for sample k.
+    #[inline]
+    pub fn transform(&self, k: usize, v: f64) -> f64 {
+        match self.term {
+            Term::LogSquare => (self.a[k] * v).ln_1p(),
+            _ => self.a[k] * v,
+        }
+    }
+
+    /// The per-sample term for model value `yp` at sample k.
+    #[inline]
+    pub fn term_at(&self, k: usize, yp: f64) -> f64 {
+        let y = self.y[k];
+        match self.term {
+            Term::AbsRatio => self.w[k] * (yp - y).abs() / (yp.abs() + y.abs() + EPS),
+            Term::Square | Term::LogSquare => {
+                let d = self.transform(k, yp) - self.transform(k, y);
+                self.w[k] * d * d
+            }
+        }
+    }
+
+    /// Weighted residual r_k with Σ r_k² = the sum the loss finishes (sum-of-squares losses).
+    #[inline]
+    pub fn residual(&self, k: usize, yp: f64) -> f64 {
+        self.w[k].sqrt() * (self.transform(k, yp) - self.transform(k, self.y[k]))
+    }
+
+    pub fn finish_sum(&self, sum: f64) -> f64 {
+        let k = self.y.len().max(1) as f64;
+        match self.finish {
+            Finish::Mean => sum / k,
+            Finish::SqrtMean => (sum / k).max(0.0).sqrt(),
+            Finish::Sum => sum,
+        }
+    }
+
+    /// The loss of a whole vector of model values.
+    pub fn loss(&self, values: &[f64]) -> f64 {
+        let s: f64 = values
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| self.term_at(k, v))
+            .sum();
+        self.finish_sum(s)
+    }
+}
+
+/// χ² = Σ ((y′ − y)/u)².
+pub fn chi2(data: &Dataset, values: &[f64]) -> f64 {
+    data.samples
+        .iter()
+        .zip(values)
+        .map(|(s, &v)| {
+            let z = (v - s.value) / s.uncertainty;
+            z * z
+        })
+        .sum()
+}
+
+/// Normalised residuals z = (y′ − y)/u.
+pub fn normalised_residuals(data: &Dataset, values: &[f64]) -> Vec<f64> {
+    data.samples
+        .iter()
+        .zip(values)
+        .map(|(s, &v)| (v - s.value) / s.uncertainty)
+        .collect()
+}

@@ -1,0 +1,121 @@
+//! Composition of one WGSL module per (model tree, loss shape): WGSL has no function
+//! pointers, so the host writes `eval_model` for the tree, calling each node's function
+//! (from its `shaders/<model>.wgsl`) with its offset into the scalar view.
+
+use crate::bsdf::{Model, Node};
+use crate::engine::loss::{Finish, Term};
+
+pub const COMMON: &str = include_str!("../../shaders/bsdf/common.wgsl");
+pub const LOSS: &str = include_str!("../../shaders/engine/loss.wgsl");
+pub const KERNEL: &str = include_str!("../../shaders/engine/kernel.wgsl");
+
+/// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Shape {
+    pub lanes: u32,
+    pub slices: u32,
+}
+
+impl Shape {
+    /// SIMD CPU devices (lavapipe): one thread walks all samples of its candidate.
+    pub const CPU_DEVICE: Shape = Shape {
+        lanes: 64,
+        slices: 1,
+    };
+    /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
+    pub const GPU_DEVICE: Shape = Shape {
+        lanes: 32,
+        slices: 8,
+    };
+}
+
+fn term_code(t: Term) -> u32 {
+    match t {
+        Term::AbsRatio => 0,
+        Term::Square => 1,
+        Term::LogSquare => 2,
+    }
+}
+
+fn finish_code(f: Finish) -> u32 {
+    match f {
+        Finish::Mean => 0,
+        Finish::SqrtMean => 1,
+        Finish::Sum => 2,
+    }
+}
+
+/// The generated `eval_model`: children first (post-order), then each combinator.
+pub fn eval_model_source(model: &Model) -> String {
+    fn emit(node: &Node, body: &mut String, counter: &mut usize) -> String {
+        let args: Vec<String> = node
+            .children
+            .iter()
+            .map(|c| emit(c, body, counter))
+            .collect();
+        let name = format!("v{}", *counter);
+        *counter += 1;
+        let w = node.bsdf.wgsl();
+        let mut call = format!("{}(b + {}u, wi, wo", w.function, node.offset);
+        for a in &args {
+            call += ", ";
+            call += a;
+        }
+        call += ")";
+        body.push_str(&format!("    let {name} = {call};\n"));
+        name
+    }
+    let mut body = String::new();
+    let mut counter = 0;
+    let root = emit(&model.root, &mut body, &mut counter);
+    format!(
+        "// Generated for `{}`: b is the channel's base index into P.\nfn eval_model(wi: vec3<f32>, wo: vec3<f32>, b: u32) -> f32 {{\n{body}    return {root};\n}}\n",
+        model.spec
+    )
+}
+
+/// The full module for a model and a loss shape.
+pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
+    let s = model.scalar_count();
+    // C counts scalar-view groups: channels, times planes under `+peraxis`.
+    let c = model.groups();
+    let mut src = format!(
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        model.spec,
+        c,
+        shape.lanes,
+        shape.slices,
+        term_code(term),
+        finish_code(finish),
+        (s * c).max(1)
+    );
+    src += COMMON;
+    let mut included: Vec<&str> = Vec::new();
+    for node in model.nodes() {
+        for (name, text) in node.bsdf.wgsl().sources {
+            if !included.contains(&name) {
+                included.push(name);
+                src += &format!("\n// ---- shaders/{name}.wgsl\n");
+                src += text;
+            }
+        }
+    }
+    src += "\n";
+    src += &eval_model_source(model);
+    src += "\n";
+    src += LOSS;
+    src += "\n";
+    src += KERNEL;
+    src
+}
+
+/// Parse and validate a module with naga (no device needed).
+pub fn validate(source: &str) -> Result<naga::Module, String> {
+    let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
+    let mut v = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    );
+    v.validate(&module).map_err(|e| e.emit_to_string(source))?;
+    Ok(module)
+}

@@ -1,0 +1,425 @@
+//! One fit: a model, a dataset, a loss, multi-start optimisation on a backend, and the
+//! report of DESIGN §8 (best loss, χ²_red, parameters with standard uncertainties).
+
+use crate::bsdf::Model;
+use crate::data::Dataset;
+use crate::engine::loss::{chi2, Loss};
+use crate::engine::{Backend, Evaluator, Problem};
+use crate::inference::covariance::{covariance, Covariance};
+use crate::optim::{compass, lm, random_starts, BatchObjective, BatchResiduals, RestartResult};
+use serde::Serialize;
+use serde_json::{Map, Value};
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Compass search (Kolda, Lewis, Torczon 2003), BBM's optimizer; any loss.
+    Compass,
+    /// Levenberg–Marquardt; sum-of-squares losses only.
+    Lm,
+}
+
+impl std::fmt::Display for Optimizer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Optimizer::Compass => "compass",
+            Optimizer::Lm => "lm",
+        })
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    pub optimizer: Optimizer,
+    pub restarts: usize,
+    pub seed: u64,
+    /// Draw this many random points per restart, evaluate them in one batch and start
+    /// from the best (1 = plain random starts). Cheap, and it keeps restarts out of the
+    /// flat, hopeless corners of the box that local optimizers cannot leave.
+    pub screen: usize,
+    /// Extra starting points (physical parameter vectors), tried before the random ones;
+    /// e.g. a smaller model's optimum carried into its extension.
+    pub initial_points: Vec<Vec<f64>>,
+    pub compass: compass::CompassOptions,
+    pub lm: lm::LmOptions,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            optimizer: Optimizer::Compass,
+            restarts: 32,
+            seed: 1,
+            screen: 8,
+            initial_points: vec![],
+            compass: Default::default(),
+            lm: Default::default(),
+        }
+    }
+}
+
+/// The best parameters of a fit (DESIGN §8 `best`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Best {
+    pub loss: f64,
+    pub chi2_red: f64,
+    /// Parameter name → value (an array per channel for rgb parameters).
+    pub params: Map<String, Value>,
+    /// Standard uncertainties, same shape; null where the data does not determine it.
+    pub param_std: Map<String, Value>,
+}
+
+/// The JSON report of one fit (DESIGN §8), with extras after the contract's fields.
+#[derive(Clone, Debug, Serialize)]
+pub struct FitReport {
+    pub model: String,
+    pub loss: String,
+    pub weights: String,
+    pub optimizer: String,
+    pub backend: String,
+    pub restarts: usize,
+    pub evaluations: u64,
+    pub seconds: f64,
+    pub best: Best,
+    pub data: String,
+    pub material: String,
+    pub samples: usize,
+    pub channels: Vec<f64>,
+    /// Measurement planes (φ, degrees) with parameters of their own (`+peraxis`), else [0].
+    pub axes: Vec<f64>,
+    pub seed: u64,
+    /// Restarts whose final loss is within 1% of the best (a multi-modality signal).
+    pub restarts_within_1pct: usize,
+    /// Parameter names of the flat vector (rgb parameters as `name[c]`).
+    pub flat_names: Vec<String>,
+    pub flat_params: Vec<f64>,
+    pub flat_std: Vec<Option<f64>>,
+    /// Correlation matrix of the flat parameters (null entries where undetermined).
+    pub correlation: Vec<Vec<Option<f64>>>,
+    pub warnings: Vec<String>,
+}
+
+/// Adapts an evaluator (physical parameters) to the optimizers' unit box.
+pub struct UnitBox<'m, 'e> {
+    pub model: &'m Model,
+    pub eval: &'m mut (dyn Evaluator + 'e),
+    pub loss_terms: Option<crate::engine::loss::LossTerms>,
+}
+
+impl UnitBox<'_, '_> {
+    fn to_physical(&self, points: &[f64]) -> Vec<f64> {
+        points
+            .chunks(self.model.dim)
+            .flat_map(|u| self.model.from_unit(u))
+            .collect()
+    }
+}
+
+impl BatchObjective for UnitBox<'_, '_> {
+    fn dim(&self) -> usize {
+        self.model.dim
+    }
+    fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let phys = self.to_physical(points);
+        self.eval.costs(&phys)
+    }
+}
+
+impl BatchResiduals for UnitBox<'_, '_> {
+    fn residuals(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let phys = self.to_physical(points);
+        let values = self.eval.values(&phys)?;
+        let t = self.loss_terms.as_ref().expect("residuals need loss terms");
+        let k = t.y.len();
+        Ok(values
+            .chunks(k)
+            .flat_map(|row| row.iter().enumerate().map(|(j, &v)| t.residual(j, v)))
+            .collect())
+    }
+    fn residual_count(&self) -> usize {
+        self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0)
+    }
+    fn normal_equations(
+        &mut self,
+        points: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        // The backend reduces them where it evaluates the model (on the GPU: on the device).
+        let unit = crate::optim::difference_points(points, steps, self.model.dim);
+        let phys = self.to_physical(&unit);
+        self.eval.normal_equations(&phys, steps)
+    }
+}
+
+/// Starting points in the unit box: the given initial points, then the best `restarts`
+/// of `restarts × screen` random draws.
+fn screened_starts(
+    obj: &mut dyn BatchObjective,
+    model: &Model,
+    opts: &FitOptions,
+) -> anyhow::Result<Vec<Vec<f64>>> {
+    let mut starts: Vec<Vec<f64>> = opts
+        .initial_points
+        .iter()
+        .map(|p| model.to_unit(p))
+        .collect();
+    let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
+    if opts.screen <= 1 {
+        starts.extend(pool);
+        return Ok(starts);
+    }
+    let flat: Vec<f64> = pool.iter().flatten().copied().collect();
+    let costs = obj.costs(&flat)?;
+    let mut order: Vec<usize> = (0..pool.len()).collect();
+    order.sort_by(|&a, &b| {
+        crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
+    });
+    starts.extend(
+        order
+            .into_iter()
+            .take(opts.restarts)
+            .map(|i| pool[i].clone()),
+    );
+    Ok(starts)
+}
+
+/// What a fit found, before it is dressed as a [`FitReport`].
+#[derive(Clone, Debug)]
+pub struct FitOutcome {
+    /// Best physical parameter vector.
+    pub flat: Vec<f64>,
+    /// Its loss.
+    pub loss: f64,
+    /// Model values at the best parameters, one per sample.
+    pub values: Vec<f64>,
+    /// χ² = Σ ((y′ − y)/u)² at the best parameters.
+    pub chi2: f64,
+    pub cov: Covariance,
+    /// Restarts whose final loss is within 1% of the best.
+    pub within: usize,
+    pub evaluations: u64,
+    pub seconds: f64,
+}
+
+/// Fit `model` to `data` under `loss` and report it (DESIGN §8).
+pub fn fit(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<FitReport> {
+    let o = fit_outcome(model, data, loss, backend, opts, progress)?;
+    let chi2_red = o.chi2 / (data.len() - model.dim) as f64;
+    Ok(make_report(
+        model,
+        data,
+        loss,
+        opts,
+        backend,
+        o.loss,
+        chi2_red,
+        &o.flat,
+        o.cov,
+        o.within,
+        o.evaluations,
+        o.seconds,
+    ))
+}
+
+/// Fit `model` to `data` under `loss`: multi-start optimisation on `backend`, then χ² and
+/// the parameter covariance at the best point.
+pub fn fit_outcome(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<FitOutcome> {
+    anyhow::ensure!(
+        model.kind == data.kind,
+        "model {} is a {} model but {} holds {} data",
+        model.spec,
+        model.kind,
+        data.source.display(),
+        data.kind
+    );
+    anyhow::ensure!(
+        data.len() > model.dim,
+        "{}: {} samples cannot determine the {} parameters of {}",
+        data.source.display(),
+        data.len(),
+        model.dim,
+        model.spec
+    );
+    anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
+    anyhow::ensure!(
+        opts.initial_points.iter().all(|p| p.len() == model.dim),
+        "an initial point does not have the {} parameters of {}",
+        model.dim,
+        model.spec
+    );
+    let t0 = Instant::now();
+    let problem = Problem { model, data, loss };
+    let mut eval = backend.prepare(problem)?;
+    let results: Vec<RestartResult> = {
+        let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
+        let mut obj = UnitBox {
+            model,
+            eval: eval.as_mut(),
+            loss_terms: terms,
+        };
+        let starts = screened_starts(&mut obj, model, opts)?;
+        match opts.optimizer {
+            Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
+            Optimizer::Lm => {
+                anyhow::ensure!(
+                    loss.is_sum_of_squares(),
+                    "--optimizer lm needs a sum-of-squares loss; {} is not one (use compass)",
+                    loss.metric
+                );
+                let finish = loss.terms(data);
+                // Forward differences need a step well above √ε of the backend's arithmetic
+                // (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly rounding noise).
+                let mut lm_opts = opts.lm.clone();
+                lm_opts.fd_step = lm_opts.fd_step.max(4.0 * backend.unit_roundoff().sqrt());
+                lm::minimize(
+                    &mut obj,
+                    &starts,
+                    &lm_opts,
+                    &|s| finish.finish_sum(s),
+                    progress,
+                )?
+            }
+        }
+    };
+    let best_r = results
+        .iter()
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .expect("at least one restart");
+    let tol = best_r.cost.abs() * 0.01 + 1e-300;
+    let within = results
+        .iter()
+        .filter(|r| r.cost <= best_r.cost + tol)
+        .count();
+    let flat = model.from_unit(&best_r.x);
+    let values = eval.values(&flat)?;
+    let chi2 = chi2(data, &values);
+    let cov = covariance(model, data, loss, eval.as_mut(), &flat)?;
+    Ok(FitOutcome {
+        loss: best_r.cost,
+        flat,
+        values,
+        chi2,
+        cov,
+        within,
+        evaluations: eval.evaluations(),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn make_report(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    opts: &FitOptions,
+    backend: &dyn Backend,
+    best_loss: f64,
+    chi2_red: f64,
+    flat: &[f64],
+    cov: Covariance,
+    within: usize,
+    evaluations: u64,
+    seconds: f64,
+) -> FitReport {
+    let group = |vals: &[Option<f64>]| -> Map<String, Value> {
+        let mut m = Map::new();
+        for p in &model.params {
+            let w = p.width(model.channels);
+            let slice = &vals[p.index..p.index + w];
+            // rgb and per-plane parameters are arrays (plane-major, then channel).
+            let v = if w > 1 {
+                Value::Array(slice.iter().map(|x| json_num(*x)).collect())
+            } else {
+                json_num(slice[0])
+            };
+            m.insert(p.name.clone(), v);
+        }
+        m
+    };
+    let params = group(&flat.iter().map(|&v| Some(v)).collect::<Vec<_>>());
+    let param_std = group(&cov.std);
+    FitReport {
+        model: model.spec.clone(),
+        loss: loss.metric.to_string(),
+        weights: loss.weights.to_string(),
+        optimizer: opts.optimizer.to_string(),
+        backend: backend.id().to_string(),
+        restarts: opts.restarts,
+        evaluations,
+        seconds,
+        best: Best {
+            loss: best_loss,
+            chi2_red,
+            params,
+            param_std,
+        },
+        data: data.source.display().to_string(),
+        material: data.material.clone(),
+        samples: data.len(),
+        channels: data.channels.clone(),
+        axes: model.axes.clone(),
+        seed: opts.seed,
+        restarts_within_1pct: within,
+        flat_names: model.flat_names(),
+        flat_params: flat.to_vec(),
+        flat_std: cov.std,
+        correlation: cov.correlation,
+        warnings: cov.warnings,
+    }
+}
+
+fn json_num(v: Option<f64>) -> Value {
+    match v {
+        Some(x) if x.is_finite() => serde_json::Number::from_f64(x)
+            .map(Value::Number)
+            .unwrap_or(Value::Null),
+        _ => Value::Null,
+    }
+}
+
+impl FitReport {
+    /// A compact human-readable summary.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "model {} fitted to '{}' ({} samples, {} channel(s)): loss {}/{} = {:.6e}, χ²_red = {:.3}\n",
+            self.model,
+            self.material,
+            self.samples,
+            self.channels.len(),
+            self.loss,
+            self.weights,
+            self.best.loss,
+            self.best.chi2_red
+        );
+        for (i, name) in self.flat_names.iter().enumerate() {
+            let std = match self.flat_std[i] {
+                Some(s) => format!("± {s:.3e}"),
+                None => "(not determined)".into(),
+            };
+            s += &format!("  {name:<14} = {:<12.6} {std}\n", self.flat_params[i]);
+        }
+        s += &format!(
+            "  {} restarts ({} within 1% of best), {} evaluations, {:.2} s on {}\n",
+            self.restarts, self.restarts_within_1pct, self.evaluations, self.seconds, self.backend
+        );
+        for w in &self.warnings {
+            s += &format!("  warning: {w}\n");
+        }
+        s
+    }
+}

@@ -1,0 +1,930 @@
+//! The sweep's pictures and `report.html`: everything is computed from the results rows
+//! (results.csv), the data files they name and the render statistics written beside the
+//! images — no number in the report is typed in.
+//!
+//! Layout of the output directory:
+//! - `plots/<data>/<fit>.svg`: angular plot of every fit (model curves, measured ±u);
+//! - `plots/<data>/weights.svg`: the best model fitted with uniform vs uncertainty weights
+//!   (paper Fig. 3, top); `plots/<data>/models.svg`: the top models (BRDF, Fig. 2) or the
+//!   best variant of each NDF family (BTDF, Fig. 4); `plots/<data>/suffixes.svg` (BTDF):
+//!   plain vs `+scale` vs `+absorb` for the best family (Fig. 5);
+//! - `renders/<data>/baseline.png` and `renders/<data>/<fit>-{model,error}.png` + `.json`
+//!   (BRDF; Figs. 1–3, bottom): the baseline is the tabulated data set of the same material
+//!   with the most samples, so a fit to in-plane data is judged against the full data;
+//! - `report.html`, tying it together (offline: relative links only).
+
+use crate::bsdf::Model;
+use crate::data::{Dataset, Kind};
+use crate::output::plot::{self, Fitted, Panel};
+use crate::output::render::{self, RenderOptions, RenderStats};
+use crate::output::results::{self, current_rows, fmt_num, rankings, Row, Skipped};
+use anyhow::Result;
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Bumped when the pictures or report change for the same results.
+const REPORT_VERSION: &str = "report-v4";
+
+/// File-name-safe slug of a fit.
+pub fn slug(r: &Row) -> String {
+    let m: String = r
+        .model
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!(
+        "{m}__{}-{}-{}-r{}-s{}",
+        r.loss, r.weights, r.optimizer, r.restarts, r.seed
+    )
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn safe_name(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// A data set as the report sees it.
+struct DataInfo {
+    name: String,
+    hash: String,
+    data: Option<Dataset>,
+    note: Option<String>,
+}
+
+fn load_data(rows: &[&Row]) -> BTreeMap<String, DataInfo> {
+    let mut out = BTreeMap::new();
+    for r in rows {
+        if out.contains_key(&r.data) {
+            continue;
+        }
+        let path = PathBuf::from(&r.data_path);
+        let candidates = [
+            path.clone(),
+            crate::data::bundled_data_dir().join(path.file_name().unwrap_or_default()),
+        ];
+        let mut info = DataInfo {
+            name: r.data.clone(),
+            hash: r.data_hash.clone(),
+            data: None,
+            note: None,
+        };
+        for p in candidates.iter() {
+            if let Ok(bytes) = std::fs::read(p) {
+                if results::content_hash(&bytes) != r.data_hash {
+                    info.note = Some(format!(
+                        "{} has changed since the fits; no pictures",
+                        p.display()
+                    ));
+                    continue;
+                }
+                match results::DataFile::read(p, &Default::default()) {
+                    Ok(f) => {
+                        info.data = Some(f.data);
+                        info.note = None;
+                        break;
+                    }
+                    Err(e) => info.note = Some(format!("{e:#}")),
+                }
+            }
+        }
+        if info.data.is_none() && info.note.is_none() {
+            info.note = Some(format!("{} not found; no pictures", r.data_path));
+        }
+        out.insert(r.data.clone(), info);
+    }
+    out
+}
+
+struct Compiled {
+    model: Model,
+    flat: Vec<f64>,
+}
+
+fn compile(r: &Row, data: &Dataset) -> Result<Compiled> {
+    let model = Model::for_data(&r.model, data)?;
+    let flat = results::flat_from_params(&model, &r.params_json())?;
+    Ok(Compiled { model, flat })
+}
+
+fn fit_title(r: &Row) -> String {
+    format!(
+        "{} — {}/{} ({}), χ²_red = {}",
+        r.model,
+        r.loss,
+        r.weights,
+        r.optimizer,
+        fmt_num(r.chi2_red)
+    )
+}
+
+/// Featured fits of one data set.
+#[derive(Default)]
+struct Featured<'a> {
+    /// The best model's fits under uniform and uncertainty weights (same loss, optimizer).
+    weights: Option<(&'a Row, &'a Row)>,
+    /// Models compared side by side / overlaid.
+    models: Vec<&'a Row>,
+    /// BTDF: plain, +scale, +absorb of the best family.
+    suffixes: Vec<&'a Row>,
+}
+
+fn ndf_family(model: &str) -> String {
+    match model.find(')') {
+        Some(i) if model.starts_with("btdf(") => model[..=i].to_string(),
+        _ => model.to_string(),
+    }
+}
+
+fn featured<'a>(rk: &results::Ranking<'a>, kind: Kind) -> Featured<'a> {
+    let mut f = Featured::default();
+    let rows = |m: &str| {
+        rk.models
+            .iter()
+            .find(|x| x.0 == m)
+            .map(|x| x.1.iter().flatten().copied().collect::<Vec<&Row>>())
+            .unwrap_or_default()
+    };
+    // Primary column: the first uniform one (columns sort uniform first within a loss,
+    // and chi2 last).
+    let Some(primary) = rk
+        .columns
+        .iter()
+        .find(|c| c.1 == "uniform")
+        .or(rk.columns.first())
+        .cloned()
+    else {
+        return f;
+    };
+    let in_col = |r: &&Row, c: &(String, String, String)| {
+        r.loss == c.0 && r.weights == c.1 && r.optimizer == c.2
+    };
+    // Best model that has both a uniform and a weighted fit with the same loss/optimizer.
+    'outer: for (m, _, _) in &rk.models {
+        let rs = rows(m);
+        for u in rs.iter().filter(|r| r.weights == "uniform") {
+            if let Some(w) = rs
+                .iter()
+                .find(|r| r.weights != "uniform" && r.loss == u.loss && r.optimizer == u.optimizer)
+            {
+                f.weights = Some((u, w));
+                break 'outer;
+            }
+        }
+    }
+    let prim: Vec<&Row> = rk
+        .models
+        .iter()
+        .filter_map(|(m, _, _)| rows(m).into_iter().find(|r| in_col(r, &primary)))
+        .collect();
+    match kind {
+        Kind::Brdf => f.models = prim.iter().take(2).copied().collect(),
+        Kind::Btdf => {
+            let mut fams = BTreeSet::new();
+            for r in &prim {
+                if fams.insert(ndf_family(&r.model)) {
+                    f.models.push(r);
+                }
+            }
+            f.models.truncate(4);
+            if let Some(best) = prim.first() {
+                let fam = ndf_family(&best.model);
+                for suffix in ["", "+scale", "+absorb"] {
+                    let m = format!("{fam}{suffix}");
+                    if let Some(r) = prim.iter().find(|r| r.model == m) {
+                        f.suffixes.push(r);
+                    }
+                }
+                if f.suffixes.len() < 2 {
+                    f.suffixes.clear();
+                }
+            }
+        }
+    }
+    f
+}
+
+/// Render and plot paths relative to the output directory.
+fn plot_rel(r: &Row) -> String {
+    format!("plots/{}/{}.svg", safe_name(&r.data), slug(r))
+}
+fn render_rel(r: &Row, what: &str) -> String {
+    format!("renders/{}/{}-{what}", safe_name(&r.data), slug(r))
+}
+
+/// Fingerprint of what the pictures depend on.
+fn stamp(out: &Path) -> String {
+    let csv = std::fs::read(out.join(results::RESULTS_CSV)).unwrap_or_default();
+    let sk = std::fs::read(out.join(results::SKIPPED_JSON)).unwrap_or_default();
+    format!(
+        "{REPORT_VERSION} {} {} {}",
+        env!("CARGO_PKG_VERSION"),
+        results::content_hash(&csv),
+        results::content_hash(&sk)
+    )
+}
+
+/// Write pictures and report.html for `rows` into `out`.
+pub fn publish(out: &Path, rows: &[Row], notice: &mut dyn FnMut(String)) -> Result<()> {
+    let t0 = std::time::Instant::now();
+    let stamp_path = out.join("report.stamp");
+    let st = stamp(out);
+    if out.join("report.html").exists()
+        && std::fs::read_to_string(&stamp_path).ok().as_deref() == Some(st.as_str())
+    {
+        notice(format!(
+            "pictures and {} are up to date",
+            out.join("report.html").display()
+        ));
+        return Ok(());
+    }
+    let cur = current_rows(rows);
+    let datas = load_data(&cur);
+    let ranks = rankings(rows);
+    let ropts = RenderOptions::default();
+    let mut problems: Vec<String> = datas.values().filter_map(|d| d.note.clone()).collect();
+    // Baseline of each BRDF material: its data set with the most samples.
+    let mut baseline_of: BTreeMap<String, String> = BTreeMap::new();
+    for d in datas.values() {
+        if let Some(ds) = &d.data {
+            if ds.kind == Kind::Brdf {
+                let e = baseline_of
+                    .entry(ds.material.clone())
+                    .or_insert(d.name.clone());
+                let cur_n = datas[e.as_str()]
+                    .data
+                    .as_ref()
+                    .map(|x| x.len())
+                    .unwrap_or(0);
+                if ds.len() > cur_n {
+                    *e = d.name.clone();
+                }
+            }
+        }
+    }
+    // Per-fit plots.
+    let mut n_plots = 0;
+    for r in &cur {
+        let Some(ds) = datas.get(&r.data).and_then(|d| d.data.as_ref()) else {
+            continue;
+        };
+        match compile(r, ds) {
+            Ok(c) => {
+                let fit = Fitted {
+                    label: r.model.clone(),
+                    model: &c.model,
+                    flat: &c.flat,
+                };
+                let panel = plot::fit_panel(ds, &fit, &fit_title(r));
+                plot::write_svg(&out.join(plot_rel(r)), &[panel], (640, 440))?;
+                n_plots += 1;
+            }
+            Err(e) => problems.push(format!("{} · {}: cannot plot ({e:#})", r.data, r.model)),
+        }
+    }
+    // Featured plots and renders.
+    let mut feats: BTreeMap<String, Featured> = BTreeMap::new();
+    let mut renders: BTreeMap<String, RenderStats> = BTreeMap::new(); // slug path → stats
+    let mut to_render: BTreeSet<(String, String)> = BTreeSet::new(); // (data, slug)
+    let mut render_rows: Vec<&Row> = Vec::new();
+    for rk in &ranks {
+        let Some(ds) = datas.get(&rk.data).and_then(|d| d.data.as_ref()) else {
+            continue;
+        };
+        let f = featured(rk, ds.kind);
+        let dir = out.join("plots").join(safe_name(&rk.data));
+        if let Some((u, w)) = f.weights {
+            let (cu, cw) = (compile(u, ds)?, compile(w, ds)?);
+            let mut panels = vec![
+                plot::fit_panel(
+                    ds,
+                    &Fitted {
+                        label: u.model.clone(),
+                        model: &cu.model,
+                        flat: &cu.flat,
+                    },
+                    &format!("{} — {} uniform", u.model, u.loss),
+                ),
+                plot::fit_panel(
+                    ds,
+                    &Fitted {
+                        label: w.model.clone(),
+                        model: &cw.model,
+                        flat: &cw.flat,
+                    },
+                    &format!("{} — {} {}", w.model, w.loss, w.weights),
+                ),
+            ];
+            plot::common_y(&mut panels);
+            plot::write_svg(&dir.join("weights.svg"), &panels, (600, 430))?;
+            if ds.kind == Kind::Brdf {
+                render_rows.extend([u, w]);
+            }
+        }
+        if !f.models.is_empty() {
+            let cs: Vec<Compiled> = f
+                .models
+                .iter()
+                .map(|r| compile(r, ds))
+                .collect::<Result<_>>()?;
+            match ds.kind {
+                Kind::Brdf => {
+                    let mut panels: Vec<Panel> = f
+                        .models
+                        .iter()
+                        .zip(&cs)
+                        .map(|(r, c)| {
+                            plot::fit_panel(
+                                ds,
+                                &Fitted {
+                                    label: r.model.clone(),
+                                    model: &c.model,
+                                    flat: &c.flat,
+                                },
+                                &format!("{} — {}/{}", r.model, r.loss, r.weights),
+                            )
+                        })
+                        .collect();
+                    plot::common_y(&mut panels);
+                    plot::write_svg(&dir.join("models.svg"), &panels, (600, 430))?;
+                    render_rows.extend(f.models.iter().copied());
+                }
+                Kind::Btdf => {
+                    let fits: Vec<Fitted> = f
+                        .models
+                        .iter()
+                        .zip(&cs)
+                        .map(|(r, c)| Fitted {
+                            label: r.model.clone(),
+                            model: &c.model,
+                            flat: &c.flat,
+                        })
+                        .collect();
+                    let t = format!(
+                        "{} — best of each NDF, {}/{}",
+                        rk.data, f.models[0].loss, f.models[0].weights
+                    );
+                    plot::write_svg(
+                        &dir.join("models.svg"),
+                        &[plot::btdf_panel(ds, &fits, &t)],
+                        (760, 480),
+                    )?;
+                }
+            }
+        }
+        if !f.suffixes.is_empty() {
+            let cs: Vec<Compiled> = f
+                .suffixes
+                .iter()
+                .map(|r| compile(r, ds))
+                .collect::<Result<_>>()?;
+            let fits: Vec<Fitted> = f
+                .suffixes
+                .iter()
+                .zip(&cs)
+                .map(|(r, c)| Fitted {
+                    label: r.model.clone(),
+                    model: &c.model,
+                    flat: &c.flat,
+                })
+                .collect();
+            let t = format!(
+                "{} — scale vs absorption, {}/{}",
+                rk.data, f.suffixes[0].loss, f.suffixes[0].weights
+            );
+            plot::write_svg(
+                &dir.join("suffixes.svg"),
+                &[plot::btdf_panel(ds, &fits, &t)],
+                (760, 480),
+            )?;
+        }
+        feats.insert(rk.data.clone(), f);
+    }
+    // Sampling geometry (Fig. 1): the top models of a material's richest data set, fitted
+    // to each of its data sets, all rendered against the same baseline.
+    let mut sampling: Vec<(String, Vec<&Row>)> = Vec::new();
+    for (material, base) in &baseline_of {
+        let members: Vec<&String> = datas
+            .values()
+            .filter(|d| d.data.as_ref().is_some_and(|x| &x.material == material))
+            .map(|d| &d.name)
+            .collect();
+        if members.len() < 2 {
+            continue;
+        }
+        let Some(f) = feats.get(base) else { continue };
+        let mut list = Vec::new();
+        for top in f.models.iter() {
+            for m in &members {
+                if let Some(r) = cur.iter().find(|r| {
+                    &&r.data == m
+                        && r.model == top.model
+                        && r.loss == top.loss
+                        && r.weights == top.weights
+                        && r.optimizer == top.optimizer
+                }) {
+                    list.push(*r);
+                }
+            }
+        }
+        render_rows.extend(list.iter().copied());
+        sampling.push((material.clone(), list));
+    }
+    // Renders.
+    for r in render_rows {
+        if !to_render.insert((r.data.clone(), slug(r))) {
+            continue;
+        }
+        let Some(ds) = datas.get(&r.data).and_then(|d| d.data.as_ref()) else {
+            continue;
+        };
+        let base_name = baseline_of
+            .get(&ds.material)
+            .cloned()
+            .unwrap_or(r.data.clone());
+        let Some(base) = datas.get(&base_name).and_then(|d| d.data.as_ref()) else {
+            continue;
+        };
+        let c = compile(r, ds)?;
+        let base_png = out.join(format!("renders/{}/baseline.png", safe_name(&r.data)));
+        let rel = render_rel(r, "");
+        let stats = render::render_fit(
+            &c.model,
+            &c.flat,
+            base,
+            &ropts,
+            Some(&base_png),
+            &out.join(format!("{rel}model.png")),
+            &out.join(format!("{rel}error.png")),
+            &r.data,
+        );
+        match stats {
+            Ok(mut s) => {
+                s.baseline = base_name.clone();
+                std::fs::write(
+                    out.join(format!("{rel}stats.json")),
+                    serde_json::to_string_pretty(&s)? + "\n",
+                )?;
+                renders.insert(rel, s);
+            }
+            Err(e) => problems.push(format!("{} · {}: cannot render ({e:#})", r.data, r.model)),
+        }
+    }
+    let skipped: Vec<Skipped> = std::fs::read_to_string(out.join(results::SKIPPED_JSON))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    let html = report_html(
+        rows,
+        &cur,
+        &ranks,
+        &datas,
+        &feats,
+        &renders,
+        &baseline_of,
+        &sampling,
+        &skipped,
+        &problems,
+    );
+    std::fs::write(out.join("report.html"), html)?;
+    std::fs::write(&stamp_path, st)?;
+    notice(format!(
+        "wrote {} ({} fit plots, {} renders) in {:.1} s",
+        out.join("report.html").display(),
+        n_plots,
+        renders.len(),
+        t0.elapsed().as_secs_f64()
+    ));
+    for p in &problems {
+        notice(format!("note: {p}"));
+    }
+    Ok(())
+}
+
+fn fmt_value(v: Option<&serde_json::Value>) -> String {
+    match v {
+        None | Some(serde_json::Value::Null) => "–".into(),
+        Some(serde_json::Value::Array(a)) => a
+            .iter()
+            .map(|x| x.as_f64().map(fmt_num).unwrap_or("–".into()))
+            .collect::<Vec<_>>()
+            .join(", "),
+        Some(x) => x.as_f64().map(fmt_num).unwrap_or("–".into()),
+    }
+}
+
+fn params_table(fits: &[(&str, &Row)]) -> String {
+    let mut names: Vec<String> = Vec::new();
+    for (_, r) in fits {
+        for k in r.params_json().keys() {
+            if !names.contains(k) {
+                names.push(k.clone());
+            }
+        }
+    }
+    let mut s = String::from("<table class=\"params\"><tr><th>parameter</th>");
+    for (label, _) in fits {
+        let _ = write!(s, "<th>{}</th>", esc(label));
+    }
+    s += "</tr>";
+    for n in &names {
+        let _ = write!(s, "<tr><td><code>{}</code></td>", esc(n));
+        for (_, r) in fits {
+            let (p, sd) = (r.params_json(), r.param_std_json());
+            let _ = write!(
+                s,
+                "<td>{} <span class=\"std\">± {}</span></td>",
+                fmt_value(p.get(n)),
+                fmt_value(sd.get(n))
+            );
+        }
+        s += "</tr>";
+    }
+    for (label, f) in [("loss", 0), ("χ²_red", 1), ("restarts within 1 %", 2)] {
+        let _ = write!(s, "<tr class=\"sum\"><td>{label}</td>");
+        for (_, r) in fits {
+            let v = match f {
+                0 => fmt_num(r.best_loss),
+                1 => fmt_num(r.chi2_red),
+                _ => format!("{} / {}", r.restarts_within_1pct, r.restarts),
+            };
+            let _ = write!(s, "<td>{v}</td>");
+        }
+        s += "</tr>";
+    }
+    s + "</table>"
+}
+
+fn figure(src: &str, caption: &str, class: &str) -> String {
+    format!("<figure class=\"{class}\"><a href=\"{0}\"><img src=\"{0}\" alt=\"{1}\"></a><figcaption>{1}</figcaption></figure>", esc(src), esc(caption))
+}
+
+fn render_strip(
+    r: &Row,
+    renders: &BTreeMap<String, RenderStats>,
+    with_baseline: bool,
+    label: &str,
+) -> String {
+    let rel = render_rel(r, "");
+    let Some(s) = renders.get(&rel) else {
+        return String::new();
+    };
+    let mut h = String::new();
+    if with_baseline {
+        h += &figure(
+            &format!("renders/{}/baseline.png", safe_name(&r.data)),
+            &format!("baseline: tabulated {}", s.baseline),
+            "render",
+        );
+    }
+    h += &figure(
+        &format!("{rel}model.png"),
+        &format!("{label}: {}", r.model),
+        "render",
+    );
+    h += &figure(
+        &format!("{rel}error.png"),
+        &format!(
+            "per-pixel {} (colour scale 0…{}; grey: beyond the measured angles): mean {:.4}",
+            s.metric.to_uppercase(),
+            s.error_scale,
+            s.mean_error
+        ),
+        "render",
+    );
+    h
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn report_html(
+    all: &[Row],
+    cur: &[&Row],
+    ranks: &[results::Ranking],
+    datas: &BTreeMap<String, DataInfo>,
+    feats: &BTreeMap<String, Featured>,
+    renders: &BTreeMap<String, RenderStats>,
+    baseline_of: &BTreeMap<String, String>,
+    sampling: &[(String, Vec<&Row>)],
+    skipped: &[Skipped],
+    problems: &[String],
+) -> String {
+    let mut h = String::new();
+    h += "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>bsdfit benchmark report</title><style>\n";
+    h += "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:24px auto;max-width:1320px;color:#222;padding:0 16px}\
+h1{margin-bottom:4px}h2{border-bottom:2px solid #ddd;padding-bottom:4px;margin-top:40px}h3{margin-top:26px}\
+table{border-collapse:collapse;margin:10px 0;font-size:13px}th,td{border:1px solid #ddd;padding:3px 8px;text-align:right}\
+th{background:#f3f3f3}td:first-child,td:nth-child(2){text-align:left}tr.top td{background:#eef7ee;font-weight:600}\
+table.params td{text-align:left}tr.sum td{background:#fafafa}.std{color:#777}.meta{color:#555;font-size:13px}\
+.badge{display:inline-block;background:#fff3cd;border:1px solid #e0c36b;border-radius:4px;padding:0 6px;font-size:12px;margin-left:6px}\
+figure{display:inline-block;margin:6px;vertical-align:top;text-align:center}figure img{max-width:100%;border:1px solid #ddd}\
+figure.render img{width:192px;height:auto;image-rendering:pixelated}figure.render{width:200px}figcaption{font-size:12px;color:#444;max-width:640px}\
+figure.wide img{width:1180px}figure.plot img{width:760px}code{font-size:12px}nav a{margin-right:10px}.note{color:#8a4b00}\
+.row{display:flex;flex-wrap:wrap;align-items:flex-start}\n</style></head><body>\n";
+    let backends: BTreeSet<&str> = cur.iter().map(|r| r.backend.as_str()).collect();
+    let secs: f64 = cur.iter().map(|r| r.seconds).sum();
+    let restarts: BTreeSet<usize> = cur.iter().map(|r| r.restarts).collect();
+    let synthetic = datas
+        .values()
+        .filter(|d| {
+            d.data.as_ref().is_some_and(|x| {
+                x.meta
+                    .get("source")
+                    .is_some_and(|s| s.contains("synthetic"))
+            })
+        })
+        .count();
+    let _ = writeln!(
+        h,
+        "<h1>bsdfit benchmark report</h1><p class=\"meta\">bsdfit {} · {} fits ({} rows in results.csv) on {} data sets · restarts {:?} · backend(s) {} · {:.1} s of fitting in total. Source files: <a href=\"results.csv\">results.csv</a>, <a href=\"results.json\">results.json</a>, <a href=\"rankings.md\">rankings.md</a>, <a href=\"skipped.json\">skipped.json</a>.</p>",
+        env!("CARGO_PKG_VERSION"),
+        cur.len(),
+        all.len(),
+        ranks.len(),
+        restarts,
+        esc(&backends.into_iter().collect::<Vec<_>>().join(", ")),
+        secs
+    );
+    if synthetic > 0 {
+        let _ = writeln!(h, "<p class=\"note\">{synthetic} of the {} data sets are <b>synthetic</b> (made by <code>bsdfit synth</code> from a known model; their true parameters are listed with each). They emulate the paper's sample types; they are not measurements.</p>", datas.len());
+    }
+    h += "<nav>";
+    for rk in ranks {
+        let _ = write!(
+            h,
+            "<a href=\"#d-{0}\">{1}</a>",
+            safe_name(&rk.data),
+            esc(&rk.data)
+        );
+    }
+    if !sampling.is_empty() {
+        h += "<a href=\"#sampling\">sampling geometry</a>";
+    }
+    h += "</nav>\n";
+    // Effect of uncertainty weighting, over all models.
+    h += "<h2>Effect of uncertainty weighting</h2><p>For each data set and loss, every model fitted with uniform weights and with the uncertainty weighting (BRDF: relative-uncertainty weights of the paper §2.2; BTDF: 1/u, §2.3.2). χ²_red = Σ((y′−y)/u)²/(K−P) judges both against the stated uncertainties.</p><table><tr><th>data set</th><th>loss (optimizer)</th><th>weighting</th><th>models</th><th>median χ²_red, uniform</th><th>median χ²_red, weighted</th><th>models with lower χ²_red when weighted</th></tr>";
+    for rk in ranks {
+        let mut combos: BTreeSet<(String, String, String)> = BTreeSet::new();
+        for c in &rk.columns {
+            if c.1 != "uniform" {
+                combos.insert(c.clone());
+            }
+        }
+        for (loss, w, o) in combos {
+            let mut pairs = Vec::new();
+            for (_, fits, _) in &rk.models {
+                let u = fits
+                    .iter()
+                    .flatten()
+                    .find(|r| r.loss == loss && r.weights == "uniform" && r.optimizer == o);
+                let x = fits
+                    .iter()
+                    .flatten()
+                    .find(|r| r.loss == loss && r.weights == w && r.optimizer == o);
+                if let (Some(u), Some(x)) = (u, x) {
+                    pairs.push((u.chi2_red, x.chi2_red));
+                }
+            }
+            if pairs.is_empty() {
+                continue;
+            }
+            let better = pairs.iter().filter(|p| p.1 < p.0).count();
+            let _ = write!(
+                h,
+                "<tr><td><a href=\"#d-{}\">{}</a></td><td>{loss} ({o})</td><td>{w}</td><td>{}</td><td>{}</td><td>{}</td><td>{better} of {}</td></tr>",
+                safe_name(&rk.data),
+                esc(&rk.data),
+                pairs.len(),
+                fmt_num(median(pairs.iter().map(|p| p.0).collect())),
+                fmt_num(median(pairs.iter().map(|p| p.1).collect())),
+                pairs.len()
+            );
+        }
+    }
+    h += "</table>\n";
+    if !sampling.is_empty() {
+        h += "<h2 id=\"sampling\">Effect of sampling geometry</h2><p>The same model fitted to each data set of a material, rendered against the tabulated baseline of the material's richest data set (paper Fig. 1).</p>";
+        for (material, list) in sampling {
+            let base = baseline_of.get(material).cloned().unwrap_or_default();
+            let _ = write!(h, "<h3>{} (baseline: {})</h3><table><tr><th>model</th><th>fitted to</th><th>samples</th><th>loss/weights</th><th>χ²_red on its data</th><th>mean per-pixel error vs baseline</th></tr>", esc(material), esc(&base));
+            for r in list {
+                let e = renders
+                    .get(&render_rel(r, ""))
+                    .map(|s| format!("{} {:.4}", s.metric.to_uppercase(), s.mean_error))
+                    .unwrap_or("–".into());
+                let _ = write!(
+                    h,
+                    "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}/{}</td><td>{}</td><td>{e}</td></tr>",
+                    esc(&r.model),
+                    esc(&r.data),
+                    r.samples,
+                    r.loss,
+                    r.weights,
+                    fmt_num(r.chi2_red)
+                );
+            }
+            h += "</table><div class=\"row\">";
+            for (i, r) in list.iter().enumerate() {
+                h += &render_strip(r, renders, i == 0, &r.data);
+            }
+            h += "</div>";
+        }
+    }
+    if !skipped.is_empty() {
+        h += "<h2>Skipped and failed fits</h2><table><tr><th>data set</th><th>model</th><th>loss/weights (optimizer)</th><th>status</th><th>reason</th></tr>";
+        for s in skipped {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td><code>{}</code></td><td>{}/{} ({})</td><td>{}</td><td style=\"text-align:left\">{}</td></tr>",
+                esc(&s.data),
+                esc(&s.model),
+                esc(&s.loss),
+                esc(&s.weights),
+                esc(&s.optimizer),
+                esc(&s.status),
+                esc(&s.reason)
+            );
+        }
+        h += "</table>\n";
+    }
+    for rk in ranks {
+        let info = &datas[&rk.data];
+        let _ = write!(h, "<h2 id=\"d-{}\">{}", safe_name(&rk.data), esc(&rk.data));
+        if let Some(ds) = &info.data {
+            let _ = write!(h, " — {}", esc(&ds.material));
+            if ds
+                .meta
+                .get("source")
+                .is_some_and(|s| s.contains("synthetic"))
+            {
+                h += "<span class=\"badge\">synthetic</span>";
+            }
+            let _ = write!(h, "</h2><p class=\"meta\">{} · {} samples ({} channel(s): {:?} nm) · measurement planes φ = {:?}° · file hash {}", ds.kind, ds.len(), ds.channel_count(), ds.channels, ds.axes, info.hash);
+            for k in [
+                "synth_model",
+                "synth_params",
+                "synth_geometry",
+                "synth_noise",
+                "synth_seed",
+            ] {
+                if let Some(v) = ds.meta.get(k) {
+                    let _ = write!(
+                        h,
+                        "<br>{}: <code>{}</code>",
+                        esc(k.trim_start_matches("synth_")),
+                        esc(v)
+                    );
+                }
+            }
+            h += "</p>";
+        } else {
+            h += "</h2>";
+        }
+        if let Some(n) = &info.note {
+            let _ = write!(h, "<p class=\"note\">{}</p>", esc(n));
+        }
+        // Ranking table.
+        h += "<h3>Ranking</h3><p class=\"meta\">Models sorted by their best χ²_red. Cells: loss value · χ²_red (links: angular plot of the fit).</p><table><tr><th>rank</th><th>model</th><th>P</th>";
+        for (l, w, o) in &rk.columns {
+            let _ = write!(h, "<th>{l}/{w}<br>({o})</th>");
+        }
+        h += "<th>best χ²_red</th></tr>";
+        for (i, (m, fits, best)) in rk.models.iter().enumerate() {
+            let p = fits
+                .iter()
+                .flatten()
+                .map(|r| r.n_params)
+                .next()
+                .unwrap_or(0);
+            let _ = write!(
+                h,
+                "<tr{}><td>{}</td><td><code>{}</code></td><td>{p}</td>",
+                if i == 0 { " class=\"top\"" } else { "" },
+                i + 1,
+                esc(m)
+            );
+            for f in fits {
+                match f {
+                    Some(r) => {
+                        let _ = write!(
+                            h,
+                            "<td><a href=\"{}\">{} · {}</a></td>",
+                            esc(&plot_rel(r)),
+                            fmt_num(r.best_loss),
+                            fmt_num(r.chi2_red)
+                        );
+                    }
+                    None => h += "<td>–</td>",
+                }
+            }
+            let _ = write!(h, "<td>{}</td></tr>", fmt_num(*best));
+        }
+        h += "</table>";
+        let Some(ds) = &info.data else { continue };
+        let Some(f) = feats.get(&rk.data) else {
+            continue;
+        };
+        let dir = format!("plots/{}", safe_name(&rk.data));
+        if let Some((u, w)) = f.weights {
+            let _ = write!(
+                h,
+                "<h3>Uniform vs uncertainty weighting: {}</h3>",
+                esc(&u.model)
+            );
+            h += &figure(
+                &format!("{dir}/weights.svg"),
+                &format!("{} fitted with {} uniform (left) and {} {} (right); lines: model, dots: measured ± u.", u.model, u.loss, w.loss, w.weights),
+                "wide",
+            );
+            h += &params_table(&[("uniform", u), (w.weights.as_str(), w)]);
+            if ds.kind == Kind::Brdf {
+                h += "<div class=\"row\">";
+                h += &render_strip(u, renders, true, "uniform");
+                h += &render_strip(w, renders, false, &w.weights);
+                h += "</div>";
+            }
+        }
+        if !f.models.is_empty() {
+            match ds.kind {
+                Kind::Brdf => {
+                    h += "<h3>Top models</h3>";
+                    h += &figure(
+                        &format!("{dir}/models.svg"),
+                        &format!(
+                            "The two best models ({}/{}).",
+                            f.models[0].loss, f.models[0].weights
+                        ),
+                        "wide",
+                    );
+                    h += "<div class=\"row\">";
+                    for (i, r) in f.models.iter().enumerate() {
+                        h += &render_strip(r, renders, i == 0, &format!("#{}", i + 1));
+                    }
+                    h += "</div>";
+                }
+                Kind::Btdf => {
+                    h += "<h3>NDF families</h3>";
+                    let cap = if ds.axes.len() > 1 {
+                        "Best variant of each NDF family (isotropic fits: one curve serves both planes; the second plane's is dashed)."
+                    } else {
+                        "Best variant of each NDF family."
+                    };
+                    h += &figure(&format!("{dir}/models.svg"), cap, "plot");
+                }
+            }
+        }
+        if !f.suffixes.is_empty() {
+            h += "<h3>Scale vs absorption</h3>";
+            h += &figure(
+                &format!("{dir}/suffixes.svg"),
+                "The best family plain, with +scale and with +absorb (paper Fig. 5).",
+                "plot",
+            );
+            let labels: Vec<(&str, &Row)> =
+                f.suffixes.iter().map(|r| (r.model.as_str(), *r)).collect();
+            h += &params_table(&labels);
+        }
+    }
+    if !problems.is_empty() {
+        h += "<h2>Notes</h2><ul>";
+        for p in problems {
+            let _ = write!(h, "<li class=\"note\">{}</li>", esc(p));
+        }
+        h += "</ul>";
+    }
+    h += "<p class=\"meta\">Generated by <code>bsdfit sweep</code> / <code>bsdfit merge</code> from results.csv; regenerate with the same command.</p></body></html>\n";
+    h
+}
