@@ -23,7 +23,7 @@
 //! components of m (no 1 − cos² cancellation at sharp peaks); G1/|μ| is evaluated in forms
 //! without a division by μ, so grazing θt gives no 0·∞.
 
-use super::{Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, gtr_norm};
 use glam::DVec3;
@@ -40,8 +40,9 @@ pub const L2_MIN: f64 = 1e-20;
 /// below e^-(10^6) there for every parameter in bounds.
 pub const C2_MIN: f64 = 1e-30;
 
-pub const ALPHA: ParamDecl =
-    ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "microfacet roughness").log();
+pub const ALPHA: ParamDecl = ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "microfacet roughness")
+    .log()
+    .per_axis();
 pub const ETA: ParamDecl = ParamDecl::shared(
     "eta",
     1.0,
@@ -55,9 +56,11 @@ pub const GAMMA: ParamDecl = ParamDecl::shared(
     4.0,
     2.0,
     "GTR tail exponent (2 = Trowbridge-Reitz)",
-);
-pub const BETA: ParamDecl =
-    ParamDecl::shared("beta", 3e-3, 1.0, 0.2, "generalized Gaussian width").log();
+)
+.neutral_at(2.0);
+pub const BETA: ParamDecl = ParamDecl::shared("beta", 3e-3, 1.0, 0.2, "generalized Gaussian width")
+    .log()
+    .per_axis();
 pub const P_SHAPE: ParamDecl = ParamDecl::shared(
     "p",
     0.2,
@@ -65,21 +68,24 @@ pub const P_SHAPE: ParamDecl = ParamDecl::shared(
     1.0,
     "generalized Gaussian shape (1 = Beckmann)",
 );
-pub const SCALE: ParamDecl = ParamDecl::shared("scale", 0.0, 10.0, 1.0, "BTDF scale factor S");
+pub const SCALE: ParamDecl =
+    ParamDecl::shared("scale", 0.0, 10.0, 1.0, "BTDF scale factor S").neutral_at(1.0);
 pub const TAU: ParamDecl = ParamDecl::shared(
     "tau",
     0.0,
     5.0,
     0.1,
     "optical depth tau*d of the absorbing layer",
-);
+)
+.neutral_at(0.0);
 pub const KD: ParamDecl = ParamDecl::shared(
     "kd",
     0.0,
     1.0,
     0.05,
     "Lambertian transmission kd (adds kd/pi)",
-);
+)
+.neutral_at(0.0);
 
 /// The normal distribution of a `btdf(…)` term.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -509,11 +515,8 @@ pub struct Btdf {
 }
 
 impl Bsdf for Btdf {
-    fn name(&self) -> &'static str {
-        "btdf"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Btdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         self.ndf.params()
@@ -556,11 +559,7 @@ pub enum Suffix {
 
 impl Suffix {
     pub fn name(self) -> &'static str {
-        match self {
-            Suffix::Scale => "scale",
-            Suffix::Absorb => "absorb",
-            Suffix::Diffuse => "diffuse",
-        }
+        self.entry().name
     }
     pub fn apply(self, k: f64, wi: DVec3, wo: DVec3, inner: f64) -> f64 {
         match self {
@@ -578,11 +577,12 @@ impl Suffix {
 }
 
 impl Bsdf for Suffix {
-    fn name(&self) -> &'static str {
-        Suffix::name(*self)
-    }
-    fn kind(&self) -> Kind {
-        Kind::Btdf
+    fn entry(&self) -> &'static Entry {
+        match self {
+            Suffix::Scale => &SCALE_ENTRY,
+            Suffix::Absorb => &ABSORB_ENTRY,
+            Suffix::Diffuse => &DIFFUSE_ENTRY,
+        }
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![match self {
@@ -603,13 +603,47 @@ impl Bsdf for Suffix {
     fn wgsl(&self) -> WgslFn {
         WgslFn {
             sources: vec![BTDF_WGSL],
-            function: format!("btdf_{}_eval", Suffix::name(*self)),
+            function: format!("btdf_{}_eval", self.name()),
         }
     }
 }
 
 // ---------------------------------------------------------------------------------------
 // Builders (registry)
+
+/// Registry entries: the transmission family and its three suffixes.
+pub const ENTRY: Entry = Entry {
+    name: "btdf",
+    kind: Some(Kind::Btdf),
+    role: Role::Transmission,
+    catalogue: InCatalogue::Yes,
+    doc: "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
+    build: Builder::Term(build),
+    variants: &["tr", "beckmann", "gtr", "gg"],
+};
+pub const SCALE_ENTRY: Entry = Entry {
+    name: "scale",
+    kind: Some(Kind::Btdf),
+    role: Role::Suffix,
+    catalogue: InCatalogue::Yes,
+    doc: "multiplies a BTDF by S",
+    build: Builder::Suffix(build_scale),
+    variants: &[],
+};
+pub const ABSORB_ENTRY: Entry = Entry {
+    name: "absorb",
+    catalogue: InCatalogue::Yes,
+    doc: "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
+    build: Builder::Suffix(build_absorb),
+    ..SCALE_ENTRY
+};
+pub const DIFFUSE_ENTRY: Entry = Entry {
+    name: "diffuse",
+    catalogue: InCatalogue::No,
+    doc: "adds a Lambertian transmission kd/pi (BTDF)",
+    build: Builder::Suffix(build_diffuse),
+    ..SCALE_ENTRY
+};
 
 const NDF_LIST: &str = "tr, beckmann, gtr, gg";
 
@@ -661,4 +695,16 @@ pub fn build_absorb(inner: Node) -> Result<Node, String> {
 
 pub fn build_diffuse(inner: Node) -> Result<Node, String> {
     wrap(Suffix::Diffuse, inner)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn declared_variants_are_the_ndfs() {
+        let names: Vec<&str> = Ndf::ALL.iter().map(|n| n.name()).collect();
+        assert_eq!(names, ENTRY.variants);
+        assert_eq!(NDF_LIST, ENTRY.variants.join(", "));
+    }
 }

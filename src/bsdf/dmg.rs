@@ -13,13 +13,14 @@
 //! B ∈ `lambert on eon vmf ggx`. Twins: `shaders/micrograin.wgsl` + `shaders/dmg.wgsl`.
 
 use super::micrograin::{layer, weight, BETA_LO, RHO_G, TAU0};
-use super::{base_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
 
 /// β of dmg: linear scale (see the module doc).
-pub const BETA: ParamDecl = ParamDecl::shared("beta", BETA_LO, 1.0, 0.5, "grain height / radius");
+pub const BETA: ParamDecl =
+    ParamDecl::shared("beta", BETA_LO, 1.0, 0.5, "grain height / radius").neutral_at_lo();
 
 #[derive(Debug, Clone, Copy)]
 pub struct DiffuseMicrograin;
@@ -33,11 +34,8 @@ pub fn dmg_layer(tau0: f64, beta: f64, rho_g: f64, wi: DVec3, wo: DVec3, f_base:
 }
 
 impl Bsdf for DiffuseMicrograin {
-    fn name(&self) -> &'static str {
-        "dmg"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![TAU0, BETA, RHO_G]
@@ -62,8 +60,21 @@ impl Bsdf for DiffuseMicrograin {
     }
 }
 
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "dmg",
+    kind: Some(Kind::Brdf),
+    role: Role::Layer {
+        over: &[Role::DiffuseBase, Role::SpecularLobe],
+    },
+    catalogue: InCatalogue::Yes,
+    doc: "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
+    build: Builder::Term(build),
+    variants: &[],
+};
+
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg("dmg", arg, &["lambert", "on", "eon", "vmf", "ggx"])?;
+    let base = base_arg(&ENTRY, arg)?;
     Ok(Node::with(DiffuseMicrograin, vec![base]))
 }
 
@@ -73,8 +84,6 @@ mod tests {
     use super::super::Model;
     use super::*;
     use std::f64::consts::PI;
-
-    const BASES: [&str; 5] = ["lambert", "on", "eon", "vmf", "ggx"];
 
     fn model(base: &str, assign: &str) -> (Model, Vec<f64>) {
         let m = Model::parse(&format!("dmg({base})"), 1).unwrap();
@@ -95,7 +104,7 @@ mod tests {
     /// |f − f_B| ≤ 2e-3·max(ρ_g/π, f_B). Checked on every base.
     #[test]
     fn tau0_lower_bound_reproduces_the_base() {
-        for base in BASES {
+        for base in super::super::registry::bases_of(&ENTRY) {
             let (m, p) = model(base, "tau0=0.001,rho_g=0.9");
             let mb = Model::parse(base, 1).unwrap();
             let pb = p[3..].to_vec();
@@ -114,7 +123,7 @@ mod tests {
 
     #[test]
     fn reciprocal_finite_and_non_negative_on_edge_grid() {
-        for base in BASES {
+        for base in super::super::registry::bases_of(&ENTRY) {
             let m = Model::parse(&format!("dmg({base})"), 1).unwrap();
             let base_reciprocal = m.root.children[0].bsdf.reciprocal();
             for &tau0 in &[1e-3, 0.3, 0.999] {

@@ -10,7 +10,7 @@
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
 //! Twin: `shaders/eon.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -45,16 +45,13 @@ pub fn f_fon(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
 pub struct Eon;
 
 impl Bsdf for Eon {
-    fn name(&self) -> &'static str {
-        "eon"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo"),
-            ParamDecl::shared("r", 0.0, 1.0, 0.5, "roughness"),
+            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0),
+            ParamDecl::shared("r", 0.0, 1.0, 0.5, "roughness").neutral_at(0.0),
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
@@ -81,6 +78,17 @@ impl Bsdf for Eon {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "eon",
+    kind: Some(Kind::Brdf),
+    role: Role::DiffuseBase,
+    catalogue: InCatalogue::Yes,
+    doc: "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
+    build: Builder::Term(build),
+    variants: &[],
+};
 
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
     no_arg("eon", arg)?;

@@ -5,7 +5,7 @@
 //! Twin: `shaders/fa.wgsl`.
 
 use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
-use super::{base_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -14,26 +14,14 @@ use glam::DVec3;
 pub struct FresnelAggregate;
 
 impl Bsdf for FresnelAggregate {
-    fn name(&self) -> &'static str {
-        "fa"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl {
-                name: "lobe.alpha",
-                ..ALPHA
-            },
-            ParamDecl {
-                name: "lobe.eta",
-                ..ETA
-            },
-            ParamDecl {
-                name: "lobe.ks",
-                ..KS
-            },
+            ALPHA.renamed("lobe.alpha"),
+            ETA.renamed("lobe.eta"),
+            KS.renamed("lobe.ks"),
         ]
     }
     fn child_roles(&self) -> &'static [&'static str] {
@@ -59,7 +47,20 @@ impl Bsdf for FresnelAggregate {
     }
 }
 
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "fa",
+    kind: Some(Kind::Brdf),
+    role: Role::Layer {
+        over: &[Role::DiffuseBase],
+    },
+    catalogue: InCatalogue::Yes,
+    doc: "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
+    build: Builder::Term(build),
+    variants: &[],
+};
+
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg("fa", arg, &["lambert", "on", "eon", "vmf"])?;
+    let base = base_arg(&ENTRY, arg)?;
     Ok(Node::with(FresnelAggregate, vec![base]))
 }

@@ -3,7 +3,7 @@
 //! f = k_s · F(ωi·h; η) · D(h) · G1(ωi) G1(ωo) / (4 μi μo), F the exact dielectric
 //! Fresnel. Twin: `shaders/ggx.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, ggx_d, ggx_g1, half_vector};
 use glam::DVec3;
@@ -21,19 +21,18 @@ pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
 }
 
 /// Parameters of a GGX lobe (also the `lobe.*` parameters of `fa`).
-pub const KS: ParamDecl = ParamDecl::rgb("ks", 0.0, 1.0, 0.5, "specular scale");
+pub const KS: ParamDecl = ParamDecl::rgb("ks", 0.0, 1.0, 0.5, "specular scale").neutral_at(0.0);
 pub const ALPHA: ParamDecl = ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "GGX roughness").log();
-pub const ETA: ParamDecl = ParamDecl::shared("eta", 1.0, 5.0, 1.5, "refractive index");
+pub const ETA: ParamDecl = ParamDecl::shared("eta", 1.0, 5.0, 1.5, "refractive index")
+    // η = 1: no Fresnel reflection, so the lobe vanishes (and fa's base is unattenuated).
+    .neutral_at(1.0);
 
 #[derive(Debug, Clone, Copy)]
 pub struct Ggx;
 
 impl Bsdf for Ggx {
-    fn name(&self) -> &'static str {
-        "ggx"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![KS, ALPHA, ETA]
@@ -48,6 +47,17 @@ impl Bsdf for Ggx {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "ggx",
+    kind: Some(Kind::Brdf),
+    role: Role::SpecularLobe,
+    catalogue: InCatalogue::Yes,
+    doc: "GGX microfacet reflection (Walter et al. 2007)",
+    build: Builder::Term(build),
+    variants: &[],
+};
 
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
     no_arg("ggx", arg)?;

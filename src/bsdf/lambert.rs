@@ -1,6 +1,6 @@
 //! Lambertian reflection: f = ρ/π. Twin: `shaders/lambert.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -9,14 +9,11 @@ use std::f64::consts::FRAC_1_PI;
 pub struct Lambert;
 
 impl Bsdf for Lambert {
-    fn name(&self) -> &'static str {
-        "lambert"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
-        vec![ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo")]
+        vec![ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0)]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
         if wi.z <= 0.0 || wo.z <= 0.0 {
@@ -31,6 +28,17 @@ impl Bsdf for Lambert {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "lambert",
+    kind: Some(Kind::Brdf),
+    role: Role::DiffuseBase,
+    catalogue: InCatalogue::Yes,
+    doc: "Lambertian: f = rho/pi",
+    build: Builder::Term(build),
+    variants: &[],
+};
 
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
     no_arg("lambert", arg)?;

@@ -59,11 +59,16 @@ pub const BETA_MIN: f64 = 1e-4;
 /// grazing effect of the previous); a linear box would give [1e-3, 0.1] only 10 % of the
 /// unit box. On the log box dw/du ∝ τ0 (1−τ0)^{E}·E stays within a factor ~3 of its peak
 /// over τ0 ∈ [0.05, 0.95], i.e. the sensitivity is spread evenly over the useful range.
-pub const TAU0: ParamDecl = ParamDecl::shared("tau0", 1e-3, 0.999, 0.5, "filling factor").log();
+pub const TAU0: ParamDecl = ParamDecl::shared("tau0", 1e-3, 0.999, 0.5, "filling factor")
+    .log()
+    // The thinnest layer: w ≈ τ0 at every angle.
+    .neutral_at_lo();
 /// Grain albedo.
-pub const RHO_G: ParamDecl = ParamDecl::rgb("rho_g", 0.0, 1.0, 0.5, "grain albedo");
+pub const RHO_G: ParamDecl = ParamDecl::rgb("rho_g", 0.0, 1.0, 0.5, "grain albedo").neutral_at(0.0);
 /// Grain index of refraction (rmg).
-pub const ETA_G: ParamDecl = ParamDecl::shared("eta_g", 1.0, 5.0, 1.5, "grain refractive index");
+pub const ETA_G: ParamDecl = ParamDecl::shared("eta_g", 1.0, 5.0, 1.5, "grain refractive index")
+    // η = 1: Lambertian-like grains, no grain specular.
+    .neutral_at(1.0);
 /// β lower bound: grains 1/100 as high as wide are flat platelets already (the diffuse
 /// layer is then w = τ0 everywhere but at μ < β); the f32 twin is accurate down to 1e-3.
 pub const BETA_LO: f64 = 1e-2;

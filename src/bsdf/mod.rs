@@ -1,5 +1,6 @@
-//! The model catalogue (DESIGN §3): one file per model, each the twin of a WGSL file in
-//! `shaders/`, plus the spec parser and the compiled [`Model`] the backends evaluate.
+//! The model catalogue: one file per model, each the twin of a WGSL file in
+//! `shaders/bsdf/`, its declarations ([`decl`]), the spec parser ([`spec`]), the registry
+//! ([`registry`], one line per model) and the compiled [`Model`] the backends evaluate.
 //!
 //! A model is a tree of [`Bsdf`] nodes. Each node declares its own parameters once
 //! ([`ParamDecl`]); combinators (`dmg(B)`, `fa(B)`, `M+retro`, BTDF suffixes) receive
@@ -8,11 +9,17 @@
 //! that the node functions read — the same layout on the CPU and the GPU.
 
 use crate::data::Kind;
+pub use decl::{Builder, Entry, InCatalogue, ParamDecl, Role, Scale};
 use glam::DVec3;
+pub use registry::{
+    base_arg, bases_of, build, catalogue, catalogue_for, no_arg, spec_kind, REGISTRY,
+};
+pub use spec::{render_spec, Ast};
 use std::fmt;
 use std::sync::Arc;
 
 pub mod btdf;
+pub mod decl;
 pub mod dmg;
 pub mod eon;
 pub mod fa;
@@ -21,94 +28,11 @@ pub mod lambert;
 pub mod micrograin;
 pub mod on;
 pub mod peraxis;
+pub mod registry;
 pub mod retro;
 pub mod rmg;
+pub mod spec;
 pub mod vmf;
-
-/// How a parameter is mapped to the optimizers' unit box.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Scale {
-    Linear,
-    /// Logarithmic, for parameters spanning decades (roughness); needs lo > 0.
-    Log,
-}
-
-/// One parameter, declared once by the model that owns it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ParamDecl {
-    /// Stable ASCII name (DESIGN §3), without the role prefix of nested models.
-    pub name: &'static str,
-    pub lo: f64,
-    pub hi: f64,
-    pub default: f64,
-    /// One value per channel ("rgb") or shared across channels.
-    pub rgb: bool,
-    pub scale: Scale,
-    pub doc: &'static str,
-}
-
-impl ParamDecl {
-    pub const fn shared(
-        name: &'static str,
-        lo: f64,
-        hi: f64,
-        default: f64,
-        doc: &'static str,
-    ) -> Self {
-        ParamDecl {
-            name,
-            lo,
-            hi,
-            default,
-            rgb: false,
-            scale: Scale::Linear,
-            doc,
-        }
-    }
-    pub const fn rgb(
-        name: &'static str,
-        lo: f64,
-        hi: f64,
-        default: f64,
-        doc: &'static str,
-    ) -> Self {
-        ParamDecl {
-            name,
-            lo,
-            hi,
-            default,
-            rgb: true,
-            scale: Scale::Linear,
-            doc,
-        }
-    }
-    pub const fn log(self) -> Self {
-        ParamDecl {
-            scale: Scale::Log,
-            ..self
-        }
-    }
-
-    /// Unit-box coordinate → physical value.
-    pub fn from_unit(&self, u: f64) -> f64 {
-        let u = u.clamp(0.0, 1.0);
-        match self.scale {
-            Scale::Linear => self.lo + u * (self.hi - self.lo),
-            Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
-        }
-        .clamp(self.lo, self.hi)
-    }
-
-    /// Physical value → unit-box coordinate (clamped to the box).
-    pub fn to_unit(&self, v: f64) -> f64 {
-        let v = v.clamp(self.lo, self.hi);
-        match self.scale {
-            Scale::Linear => (v - self.lo) / (self.hi - self.lo),
-            Scale::Log => (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()),
-        }
-    }
-}
-
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]
 pub struct WgslFn {
@@ -120,9 +44,16 @@ pub struct WgslFn {
 
 /// One node of a model tree: a BSDF or a combinator of its children.
 pub trait Bsdf: Send + Sync + fmt::Debug {
+    /// The node's registry entry: its declared name, kind and role.
+    fn entry(&self) -> &'static Entry;
     /// The spec name (`lambert`, `dmg`, `retro`, …).
-    fn name(&self) -> &'static str;
-    fn kind(&self) -> Kind;
+    fn name(&self) -> &'static str {
+        self.entry().name
+    }
+    /// The declared kind; a suffix that applies to either kind overrides this.
+    fn kind(&self) -> Kind {
+        self.entry().kind.unwrap_or(Kind::Brdf)
+    }
     /// The node's own parameters, in the order `eval` reads them.
     fn params(&self) -> Vec<ParamDecl>;
     /// Roles of the children (`"base"` → parameters prefixed `base.`; `""` → unprefixed).
@@ -302,11 +233,7 @@ impl Model {
             let decls = node.bsdf.params();
             node.nparams = decls.len();
             for decl in decls {
-                let axes = if per_axis && peraxis::PER_AXIS.contains(&decl.name) {
-                    l.axes
-                } else {
-                    1
-                };
+                let axes = if per_axis && decl.per_axis { l.axes } else { 1 };
                 let p = FlatParam {
                     name: format!("{prefix}{}", decl.name),
                     decl,
@@ -528,220 +455,6 @@ impl Model {
         let mut v = Vec::new();
         self.root.visit(&mut |n| v.push(n));
         v
-    }
-}
-
-// ---------------------------------------------------------------------------------------
-// Spec strings: `term ('+' suffix)*`, `term := name ('(' spec ')')?`.
-
-/// Parsed spec syntax.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Ast {
-    Term { name: String, arg: Option<Box<Ast>> },
-    Suffix { inner: Box<Ast>, name: String },
-}
-
-impl Ast {
-    pub fn parse(s: &str) -> Result<Ast, SpecError> {
-        let err = |msg: String| SpecError::Parse {
-            spec: s.to_string(),
-            msg,
-        };
-        if s.is_empty() {
-            return Err(err("empty spec".into()));
-        }
-        let (ast, rest) = parse_spec(s).map_err(err)?;
-        if !rest.is_empty() {
-            return Err(SpecError::Parse {
-                spec: s.to_string(),
-                msg: format!("unexpected '{rest}'"),
-            });
-        }
-        Ok(ast)
-    }
-}
-
-fn parse_ident(s: &str) -> Result<(String, &str), String> {
-    let end = s
-        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-        .unwrap_or(s.len());
-    if end == 0 {
-        return Err(format!("expected a model name at '{s}'"));
-    }
-    Ok((s[..end].to_ascii_lowercase(), &s[end..]))
-}
-
-fn parse_spec(s: &str) -> Result<(Ast, &str), String> {
-    let (name, mut rest) = parse_ident(s)?;
-    let mut ast = if let Some(r) = rest.strip_prefix('(') {
-        let (inner, r) = parse_spec(r)?;
-        let r = r
-            .strip_prefix(')')
-            .ok_or_else(|| format!("missing ')' after '{}'", &s[..s.len() - r.len()]))?;
-        rest = r;
-        Ast::Term {
-            name,
-            arg: Some(Box::new(inner)),
-        }
-    } else {
-        Ast::Term { name, arg: None }
-    };
-    while let Some(r) = rest.strip_prefix('+') {
-        let (suffix, r) = parse_ident(r)?;
-        ast = Ast::Suffix {
-            inner: Box::new(ast),
-            name: suffix,
-        };
-        rest = r;
-    }
-    Ok((ast, rest))
-}
-
-/// Builds a node from a term's optional argument.
-pub type TermBuilder = fn(arg: Option<&Ast>) -> Result<Node, String>;
-/// Wraps a node in a suffix combinator.
-pub type SuffixBuilder = fn(inner: Node) -> Result<Node, String>;
-
-/// The registry: one line per model (DESIGN: "add a file on each side and one registry line").
-pub const TERMS: &[(&str, TermBuilder, &str)] = &[
-    ("lambert", lambert::build, "Lambertian: f = rho/pi"),
-    ("on", on::build, "Oren-Nayar 1994 qualitative model"),
-    (
-        "eon",
-        eon::build,
-        "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
-    ),
-    ("vmf", vmf::build, "VMF diffuse (d'Eon & Weidlich 2024)"),
-    (
-        "ggx",
-        ggx::build,
-        "GGX microfacet reflection (Walter et al. 2007)",
-    ),
-    (
-        "dmg",
-        dmg::build,
-        "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
-    ),
-    (
-        "rmg",
-        rmg::build,
-        "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
-    ),
-    (
-        "fa",
-        fa::build,
-        "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
-    ),
-    (
-        "btdf",
-        btdf::build,
-        "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
-    ),
-];
-
-pub const SUFFIXES: &[(&str, SuffixBuilder, &str)] = &[
-    (
-        "retro",
-        retro::build,
-        "adds a back-vector retroreflective GGX lobe (BRDF)",
-    ),
-    ("scale", btdf::build_scale, "multiplies a BTDF by S"),
-    (
-        "absorb",
-        btdf::build_absorb,
-        "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
-    ),
-    (
-        "diffuse",
-        btdf::build_diffuse,
-        "adds a Lambertian transmission kd/pi (BTDF)",
-    ),
-    (
-        "peraxis",
-        peraxis::build,
-        "roughness (alpha, beta) gets one value per measured phi plane",
-    ),
-];
-
-/// Build a node tree from syntax.
-pub fn build(ast: &Ast) -> Result<Node, String> {
-    match ast {
-        Ast::Term { name, arg } => {
-            let (_, b, _) = TERMS.iter().find(|(n, _, _)| n == name).ok_or_else(|| {
-                format!(
-                    "unknown model '{name}' (known: {})",
-                    TERMS.iter().map(|t| t.0).collect::<Vec<_>>().join(", ")
-                )
-            })?;
-            b(arg.as_deref())
-        }
-        Ast::Suffix { inner, name } => {
-            let (_, b, _) = SUFFIXES.iter().find(|(n, _, _)| n == name).ok_or_else(|| {
-                format!(
-                    "unknown suffix '+{name}' (known: {})",
-                    SUFFIXES
-                        .iter()
-                        .map(|t| format!("+{}", t.0))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
-            })?;
-            b(build(inner)?)
-        }
-    }
-}
-
-/// Builders' helper: a term that takes no argument.
-pub fn no_arg(name: &str, arg: Option<&Ast>) -> Result<(), String> {
-    match arg {
-        None => Ok(()),
-        Some(_) => Err(format!("'{name}' takes no argument")),
-    }
-}
-
-/// Builders' helper: build the base model of a combinator and check it is allowed.
-pub fn base_arg(name: &str, arg: Option<&Ast>, allowed: &[&str]) -> Result<Node, String> {
-    let Some(arg) = arg else {
-        return Err(format!(
-            "'{name}' needs a base model, e.g. {name}({})",
-            allowed[0]
-        ));
-    };
-    let node = build(arg)?;
-    if !allowed.contains(&node.bsdf.name()) || !node.children.is_empty() {
-        return Err(format!(
-            "'{name}' takes a base among {}",
-            allowed.join(", ")
-        ));
-    }
-    Ok(node)
-}
-
-/// The catalogue a sweep runs by default for a kind of data.
-pub fn catalogue(kind: Kind) -> Vec<String> {
-    match kind {
-        Kind::Brdf => {
-            let bases = ["lambert", "on", "eon", "vmf", "ggx"];
-            let mut v: Vec<String> = bases.iter().map(|s| s.to_string()).collect();
-            for comb in ["dmg", "rmg"] {
-                v.extend(bases.iter().map(|b| format!("{comb}({b})")));
-            }
-            v.extend(
-                ["lambert", "on", "eon", "vmf"]
-                    .iter()
-                    .map(|b| format!("fa({b})")),
-            );
-            v
-        }
-        Kind::Btdf => {
-            let mut v = Vec::new();
-            for ndf in ["tr", "beckmann", "gtr", "gg"] {
-                for suffix in ["", "+scale", "+absorb"] {
-                    v.push(format!("btdf({ndf}){suffix}"));
-                }
-            }
-            v
-        }
     }
 }
 

@@ -7,7 +7,7 @@
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
 //! Twin: `shaders/on.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
@@ -16,22 +16,20 @@ use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
 pub struct OrenNayar;
 
 impl Bsdf for OrenNayar {
-    fn name(&self) -> &'static str {
-        "on"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo"),
+            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0),
             ParamDecl::shared(
                 "sigma",
                 0.0,
                 FRAC_PI_2,
                 0.3,
                 "facet slope standard deviation (rad)",
-            ),
+            )
+            .neutral_at(0.0),
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
@@ -53,6 +51,17 @@ impl Bsdf for OrenNayar {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "on",
+    kind: Some(Kind::Brdf),
+    role: Role::DiffuseBase,
+    catalogue: InCatalogue::Yes,
+    doc: "Oren-Nayar 1994 qualitative model",
+    build: Builder::Term(build),
+    variants: &[],
+};
 
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
     no_arg("on", arg)?;

@@ -1,16 +1,26 @@
 //! `M+peraxis`: the roughness parameters of M (`alpha`, `beta`) get one value per
 //! measured φ plane, the others stay shared — the paper fits its anisotropic diffusers
 //! A and D axis by axis (§2.3.2); this fits both planes at once with the index and scale
-//! shared. The node itself computes nothing: the layout (src/model/mod.rs) gives the
+//! shared. The node itself computes nothing: the layout (src/bsdf/mod.rs) gives the
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/peraxis.wgsl`.
 
-use super::{Bsdf, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
-/// Parameter names that become per-plane under `+peraxis`.
-pub const PER_AXIS: &[&str] = &["alpha", "beta"];
+/// Registry entry: a suffix of either kind; in the catalogue, appended to the scaled
+/// models for data measured on several planes.
+pub const ENTRY: Entry = Entry {
+    name: "peraxis",
+    kind: None,
+    role: Role::Suffix,
+    catalogue: InCatalogue::MultiPlaneAfter("scale"),
+    doc:
+        "roughness parameters (declared per-axis: alpha, beta) get one value per measured phi plane",
+    build: Builder::Suffix(build),
+    variants: &[],
+};
 
 #[derive(Debug, Clone, Copy)]
 pub struct PerAxis {
@@ -18,8 +28,8 @@ pub struct PerAxis {
 }
 
 impl Bsdf for PerAxis {
-    fn name(&self) -> &'static str {
-        "peraxis"
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn kind(&self) -> Kind {
         self.kind
@@ -54,14 +64,14 @@ pub fn build(inner: Node) -> Result<Node, String> {
     }
     let mut twice = false;
     visit(&inner, &mut |n| {
-        has_roughness |= n.bsdf.params().iter().any(|p| PER_AXIS.contains(&p.name));
+        has_roughness |= n.bsdf.params().iter().any(|p| p.per_axis);
         twice |= n.bsdf.name() == "peraxis";
     });
     if twice {
         return Err("+peraxis given twice".into());
     }
     if !has_roughness {
-        return Err("+peraxis needs a model with a roughness parameter (alpha or beta)".into());
+        return Err("+peraxis needs a model with a per-plane (roughness) parameter".into());
     }
     let kind = inner.bsdf.kind();
     Ok(Node::with(PerAxis { kind }, vec![inner]))

@@ -3,7 +3,7 @@
 //! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z). It peaks at ωo = ωi.
 //! Twin: `shaders/retro.wgsl`.
 
-use super::{Bsdf, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{ggx_d, ggx_g1, half_vector};
 use glam::DVec3;
@@ -24,15 +24,12 @@ pub fn retro_lobe(kr: f64, alpha: f64, wi: DVec3, wo: DVec3) -> f64 {
 }
 
 impl Bsdf for Retro {
-    fn name(&self) -> &'static str {
-        "retro"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("kr", 0.0, 10.0, 0.1, "retroreflective lobe scale"),
+            ParamDecl::rgb("kr", 0.0, 10.0, 0.1, "retroreflective lobe scale").neutral_at(0.0),
             ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness").log(),
         ]
     }
@@ -49,6 +46,17 @@ impl Bsdf for Retro {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "retro",
+    kind: Some(Kind::Brdf),
+    role: Role::Suffix,
+    catalogue: InCatalogue::No,
+    doc: "adds a back-vector retroreflective GGX lobe (BRDF)",
+    build: Builder::Suffix(build),
+    variants: &[],
+};
 
 pub fn build(inner: Node) -> Result<Node, String> {
     if inner.bsdf.kind() != Kind::Brdf {

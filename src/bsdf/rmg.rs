@@ -20,13 +20,14 @@
 //! Twins: `shaders/micrograin.wgsl` + `shaders/rmg.wgsl`.
 
 use super::micrograin::{layer, rough_grain, weight, BETA_LO, ETA_G, RHO_G, TAU0};
-use super::{base_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
 /// β of rmg: log scale (see the module doc).
-pub const BETA: ParamDecl =
-    ParamDecl::shared("beta", BETA_LO, 1.0, 0.5, "grain height / radius").log();
+pub const BETA: ParamDecl = ParamDecl::shared("beta", BETA_LO, 1.0, 0.5, "grain height / radius")
+    .log()
+    .neutral_at_lo();
 
 #[derive(Debug, Clone, Copy)]
 pub struct RoughMicrograin;
@@ -52,11 +53,8 @@ pub fn rmg_layer(
 }
 
 impl Bsdf for RoughMicrograin {
-    fn name(&self) -> &'static str {
-        "rmg"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![TAU0, BETA, RHO_G, ETA_G]
@@ -81,8 +79,21 @@ impl Bsdf for RoughMicrograin {
     }
 }
 
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "rmg",
+    kind: Some(Kind::Brdf),
+    role: Role::Layer {
+        over: &[Role::DiffuseBase, Role::SpecularLobe],
+    },
+    catalogue: InCatalogue::Yes,
+    doc: "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
+    build: Builder::Term(build),
+    variants: &[],
+};
+
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg("rmg", arg, &["lambert", "on", "eon", "vmf", "ggx"])?;
+    let base = base_arg(&ENTRY, arg)?;
     Ok(Node::with(RoughMicrograin, vec![base]))
 }
 
@@ -94,8 +105,6 @@ mod tests {
     use super::*;
     use crate::math::fresnel_dielectric;
     use std::f64::consts::PI;
-
-    const BASES: [&str; 5] = ["lambert", "on", "eon", "vmf", "ggx"];
 
     fn base_assign(base: &str, v: f64) -> String {
         format!("{}={v}", if base == "ggx" { "base.ks" } else { "base.rho" })
@@ -124,7 +133,7 @@ mod tests {
     /// |f − f_B| ≤ 2e-3·max(f_grain, f_B). Checked on every base, off the specular peak.
     #[test]
     fn tau0_lower_bound_reproduces_the_base() {
-        for base in BASES {
+        for base in super::super::registry::bases_of(&ENTRY) {
             let m = Model::parse(&format!("rmg({base})"), 1).unwrap();
             let p = m
                 .params_from_assignments(&format!("tau0=0.001,beta=0.3,{}", base_assign(base, 0.5)))
@@ -147,7 +156,7 @@ mod tests {
 
     #[test]
     fn reciprocal_finite_and_non_negative_on_edge_grid() {
-        for base in BASES {
+        for base in super::super::registry::bases_of(&ENTRY) {
             let m = Model::parse(&format!("rmg({base})"), 1).unwrap();
             let base_reciprocal = m.root.children[0].bsdf.reciprocal();
             for &tau0 in &[1e-3, 0.3, 0.999] {

@@ -52,7 +52,7 @@
 //!
 //! Twin: `shaders/vmf.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Node, ParamDecl, WgslFn};
+use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -324,16 +324,13 @@ pub fn f_vmf(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
 pub struct Vmf;
 
 impl Bsdf for Vmf {
-    fn name(&self) -> &'static str {
-        "vmf"
-    }
-    fn kind(&self) -> Kind {
-        Kind::Brdf
+    fn entry(&self) -> &'static Entry {
+        &ENTRY
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo"),
-            ParamDecl::shared("r", 0.0, R_MAX, 0.5, "roughness"),
+            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0),
+            ParamDecl::shared("r", 0.0, R_MAX, 0.5, "roughness").neutral_at(0.0),
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
@@ -346,6 +343,17 @@ impl Bsdf for Vmf {
         }
     }
 }
+
+/// Registry entry (one line in [`super::registry::REGISTRY`]).
+pub const ENTRY: Entry = Entry {
+    name: "vmf",
+    kind: Some(Kind::Brdf),
+    role: Role::DiffuseBase,
+    catalogue: InCatalogue::Yes,
+    doc: "VMF diffuse (d'Eon & Weidlich 2024)",
+    build: Builder::Term(build),
+    variants: &[],
+};
 
 pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
     no_arg("vmf", arg)?;

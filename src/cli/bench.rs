@@ -33,14 +33,12 @@ pub fn run(a: BenchArgs) -> Result<()> {
         Some(list) => list
             .iter()
             .map(|s| {
-                let kind = if s.trim_start().starts_with("btdf") {
-                    Kind::Btdf
-                } else {
-                    Kind::Brdf
-                };
-                (kind, s.trim().to_string())
+                Ok((
+                    bsdf::spec_kind(s).context("--models")?,
+                    s.trim().to_string(),
+                ))
             })
-            .collect(),
+            .collect::<Result<_>>()?,
         None => bsdf::catalogue(Kind::Brdf)
             .into_iter()
             .map(|s| (Kind::Brdf, s))

@@ -8,13 +8,28 @@ use anyhow::Result;
 pub fn run() -> Result<()> {
     println!("Models (spec strings; nested parameters are prefixed by role, rgb = one value per channel):");
     let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
-    examples.push("lambert+retro".into());
-    examples.extend(bsdf::catalogue(Kind::Btdf));
-    for (name, _, doc) in bsdf::TERMS {
-        println!("  {name:<8} {doc}");
-    }
-    for (name, _, doc) in bsdf::SUFFIXES {
-        println!("  +{name:<7} {doc}");
+    examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
+    for e in bsdf::REGISTRY {
+        let name = match e.build {
+            bsdf::Builder::Term(_) => e.name.to_string(),
+            bsdf::Builder::Suffix(_) => format!("+{}", e.name),
+        };
+        let kind = e
+            .kind
+            .map(|k| k.to_string())
+            .unwrap_or_else(|| "any".into());
+        println!("  {name:<8} {kind:<4} {:<13} {}", role_word(e.role), e.doc);
+        if e.catalogue == bsdf::InCatalogue::No {
+            // Models outside the default sweep still appear among the examples.
+            match e.build {
+                bsdf::Builder::Suffix(_) => examples.push(format!(
+                    "{}+{}",
+                    bsdf::catalogue(e.kind.unwrap_or(Kind::Brdf))[0],
+                    e.name
+                )),
+                bsdf::Builder::Term(_) => examples.push(e.name.to_string()),
+            }
+        }
     }
     println!("\nCatalogue:");
     for spec in examples {
@@ -45,4 +60,14 @@ pub fn run() -> Result<()> {
         println!("  {:<10} {:<5} {}", g.name, g.kind.to_string(), g.doc);
     }
     Ok(())
+}
+
+fn role_word(r: bsdf::Role) -> &'static str {
+    match r {
+        bsdf::Role::DiffuseBase => "diffuse base",
+        bsdf::Role::SpecularLobe => "specular lobe",
+        bsdf::Role::Layer { .. } => "layer over B",
+        bsdf::Role::Transmission => "transmission",
+        bsdf::Role::Suffix => "suffix",
+    }
 }

@@ -1,6 +1,6 @@
 //! `bsdfit synth`.
 
-use crate::bsdf::Model;
+use crate::bsdf::{self, Model};
 use crate::data::Kind;
 use crate::workflows::synth;
 use anyhow::{Context, Result};
@@ -37,11 +37,7 @@ pub struct SynthArgs {
 }
 
 pub fn run(a: SynthArgs) -> Result<()> {
-    let ast_kind = if a.model.trim_start().starts_with("btdf") {
-        Kind::Btdf
-    } else {
-        Kind::Brdf
-    };
+    let ast_kind = bsdf::spec_kind(&a.model).context("--model")?;
     let wavelengths = a.wavelengths.clone().unwrap_or_else(|| match ast_kind {
         Kind::Brdf => vec![450.0, 550.0, 650.0],
         Kind::Btdf => vec![633.0],

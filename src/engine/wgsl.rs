@@ -74,6 +74,24 @@ pub fn eval_model_source(model: &Model) -> String {
     )
 }
 
+/// Parameter accessors generated from a node's declarations: `fn <prefix>_<name>(o: u32)
+/// -> f32` returns the parameter `name` of the node whose scalar view starts at `o`, with
+/// `<prefix>` the node's WGSL function name without `_eval` and dots in role-prefixed
+/// names written as `_` (`fa_lobe_alpha`). The WGSL twins read their parameters only
+/// through these, so Rust and WGSL cannot disagree on the order.
+pub fn accessors_source(node: &Node) -> String {
+    let w = node.bsdf.wgsl();
+    let prefix = w.function.strip_suffix("_eval").unwrap_or(&w.function);
+    let mut src = String::new();
+    for (k, p) in node.bsdf.params().iter().enumerate() {
+        src += &format!(
+            "fn {prefix}_{}(o: u32) -> f32 {{ return P[o + {k}u]; }}\n",
+            p.name.replace('.', "_")
+        );
+    }
+    src
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
@@ -91,7 +109,14 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     );
     src += COMMON;
     let mut included: Vec<&str> = Vec::new();
+    let mut accessors: Vec<String> = Vec::new();
     for node in model.nodes() {
+        let function = node.bsdf.wgsl().function;
+        if !accessors.contains(&function) {
+            src += &format!("\n// ---- parameters of {function} (generated)\n");
+            src += &accessors_source(node);
+            accessors.push(function);
+        }
         for (name, text) in node.bsdf.wgsl().sources {
             if !included.contains(&name) {
                 included.push(name);

@@ -46,15 +46,6 @@ pub fn expand_data(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// The kind of data a spec is for, from its syntax (works for models that fail to build).
-pub fn spec_kind(spec: &str) -> Kind {
-    if spec.trim_start().to_ascii_lowercase().starts_with("btdf") {
-        Kind::Btdf
-    } else {
-        Kind::Brdf
-    }
-}
-
 /// One fit to run.
 #[derive(Clone, Debug)]
 pub struct Task {
@@ -110,21 +101,16 @@ pub fn tasks(files: &[DataFile], args: &Selection) -> Result<Vec<Task>> {
             Some(list) => list
                 .iter()
                 .map(|s| s.trim().to_string())
-                .filter(|s| !s.is_empty() && spec_kind(s) == kind)
+                // A spec that does not parse is kept for every kind: its fit is then
+                // skipped with the parser's reason.
+                .filter(|s| {
+                    !s.is_empty() && bsdf::spec_kind(s).is_ok_and(|k| k == kind)
+                        || bsdf::spec_kind(s).is_err()
+                })
                 .collect(),
-            None => {
-                let mut v = bsdf::catalogue(kind);
-                // Data measured on several φ planes (anisotropic diffusers, paper §2.3.2)
-                // also gets the per-plane roughness variants of the scaled BTDF models.
-                if kind == Kind::Btdf && f.data.axes.len() > 1 {
-                    v.extend(
-                        ["tr", "beckmann", "gtr", "gg"]
-                            .iter()
-                            .map(|n| format!("btdf({n})+scale+peraxis")),
-                    );
-                }
-                v
-            }
+            // Data measured on several φ planes (anisotropic diffusers) also gets the
+            // catalogue's per-plane variants.
+            None => bsdf::catalogue_for(kind, f.data.axes.len()),
         };
         let losses: Vec<Metric> = match &args.losses {
             Some(list) => {

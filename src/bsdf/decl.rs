@@ -1,0 +1,183 @@
+//! What a model declares once: its parameters ([`ParamDecl`]) and its registry [`Entry`]
+//! (name, kind, role, documentation, builder). The catalogue, the base allow-lists,
+//! `bsdfit models`, the per-plane variants, the kind of a spec and diagnose's extensions
+//! and embeddings are all derived from these declarations (see [`super::registry`]).
+
+use super::spec::Ast;
+use super::Node;
+use crate::data::Kind;
+
+/// How a parameter is mapped to the optimizers' unit box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    Linear,
+    /// Logarithmic, for parameters spanning decades (roughness); needs lo > 0.
+    Log,
+}
+
+/// One parameter, declared once by the model that owns it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamDecl {
+    /// Stable ASCII name (DESIGN §3), without the role prefix of nested models.
+    pub name: &'static str,
+    pub lo: f64,
+    pub hi: f64,
+    pub default: f64,
+    /// One value per channel ("rgb") or shared across channels.
+    pub rgb: bool,
+    pub scale: Scale,
+    pub doc: &'static str,
+    /// The value at which the parameter makes its model add nothing to what it wraps or
+    /// extends (k_s = 0, σ = 0, S = 1, γ = 2 …): a fitted model embeds into its extension
+    /// at this value (diagnose), and a test checks the claim. `None`: no such value.
+    pub neutral: Option<f64>,
+    /// A roughness that gets one value per measured φ plane under `+peraxis`.
+    pub per_axis: bool,
+}
+
+impl ParamDecl {
+    pub const fn shared(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: false,
+            scale: Scale::Linear,
+            doc,
+            neutral: None,
+            per_axis: false,
+        }
+    }
+    pub const fn rgb(
+        name: &'static str,
+        lo: f64,
+        hi: f64,
+        default: f64,
+        doc: &'static str,
+    ) -> Self {
+        ParamDecl {
+            name,
+            lo,
+            hi,
+            default,
+            rgb: true,
+            scale: Scale::Linear,
+            doc,
+            neutral: None,
+            per_axis: false,
+        }
+    }
+    pub const fn log(self) -> Self {
+        ParamDecl {
+            scale: Scale::Log,
+            ..self
+        }
+    }
+    /// Declare the value at which the parameter adds nothing (see [`ParamDecl::neutral`]).
+    pub const fn neutral_at(self, v: f64) -> Self {
+        ParamDecl {
+            neutral: Some(v),
+            ..self
+        }
+    }
+    /// Neutral at its lower bound (the thinnest layer, the flattest grains).
+    pub const fn neutral_at_lo(self) -> Self {
+        ParamDecl {
+            neutral: Some(self.lo),
+            ..self
+        }
+    }
+    /// One value per measured φ plane under `+peraxis`.
+    pub const fn per_axis(self) -> Self {
+        ParamDecl {
+            per_axis: true,
+            ..self
+        }
+    }
+    /// The same declaration under another name (a lobe's `lobe.alpha`).
+    pub const fn renamed(self, name: &'static str) -> Self {
+        ParamDecl { name, ..self }
+    }
+
+    /// Unit-box coordinate → physical value.
+    pub fn from_unit(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        match self.scale {
+            Scale::Linear => self.lo + u * (self.hi - self.lo),
+            Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
+        }
+        .clamp(self.lo, self.hi)
+    }
+
+    /// Physical value → unit-box coordinate (clamped to the box).
+    pub fn to_unit(&self, v: f64) -> f64 {
+        let v = v.clamp(self.lo, self.hi);
+        match self.scale {
+            Scale::Linear => (v - self.lo) / (self.hi - self.lo),
+            Scale::Log => (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()),
+        }
+    }
+}
+
+/// What a model is for. Layers name the roles they accept as a base, so allow-lists are
+/// derived, never listed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// A diffuse base (`lambert on eon vmf`): a complete BRDF that may sit under a layer.
+    DiffuseBase,
+    /// A specular lobe that is a complete BRDF on its own (`ggx`).
+    SpecularLobe,
+    /// A layer or aggregate over one base, `name(B)`, B of one of these roles.
+    Layer { over: &'static [Role] },
+    /// A transmission family, `btdf(ndf)`; its variants are declared by the model.
+    Transmission,
+    /// A suffix `M+name` wrapping a model of its kind (any kind when [`Entry::kind`] is None).
+    Suffix,
+}
+
+/// Where a model appears in the default catalogue (what `sweep` fits by default).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InCatalogue {
+    No,
+    /// Yes: as itself (leaves, layers over every accepted base, each transmission
+    /// variant) or, for a suffix, appended to each catalogue model of its kind.
+    Yes,
+    /// For data measured on several φ planes: appended to every catalogue model whose
+    /// spec ends with this suffix (the scaled BTDFs get per-plane roughness).
+    MultiPlaneAfter(&'static str),
+}
+
+/// Builds a node from a term's optional argument.
+pub type TermBuilder = fn(arg: Option<&Ast>) -> Result<Node, String>;
+/// Wraps a node in a suffix combinator.
+pub type SuffixBuilder = fn(inner: Node) -> Result<Node, String>;
+
+#[derive(Clone, Copy, Debug)]
+pub enum Builder {
+    Term(TermBuilder),
+    Suffix(SuffixBuilder),
+}
+
+/// A model's registry entry: declared once, next to its code, and listed by one line of
+/// [`super::registry::REGISTRY`].
+#[derive(Clone, Copy, Debug)]
+pub struct Entry {
+    /// The spec name (`lambert`, `dmg`, `retro`, …).
+    pub name: &'static str,
+    /// BRDF or BTDF; None for suffixes that apply to either (`+peraxis`).
+    pub kind: Option<Kind>,
+    pub role: Role,
+    pub catalogue: InCatalogue,
+    /// One line for `bsdfit models`.
+    pub doc: &'static str,
+    pub build: Builder,
+    /// The argument names a term accepts (`btdf(tr)`): its variants. Empty otherwise.
+    pub variants: &'static [&'static str],
+}

@@ -1,0 +1,208 @@
+//! The registry: one line per model. Everything else about the catalogue is derived from
+//! the models' declarations ([`Entry`], [`ParamDecl`](super::ParamDecl)): the default
+//! catalogue, the bases a layer accepts, the kind of a spec, and `bsdfit models`.
+
+use super::decl::{Builder, Entry, InCatalogue, Role};
+use super::spec::Ast;
+use super::{btdf, dmg, eon, fa, ggx, lambert, on, peraxis, retro, rmg, vmf};
+use super::{Node, SpecError};
+use crate::data::Kind;
+
+/// Every model, in the order the catalogue lists them. Adding a model: its Rust file, its
+/// WGSL twin, and one line here.
+pub const REGISTRY: &[&Entry] = &[
+    &lambert::ENTRY,
+    &on::ENTRY,
+    &eon::ENTRY,
+    &vmf::ENTRY,
+    &ggx::ENTRY,
+    &dmg::ENTRY,
+    &rmg::ENTRY,
+    &fa::ENTRY,
+    &btdf::ENTRY,
+    &retro::ENTRY,
+    &btdf::SCALE_ENTRY,
+    &btdf::ABSORB_ENTRY,
+    &btdf::DIFFUSE_ENTRY,
+    &peraxis::ENTRY,
+];
+
+fn is_suffix(e: &Entry) -> bool {
+    matches!(e.build, Builder::Suffix(_))
+}
+
+/// The entry of a term (`lambert`, `btdf`) or, with `suffix`, of a suffix (`retro`).
+pub fn entry(name: &str, suffix: bool) -> Option<&'static Entry> {
+    REGISTRY
+        .iter()
+        .copied()
+        .find(|e| e.name == name && is_suffix(e) == suffix)
+}
+
+fn known(suffix: bool) -> String {
+    REGISTRY
+        .iter()
+        .filter(|e| is_suffix(e) == suffix)
+        .map(|e| {
+            if suffix {
+                format!("+{}", e.name)
+            } else {
+                e.name.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Build a node tree from syntax.
+pub fn build(ast: &Ast) -> Result<Node, String> {
+    match ast {
+        Ast::Term { name, arg } => {
+            let e = entry(name, false)
+                .ok_or_else(|| format!("unknown model '{name}' (known: {})", known(false)))?;
+            match e.build {
+                Builder::Term(b) => b(arg.as_deref()),
+                Builder::Suffix(_) => unreachable!("entry() matched a term"),
+            }
+        }
+        Ast::Suffix { inner, name } => {
+            let e = entry(name, true)
+                .ok_or_else(|| format!("unknown suffix '+{name}' (known: {})", known(true)))?;
+            match e.build {
+                Builder::Suffix(b) => b(build(inner)?),
+                Builder::Term(_) => unreachable!("entry() matched a suffix"),
+            }
+        }
+    }
+}
+
+/// The kind of data a spec is for, from its syntax and the declarations alone (it works
+/// for specs that would not build, e.g. with a base a layer does not accept).
+pub fn spec_kind(spec: &str) -> Result<Kind, SpecError> {
+    let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
+    let ast = Ast::parse(&clean)?;
+    fn kind_of(ast: &Ast) -> Result<Kind, String> {
+        match ast {
+            Ast::Term { name, .. } => entry(name, false)
+                .and_then(|e| e.kind)
+                .ok_or_else(|| format!("unknown model '{name}' (known: {})", known(false))),
+            Ast::Suffix { inner, name } => {
+                let e = entry(name, true)
+                    .ok_or_else(|| format!("unknown suffix '+{name}' (known: {})", known(true)))?;
+                match e.kind {
+                    Some(k) => Ok(k),
+                    None => kind_of(inner),
+                }
+            }
+        }
+    }
+    kind_of(&ast).map_err(|msg| SpecError::Parse { spec: clean, msg })
+}
+
+/// Builders' helper: a term that takes no argument.
+pub fn no_arg(name: &str, arg: Option<&Ast>) -> Result<(), String> {
+    match arg {
+        None => Ok(()),
+        Some(_) => Err(format!("'{name}' takes no argument")),
+    }
+}
+
+/// The leaf models (no argument, no children) whose role is one of `roles`, in registry
+/// order: the bases a layer with `Role::Layer { over: roles }` accepts.
+pub fn leaves_with_role(roles: &[Role]) -> Vec<&'static str> {
+    REGISTRY
+        .iter()
+        .filter(|e| roles.contains(&e.role))
+        .map(|e| e.name)
+        .collect()
+}
+
+/// The bases a layer accepts (empty for a model that is not a layer).
+pub fn bases_of(layer: &Entry) -> Vec<&'static str> {
+    match layer.role {
+        Role::Layer { over } => leaves_with_role(over),
+        _ => Vec::new(),
+    }
+}
+
+/// Layers' helper: build the base model of `layer(B)` and check that the layer's
+/// declaration accepts it.
+pub fn base_arg(layer: &Entry, arg: Option<&Ast>) -> Result<Node, String> {
+    let allowed = bases_of(layer);
+    if allowed.is_empty() {
+        return Err(format!("'{}' is not a layer", layer.name));
+    }
+    let name = layer.name;
+    let Some(arg) = arg else {
+        return Err(format!(
+            "'{name}' needs a base model, e.g. {name}({})",
+            allowed[0]
+        ));
+    };
+    let node = build(arg)?;
+    if !allowed.contains(&node.bsdf.name()) || !node.children.is_empty() {
+        return Err(format!(
+            "'{name}' takes a base among {}",
+            allowed.join(", ")
+        ));
+    }
+    Ok(node)
+}
+
+/// The catalogue a sweep runs by default for a kind of data measured on `planes` φ planes:
+/// every leaf, every layer over every base it accepts, every transmission variant, each
+/// with and without each catalogue suffix of its kind; plus, for data on several planes,
+/// the per-plane variants.
+pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
+    let mut cores: Vec<String> = Vec::new();
+    for e in REGISTRY.iter().filter(|e| e.kind == Some(kind)) {
+        if e.catalogue != InCatalogue::Yes || is_suffix(e) {
+            continue;
+        }
+        match e.role {
+            Role::DiffuseBase | Role::SpecularLobe => cores.push(e.name.into()),
+            Role::Layer { over } => cores.extend(
+                leaves_with_role(over)
+                    .into_iter()
+                    .map(|b| format!("{}({b})", e.name)),
+            ),
+            Role::Transmission => {
+                cores.extend(e.variants.iter().map(|v| format!("{}({v})", e.name)))
+            }
+            Role::Suffix => {}
+        }
+    }
+    let suffixes: Vec<&Entry> = REGISTRY
+        .iter()
+        .copied()
+        .filter(|e| is_suffix(e) && e.catalogue == InCatalogue::Yes)
+        .filter(|e| e.kind.is_none_or(|k| k == kind))
+        .collect();
+    let mut out = Vec::new();
+    for c in &cores {
+        out.push(c.clone());
+        out.extend(suffixes.iter().map(|s| format!("{c}+{}", s.name)));
+    }
+    if planes > 1 {
+        let mut extra = Vec::new();
+        for e in REGISTRY.iter().filter(|e| is_suffix(e)) {
+            if let InCatalogue::MultiPlaneAfter(after) = e.catalogue {
+                if e.kind.is_none_or(|k| k == kind) {
+                    let tail = format!("+{after}");
+                    extra.extend(
+                        out.iter()
+                            .filter(|s| s.ends_with(&tail))
+                            .map(|s| format!("{s}+{}", e.name)),
+                    );
+                }
+            }
+        }
+        out.extend(extra);
+    }
+    out
+}
+
+/// The catalogue for data on one plane.
+pub fn catalogue(kind: Kind) -> Vec<String> {
+    catalogue_for(kind, 1)
+}
