@@ -12,7 +12,7 @@ use crate::data::Kind;
 pub use decl::{Builder, Entry, InCatalogue, ParamDecl, Role, Scale};
 use glam::DVec3;
 pub use registry::{
-    base_arg, bases_of, build, catalogue, catalogue_for, no_arg, spec_kind, REGISTRY,
+    base_arg, bases_of, build, catalogue, catalogue_for, every_spec, no_arg, spec_kind, REGISTRY,
 };
 pub use spec::{render_spec, Ast};
 use std::fmt;

@@ -206,3 +206,22 @@ pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
 pub fn catalogue(kind: Kind) -> Vec<String> {
     catalogue_for(kind, 1)
 }
+
+/// Every spec a test suite should cover for a kind: the catalogue (with its per-plane
+/// variants) plus each model outside it — terms on their own, suffixes on each core model
+/// of their kind. Tests that enumerate this cover a new model without being edited.
+pub fn every_spec(kind: Kind) -> Vec<String> {
+    let mut out = catalogue_for(kind, 2);
+    let cores: Vec<String> = out.iter().filter(|s| !s.contains('+')).cloned().collect();
+    for e in REGISTRY.iter().filter(|e| e.catalogue == InCatalogue::No) {
+        if !e.kind.is_none_or(|k| k == kind) {
+            continue;
+        }
+        match e.build {
+            Builder::Term(_) => out.push(e.name.to_string()),
+            Builder::Suffix(_) => out.extend(cores.iter().map(|c| format!("{c}+{}", e.name))),
+        }
+    }
+    out.dedup();
+    out
+}
