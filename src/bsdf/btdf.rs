@@ -23,7 +23,7 @@
 //! components of m (no 1 − cos² cancellation at sharp peaks); G1/|μ| is evaluated in forms
 //! without a division by μ, so grazing θt gives no 0·∞.
 
-use super::{Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Ast, Bsdf, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, gtr_norm};
 use glam::DVec3;
@@ -612,38 +612,36 @@ impl Bsdf for Suffix {
 // Builders (registry)
 
 /// Registry entries: the transmission family and its three suffixes.
-pub const ENTRY: Entry = Entry {
-    name: "btdf",
-    kind: Some(Kind::Btdf),
-    role: Role::Transmission,
-    catalogue: InCatalogue::Yes,
-    doc: "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
-    build: Builder::Term(build),
-    variants: &["tr", "beckmann", "gtr", "gg"],
-};
-pub const SCALE_ENTRY: Entry = Entry {
-    name: "scale",
-    kind: Some(Kind::Btdf),
-    role: Role::Suffix,
-    catalogue: InCatalogue::Yes,
-    doc: "multiplies a BTDF by S",
-    build: Builder::Suffix(build_scale),
-    variants: &[],
-};
-pub const ABSORB_ENTRY: Entry = Entry {
-    name: "absorb",
-    catalogue: InCatalogue::Yes,
-    doc: "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
-    build: Builder::Suffix(build_absorb),
-    ..SCALE_ENTRY
-};
-pub const DIFFUSE_ENTRY: Entry = Entry {
-    name: "diffuse",
-    catalogue: InCatalogue::No,
-    doc: "adds a Lambertian transmission kd/pi (BTDF)",
-    build: Builder::Suffix(build_diffuse),
-    ..SCALE_ENTRY
-};
+pub const ENTRY: Entry = Entry::term(
+    "btdf",
+    Kind::Btdf,
+    Role::Transmission,
+    "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
+    build,
+)
+.with_variants(&["tr", "beckmann", "gtr", "gg"]);
+const BTDF: Option<Kind> = Some(Kind::Btdf);
+pub const SCALE_ENTRY: Entry = Entry::suffix(
+    "scale",
+    BTDF,
+    InCatalogue::Yes,
+    "multiplies a BTDF by S",
+    build_scale,
+);
+pub const ABSORB_ENTRY: Entry = Entry::suffix(
+    "absorb",
+    BTDF,
+    InCatalogue::Yes,
+    "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
+    build_absorb,
+);
+pub const DIFFUSE_ENTRY: Entry = Entry::suffix(
+    "diffuse",
+    BTDF,
+    InCatalogue::No,
+    "adds a Lambertian transmission kd/pi (BTDF)",
+    build_diffuse,
+);
 
 const NDF_LIST: &str = "tr, beckmann, gtr, gg";
 

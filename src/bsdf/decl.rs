@@ -55,6 +55,7 @@ impl ParamDecl {
             per_axis: false,
         }
     }
+    /// One value per channel.
     pub const fn rgb(
         name: &'static str,
         lo: f64,
@@ -63,15 +64,8 @@ impl ParamDecl {
         doc: &'static str,
     ) -> Self {
         ParamDecl {
-            name,
-            lo,
-            hi,
-            default,
             rgb: true,
-            scale: Scale::Linear,
-            doc,
-            neutral: None,
-            per_axis: false,
+            ..ParamDecl::shared(name, lo, hi, default, doc)
         }
     }
     pub const fn log(self) -> Self {
@@ -159,10 +153,94 @@ pub type TermBuilder = fn(arg: Option<&Ast>) -> Result<Node, String>;
 /// Wraps a node in a suffix combinator.
 pub type SuffixBuilder = fn(inner: Node) -> Result<Node, String>;
 
+/// Makes a leaf node (a term without argument).
+pub type LeafBuilder = fn() -> Node;
+
+/// Wraps the base of `layer(B)` (checked against the layer's role first).
+pub type LayerBuilder = fn(base: Node) -> Node;
+
 #[derive(Clone, Copy, Debug)]
 pub enum Builder {
+    Leaf(LeafBuilder),
+    Layer(LayerBuilder),
     Term(TermBuilder),
     Suffix(SuffixBuilder),
+}
+
+impl Entry {
+    /// A term `name` or `name(arg)`, in the default catalogue.
+    pub const fn term(
+        name: &'static str,
+        kind: Kind,
+        role: Role,
+        doc: &'static str,
+        build: TermBuilder,
+    ) -> Entry {
+        Entry {
+            name,
+            kind: Some(kind),
+            role,
+            catalogue: InCatalogue::Yes,
+            doc,
+            build: Builder::Term(build),
+            variants: &[],
+        }
+    }
+    /// A term without argument (`lambert`), in the default catalogue.
+    pub const fn leaf(
+        name: &'static str,
+        kind: Kind,
+        role: Role,
+        doc: &'static str,
+        build: LeafBuilder,
+    ) -> Entry {
+        Entry {
+            build: Builder::Leaf(build),
+            ..Entry::term(name, kind, role, doc, |_| Err(String::new()))
+        }
+    }
+    /// A layer `name(B)` over a base of one of `over`'s roles, in the default catalogue
+    /// over each accepted base.
+    pub const fn layer(
+        name: &'static str,
+        kind: Kind,
+        over: &'static [Role],
+        doc: &'static str,
+        build: LayerBuilder,
+    ) -> Entry {
+        Entry {
+            build: Builder::Layer(build),
+            ..Entry::term(
+                name,
+                kind,
+                Role::Layer { over },
+                doc,
+                |_| Err(String::new()),
+            )
+        }
+    }
+    /// A suffix `M+name` for models of `kind` (None: either kind).
+    pub const fn suffix(
+        name: &'static str,
+        kind: Option<Kind>,
+        catalogue: InCatalogue,
+        doc: &'static str,
+        build: SuffixBuilder,
+    ) -> Entry {
+        Entry {
+            name,
+            kind,
+            role: Role::Suffix,
+            catalogue,
+            doc,
+            build: Builder::Suffix(build),
+            variants: &[],
+        }
+    }
+    /// The term's argument names (`btdf(tr)`), each a catalogue model.
+    pub const fn with_variants(self, variants: &'static [&'static str]) -> Entry {
+        Entry { variants, ..self }
+    }
 }
 
 /// A model's registry entry: declared once, next to its code, and listed by one line of

@@ -12,8 +12,8 @@
 //! would spend half its length where dmg hardly changes), ρ_g rgb [0, 1]; then B's as `base.*`.
 //! B ∈ `lambert on eon vmf ggx`. Twins: `shaders/micrograin.wgsl` + `shaders/dmg.wgsl`.
 
-use super::micrograin::{layer, weight, BETA_LO, RHO_G, TAU0};
-use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::micrograin::{layer, layer_wgsl, weight, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0};
+use super::{Bsdf, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -47,36 +47,18 @@ impl Bsdf for DiffuseMicrograin {
         dmg_layer(p[0], p[1], p[2], wi, wo, children[0])
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![
-                (
-                    "micrograin",
-                    include_str!("../../shaders/bsdf/micrograin.wgsl"),
-                ),
-                ("dmg", include_str!("../../shaders/bsdf/dmg.wgsl")),
-            ],
-            function: "dmg_eval".into(),
-        }
+        layer_wgsl("dmg", include_str!("../../shaders/bsdf/dmg.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "dmg",
-    kind: Some(Kind::Brdf),
-    role: Role::Layer {
-        over: &[Role::DiffuseBase, Role::SpecularLobe],
-    },
-    catalogue: InCatalogue::Yes,
-    doc: "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg(&ENTRY, arg)?;
-    Ok(Node::with(DiffuseMicrograin, vec![base]))
-}
+pub const ENTRY: Entry = Entry::layer(
+    "dmg",
+    Kind::Brdf,
+    MICROGRAIN_BASES,
+    "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
+    |base| Node::with(DiffuseMicrograin, vec![base]),
+);
 
 #[cfg(test)]
 mod tests {

@@ -10,7 +10,7 @@
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
 //! Twin: `shaders/eon.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -72,25 +72,15 @@ impl Bsdf for Eon {
         f_ss + f_ms
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("eon", include_str!("../../shaders/bsdf/eon.wgsl"))],
-            function: "eon_eval".into(),
-        }
+        WgslFn::single("eon", include_str!("../../shaders/bsdf/eon.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "eon",
-    kind: Some(Kind::Brdf),
-    role: Role::DiffuseBase,
-    catalogue: InCatalogue::Yes,
-    doc: "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    no_arg("eon", arg)?;
-    Ok(Node::leaf(Eon))
-}
+pub const ENTRY: Entry = Entry::leaf(
+    "eon",
+    Kind::Brdf,
+    Role::DiffuseBase,
+    "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
+    || Node::leaf(Eon),
+);

@@ -5,7 +5,7 @@
 //! Twin: `shaders/fa.wgsl`.
 
 use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
-use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -48,19 +48,10 @@ impl Bsdf for FresnelAggregate {
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "fa",
-    kind: Some(Kind::Brdf),
-    role: Role::Layer {
-        over: &[Role::DiffuseBase],
-    },
-    catalogue: InCatalogue::Yes,
-    doc: "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg(&ENTRY, arg)?;
-    Ok(Node::with(FresnelAggregate, vec![base]))
-}
+pub const ENTRY: Entry = Entry::layer(
+    "fa",
+    Kind::Brdf,
+    &[Role::DiffuseBase],
+    "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
+    |base| Node::with(FresnelAggregate, vec![base]),
+);

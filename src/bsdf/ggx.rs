@@ -3,7 +3,7 @@
 //! f = k_s · F(ωi·h; η) · D(h) · G1(ωi) G1(ωo) / (4 μi μo), F the exact dielectric
 //! Fresnel. Twin: `shaders/ggx.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, ggx_d, ggx_g1, half_vector};
 use glam::DVec3;
@@ -41,25 +41,15 @@ impl Bsdf for Ggx {
         ggx_reflect(p[0], p[1], p[2], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))],
-            function: "ggx_eval".into(),
-        }
+        WgslFn::single("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "ggx",
-    kind: Some(Kind::Brdf),
-    role: Role::SpecularLobe,
-    catalogue: InCatalogue::Yes,
-    doc: "GGX microfacet reflection (Walter et al. 2007)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    no_arg("ggx", arg)?;
-    Ok(Node::leaf(Ggx))
-}
+pub const ENTRY: Entry = Entry::leaf(
+    "ggx",
+    Kind::Brdf,
+    Role::SpecularLobe,
+    "GGX microfacet reflection (Walter et al. 2007)",
+    || Node::leaf(Ggx),
+);

@@ -1,6 +1,6 @@
 //! Lambertian reflection: f = ρ/π. Twin: `shaders/lambert.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -22,25 +22,15 @@ impl Bsdf for Lambert {
         p[0] * FRAC_1_PI
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("lambert", include_str!("../../shaders/bsdf/lambert.wgsl"))],
-            function: "lambert_eval".into(),
-        }
+        WgslFn::single("lambert", include_str!("../../shaders/bsdf/lambert.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "lambert",
-    kind: Some(Kind::Brdf),
-    role: Role::DiffuseBase,
-    catalogue: InCatalogue::Yes,
-    doc: "Lambertian: f = rho/pi",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    no_arg("lambert", arg)?;
-    Ok(Node::leaf(Lambert))
-}
+pub const ENTRY: Entry = Entry::leaf(
+    "lambert",
+    Kind::Brdf,
+    Role::DiffuseBase,
+    "Lambertian: f = rho/pi",
+    || Node::leaf(Lambert),
+);

@@ -36,7 +36,7 @@
 //! inside w; G1/μ is computed as 1/(γβ (σ + Λσ)), finite at μ → 0, so nothing divides by
 //! zero at grazing.
 
-use super::ParamDecl;
+use super::{ParamDecl, Role, WgslFn};
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -59,6 +59,23 @@ pub const BETA_MIN: f64 = 1e-4;
 /// grazing effect of the previous); a linear box would give [1e-3, 0.1] only 10 % of the
 /// unit box. On the log box dw/du ∝ τ0 (1−τ0)^{E}·E stays within a factor ~3 of its peak
 /// over τ0 ∈ [0.05, 0.95], i.e. the sensitivity is spread evenly over the useful range.
+/// The bases of a micrograin layer: any leaf BRDF (a diffuse base or a lone lobe).
+pub const MICROGRAIN_BASES: &[Role] = &[Role::DiffuseBase, Role::SpecularLobe];
+
+/// The WGSL of a micrograin layer `name`: the shared micrograin functions, then its own file.
+pub fn layer_wgsl(name: &'static str, source: &'static str) -> WgslFn {
+    WgslFn {
+        sources: vec![
+            (
+                "micrograin",
+                include_str!("../../shaders/bsdf/micrograin.wgsl"),
+            ),
+            (name, source),
+        ],
+        function: format!("{name}_eval"),
+    }
+}
+
 pub const TAU0: ParamDecl = ParamDecl::shared("tau0", 1e-3, 0.999, 0.5, "filling factor")
     .log()
     // The thinnest layer: w ≈ τ0 at every angle.

@@ -42,6 +42,16 @@ pub struct WgslFn {
     pub function: String,
 }
 
+impl WgslFn {
+    /// A node whose twin is one file `shaders/bsdf/<name>.wgsl` defining `<name>_eval`.
+    pub fn single(name: &'static str, source: &'static str) -> WgslFn {
+        WgslFn {
+            sources: vec![(name, source)],
+            function: format!("{name}_eval"),
+        }
+    }
+}
+
 /// One node of a model tree: a BSDF or a combinator of its children.
 pub trait Bsdf: Send + Sync + fmt::Debug {
     /// The node's registry entry: its declared name, kind and role.

@@ -7,7 +7,7 @@
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
 //! Twin: `shaders/on.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
@@ -45,25 +45,15 @@ impl Bsdf for OrenNayar {
         rho * FRAC_1_PI * (a + b * s.max(0.0) / mu_i.max(mu_o))
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("on", include_str!("../../shaders/bsdf/on.wgsl"))],
-            function: "on_eval".into(),
-        }
+        WgslFn::single("on", include_str!("../../shaders/bsdf/on.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "on",
-    kind: Some(Kind::Brdf),
-    role: Role::DiffuseBase,
-    catalogue: InCatalogue::Yes,
-    doc: "Oren-Nayar 1994 qualitative model",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    no_arg("on", arg)?;
-    Ok(Node::leaf(OrenNayar))
-}
+pub const ENTRY: Entry = Entry::leaf(
+    "on",
+    Kind::Brdf,
+    Role::DiffuseBase,
+    "Oren-Nayar 1994 qualitative model",
+    || Node::leaf(OrenNayar),
+);

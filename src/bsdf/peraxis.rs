@@ -5,22 +5,19 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/peraxis.wgsl`.
 
-use super::{Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
 /// Registry entry: a suffix of either kind; in the catalogue, appended to the scaled
 /// models for data measured on several planes.
-pub const ENTRY: Entry = Entry {
-    name: "peraxis",
-    kind: None,
-    role: Role::Suffix,
-    catalogue: InCatalogue::MultiPlaneAfter("scale"),
-    doc:
-        "roughness parameters (declared per-axis: alpha, beta) get one value per measured phi plane",
-    build: Builder::Suffix(build),
-    variants: &[],
-};
+pub const ENTRY: Entry = Entry::suffix(
+    "peraxis",
+    None,
+    InCatalogue::MultiPlaneAfter("scale"),
+    "parameters declared per-plane (roughness) get one value per measured phi plane",
+    build,
+);
 
 #[derive(Debug, Clone, Copy)]
 pub struct PerAxis {
@@ -47,10 +44,7 @@ impl Bsdf for PerAxis {
         false // samples on different planes see different parameters
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("peraxis", include_str!("../../shaders/bsdf/peraxis.wgsl"))],
-            function: "peraxis_eval".into(),
-        }
+        WgslFn::single("peraxis", include_str!("../../shaders/bsdf/peraxis.wgsl"))
     }
 }
 

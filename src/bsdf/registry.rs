@@ -61,6 +61,8 @@ pub fn build(ast: &Ast) -> Result<Node, String> {
             let e = entry(name, false)
                 .ok_or_else(|| format!("unknown model '{name}' (known: {})", known(false)))?;
             match e.build {
+                Builder::Leaf(b) => no_arg(name, arg.as_deref()).map(|()| b()),
+                Builder::Layer(b) => base_arg(e, arg.as_deref()).map(b),
                 Builder::Term(b) => b(arg.as_deref()),
                 Builder::Suffix(_) => unreachable!("entry() matched a term"),
             }
@@ -70,7 +72,9 @@ pub fn build(ast: &Ast) -> Result<Node, String> {
                 .ok_or_else(|| format!("unknown suffix '+{name}' (known: {})", known(true)))?;
             match e.build {
                 Builder::Suffix(b) => b(build(inner)?),
-                Builder::Term(_) => unreachable!("entry() matched a suffix"),
+                Builder::Leaf(_) | Builder::Layer(_) | Builder::Term(_) => {
+                    unreachable!("entry() matched a suffix")
+                }
             }
         }
     }
@@ -218,7 +222,7 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
             continue;
         }
         match e.build {
-            Builder::Term(_) => out.push(e.name.to_string()),
+            Builder::Leaf(_) | Builder::Layer(_) | Builder::Term(_) => out.push(e.name.to_string()),
             Builder::Suffix(_) => out.extend(cores.iter().map(|c| format!("{c}+{}", e.name))),
         }
     }

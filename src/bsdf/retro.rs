@@ -3,7 +3,7 @@
 //! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z). It peaks at ωo = ωi.
 //! Twin: `shaders/retro.wgsl`.
 
-use super::{Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::{ggx_d, ggx_g1, half_vector};
 use glam::DVec3;
@@ -40,23 +40,18 @@ impl Bsdf for Retro {
         children[0] + retro_lobe(p[0], p[1], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("retro", include_str!("../../shaders/bsdf/retro.wgsl"))],
-            function: "retro_eval".into(),
-        }
+        WgslFn::single("retro", include_str!("../../shaders/bsdf/retro.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "retro",
-    kind: Some(Kind::Brdf),
-    role: Role::Suffix,
-    catalogue: InCatalogue::No,
-    doc: "adds a back-vector retroreflective GGX lobe (BRDF)",
-    build: Builder::Suffix(build),
-    variants: &[],
-};
+pub const ENTRY: Entry = Entry::suffix(
+    "retro",
+    Some(Kind::Brdf),
+    InCatalogue::No,
+    "adds a back-vector retroreflective GGX lobe (BRDF)",
+    build,
+);
 
 pub fn build(inner: Node) -> Result<Node, String> {
     if inner.bsdf.kind() != Kind::Brdf {

@@ -19,8 +19,10 @@
 //! η_g [1, 5]; then B's as `base.*`. B ∈ `lambert on eon vmf ggx`.
 //! Twins: `shaders/micrograin.wgsl` + `shaders/rmg.wgsl`.
 
-use super::micrograin::{layer, rough_grain, weight, BETA_LO, ETA_G, RHO_G, TAU0};
-use super::{base_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::micrograin::{
+    layer, layer_wgsl, rough_grain, weight, BETA_LO, ETA_G, MICROGRAIN_BASES, RHO_G, TAU0,
+};
+use super::{Bsdf, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -66,36 +68,18 @@ impl Bsdf for RoughMicrograin {
         rmg_layer(p[0], p[1], p[2], p[3], wi, wo, children[0])
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![
-                (
-                    "micrograin",
-                    include_str!("../../shaders/bsdf/micrograin.wgsl"),
-                ),
-                ("rmg", include_str!("../../shaders/bsdf/rmg.wgsl")),
-            ],
-            function: "rmg_eval".into(),
-        }
+        layer_wgsl("rmg", include_str!("../../shaders/bsdf/rmg.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "rmg",
-    kind: Some(Kind::Brdf),
-    role: Role::Layer {
-        over: &[Role::DiffuseBase, Role::SpecularLobe],
-    },
-    catalogue: InCatalogue::Yes,
-    doc: "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    let base = base_arg(&ENTRY, arg)?;
-    Ok(Node::with(RoughMicrograin, vec![base]))
-}
+pub const ENTRY: Entry = Entry::layer(
+    "rmg",
+    Kind::Brdf,
+    MICROGRAIN_BASES,
+    "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
+    |base| Node::with(RoughMicrograin, vec![base]),
+);
 
 #[cfg(test)]
 mod tests {

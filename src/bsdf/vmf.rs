@@ -52,7 +52,7 @@
 //!
 //! Twin: `shaders/vmf.wgsl`.
 
-use super::{no_arg, Ast, Bsdf, Builder, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -337,28 +337,18 @@ impl Bsdf for Vmf {
         f_vmf(p[0], p[1], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn {
-            sources: vec![("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))],
-            function: "vmf_eval".into(),
-        }
+        WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))
     }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).
-pub const ENTRY: Entry = Entry {
-    name: "vmf",
-    kind: Some(Kind::Brdf),
-    role: Role::DiffuseBase,
-    catalogue: InCatalogue::Yes,
-    doc: "VMF diffuse (d'Eon & Weidlich 2024)",
-    build: Builder::Term(build),
-    variants: &[],
-};
-
-pub fn build(arg: Option<&Ast>) -> Result<Node, String> {
-    no_arg("vmf", arg)?;
-    Ok(Node::leaf(Vmf))
-}
+pub const ENTRY: Entry = Entry::leaf(
+    "vmf",
+    Kind::Brdf,
+    Role::DiffuseBase,
+    "VMF diffuse (d'Eon & Weidlich 2024)",
+    || Node::leaf(Vmf),
+);
 
 #[cfg(test)]
 mod tests {
@@ -656,11 +646,10 @@ mod tests {
 
     #[test]
     fn build_takes_no_argument() {
-        assert!(build(None).is_ok());
-        let arg = Ast::Term {
-            name: "lambert".into(),
-            arg: None,
-        };
-        assert!(build(Some(&arg)).is_err());
+        assert!(crate::bsdf::Model::parse("vmf", 1).is_ok());
+        let e = crate::bsdf::Model::parse("vmf(lambert)", 1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("takes no argument"), "{e}");
     }
 }

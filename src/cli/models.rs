@@ -10,9 +10,9 @@ pub fn run() -> Result<()> {
     let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
     examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
     for e in bsdf::REGISTRY {
-        let name = match e.build {
-            bsdf::Builder::Term(_) => e.name.to_string(),
-            bsdf::Builder::Suffix(_) => format!("+{}", e.name),
+        let name = match e.role {
+            bsdf::Role::Suffix => format!("+{}", e.name),
+            _ => e.name.to_string(),
         };
         let kind = e
             .kind
@@ -21,13 +21,13 @@ pub fn run() -> Result<()> {
         println!("  {name:<8} {kind:<4} {:<13} {}", role_word(e.role), e.doc);
         if e.catalogue == bsdf::InCatalogue::No {
             // Models outside the default sweep still appear among the examples.
-            match e.build {
-                bsdf::Builder::Suffix(_) => examples.push(format!(
+            match e.role {
+                bsdf::Role::Suffix => examples.push(format!(
                     "{}+{}",
                     bsdf::catalogue(e.kind.unwrap_or(Kind::Brdf))[0],
                     e.name
                 )),
-                bsdf::Builder::Term(_) => examples.push(e.name.to_string()),
+                _ => examples.push(e.name.to_string()),
             }
         }
     }
