@@ -12,27 +12,41 @@ use crate::data::Kind;
 pub use decl::{Builder, Entry, InCatalogue, ParamDecl, Role, Scale};
 use glam::DVec3;
 pub use registry::{
-    base_arg, bases_of, build, catalogue, catalogue_for, every_spec, no_arg, spec_kind, REGISTRY,
+    base_arg, bases_of, build, catalogue, catalogue_for, every_spec, no_arg, spec_kind,
 };
 pub use spec::{render_spec, Ast};
 use std::fmt;
 use std::sync::Arc;
 
-pub mod btdf;
 pub mod decl;
-pub mod dmg;
-pub mod eon;
-pub mod fa;
-pub mod ggx;
-pub mod lambert;
 pub mod micrograin;
-pub mod on;
-pub mod peraxis;
 pub mod registry;
-pub mod retro;
-pub mod rmg;
 pub mod spec;
-pub mod vmf;
+
+/// Declares each model file as a module and lists the registry entries it declares.
+macro_rules! models {
+    ($($module:ident => [$($entry:ident),+]),* $(,)?) => {
+        $(pub mod $module;)*
+        /// Every model, in the order the catalogue lists them.
+        pub const REGISTRY: &[&Entry] = &[$($(&$module::$entry),+),*];
+    };
+}
+
+// The registry: one line per model file. Adding a model is its Rust file, its WGSL twin
+// in shaders/bsdf/, and one line here; everything else is derived from its declarations.
+models! {
+    lambert => [ENTRY],
+    on => [ENTRY],
+    eon => [ENTRY],
+    vmf => [ENTRY],
+    ggx => [ENTRY],
+    dmg => [ENTRY],
+    rmg => [ENTRY],
+    fa => [ENTRY],
+    retro => [ENTRY],
+    btdf => [ENTRY, SCALE_ENTRY, ABSORB_ENTRY, DIFFUSE_ENTRY],
+    peraxis => [ENTRY],
+}
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]
 pub struct WgslFn {

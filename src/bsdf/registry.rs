@@ -1,31 +1,12 @@
-//! The registry: one line per model. Everything else about the catalogue is derived from
+//! What is derived from the registry ([`REGISTRY`], one line per model file in
+//! `src/bsdf/mod.rs`). Everything about the catalogue is derived from
 //! the models' declarations ([`Entry`], [`ParamDecl`](super::ParamDecl)): the default
 //! catalogue, the bases a layer accepts, the kind of a spec, and `bsdfit models`.
 
 use super::decl::{Builder, Entry, InCatalogue, Role};
 use super::spec::Ast;
-use super::{btdf, dmg, eon, fa, ggx, lambert, on, peraxis, retro, rmg, vmf};
-use super::{Node, SpecError};
+use super::{Node, SpecError, REGISTRY};
 use crate::data::Kind;
-
-/// Every model, in the order the catalogue lists them. Adding a model: its Rust file, its
-/// WGSL twin, and one line here.
-pub const REGISTRY: &[&Entry] = &[
-    &lambert::ENTRY,
-    &on::ENTRY,
-    &eon::ENTRY,
-    &vmf::ENTRY,
-    &ggx::ENTRY,
-    &dmg::ENTRY,
-    &rmg::ENTRY,
-    &fa::ENTRY,
-    &btdf::ENTRY,
-    &retro::ENTRY,
-    &btdf::SCALE_ENTRY,
-    &btdf::ABSORB_ENTRY,
-    &btdf::DIFFUSE_ENTRY,
-    &peraxis::ENTRY,
-];
 
 fn is_suffix(e: &Entry) -> bool {
     matches!(e.build, Builder::Suffix(_))
