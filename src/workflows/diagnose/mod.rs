@@ -38,6 +38,7 @@ use crate::engine::loss::{normalised_residuals, Loss, Metric, Weights};
 use crate::engine::Backend;
 use crate::inference::covariance::Covariance;
 use crate::inference::fit::{fit_outcome, FitOptions, Optimizer};
+use crate::math::{chi2_sf, f_sf};
 use anyhow::{Context, Result};
 use glam::DVec3;
 use serde_json::{json, Value};
@@ -313,157 +314,6 @@ pub fn embed(old: &Model, old_flat: &[f64], new: &Model) -> Vec<f64> {
         }
     }
     flat
-}
-
-// ---------------------------------------------------------------------------------------
-// Distributions: regularized incomplete gamma and beta (Numerical Recipes §6.2, §6.4)
-
-/// ln Γ(x), x > 0 (Lanczos, g = 7, n = 9; relative error < 1e-14).
-pub fn ln_gamma(x: f64) -> f64 {
-    const G: f64 = 7.0;
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        // Reflection.
-        let pi = std::f64::consts::PI;
-        return (pi / (pi * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut a = C[0];
-    let t = x + G + 0.5;
-    for (i, &c) in C.iter().enumerate().skip(1) {
-        a += c / (x + i as f64);
-    }
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
-}
-
-/// Regularized upper incomplete gamma Q(a, x) = Γ(a, x)/Γ(a).
-pub fn gamma_q(a: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 1.0;
-    }
-    let gln = ln_gamma(a);
-    if x < a + 1.0 {
-        // Series for P.
-        let (mut ap, mut sum) = (a, 1.0 / a);
-        let mut del = sum;
-        for _ in 0..100_000 {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
-            if del.abs() < sum.abs() * 1e-15 {
-                break;
-            }
-        }
-        (1.0 - sum * (-x + a * x.ln() - gln).exp()).clamp(0.0, 1.0)
-    } else {
-        // Continued fraction for Q (modified Lentz).
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..100_000 {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let del = d * c;
-            h *= del;
-            if (del - 1.0).abs() < 1e-15 {
-                break;
-            }
-        }
-        ((-x + a * x.ln() - gln).exp() * h).clamp(0.0, 1.0)
-    }
-}
-
-fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
-    let tiny = 1e-300;
-    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
-    let mut c = 1.0;
-    let mut d = 1.0 - qab * x / qap;
-    if d.abs() < tiny {
-        d = tiny;
-    }
-    d = 1.0 / d;
-    let mut h = d;
-    for m in 1..100_000 {
-        let m = m as f64;
-        let m2 = 2.0 * m;
-        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        h *= d * c;
-        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        if d.abs() < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if c.abs() < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        let del = d * c;
-        h *= del;
-        if (del - 1.0).abs() < 1e-15 {
-            break;
-        }
-    }
-    h
-}
-
-/// Regularized incomplete beta I_x(a, b).
-pub fn beta_i(a: f64, b: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    if x >= 1.0 {
-        return 1.0;
-    }
-    let ln_front = ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln();
-    if x < (a + 1.0) / (a + b + 2.0) {
-        (ln_front.exp() * beta_cf(a, b, x) / a).clamp(0.0, 1.0)
-    } else {
-        (1.0 - ln_front.exp() * beta_cf(b, a, 1.0 - x) / b).clamp(0.0, 1.0)
-    }
-}
-
-/// P(χ²_k ≥ x): the p-value of a χ² with k degrees of freedom.
-pub fn chi2_sf(x: f64, k: f64) -> f64 {
-    gamma_q(0.5 * k, 0.5 * x)
-}
-
-/// P(F(d1, d2) ≥ f): the p-value of an F statistic.
-pub fn f_sf(f: f64, d1: f64, d2: f64) -> f64 {
-    if f <= 0.0 {
-        return 1.0;
-    }
-    beta_i(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * f))
 }
 
 fn fmt_p(p: f64) -> String {
@@ -1627,44 +1477,6 @@ fn esc(s: &str) -> String {
 mod tests {
     use super::*;
     use crate::data::RawRow;
-
-    fn close(a: f64, b: f64, rel: f64) -> bool {
-        (a - b).abs() <= rel * b.abs().max(1e-300)
-    }
-
-    #[test]
-    fn chi2_and_f_tails_match_scipy() {
-        // Reference values: scipy.stats 1.17 chi2.sf / f.sf.
-        for (x, k, p) in [
-            (3.841458820694124, 1.0, 0.05),
-            (1050.0, 1000.0, 0.13247405682147703),
-            (900.0, 1000.0, 0.9892827619087102),
-            (0.5, 3.0, 0.9188914116546758),
-        ] {
-            let got = chi2_sf(x, k);
-            assert!(close(got, p, 1e-9), "chi2_sf({x}, {k}) = {got}, want {p}");
-        }
-        assert!(chi2_sf(5000.0, 1000.0) < 1e-300);
-        for (f, d1, d2, p) in [
-            (3.0, 3.0, 20.0, 0.05485861866829506),
-            (6.9, 1.0, 100.0, 0.009975476389114826),
-            (2.5, 5.0, 2000.0, 0.02888040429829556),
-            (50.0, 5.0, 500.0, 5.536126339695859e-42),
-            (0.3, 2.0, 10.0, 0.7472581728660572),
-        ] {
-            let got = f_sf(f, d1, d2);
-            assert!(
-                close(got, p, 1e-8),
-                "f_sf({f}, {d1}, {d2}) = {got}, want {p}"
-            );
-        }
-        assert!(close(ln_gamma(10.0), (362880.0f64).ln(), 1e-13));
-        assert!(close(
-            ln_gamma(0.5),
-            std::f64::consts::PI.sqrt().ln(),
-            1e-13
-        ));
-    }
 
     fn dataset(kind: Kind, rows: &[[f64; 4]], channels: usize) -> Dataset {
         let wl = [450.0, 550.0, 650.0];
