@@ -8,7 +8,7 @@ use crate::engine::loss::normalised_residuals;
 use crate::engine::Backend;
 use crate::inference::covariance::Covariance;
 use crate::inference::fit::{fit_outcome, FitOptions, Optimizer};
-use crate::math::chi2_sf;
+use crate::inference::stats::consistency_p;
 use anyhow::{Context, Result};
 
 /// One fitted model (χ² statistics, parameters, residuals).
@@ -35,7 +35,7 @@ impl FitResult {
     }
     /// P(χ²_{K−P} ≥ χ²).
     pub fn p_consistent(&self) -> f64 {
-        chi2_sf(self.chi2, self.dof as f64)
+        consistency_p(self.chi2, self.dof)
     }
 }
 

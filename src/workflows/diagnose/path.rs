@@ -2,13 +2,14 @@
 //! and revisit the steps of a path that ends inconsistent ([`diagnose`]).
 
 use super::fit::fit_all;
-use super::score::{consistency, fmt_p, score};
+use super::score::{consistency, score};
 use super::{
     describe_regions, extensions, fit_model, DiagnoseOptions, Diagnosis, FitResult, Scored, Step,
 };
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::Backend;
+use crate::inference::stats::{bic, format_p};
 use anyhow::{Context, Result};
 
 /// Build the step that adopts `best` after `current` (its evidence: the test that adopted
@@ -37,7 +38,7 @@ fn adopt_step(
             best.dp,
             best.dp,
             fit.dof,
-            fmt_p(p),
+            format_p(p),
             best.delta_bic
         ),
         _ => format!(
@@ -201,7 +202,7 @@ fn extend_path(
 /// BIC of a path's final model: χ² + P ln K.
 fn path_bic(steps: &[Step], k: usize) -> f64 {
     let f = &steps.last().expect("a step").fit;
-    f.chi2 + f.model.dim as f64 * (k as f64).ln()
+    bic(f.chi2, f.model.dim, k)
 }
 
 /// Run the discrepancy workflow from `start` on `data`. `log` receives progress lines

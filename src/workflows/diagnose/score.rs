@@ -4,7 +4,7 @@
 use super::{Candidate, FitResult};
 use crate::bsdf::Model;
 use crate::data::Dataset;
-use crate::math::f_sf;
+use crate::inference::stats::{self, f_test, format_p};
 use anyhow::Result;
 
 /// A fitted candidate and its comparison with the current model.
@@ -86,7 +86,7 @@ pub(super) fn score(
     m: usize,
     alpha: f64,
 ) -> Scored {
-    let k = data.len() as f64;
+    let k = data.len();
     let fit = match fit {
         Ok(f) => f,
         Err(e) => {
@@ -108,11 +108,11 @@ pub(super) fn score(
     let dp = fit.model.dim as i64 - current.model.dim as i64;
     let delta_chi2 = current.chi2 - fit.chi2;
     let s = fit.chi2_red.max(1.0);
-    let delta_bic = (fit.chi2 - current.chi2) + dp as f64 * k.ln();
-    let delta_bic_scaled = (fit.chi2 - current.chi2) / s + dp as f64 * k.ln();
+    let delta_bic = stats::delta_bic(current.chi2, fit.chi2, dp, k, 1.0);
+    let delta_bic_scaled = stats::delta_bic(current.chi2, fit.chi2, dp, k, s);
     let (f, p) = if candidate.nested && dp > 0 {
-        let fstat = (delta_chi2.max(0.0) / dp as f64) / (fit.chi2 / fit.dof as f64);
-        (Some(fstat), Some(f_sf(fstat, dp as f64, fit.dof as f64)))
+        let (fstat, p) = f_test(delta_chi2, dp as usize, fit.chi2, fit.dof);
+        (Some(fstat), Some(p))
     } else {
         (None, None)
     };
@@ -126,7 +126,7 @@ pub(super) fn score(
         match p {
             Some(p) => format!(
                 "not significant ({}, need < {level:.1e}; scaled ΔBIC {delta_bic_scaled:+.1})",
-                fmt_p(p)
+                format_p(p)
             ),
             None => {
                 format!("not significant (swap: scaled ΔBIC {delta_bic_scaled:+.1}, need < −10)")
@@ -167,18 +167,7 @@ pub(super) fn consistency(fit: &FitResult, alpha: f64) -> (bool, String) {
             "χ²_red = {:.3} on {} dof: {verdict} ({}, α = {alpha})",
             fit.chi2_red,
             fit.dof,
-            fmt_p(p)
+            format_p(p)
         ),
     )
-}
-
-/// A p-value for prose.
-pub(super) fn fmt_p(p: f64) -> String {
-    if p < 1e-300 {
-        "p < 1e-300".into()
-    } else if p < 1e-3 {
-        format!("p = {p:.1e}")
-    } else {
-        format!("p = {p:.3}")
-    }
 }
