@@ -1,6 +1,7 @@
 //! Candidate extensions of a spec (DESIGN §7's effect → extension table) and the
 //! embedding of the current optimum in an extension's parameters.
 
+use super::effects::{Make, EFFECTS};
 use super::Effect;
 use crate::bsdf::{Ast, Model};
 use crate::data::{Dataset, Kind};
@@ -47,13 +48,11 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
     s
 }
 
-const DIFFUSE_BASES: [&str; 4] = ["lambert", "on", "eon", "vmf"];
-const BASES: [&str; 5] = ["lambert", "on", "eon", "vmf", "ggx"];
-
-/// Every applicable extension of `spec` for `data` (DESIGN §7's effect → extension table),
-/// each checked to parse for the data's channels and planes.
+/// Every applicable extension of `spec` for `data`, from the effect catalogue
+/// [`EFFECTS`] (DESIGN §7's effect → extension table), each checked to parse for the
+/// data's channels and planes. For a core term M (its suffixes are kept):
 ///
-/// BRDF, for a core term M (suffixes such as `+retro` are kept):
+/// BRDF:
 /// - `backscatter`: `lambert` → `on`, `eon`, `vmf` (also inside `fa`, `dmg`, `rmg`);
 /// - `specular_lobe`: a diffuse base B → `fa(B)`;
 /// - `diffuse_floor`: `ggx` → `fa(lambert)` (a Lambertian term under the lobe);
@@ -67,84 +66,68 @@ pub fn extensions(spec: &str, data: &Dataset) -> Result<Vec<Candidate>> {
     let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
     let ast = Ast::parse(&clean)?;
     let (core, suffixes) = peel(&ast);
-    let Ast::Term { name, arg } = &core else {
-        unreachable!("peel returns a term")
-    };
-    let arg_name = match arg.as_deref() {
-        Some(Ast::Term { name, arg: None }) => Some(name.as_str()),
-        _ => None,
-    };
+    let planes = data.axes.len().max(1);
     let mut out: Vec<Candidate> = Vec::new();
-    let mut push = |core: String, sfx: &[String], effect: Effect, nested: bool| {
-        out.push(Candidate {
-            spec: with_suffixes(&core, sfx),
-            effect,
-            nested,
-        });
-    };
-    match data.kind {
-        Kind::Brdf => {
-            let n = name.as_str();
-            if arg.is_none() && BASES.contains(&n) {
-                if n == "lambert" {
-                    for alt in ["on", "eon", "vmf"] {
-                        push(alt.into(), &suffixes, Effect::Backscatter, true);
-                    }
-                }
-                if DIFFUSE_BASES.contains(&n) {
-                    push(format!("fa({n})"), &suffixes, Effect::SpecularLobe, true);
-                }
-                if n == "ggx" {
-                    push("fa(lambert)".into(), &suffixes, Effect::DiffuseFloor, true);
-                }
-                for comb in ["dmg", "rmg"] {
-                    push(
-                        format!("{comb}({n})"),
-                        &suffixes,
-                        Effect::GrazingDecay,
-                        true,
-                    );
-                }
-            } else if matches!(n, "fa" | "dmg" | "rmg") && arg_name == Some("lambert") {
-                for alt in ["on", "eon", "vmf"] {
-                    push(format!("{n}({alt})"), &suffixes, Effect::Backscatter, true);
-                }
-            }
-            if !suffixes.iter().any(|s| s == "retro") {
-                let mut sfx = suffixes.clone();
-                sfx.push("retro".into());
-                push(render_spec(&core), &sfx, Effect::RetroLobe, true);
-            }
-        }
-        Kind::Btdf => {
-            if name == "btdf" {
-                match arg_name {
-                    Some("beckmann") | Some("gg") => {
-                        push("btdf(tr)".into(), &suffixes, Effect::LongTail, false)
-                    }
-                    Some("tr") => push("btdf(gtr)".into(), &suffixes, Effect::LongTail, true),
-                    _ => {}
-                }
-            }
-            let core_s = render_spec(&core);
-            let mut add = |sfx_name: &str, effect: Effect| {
-                if !suffixes.iter().any(|s| s == sfx_name) {
-                    let mut sfx = suffixes.clone();
-                    sfx.push(sfx_name.into());
-                    push(core_s.clone(), &sfx, effect, true);
-                }
-            };
-            add("scale", Effect::Scale);
-            add("absorb", Effect::Absorption);
-            add("diffuse", Effect::DiffuseFloor);
-            if data.axes.len() > 1 {
-                add("peraxis", Effect::Anisotropy);
+    for entry in EFFECTS {
+        for rule in entry.rules.iter().filter(|r| r.kind == data.kind) {
+            for spec in make(&rule.make, &core, &suffixes, planes) {
+                out.push(Candidate {
+                    spec,
+                    effect: entry.effect,
+                    nested: rule.nested,
+                });
             }
         }
     }
     // Every generated spec must parse for this data (channels, planes).
     out.retain(|c| Model::for_data(&c.spec, data).is_ok());
     Ok(out)
+}
+
+/// The specs that `how` makes from the core term `core` with `suffixes`, for data on
+/// `planes` measurement planes (none where the rule does not apply).
+fn make(how: &Make, core: &Ast, suffixes: &[String], planes: usize) -> Vec<String> {
+    let Ast::Term { name, arg } = core else {
+        unreachable!("peel returns a term")
+    };
+    let name = name.as_str();
+    let bare = arg.is_none();
+    // The argument when it is a bare term: `lambert` in `fa(lambert)`.
+    let arg_name = match arg.as_deref() {
+        Some(Ast::Term { name, arg: None }) => Some(name.as_str()),
+        _ => None,
+    };
+    let keep = |c: String| with_suffixes(&c, suffixes);
+    match *how {
+        Make::ReplaceBase { from, to, inside } => {
+            if bare && name == from {
+                to.iter().map(|b| keep(b.to_string())).collect()
+            } else if inside.contains(&name) && arg_name == Some(from) {
+                to.iter().map(|b| keep(format!("{name}({b})"))).collect()
+            } else {
+                vec![]
+            }
+        }
+        Make::Wrap { combinators, bases } if bare && bases.contains(&name) => combinators
+            .iter()
+            .map(|c| keep(format!("{c}({name})")))
+            .collect(),
+        Make::Replace { from, to } if bare && name == from => vec![keep(to.to_string())],
+        Make::Suffix {
+            name: sfx,
+            min_planes,
+        } if planes >= min_planes && !suffixes.iter().any(|s| s == sfx) => {
+            let mut more = suffixes.to_vec();
+            more.push(sfx.to_string());
+            vec![with_suffixes(&render_spec(core), &more)]
+        }
+        Make::SwapNdf { term, from, to }
+            if name == term && arg_name.is_some_and(|a| from.contains(&a)) =>
+        {
+            vec![keep(format!("{term}({to})"))]
+        }
+        _ => vec![],
+    }
 }
 
 /// The extension's parameters at which it reproduces the current model (or a good start
@@ -209,10 +192,12 @@ mod tests {
     use super::*;
     use crate::workflows::diagnose::testdata::dataset;
 
-    fn specs(c: &[Candidate]) -> Vec<(String, &'static str)> {
-        c.iter()
-            .map(|c| (c.spec.clone(), c.effect.name()))
-            .collect()
+    fn specs(c: &[Candidate]) -> Vec<(String, Effect)> {
+        c.iter().map(|c| (c.spec.clone(), c.effect)).collect()
+    }
+
+    fn owned(list: &[(&str, Effect)]) -> Vec<(String, Effect)> {
+        list.iter().map(|&(s, e)| (s.to_string(), e)).collect()
     }
 
     #[test]
@@ -222,54 +207,59 @@ mod tests {
             &crate::workflows::synth::geometry("inplane10").unwrap().1,
             3,
         );
-        let e = specs(&extensions("lambert", &brdf).unwrap());
-        for (s, eff) in [
-            ("on", "backscatter"),
-            ("eon", "backscatter"),
-            ("vmf", "backscatter"),
-            ("fa(lambert)", "specular_lobe"),
-            ("dmg(lambert)", "grazing_decay"),
-            ("rmg(lambert)", "grazing_decay"),
-            ("lambert+retro", "retro_lobe"),
-        ] {
-            assert!(e.contains(&(s.to_string(), eff)), "{s} missing from {e:?}");
-        }
-        assert_eq!(e.len(), 7);
-        let e = specs(&extensions("fa(lambert)+retro", &brdf).unwrap());
+        // The candidates in the order of the catalogue (the order of candidates.json).
         assert_eq!(
-            e,
-            [
-                ("fa(on)+retro".to_string(), "backscatter"),
-                ("fa(eon)+retro".into(), "backscatter"),
-                ("fa(vmf)+retro".into(), "backscatter")
-            ]
+            specs(&extensions("lambert", &brdf).unwrap()),
+            owned(&[
+                ("on", Effect::Backscatter),
+                ("eon", Effect::Backscatter),
+                ("vmf", Effect::Backscatter),
+                ("fa(lambert)", Effect::SpecularLobe),
+                ("dmg(lambert)", Effect::GrazingDecay),
+                ("rmg(lambert)", Effect::GrazingDecay),
+                ("lambert+retro", Effect::RetroLobe),
+            ])
         );
-        let e = specs(&extensions("ggx", &brdf).unwrap());
-        assert!(
-            e.contains(&("fa(lambert)".into(), "diffuse_floor")),
-            "{e:?}"
+        assert_eq!(
+            specs(&extensions("fa(lambert)+retro", &brdf).unwrap()),
+            owned(&[
+                ("fa(on)+retro", Effect::Backscatter),
+                ("fa(eon)+retro", Effect::Backscatter),
+                ("fa(vmf)+retro", Effect::Backscatter),
+            ])
         );
-        assert!(!e.iter().any(|(s, _)| s == "fa(ggx)"));
+        assert_eq!(
+            specs(&extensions("ggx", &brdf).unwrap()),
+            owned(&[
+                ("fa(lambert)", Effect::DiffuseFloor),
+                ("dmg(ggx)", Effect::GrazingDecay),
+                ("rmg(ggx)", Effect::GrazingDecay),
+                ("ggx+retro", Effect::RetroLobe),
+            ])
+        );
 
         let btdf = dataset(
             Kind::Btdf,
             &crate::workflows::synth::geometry("oblique").unwrap().1,
             1,
         );
-        let e = specs(&extensions("btdf(beckmann)+scale", &btdf).unwrap());
         assert_eq!(
-            e,
-            [
-                ("btdf(tr)+scale".to_string(), "long_tail"),
-                ("btdf(beckmann)+scale+absorb".into(), "absorption"),
-                ("btdf(beckmann)+scale+diffuse".into(), "diffuse_floor"),
-            ]
+            specs(&extensions("btdf(beckmann)+scale", &btdf).unwrap()),
+            owned(&[
+                ("btdf(tr)+scale", Effect::LongTail),
+                ("btdf(beckmann)+scale+absorb", Effect::Absorption),
+                ("btdf(beckmann)+scale+diffuse", Effect::DiffuseFloor),
+            ])
         );
-        let e = specs(&extensions("btdf(tr)", &btdf).unwrap());
-        assert!(e.contains(&("btdf(gtr)".into(), "long_tail")));
-        assert!(
-            !e.iter().any(|(_, eff)| *eff == "anisotropy"),
-            "one plane: no +peraxis"
+        // One plane: no +peraxis.
+        assert_eq!(
+            specs(&extensions("btdf(tr)", &btdf).unwrap()),
+            owned(&[
+                ("btdf(gtr)", Effect::LongTail),
+                ("btdf(tr)+scale", Effect::Scale),
+                ("btdf(tr)+absorb", Effect::Absorption),
+                ("btdf(tr)+diffuse", Effect::DiffuseFloor),
+            ])
         );
         let two = dataset(
             Kind::Btdf,
@@ -277,26 +267,23 @@ mod tests {
             1,
         );
         assert!(specs(&extensions("btdf(tr)", &two).unwrap())
-            .contains(&("btdf(tr)+peraxis".into(), "anisotropy")));
+            .contains(&("btdf(tr)+peraxis".into(), Effect::Anisotropy)));
         for c in extensions("btdf(gg)+absorb", &two)
             .unwrap()
             .iter()
             .chain(&extensions("dmg(lambert)", &brdf).unwrap())
         {
-            Model::for_data(
-                &c.spec,
-                if c.spec.starts_with("btdf") {
-                    &two
-                } else {
-                    &brdf
-                },
-            )
-            .unwrap();
+            let data = match Model::parse(&c.spec, 1).unwrap().kind {
+                Kind::Btdf => &two,
+                Kind::Brdf => &brdf,
+            };
+            Model::for_data(&c.spec, data).unwrap();
         }
     }
 
     /// Every extension marked nested reproduces the current model at the embedded
-    /// parameters (dmg/rmg only in the limit τ0 → 0: within 1 %).
+    /// parameters (the micrograin layers of grazing_decay only in the limit τ0 → 0:
+    /// within 1 %).
     #[test]
     fn nested_extensions_embed_the_current_model() {
         use rand::{Rng, SeedableRng};
@@ -333,7 +320,7 @@ mod tests {
                     if !c.nested {
                         continue;
                     }
-                    let tol = if c.spec.starts_with("dmg") || c.spec.starts_with("rmg") {
+                    let tol = if c.effect == Effect::GrazingDecay {
                         1e-2
                     } else {
                         1e-6
