@@ -196,78 +196,84 @@ mod tests {
         c.iter().map(|c| (c.spec.clone(), c.effect)).collect()
     }
 
-    fn owned(list: &[(&str, Effect)]) -> Vec<(String, Effect)> {
-        list.iter().map(|&(s, e)| (s.to_string(), e)).collect()
-    }
-
     #[test]
     fn extensions_follow_the_effect_table() {
-        let brdf = dataset(
-            Kind::Brdf,
-            &crate::workflows::synth::geometry("inplane10").unwrap().1,
-            3,
-        );
+        use Effect::*;
+        let geometry = |name: &str| crate::workflows::synth::geometry(name).unwrap().1;
+        let brdf = dataset(Kind::Brdf, &geometry("inplane10"), 3);
+        let btdf = dataset(Kind::Btdf, &geometry("oblique"), 1);
+        let two = dataset(Kind::Btdf, &geometry("ptb1"), 1);
         // The candidates in the order of the catalogue (the order of candidates.json).
-        assert_eq!(
-            specs(&extensions("lambert", &brdf).unwrap()),
-            owned(&[
-                ("on", Effect::Backscatter),
-                ("eon", Effect::Backscatter),
-                ("vmf", Effect::Backscatter),
-                ("fa(lambert)", Effect::SpecularLobe),
-                ("dmg(lambert)", Effect::GrazingDecay),
-                ("rmg(lambert)", Effect::GrazingDecay),
-                ("lambert+retro", Effect::RetroLobe),
-            ])
-        );
-        assert_eq!(
-            specs(&extensions("fa(lambert)+retro", &brdf).unwrap()),
-            owned(&[
-                ("fa(on)+retro", Effect::Backscatter),
-                ("fa(eon)+retro", Effect::Backscatter),
-                ("fa(vmf)+retro", Effect::Backscatter),
-            ])
-        );
-        assert_eq!(
-            specs(&extensions("ggx", &brdf).unwrap()),
-            owned(&[
-                ("fa(lambert)", Effect::DiffuseFloor),
-                ("dmg(ggx)", Effect::GrazingDecay),
-                ("rmg(ggx)", Effect::GrazingDecay),
-                ("ggx+retro", Effect::RetroLobe),
-            ])
-        );
-
-        let btdf = dataset(
-            Kind::Btdf,
-            &crate::workflows::synth::geometry("oblique").unwrap().1,
-            1,
-        );
-        assert_eq!(
-            specs(&extensions("btdf(beckmann)+scale", &btdf).unwrap()),
-            owned(&[
-                ("btdf(tr)+scale", Effect::LongTail),
-                ("btdf(beckmann)+scale+absorb", Effect::Absorption),
-                ("btdf(beckmann)+scale+diffuse", Effect::DiffuseFloor),
-            ])
-        );
-        // One plane: no +peraxis.
-        assert_eq!(
-            specs(&extensions("btdf(tr)", &btdf).unwrap()),
-            owned(&[
-                ("btdf(gtr)", Effect::LongTail),
-                ("btdf(tr)+scale", Effect::Scale),
-                ("btdf(tr)+absorb", Effect::Absorption),
-                ("btdf(tr)+diffuse", Effect::DiffuseFloor),
-            ])
-        );
-        let two = dataset(
-            Kind::Btdf,
-            &crate::workflows::synth::geometry("ptb1").unwrap().1,
-            1,
-        );
-        assert!(specs(&extensions("btdf(tr)", &two).unwrap())
-            .contains(&("btdf(tr)+peraxis".into(), Effect::Anisotropy)));
+        type Want = &'static [(&'static str, Effect)];
+        let cases: [(&str, &Dataset, Want); 6] = [
+            (
+                "lambert",
+                &brdf,
+                &[
+                    ("on", Backscatter),
+                    ("eon", Backscatter),
+                    ("vmf", Backscatter),
+                    ("fa(lambert)", SpecularLobe),
+                    ("dmg(lambert)", GrazingDecay),
+                    ("rmg(lambert)", GrazingDecay),
+                    ("lambert+retro", RetroLobe),
+                ],
+            ),
+            (
+                "fa(lambert)+retro",
+                &brdf,
+                &[
+                    ("fa(on)+retro", Backscatter),
+                    ("fa(eon)+retro", Backscatter),
+                    ("fa(vmf)+retro", Backscatter),
+                ],
+            ),
+            (
+                "ggx",
+                &brdf,
+                &[
+                    ("fa(lambert)", DiffuseFloor),
+                    ("dmg(ggx)", GrazingDecay),
+                    ("rmg(ggx)", GrazingDecay),
+                    ("ggx+retro", RetroLobe),
+                ],
+            ),
+            (
+                "btdf(beckmann)+scale",
+                &btdf,
+                &[
+                    ("btdf(tr)+scale", LongTail),
+                    ("btdf(beckmann)+scale+absorb", Absorption),
+                    ("btdf(beckmann)+scale+diffuse", DiffuseFloor),
+                ],
+            ),
+            // One plane: no +peraxis.
+            (
+                "btdf(tr)",
+                &btdf,
+                &[
+                    ("btdf(gtr)", LongTail),
+                    ("btdf(tr)+scale", Scale),
+                    ("btdf(tr)+absorb", Absorption),
+                    ("btdf(tr)+diffuse", DiffuseFloor),
+                ],
+            ),
+            (
+                "btdf(tr)+scale",
+                &two,
+                &[
+                    ("btdf(gtr)+scale", LongTail),
+                    ("btdf(tr)+scale+absorb", Absorption),
+                    ("btdf(tr)+scale+diffuse", DiffuseFloor),
+                    ("btdf(tr)+scale+peraxis", Anisotropy),
+                ],
+            ),
+        ];
+        for (spec, data, want) in cases {
+            let want: Vec<(String, Effect)> =
+                want.iter().map(|&(s, e)| (s.to_string(), e)).collect();
+            assert_eq!(specs(&extensions(spec, data).unwrap()), want, "{spec}");
+        }
         for c in extensions("btdf(gg)+absorb", &two)
             .unwrap()
             .iter()

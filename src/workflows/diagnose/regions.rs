@@ -206,13 +206,17 @@ pub fn describe_regions(data: &Dataset, z: &[f64]) -> String {
         if said.len() == 3 {
             break;
         }
-        let overlap = r
-            .mask
-            .iter()
-            .zip(&covered)
-            .filter(|(&m, &c)| m && c)
-            .count();
-        if overlap * 2 > r.n {
+        // At most half of a region may repeat what was said already.
+        let mostly_said = |s: &RegionStat| {
+            let overlap = s
+                .mask
+                .iter()
+                .zip(&covered)
+                .filter(|(&m, &c)| m && c)
+                .count();
+            overlap * 2 > s.n
+        };
+        if mostly_said(r) {
             continue;
         }
         // Localize: a sub-region of the same sign with a much larger mean says it better.
@@ -229,15 +233,7 @@ pub fn describe_regions(data: &Dataset, z: &[f64]) -> String {
                 None => break,
             }
         }
-        if best
-            .mask
-            .iter()
-            .zip(&covered)
-            .filter(|(&m, &c)| m && c)
-            .count()
-            * 2
-            > best.n
-        {
+        if mostly_said(best) {
             continue;
         }
         for (c, &m) in covered.iter_mut().zip(&r.mask) {
