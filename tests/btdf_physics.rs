@@ -6,10 +6,11 @@
 //! written `assert!(x.is_finite() && …)` or as `!(err <= tol)` → failure.
 
 use bsdfit::bsdf::btdf::{
-    beckmann_d, gg_lambda_exact, gg_lambda_table, gtr_d, ln_gamma, tr_d, GgShape, GG_NA, GG_NP,
-    GG_P_HI, GG_P_LO,
+    beckmann_d, gg_lambda_exact, gg_lambda_table, gtr_d, tr_d, GgShape, GG_NA, GG_NP, GG_P_HI,
+    GG_P_LO,
 };
 use bsdfit::bsdf::Model;
+use bsdfit::math::ln_gamma;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -9,7 +9,7 @@
 //! geometry is chosen so the hidden effect is identifiable, as each test says.
 
 use bsdfit::bsdf::Model;
-use bsdfit::data::Dataset;
+use bsdfit::data::{Dataset, Kind};
 use bsdfit::engine::{self, Backend, BackendChoice};
 use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect};
 use bsdfit::workflows::synth::{synthesize, Noise};
@@ -82,7 +82,7 @@ fn btdf_rows(theta_i: &[f64], theta_t: &[f64], planes: &[f64]) -> Vec<[f64; 4]> 
 /// Synthesize `spec` with `params` on `rows` (wavelengths: 3 channels for a BRDF, one for
 /// a BTDF), noise u = sqrt((rel·f)² + abs²).
 fn synth(spec: &str, params: &str, rows: &[[f64; 4]], noise: (f64, f64), seed: u64) -> Dataset {
-    let btdf = spec.starts_with("btdf");
+    let btdf = Model::parse(spec, 1).unwrap().kind == Kind::Btdf;
     let wl: Vec<f64> = if btdf {
         vec![589.0]
     } else {

@@ -1,4 +1,4 @@
-// Shared scattering math in f32: the GPU twin of src/math.rs.
+// Shared scattering math in f32: the GPU twin of src/math/mod.rs.
 // Conventions (DESIGN §1): normal on +z, directions point away from the surface.
 
 const PI: f32 = 3.14159265358979;
@@ -54,7 +54,7 @@ fn beckmann_d(cos_m: f32, alpha: f32) -> f32 {
     return exp(-tan2 / a2) / (PI * a2 * c2 * c2);
 }
 
-// Normalisation of Burley's GTR with its γ = 1 and α = 1 limits (see src/math.rs).
+// Normalisation of Burley's GTR with its γ = 1 and α = 1 limits (see src/math/mod.rs).
 fn gtr_norm(a2: f32, gamma: f32) -> f32 {
     let ln_a2 = log(a2);
     let x = (1.0 - gamma) * ln_a2;

@@ -25,7 +25,7 @@
 
 use super::{Ast, Bsdf, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::{fresnel_dielectric, gtr_norm};
+use crate::math::{fresnel_dielectric, gtr_norm, ln_gamma};
 use glam::DVec3;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
@@ -262,28 +262,6 @@ pub fn tr_g1_over_mu(v: DVec3, alpha: f64) -> f64 {
 
 // ---------------------------------------------------------------------------------------
 // Generalized Gaussian (Holzschuch & Pacanowski 2017)
-
-/// ln Γ(x) for x > 0: shifted up to z ≥ 10 by Γ(x) = Γ(x + n) / (x (x+1) … (x+n−1)), then
-/// Stirling's series to 1/z⁹ (truncation < 2e-14). No cancellation-prone coefficients, so
-/// the f32 twin keeps ~1e-6 relative accuracy in Γ over the range used (0.2 ≤ x ≤ 7.5).
-pub fn ln_gamma(x: f64) -> f64 {
-    let mut z = x;
-    let mut prod = 1.0;
-    let mut k = 0;
-    while z < 10.0 && k < 12 {
-        prod *= z;
-        z += 1.0;
-        k += 1;
-    }
-    let zi = 1.0 / z;
-    let zi2 = zi * zi;
-    let series = zi
-        * (1.0 / 12.0
-            - zi2
-                * (1.0 / 360.0
-                    - zi2 * (1.0 / 1260.0 - zi2 * (1.0 / 1680.0 - zi2 * (1.0 / 1188.0)))));
-    (z - 0.5) * z.ln() - z + 0.918_938_533_204_672_8 + series - prod.ln()
-}
 
 /// Per-evaluation constants of a GG distribution.
 #[derive(Clone, Copy, Debug)]

@@ -2,3 +2,4 @@
 //! statistics (χ² and F tails, information criteria) that judge a fit.
 pub mod covariance;
 pub mod fit;
+pub mod stats;

@@ -1,7 +1,12 @@
 //! Shared scattering math in f64: the CPU twin of `shaders/common.wgsl`.
 //!
 //! Conventions (DESIGN §1): local frame with the normal on +z, directions point away
-//! from the surface, μ = cos θ = z.
+//! from the surface, μ = cos θ = z. Special functions (ln Γ, incomplete gamma and beta,
+//! χ² and F tails, Gauss–Legendre quadrature) live in [`special`].
+
+pub mod special;
+
+pub use special::{beta_i, chi2_sf, f_sf, gamma_q, gauss_legendre, ln_gamma};
 
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -108,51 +113,9 @@ pub fn half_vector(wi: DVec3, wo: DVec3) -> DVec3 {
     }
 }
 
-/// Gauss–Legendre nodes and weights on [a, b] (Newton iteration on P_n from Tricomi's
-/// initial guess): the quadrature the tests and table builders integrate with.
-pub fn gauss_legendre(n: usize, a: f64, b: f64) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-15 {
-                    break;
-                }
-            }
-            let w = 2.0 / ((1.0 - x * x) * dp * dp);
-            (0.5 * (a + b) + 0.5 * (b - a) * x, 0.5 * (b - a) * w)
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn gauss_legendre_integrates_polynomials_exactly() {
-        // n nodes integrate degree 2n − 1 exactly: ∫₀² x⁷ dx = 32.
-        let s: f64 = gauss_legendre(4, 0.0, 2.0)
-            .iter()
-            .map(|(x, w)| w * x.powi(7))
-            .sum();
-        assert!((s - 32.0).abs() < 1e-12, "{s}");
-        let s: f64 = gauss_legendre(64, 0.0, PI)
-            .iter()
-            .map(|(x, w)| w * x.sin())
-            .sum();
-        assert!((s - 2.0).abs() < 1e-13, "{s}");
-    }
 
     #[test]
     fn fresnel_limits() {

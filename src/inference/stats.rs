@@ -1,0 +1,76 @@
+//! Statistics that judge least-squares fits of K samples with P parameters by
+//! χ² = Σ ((y′ − y)/u)²: consistency with the uncertainties, the F test of nested models
+//! and the Bayesian information criterion (the distributions are in
+//! [`crate::math::special`]).
+
+use crate::math::{chi2_sf, f_sf};
+
+/// P(χ²_ν ≥ χ²) with ν = K − P: the probability of a misfit at least this large if the
+/// model were right and the uncertainties Gaussian.
+pub fn consistency_p(chi2: f64, dof: usize) -> f64 {
+    chi2_sf(chi2, dof as f64)
+}
+
+/// The F test of a nested extension: F = (Δχ²/ΔP) / (χ²₁/ν₁) with Δχ² = χ²₀ − χ²₁ (a
+/// negative Δχ² counts as 0) and ν₁ = K − P₁ the extension's degrees of freedom, against
+/// F(ΔP, ν₁). Returns (F, p).
+pub fn f_test(delta_chi2: f64, extra_params: usize, chi2_ext: f64, dof_ext: usize) -> (f64, f64) {
+    let f = (delta_chi2.max(0.0) / extra_params as f64) / (chi2_ext / dof_ext as f64);
+    (f, f_sf(f, extra_params as f64, dof_ext as f64))
+}
+
+/// BIC = χ² + P ln K (χ² in place of −2 ln L).
+pub fn bic(chi2: f64, params: usize, samples: usize) -> f64 {
+    chi2 + params as f64 * (samples as f64).ln()
+}
+
+/// BIC(extension) − BIC(current) on the same K samples, both χ² divided by `scale`
+/// (1: as is; max(1, χ²_red) of the extension: a misfit both models share does not
+/// inflate the difference).
+pub fn delta_bic(
+    chi2_current: f64,
+    chi2_ext: f64,
+    extra_params: i64,
+    samples: usize,
+    scale: f64,
+) -> f64 {
+    (chi2_ext - chi2_current) / scale + extra_params as f64 * (samples as f64).ln()
+}
+
+/// A p-value for prose: `p < 1e-300`, `p = 1.3e-9`, `p = 0.043`.
+pub fn format_p(p: f64) -> String {
+    if p < 1e-300 {
+        "p < 1e-300".into()
+    } else if p < 1e-3 {
+        format!("p = {p:.1e}")
+    } else {
+        format!("p = {p:.3}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn criteria_and_tests() {
+        // BIC differences: unscaled it is the plain difference of the two BICs.
+        let (k, c0, c1) = (200, 450.0, 310.0);
+        let d = delta_bic(c0, c1, 3, k, 1.0);
+        assert!((d - (bic(c1, 5, k) - bic(c0, 2, k))).abs() < 1e-9, "{d}");
+        assert_eq!(delta_bic(c0, c1, 3, k, 2.0), -70.0 + 3.0 * 200f64.ln());
+        // F test: F = (140/3)/(310/195); p from the F(3, 195) tail.
+        let (f, p) = f_test(c0 - c1, 3, c1, 195);
+        assert!((f - (140.0 / 3.0) / (310.0 / 195.0)).abs() < 1e-12);
+        assert_eq!(p, f_sf(f, 3.0, 195.0));
+        // A worse extension counts as no improvement.
+        assert_eq!(f_test(-5.0, 2, 100.0, 90), (0.0, 1.0));
+        assert_eq!(
+            consistency_p(3.841458820694124, 1),
+            chi2_sf(3.841458820694124, 1.0)
+        );
+        assert_eq!(format_p(0.0), "p < 1e-300");
+        assert_eq!(format_p(1.26e-9), "p = 1.3e-9");
+        assert_eq!(format_p(0.0431), "p = 0.043");
+    }
+}

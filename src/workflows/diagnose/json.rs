@@ -1,0 +1,60 @@
+//! The diagnosis as JSON: DESIGN §8's contract and the candidate tables of `--report`.
+
+use super::Diagnosis;
+use serde_json::{json, Value};
+
+impl Diagnosis {
+    /// DESIGN §8: `{start_model, final_model, effects, steps: [{model, effect, chi2_red,
+    /// loss, evidence}]}`.
+    pub fn to_json(&self) -> Value {
+        json!({
+            "start_model": self.start_model,
+            "final_model": self.final_model,
+            "effects": self.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
+            "steps": self.steps.iter().map(|s| json!({
+                "model": s.model,
+                "effect": s.effect.map(|e| e.name()),
+                "chi2_red": num(s.chi2_red),
+                "loss": num(s.loss),
+                "evidence": s.evidence,
+            })).collect::<Vec<_>>(),
+        })
+    }
+
+    /// Every candidate of every round (for `--report`).
+    pub fn candidates_json(&self) -> Value {
+        Value::Array(
+            self.steps
+                .iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    json!({
+                        "after_step": i,
+                        "current": s.model,
+                        "candidates": s.candidates.iter().map(|c| json!({
+                            "model": c.candidate.spec,
+                            "effect": c.candidate.effect.name(),
+                            "nested": c.candidate.nested,
+                            "chi2_red": c.fit.as_ref().map(|f| num(f.chi2_red)),
+                            "extra_params": c.dp,
+                            "delta_chi2": num(c.delta_chi2),
+                            "F": c.f.map(num),
+                            "p": c.p.map(num),
+                            "delta_bic": num(c.delta_bic),
+                            "delta_bic_scaled": num(c.delta_bic_scaled),
+                            "significant": c.significant,
+                            "identifiable": c.identifiable,
+                            "verdict": c.verdict,
+                        })).collect::<Vec<_>>(),
+                    })
+                })
+                .collect(),
+        )
+    }
+}
+
+fn num(v: f64) -> Value {
+    serde_json::Number::from_f64(v)
+        .map(Value::Number)
+        .unwrap_or(Value::Null)
+}

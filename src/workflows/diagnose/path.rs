@@ -1,0 +1,313 @@
+//! The path search: adopt the best significant candidate of each round, continue greedily,
+//! and revisit the steps of a path that ends inconsistent ([`diagnose`]).
+
+use super::fit::fit_all;
+use super::score::{consistency, score};
+use super::{
+    describe_regions, extensions, fit_model, DiagnoseOptions, Diagnosis, FitResult, Scored, Step,
+};
+use crate::bsdf::Model;
+use crate::data::Dataset;
+use crate::engine::Backend;
+use crate::inference::stats::{bic, format_p};
+use anyhow::{Context, Result};
+
+/// Build the step that adopts `best` after `current` (its evidence: the test that adopted
+/// it, the runner-up of another effect, the consistency verdict and the remaining regions).
+fn adopt_step(
+    data: &Dataset,
+    current: &FitResult,
+    best: &Scored,
+    scored: &[Scored],
+    opts: &DiagnoseOptions,
+) -> (Step, bool) {
+    let m = scored.len();
+    let mut ranked: Vec<&Scored> = scored
+        .iter()
+        .filter(|s| s.significant && s.identifiable)
+        .collect();
+    ranked.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    let fit = best.fit.clone().expect("a significant candidate has a fit");
+    let effect = best.candidate.effect;
+    let test = match (best.f, best.p) {
+        (Some(f), Some(p)) => format!(
+            "{} over {}: Δχ² = {:.1} for {} more parameter(s), F({}, {}) = {f:.1}, {}, ΔBIC = {:.1}",
+            fit.model.spec,
+            current.model.spec,
+            best.delta_chi2,
+            best.dp,
+            best.dp,
+            fit.dof,
+            format_p(p),
+            best.delta_bic
+        ),
+        _ => format!(
+            "{} instead of {} (not nested, compared by BIC): Δχ² = {:.1}, ΔBIC = {:.1} (scaled {:.1})",
+            fit.model.spec, current.model.spec, best.delta_chi2, best.delta_bic, best.delta_bic_scaled
+        ),
+    };
+    let rank = ranked
+        .iter()
+        .position(|s| s.candidate.spec == best.candidate.spec)
+        .unwrap_or(0);
+    let other = ranked.iter().find(|s| s.candidate.effect != effect);
+    let runner = match other {
+        Some(r) if rank == 0 => format!(
+            "; next best {} [{}] ΔBIC {:.1} worse",
+            r.candidate.spec,
+            r.candidate.effect,
+            r.delta_bic - best.delta_bic
+        ),
+        Some(r) => format!(
+            "; {} [{}] fitted better at this step (ΔBIC {:.1} lower) but led to a worse final model",
+            r.candidate.spec,
+            r.candidate.effect,
+            best.delta_bic - r.delta_bic
+        ),
+        None => String::new(),
+    };
+    let (ok, text) = consistency(&fit, opts.alpha);
+    let regions = describe_regions(data, &fit.z);
+    let evidence = format!(
+        "{} ({}): {test} (best of {m} candidates{runner}). Now {text}. {}",
+        effect,
+        effect.signature(),
+        capitalize(&regions)
+    );
+    let step = Step {
+        model: fit.model.spec.clone(),
+        effect: Some(effect),
+        chi2_red: fit.chi2_red,
+        loss: fit.loss,
+        evidence,
+        fit,
+        candidates: vec![],
+    };
+    (step, ok)
+}
+
+fn log_step(
+    log: &mut dyn FnMut(String),
+    k: usize,
+    step: &Step,
+    data: &Dataset,
+    opts: &DiagnoseOptions,
+) {
+    let (_, text) = consistency(&step.fit, opts.alpha);
+    log(format!("step {k}: {} — {text}", step.model));
+    log(format!(
+        "  residuals: {}",
+        describe_regions(data, &step.fit.z)
+    ));
+}
+
+/// Continue a path greedily: fit every extension of its last model, adopt the best
+/// significant one, repeat. Returns the path and whether it ended consistent.
+fn extend_path(
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    mut steps: Vec<Step>,
+) -> Result<(Vec<Step>, bool)> {
+    loop {
+        let current = steps.last().expect("a step").fit.clone();
+        if consistency(&current, opts.alpha).0 && opts.stop_when_consistent {
+            let last = steps.last_mut().unwrap();
+            last.evidence.push_str(if last.effect.is_none() {
+                ". Stopped: nothing to add"
+            } else {
+                ". Stopped: nothing significant remains"
+            });
+            return Ok((steps, true));
+        }
+        if steps.len() > opts.max_steps {
+            steps.last_mut().unwrap().evidence.push_str(&format!(
+                ". Stopped after {} effects (--max-steps)",
+                opts.max_steps
+            ));
+            return Ok((steps, consistency(&current, opts.alpha).0));
+        }
+        let cands = extensions(&current.model.spec, data)?;
+        if cands.is_empty() {
+            steps
+                .last_mut()
+                .unwrap()
+                .evidence
+                .push_str(". Stopped: the catalogue has no extension of this model");
+            return Ok((steps, consistency(&current, opts.alpha).0));
+        }
+        log(format!(
+            "  fitting {} candidate extensions of {} on {}",
+            cands.len(),
+            current.model.spec,
+            backend.id()
+        ));
+        let fits = fit_all(&cands, data, backend, opts, &current);
+        let m = cands.len();
+        let scored: Vec<Scored> = cands
+            .into_iter()
+            .zip(fits)
+            .map(|(c, f)| score(data, &current, c, f, m, opts.alpha))
+            .collect();
+        log(format!(
+            "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:>10} {:>6}  verdict",
+            "model", "effect", "χ²_red", "ΔP", "F", "p", "ΔBIC", "s"
+        ));
+        for s in &scored {
+            log(format!(
+                "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:>10.1} {:>6.1}  {}",
+                s.candidate.spec,
+                s.candidate.effect.name(),
+                s.fit
+                    .as_ref()
+                    .map(|f| format!("{:.3}", f.chi2_red))
+                    .unwrap_or("-".into()),
+                s.dp,
+                s.f.map(|f| format!("{f:.1}")).unwrap_or("-".into()),
+                s.p.map(|p| format!("{p:.1e}")).unwrap_or("-".into()),
+                s.delta_bic,
+                s.fit.as_ref().map(|f| f.seconds).unwrap_or(0.0),
+                s.verdict
+            ));
+        }
+        let best = scored
+            .iter()
+            .filter(|s| s.significant && s.identifiable)
+            .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
+            .cloned();
+        let Some(best) = best else {
+            let why = if scored.iter().any(|s| s.significant) {
+                "the only significant extensions add parameters the data does not determine"
+            } else {
+                "no extension improves the fit significantly; the remaining misfit is not one of the catalogue's effects, or the geometry cannot separate it"
+            };
+            log(format!("  → stop: {why}"));
+            let last = steps.last_mut().unwrap();
+            last.evidence.push_str(&format!(". Stopped: {why}"));
+            last.candidates = scored;
+            return Ok((steps, consistency(&current, opts.alpha).0));
+        };
+        let (step, _) = adopt_step(data, &current, &best, &scored, opts);
+        log(format!(
+            "  → adopt {} [{}]",
+            step.model, best.candidate.effect
+        ));
+        log_step(log, steps.len(), &step, data, opts);
+        steps.last_mut().unwrap().candidates = scored;
+        steps.push(step);
+    }
+}
+
+/// BIC of a path's final model: χ² + P ln K.
+fn path_bic(steps: &[Step], k: usize) -> f64 {
+    let f = &steps.last().expect("a step").fit;
+    bic(f.chi2, f.model.dim, k)
+}
+
+/// Run the discrepancy workflow from `start` on `data`. `log` receives progress lines
+/// (the start fit, each round's candidate table, the decision).
+///
+/// The path is greedy (the best significant extension at each step). When it ends with
+/// the misfit still exceeding the uncertainties, each earlier step is revisited once with
+/// the best significant candidate of another effect, continued greedily, and the path
+/// whose final model has the lowest BIC is reported — the first that ends consistent, if
+/// any (an effect can mimic another at first, e.g. rough micrograins a coarsely sampled
+/// specular lobe).
+pub fn diagnose(
+    data: &Dataset,
+    start: &str,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+) -> Result<Diagnosis> {
+    let model = Model::for_data(start, data).context("--model")?;
+    anyhow::ensure!(
+        model.kind == data.kind,
+        "model {} is a {} model but the data is {}",
+        model.spec,
+        model.kind,
+        data.kind
+    );
+    let first = fit_model(&model, data, backend, opts, &[])?;
+    let (_, text) = consistency(&first, opts.alpha);
+    let regions = describe_regions(data, &first.z);
+    let step0 = Step {
+        model: model.spec.clone(),
+        effect: None,
+        chi2_red: first.chi2_red,
+        loss: first.loss,
+        evidence: format!("{text}. {}", capitalize(&regions)),
+        fit: first,
+        candidates: vec![],
+    };
+    log_step(log, 0, &step0, data, opts);
+    let (greedy, ok) = extend_path(data, backend, opts, log, vec![step0])?;
+    let mut best_path = greedy.clone();
+    if !ok && opts.backtrack {
+        for r in 0..greedy.len().saturating_sub(1) {
+            let adopted = greedy[r + 1].effect;
+            let scored = &greedy[r].candidates;
+            let alt = scored
+                .iter()
+                .filter(|s| s.significant && s.identifiable && Some(s.candidate.effect) != adopted)
+                .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+            let Some(alt) = alt else { continue };
+            log(format!(
+                "  ↺ {} ended with χ²_red = {:.3}: trying {} [{}] instead of {} at step {}",
+                greedy.last().unwrap().model,
+                greedy.last().unwrap().chi2_red,
+                alt.candidate.spec,
+                alt.candidate.effect,
+                greedy[r + 1].model,
+                r + 1
+            ));
+            let mut steps: Vec<Step> = greedy[..=r].to_vec();
+            let (step, _) = adopt_step(data, &steps[r].fit, alt, scored, opts);
+            log_step(log, r + 1, &step, data, opts);
+            steps.push(step);
+            let (path, consistent) = extend_path(data, backend, opts, log, steps)?;
+            if path_bic(&path, data.len()) < path_bic(&best_path, data.len()) {
+                best_path = path;
+                if consistent {
+                    break; // nothing significant remains on this path
+                }
+            }
+        }
+        if best_path.last().unwrap().model != greedy.last().unwrap().model {
+            let g = greedy.last().unwrap();
+            let note = format!(
+                ". Chosen over the greedy path {} (final χ²_red = {:.3}, BIC {:.1} higher)",
+                greedy
+                    .iter()
+                    .map(|s| s.model.as_str())
+                    .collect::<Vec<_>>()
+                    .join(" → "),
+                g.chi2_red,
+                path_bic(&greedy, data.len()) - path_bic(&best_path, data.len())
+            );
+            log(format!(
+                "  ↺ chose {}{note}",
+                best_path.last().unwrap().model
+            ));
+            best_path.last_mut().unwrap().evidence.push_str(&note);
+        }
+    }
+    let steps = best_path;
+    Ok(Diagnosis {
+        start_model: model.spec.clone(),
+        final_model: steps.last().unwrap().model.clone(),
+        effects: steps.iter().filter_map(|s| s.effect).collect(),
+        steps,
+        alpha: opts.alpha,
+        backend: backend.name(),
+    })
+}
+
+fn capitalize(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().collect::<String>() + c.as_str(),
+        None => String::new(),
+    }
+}
