@@ -30,10 +30,10 @@ pub enum Make {
         to: &'static [&'static str],
         inside: &'static [&'static str],
     },
-    /// Wrap a bare base, one of `bases`, in each combinator of `combinators`: B → `fa(B)`.
+    /// Wrap a bare base in each combinator of `combinators` that accepts it (by the
+    /// combinator's declared role): B → `fa(B)`.
     Wrap {
         combinators: &'static [&'static str],
-        bases: &'static [&'static str],
     },
     /// Replace the bare term `from` by the spec `to` that contains it: `ggx` →
     /// `fa(lambert)` (a Lambertian base under the lobe).
@@ -78,11 +78,6 @@ pub struct EffectEntry {
     pub rules: &'static [Rule],
 }
 
-/// The diffuse bases.
-const DIFFUSE: &[&str] = &["lambert", "on", "eon", "vmf"];
-/// The bases a combinator takes: the diffuse ones and the bare lobe.
-const BASES: &[&str] = &["lambert", "on", "eon", "vmf", "ggx"];
-
 const fn rule(kind: Kind, make: Make, nested: bool) -> Rule {
     Rule { kind, make, nested }
 }
@@ -113,7 +108,6 @@ pub const EFFECTS: &[EffectEntry] = &[
             Kind::Brdf,
             Make::Wrap {
                 combinators: &["fa"],
-                bases: DIFFUSE,
             },
             true,
         )],
@@ -201,7 +195,6 @@ pub const EFFECTS: &[EffectEntry] = &[
             Kind::Brdf,
             Make::Wrap {
                 combinators: &["dmg", "rmg"],
-                bases: BASES,
             },
             true,
         )],

@@ -3,7 +3,8 @@
 
 use super::effects::{Make, EFFECTS};
 use super::Effect;
-use crate::bsdf::{Ast, Model};
+pub use crate::bsdf::render_spec;
+use crate::bsdf::{bases_of, registry, Ast, Model};
 use crate::data::{Dataset, Kind};
 use anyhow::Result;
 
@@ -16,15 +17,6 @@ pub struct Candidate {
     /// Whether the current model is the extension at some parameter values (F test), or a
     /// swap that is not (BIC only).
     pub nested: bool,
-}
-
-/// Spec text of a syntax tree (the inverse of [`Ast::parse`]).
-pub fn render_spec(ast: &Ast) -> String {
-    match ast {
-        Ast::Term { name, arg: None } => name.clone(),
-        Ast::Term { name, arg: Some(a) } => format!("{name}({})", render_spec(a)),
-        Ast::Suffix { inner, name } => format!("{}+{name}", render_spec(inner)),
-    }
 }
 
 /// Split a spec into its core term and its suffixes (left to right).
@@ -108,8 +100,9 @@ fn make(how: &Make, core: &Ast, suffixes: &[String], planes: usize) -> Vec<Strin
                 vec![]
             }
         }
-        Make::Wrap { combinators, bases } if bare && bases.contains(&name) => combinators
+        Make::Wrap { combinators } if bare => combinators
             .iter()
+            .filter(|c| registry::entry(c, false).is_some_and(|e| bases_of(e).contains(&name)))
             .map(|c| keep(format!("{c}({name})")))
             .collect(),
         Make::Replace { from, to } if bare && name == from => vec![keep(to.to_string())],
@@ -166,19 +159,8 @@ pub fn embed(old: &Model, old_flat: &[f64], new: &Model) -> Vec<f64> {
                 }
             }
             None => {
-                let neutral = match p.name.as_str() {
-                    "sigma" | "base.sigma" | "r" | "base.r" | "lobe.ks" | "kr" | "tau" | "kd"
-                    | "base.rho" | "rho_g" => Some(0.0),
-                    // η = 1: no Fresnel reflection, so fa's lobe and rmg's grain specular vanish.
-                    "lobe.eta" | "eta_g" => Some(1.0),
-                    "scale" => Some(1.0),
-                    "gamma" => Some(2.0),
-                    // The thinnest layer of the flattest grains: w ≈ τ0 at every angle.
-                    "tau0" => Some(p.decl.lo),
-                    "beta" if new.kind == Kind::Brdf => Some(p.decl.lo),
-                    _ => None,
-                };
-                if let Some(v) = neutral {
+                // The value each model declares for "adds nothing" (ParamDecl::neutral).
+                if let Some(v) = p.decl.neutral {
                     slot.fill(v.clamp(p.decl.lo, p.decl.hi));
                 }
             }
