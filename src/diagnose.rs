@@ -561,8 +561,8 @@ pub fn fit_model(
 ) -> Result<FitResult> {
     anyhow::ensure!(
         data.len() > model.dim,
-        "{} samples cannot determine the {} parameters of {}",
-        data.len(),
+        "{} cannot determine the {} parameters of {}",
+        crate::dataset::count(data.len(), "sample", "samples"),
         model.dim,
         model.spec
     );
@@ -1666,6 +1666,8 @@ pub struct DiagnoseArgs {
     /// Replace zero uncertainties by a floor instead of rejecting them.
     #[arg(long)]
     pub allow_zero_uncertainty: bool,
+    #[command(flatten)]
+    pub selection: crate::readers::DataSelection,
     /// Keep the greedy path even when it ends with the misfit exceeding the uncertainties
     /// (by default each step is then revisited once with another effect's best candidate).
     #[arg(long)]
@@ -1677,11 +1679,15 @@ pub struct DiagnoseArgs {
 }
 
 pub fn run_diagnose(a: &DiagnoseArgs) -> Result<()> {
-    let ropts = ReadOptions {
+    let mut ropts = ReadOptions {
         allow_zero_uncertainty: a.allow_zero_uncertainty,
         wavelengths: a.wavelengths.clone(),
+        ..Default::default()
     };
-    let data = Dataset::read(&a.data, &ropts)?;
+    a.selection
+        .apply(&mut ropts)
+        .map_err(|e| anyhow::anyhow!(e))?;
+    let data = crate::readers::load_reporting(&a.data, &ropts)?;
     for n in &data.notices {
         eprintln!("note: {n}");
     }

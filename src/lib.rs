@@ -1,6 +1,7 @@
 //! bsdfit: fit BRDF and BTDF models to measured goniometric data with uncertainties.
 //!
 //! - [`dataset`]: the v1 CSV format, validation, channels.
+//! - [`readers`]: every file format (v1 CSV, ALTA text, MERL binary) by content.
 //! - [`model`]: the catalogue (one file per model, each with a WGSL twin in `shaders/`).
 //! - [`loss`]: the benchmark's losses and χ².
 //! - [`backend`]: the CPU reference and the GPU engine behind one trait.
@@ -20,6 +21,7 @@ pub mod math;
 pub mod model;
 pub mod optim;
 pub mod plot;
+pub mod readers;
 pub mod render;
 pub mod report;
 pub mod sweep;

@@ -41,6 +41,20 @@ enum Command {
     /// Find where a model and the measurement disagree, name the missing effect, add it,
     /// and repeat while the improvement is significant (DESIGN §7).
     Diagnose(bsdfit::diagnose::DiagnoseArgs),
+    /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
+    /// bsdfit v1 CSV, applying the data-selection options.
+    Convert(ConvertArgs),
+}
+
+#[derive(Args)]
+struct ConvertArgs {
+    /// Input file (format recognised by content).
+    input: PathBuf,
+    /// Output v1 CSV file.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    data_args: DataArgs,
 }
 
 #[derive(Args)]
@@ -70,15 +84,25 @@ struct DataArgs {
     /// Replace zero uncertainties by a floor (max(1%·|value|, 1e-6)) instead of rejecting them.
     #[arg(long)]
     allow_zero_uncertainty: bool,
+    #[command(flatten)]
+    selection: bsdfit::readers::DataSelection,
 }
 
 impl DataArgs {
-    fn read(&self, path: &std::path::Path) -> Result<Dataset> {
-        let opts = ReadOptions {
+    fn options(&self) -> Result<ReadOptions> {
+        let mut opts = ReadOptions {
             allow_zero_uncertainty: self.allow_zero_uncertainty,
             wavelengths: self.wavelengths.clone(),
+            ..Default::default()
         };
-        let ds = Dataset::read(path, &opts)?;
+        self.selection
+            .apply(&mut opts)
+            .map_err(|e| anyhow::anyhow!(e))?;
+        Ok(opts)
+    }
+
+    fn read(&self, path: &std::path::Path) -> Result<Dataset> {
+        let ds = bsdfit::readers::load_reporting(path, &self.options()?)?;
         for n in &ds.notices {
             eprintln!("note: {n}");
         }
@@ -159,6 +183,7 @@ fn main() {
         Command::Merge(a) => bsdfit::sweep::run_merge(&a),
         Command::Render(a) => bsdfit::render::run_render(&a),
         Command::Diagnose(a) => bsdfit::diagnose::run_diagnose(&a),
+        Command::Convert(a) => cmd_convert(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -293,10 +318,25 @@ fn cmd_synth(a: SynthArgs) -> Result<()> {
     ds.meta.insert("synth_geometry".into(), geometry.clone());
     ds.write(&a.out)?;
     eprintln!(
-        "wrote {} ({} samples, {} channel(s), geometry {geometry})",
+        "wrote {} ({}, {} channel(s), geometry {geometry})",
         a.out.display(),
-        ds.len(),
+        bsdfit::dataset::count(ds.len(), "sample", "samples"),
         ds.channel_count()
+    );
+    Ok(())
+}
+
+fn cmd_convert(a: ConvertArgs) -> Result<()> {
+    let ds = bsdfit::readers::convert(&a.input, &a.out, &a.data_args.options()?)?;
+    for n in &ds.notices {
+        eprintln!("note: {n}");
+    }
+    eprintln!(
+        "wrote {} ({}, {} channel(s): {:?} nm)",
+        a.out.display(),
+        bsdfit::dataset::count(ds.len(), "sample", "samples"),
+        ds.channel_count(),
+        ds.channels
     );
     Ok(())
 }

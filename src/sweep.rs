@@ -293,8 +293,11 @@ impl DataFile {
     pub fn read(path: &Path) -> Result<DataFile> {
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let text = String::from_utf8_lossy(&bytes);
-        let data = Dataset::parse(&text, &path.display().to_string(), &ReadOptions::default())?;
+        let data = crate::readers::parse_bytes(
+            &bytes,
+            &path.display().to_string(),
+            &ReadOptions::default(),
+        )?;
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())

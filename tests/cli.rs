@@ -310,15 +310,40 @@ fn data_errors_are_clear() {
     .unwrap();
     let out = bsdfit(&["fit", p(&f), "--model", "on", "--backend", "cpu"]);
     assert_clear_error(&out, &["two.csv", "2 samples"]);
-    // Duplicate written with a signed angle.
+    // One sample cannot determine the one parameter of lambert: "1 sample", singular.
+    let f = dir.path().join("one.csv");
+    std::fs::write(
+        &f,
+        "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n0,0,10,0,550,0.25,0.01\n",
+    )
+    .unwrap();
+    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
+    let e = assert_clear_error(&out, &["one.csv", "1 sample cannot"]);
+    assert!(!e.contains("1 samples"), "{e}");
+    // A geometry written twice (once with a signed angle) is two independent samples,
+    // announced, not an error (DESIGN §2).
     let f = dir.path().join("dup.csv");
     std::fs::write(
         &f,
         "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n10,0,-20,0,550,0.25,0.01\n10,0,20,180,550,0.24,0.01\n",
     )
     .unwrap();
-    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
-    assert_clear_error(&out, &["dup.csv:4", "duplicate"]);
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+    ]);
+    assert_ok(&out, "fit on a repeated geometry");
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("dup.csv") && err.contains("measured more than once"),
+        "the repeat is announced:\n{err}"
+    );
 }
 
 #[test]
