@@ -1006,10 +1006,7 @@ impl Dataset {
         let Some(mut b) = builder else {
             return Err(DataError::File {
                 file: file.into(),
-                msg: format!(
-                    "no header line (expected: {}); nor is it an ALTA or MERL file",
-                    COLUMNS.join(",")
-                ),
+                msg: format!("no header line (expected: {})", COLUMNS.join(",")),
             });
         };
         progress(Progress {

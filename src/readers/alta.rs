@@ -210,9 +210,23 @@ pub(crate) fn rot_z(v: DVec3, a: f64) -> DVec3 {
     DVec3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z)
 }
 
+/// Rotate (ωi, ωo) about the normal so that φi = 0 (exact for an isotropic BRDF). At
+/// normal incidence (sin θi ≤ 1e-12, rounding) ωi is set to +z and nothing is rotated.
+pub(crate) fn to_phi_i_zero(wi: DVec3, wo: DVec3) -> (DVec3, DVec3) {
+    let s = wi.x.hypot(wi.y);
+    if s <= 1e-12 {
+        return (DVec3::Z, wo);
+    }
+    let a = -wi.y.atan2(wi.x);
+    let (mut i, o) = (rot_z(wi, a), rot_z(wo, a));
+    i.y = 0.0; // exactly in the plane φ = 0
+    (i, o)
+}
+
 /// (θ, φ) in degrees of a unit upper-hemisphere vector, φ in [0, 360) (0 at the pole).
 pub(crate) fn angles_deg(w: DVec3) -> (f64, f64) {
-    let theta = w.z.clamp(-1.0, 1.0).acos().to_degrees();
+    // atan2 keeps full precision near the pole, where acos(z) loses half the digits.
+    let theta = w.x.hypot(w.y).atan2(w.z).to_degrees();
     let phi = if w.x == 0.0 && w.y == 0.0 {
         0.0
     } else {
@@ -663,11 +677,8 @@ fn convert_row(
     let strict = h.param_in == ParamIn::Cartesian;
     let mut wo = checked_unit(v, "view (outgoing)", strict)?;
     let mut wi = checked_unit(l, "light (incident)", strict)?;
-    if h.param_in.isotropic() && (wi.x != 0.0 || wi.y != 0.0) {
-        let a = -wi.y.atan2(wi.x);
-        wi = rot_z(wi, a);
-        wo = rot_z(wo, a);
-        wi.y = 0.0; // exactly in the plane φ = 0
+    if h.param_in.isotropic() {
+        (wi, wo) = to_phi_i_zero(wi, wo);
     }
     let cos_o = wo.z;
     let cosine = h.param_out == ParamOut::InvSteradianCosineFactor;

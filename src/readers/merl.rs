@@ -105,18 +105,13 @@ pub fn cell_directions(theta_h: f64, theta_d: f64, phi_d: f64) -> Option<(DVec3,
         theta_d.sin() * phi_d.sin(),
         theta_d.cos(),
     );
-    let mut wi = super::alta::rot_y(d, theta_h);
-    let mut wo = 2.0 * wi.dot(h) * h - wi;
+    let wi = super::alta::rot_y(d, theta_h);
+    let wo = 2.0 * wi.dot(h) * h - wi;
     if wi.z <= 1e-12 || wo.z <= 1e-12 {
         return None;
     }
-    if wi.x != 0.0 || wi.y != 0.0 {
-        let a = -wi.y.atan2(wi.x);
-        wi = super::alta::rot_z(wi, a);
-        wo = super::alta::rot_z(wo, a);
-        wi.y = 0.0;
-    }
-    Some((wi.normalize(), wo.normalize()))
+    let (wi, wo) = super::alta::to_phi_i_zero(wi.normalize(), wo.normalize());
+    Some((wi, wo))
 }
 
 /// MERL's lookup: the flat cell index holding the BRDF value of (ωi, ωo).

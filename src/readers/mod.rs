@@ -142,7 +142,20 @@ pub fn load_with_progress(
     let len = f.metadata().map(|m| m.len()).unwrap_or(0);
     let mut reader = BufReader::with_capacity(1 << 16, f);
     let head = reader.fill_buf().map_err(|e| cannot_read(&file, e))?;
-    match sniff(head, len).unwrap_or_else(|| by_extension(path)) {
+    let Some(format) = sniff(head, len) else {
+        // Nothing recognisable: the extension's reader explains what it expected.
+        return match by_extension(path) {
+            Format::MerlBinary => {
+                let mut bytes = Vec::new();
+                reader
+                    .read_to_end(&mut bytes)
+                    .map_err(|e| cannot_read(&file, e))?;
+                merl::parse(&bytes, &file, opts)
+            }
+            _ => Dataset::parse_reader(reader, &file, opts, progress).map_err(unrecognised),
+        };
+    };
+    match format {
         Format::MerlBinary => {
             let mut bytes = Vec::with_capacity(len.min(1 << 27) as usize);
             reader
@@ -162,10 +175,31 @@ pub fn load_with_progress(
 /// Parse a whole file held in memory (any format, recognised by content); `file` names
 /// it in messages and, when nothing matches, its extension picks the reader.
 pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
-    match sniff(bytes, bytes.len() as u64).unwrap_or_else(|| by_extension(Path::new(file))) {
-        Format::MerlBinary => merl::parse(bytes, file, opts),
-        Format::AltaText => alta::parse_reader(bytes, file, opts, &mut |_| {}),
-        Format::V1Csv => Dataset::parse_reader(bytes, file, opts, &mut |_| {}),
+    match sniff(bytes, bytes.len() as u64) {
+        Some(Format::MerlBinary) => merl::parse(bytes, file, opts),
+        Some(Format::AltaText) => alta::parse_reader(bytes, file, opts, &mut |_| {}),
+        Some(Format::V1Csv) => Dataset::parse_reader(bytes, file, opts, &mut |_| {}),
+        None => match by_extension(Path::new(file)) {
+            Format::MerlBinary => merl::parse(bytes, file, opts),
+            _ => Dataset::parse_reader(bytes, file, opts, &mut |_| {}).map_err(unrecognised),
+        },
+    }
+}
+
+/// A v1 error for a file that matched no format: say the other formats were tried too.
+fn unrecognised(e: DataError) -> DataError {
+    const HINT: &str = " (nor is the file recognisable as ALTA text or a MERL table)";
+    match e {
+        DataError::File { file, msg } => DataError::File {
+            file,
+            msg: msg + HINT,
+        },
+        DataError::Line { file, line, msg } => DataError::Line {
+            file,
+            line,
+            msg: msg + HINT,
+        },
+        other => other,
     }
 }
 
@@ -187,8 +221,8 @@ pub fn parse_assumed_note(note: &str) -> Option<(f64, f64)> {
         return None;
     }
     let after = |key: &str| -> Option<f64> {
-        let rest = &note[note.find(key)? + key.len()..];
-        let rest = rest.trim_start().strip_prefix('=')?.trim_start();
+        let key = format!("{key} =");
+        let rest = note[note.find(&key)? + key.len()..].trim_start();
         let end = rest
             .find(|c: char| !(c.is_ascii_digit() || "+-.eE".contains(c)))
             .unwrap_or(rest.len());
