@@ -747,3 +747,66 @@ fn assume_uncertainty_argument() {
     assert_eq!(readers::parse_assumed_note(&note), Some((0.05, 0.001)));
     assert_eq!(readers::parse_assumed_note("measured, k = 1"), None);
 }
+
+// ---------------------------------------------------------------------------------------
+// The real measurement (not vendored: see data/real/README.md)
+
+/// The 3M yellow tape of Belcour et al. 2014, when present at `data/real/` or at
+/// `$BSDFIT_REAL_DATA`.
+#[test]
+#[ignore]
+fn real_yellow_tape() {
+    let path = std::env::var_os("BSDFIT_REAL_DATA")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/real/retro-3M-jaune.dat")
+        });
+    assert!(
+        path.is_file(),
+        "fetch the file first (data/real/README.md): {}",
+        path.display()
+    );
+    assert_eq!(readers::detect(&path).unwrap(), Format::AltaText);
+    let e = err_of(readers::load(&path, &ReadOptions::default()));
+    assert!(e.contains("--assume-uncertainty"), "{e}");
+    let d = readers::load(&path, &with_assumed()).unwrap();
+    assert_eq!(d.material, "3M Yellow");
+    assert_eq!(d.len(), 7311);
+    let mut per_theta: Vec<(i64, usize)> = Vec::new();
+    for s in &d.samples {
+        let t = s.theta_i.to_degrees().round() as i64;
+        match per_theta.iter_mut().find(|(k, _)| *k == t) {
+            Some(e) => e.1 += 1,
+            None => per_theta.push((t, 1)),
+        }
+    }
+    assert_eq!(per_theta, vec![(15, 2601), (30, 2629), (60, 2081)]);
+    let (lo, hi) = d.samples.iter().fold((f64::MAX, 0f64), |(a, b), s| {
+        (a.min(s.value), b.max(s.value))
+    });
+    assert!(
+        (lo - 0.00153).abs() < 1e-5 && (hi - 38.97).abs() < 0.01,
+        "{lo} {hi}"
+    );
+    // Retro peaks (ωo = ωi) and mirror peaks are both there at each incidence.
+    for t in [15.0f64, 30.0, 60.0] {
+        let near = |w: DVec3, s: &Sample| (s.wo - w).length() < 0.03;
+        let wi = dir(t.to_radians(), 0.0);
+        let retro = d
+            .samples
+            .iter()
+            .filter(|s| near(wi, s))
+            .map(|s| s.value)
+            .fold(0.0, f64::max);
+        let spec = d
+            .samples
+            .iter()
+            .filter(|s| near(mirror(wi), s))
+            .map(|s| s.value)
+            .fold(0.0, f64::max);
+        assert!(
+            retro > 5.0 && spec > 5.0,
+            "θi = {t}: retro {retro}, mirror {spec}"
+        );
+    }
+}

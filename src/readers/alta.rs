@@ -331,7 +331,9 @@ pub fn parse_reader<R: BufRead>(
     let mut keys: BTreeMap<String, (usize, String)> = BTreeMap::new();
     let mut order: Vec<String> = Vec::new();
     let mut header_closed = false;
-    let mut state: Option<(Header, Builder, Option<(f64, f64)>)> = None;
+    // Once the header is read: it, the builder, and the assumed (REL, ABS) if any.
+    type Reading<'a> = (Header, Builder<'a>, Option<(f64, f64)>);
+    let mut state: Option<Reading> = None;
     let mut buf = Vec::with_capacity(256);
     let (mut line, mut bytes) = (0usize, 0u64);
     let mut grazing = 0usize;
@@ -393,7 +395,7 @@ pub fn parse_reader<R: BufRead>(
         }
         if state.is_none() {
             let header = parse_header(&keys, &order, file)?;
-            let assumed = if header.vs.iter().any(|&k| k == 0) {
+            let assumed = if header.vs.contains(&0) {
                 Some(require_assumption(
                     file,
                     opts,
