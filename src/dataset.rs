@@ -83,7 +83,8 @@ pub struct Dataset {
     pub channels: Vec<f64>,
     pub samples: Vec<Sample>,
     /// Measurement planes: distinct φo mod 180° (degrees) of the samples with θo > 0,
-    /// ascending; `[0.0]` when there is none. Anisotropic diffusers are measured on two.
+    /// ascending; `[0.0]` when there is none, or when there are more than [`MAX_PLANES`]
+    /// (out-of-plane data such as MERL tables). Anisotropic diffusers are measured on two.
     pub axes: Vec<f64>,
     /// Where the data came from (for messages); empty for in-memory data.
     pub source: PathBuf,
@@ -150,6 +151,9 @@ pub const MIN_REL_UNCERTAINTY: f64 = 1e-12;
 /// Smallest accepted uncertainty, sr⁻¹: 1/u² of smaller ones overflows χ² sums (f64
 /// overflows near 1e308, and a residual of 1 sr⁻¹ over u = 1e-160 already does).
 pub const MIN_ABS_UNCERTAINTY: f64 = 1e-30;
+/// More distinct outgoing azimuths (mod 180°) than this and the data are not scans on a
+/// few measurement planes: [`Dataset::axes`] is then the single plane 0.
+pub const MAX_PLANES: usize = 32;
 /// `--wavelengths`: a request farther than this from every wavelength of the file is an
 /// error rather than a silent substitution.
 pub const MAX_WAVELENGTH_GAP_NM: f64 = 50.0;
@@ -476,13 +480,26 @@ impl<'a> Builder<'a> {
                 msg: "the selection leaves no sample".into(),
             });
         }
-        let axes = measurement_planes(
+        let mut axes = measurement_planes(
             samples
                 .iter()
                 .map(|s| (s.theta_o.to_degrees(), s.phi_o.to_degrees())),
         );
-        for s in &mut samples {
-            s.axis = plane_index(&axes, s.theta_o.to_degrees(), s.phi_o.to_degrees());
+        if axes.len() > MAX_PLANES {
+            // Out-of-plane data (MERL tables, dense ALTA scans): one "plane" per azimuth
+            // is no measurement plane; per-plane fits and checks would multiply by them.
+            notices.push(format!(
+                "{file}: {} distinct outgoing azimuths (mod 180°): the data are not scans on a few planes, so they are treated as one (no per-plane analysis)",
+                axes.len()
+            ));
+            axes = vec![0.0];
+            for s in &mut samples {
+                s.axis = 0;
+            }
+        } else {
+            for s in &mut samples {
+                s.axis = plane_index(&axes, s.theta_o.to_degrees(), s.phi_o.to_degrees());
+            }
         }
         samples.shrink_to_fit();
         Ok(Dataset {
@@ -1152,7 +1169,9 @@ pub fn measurement_planes(pairs: impl Iterator<Item = (f64, f64)>) -> Vec<f64> {
 /// planes (a scan through the normal on that plane), else to plane 0.
 fn plane_index(planes: &[f64], theta_deg: f64, phi_deg: f64) -> usize {
     let p = plane_of(theta_deg, phi_deg).unwrap_or_else(|| plane_of_phi(phi_deg));
-    planes.iter().position(|&q| q == p).unwrap_or(0)
+    // `planes` is sorted (measurement_planes): out-of-plane data (MERL, ALTA) has one
+    // plane per distinct azimuth, up to millions.
+    planes.binary_search_by(|q| q.total_cmp(&p)).unwrap_or(0)
 }
 
 impl Dataset {

@@ -908,3 +908,36 @@ fn band_averages_neighbouring_wavelengths() {
     };
     assert!(err(&t, &opts).contains("--band needs --wavelengths"));
 }
+
+#[test]
+fn out_of_plane_data_is_one_plane() {
+    // Up to 32 distinct azimuths are measurement planes…
+    let rows: Vec<String> = (0..32)
+        .map(|k| format!("10,0,40,{},550,0.2,0.01", k * 5))
+        .collect();
+    let d = parse(&file(
+        "brdf",
+        &rows.iter().map(String::as_str).collect::<Vec<_>>(),
+    ))
+    .unwrap();
+    assert_eq!(d.axes.len(), 32);
+    assert!(d.samples.iter().enumerate().all(|(k, s)| s.axis == k));
+    // …more are out-of-plane data (MERL, dense ALTA scans): a single plane, said so.
+    let rows: Vec<String> = (0..33)
+        .map(|k| format!("10,0,40,{},550,0.2,0.01", k * 5))
+        .collect();
+    let d = parse(&file(
+        "brdf",
+        &rows.iter().map(String::as_str).collect::<Vec<_>>(),
+    ))
+    .unwrap();
+    assert_eq!(d.axes, vec![0.0]);
+    assert!(d.samples.iter().all(|s| s.axis == 0));
+    assert!(
+        d.notices
+            .iter()
+            .any(|n| n.contains("33 distinct outgoing azimuths")),
+        "{:?}",
+        d.notices
+    );
+}

@@ -5,7 +5,7 @@
 //!
 //! - Header: three little-endian int32, the dimensions 90 (θh) × 90 (θd) × 180 (φd).
 //! - Then 3 × 1,458,000 little-endian f64: the R block, the G block, the B block, each
-//!   indexed `iφd + 180·(iθd + 90·iθh)`. A file is exactly 38,880,012 bytes.
+//!   indexed `iφd + 180·(iθd + 90·iθh)`. A file is exactly 34,992,012 bytes.
 //! - Stored values times R 1/1500, G 1.15/1500, B 1.66/1500 are the BRDF in sr⁻¹.
 //!   Negative values mark cells that were not measured (below the horizon).
 //! - Rusinkiewicz half/difference angles, from the **incident** direction: h =
