@@ -415,3 +415,62 @@ fn synth_rejects_out_of_bounds_parameters() {
     ]);
     assert_clear_error(&out, &["noise"]);
 }
+
+#[test]
+fn convert_reads_any_format_and_says_where_it_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let alta = dir.path().join("tape.dat");
+    std::fs::write(
+        &alta,
+        "#SAMPLE \"tape\"\n#DIM 3 1\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n#PARAM_OUT INV_STERADIAN_COSINE_FACTOR\n0.5 0.5 0 1.2\n0.5 -0.5 0 2.4\n0.5 0.2 0.2 0.8\n",
+    )
+    .unwrap();
+    let out_csv = dir.path().join("tape.csv");
+    let out = bsdfit(&["convert", p(&alta), "--out", p(&out_csv)]);
+    assert_clear_error(&out, &["tape.dat", "--assume-uncertainty"]);
+    let out = bsdfit(&[
+        "convert",
+        p(&alta),
+        "--out",
+        p(&out_csv),
+        "--assume-uncertainty",
+        "0.05,0.001",
+    ]);
+    assert_ok(&out, "convert");
+    let err = text(&out.stderr);
+    assert!(err.contains("wrote") && err.contains("3 samples"), "{err}");
+    let csv = std::fs::read_to_string(&out_csv).unwrap();
+    assert!(
+        csv.contains("# material: tape")
+            && csv.contains("(ALTA text)")
+            && csv.contains("# uncertainty: assumed"),
+        "{csv}"
+    );
+    // The converted file fits, and the fit reports the assumption.
+    let out = bsdfit(&[
+        "fit",
+        p(&out_csv),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+    ]);
+    assert_ok(&out, "fit of the converted file");
+    assert!(
+        text(&out.stdout).contains("uncertainties were assumed"),
+        "{}",
+        text(&out.stdout)
+    );
+    // A bad --assume-uncertainty is a clear error.
+    let out = bsdfit(&[
+        "convert",
+        p(&alta),
+        "--out",
+        p(&out_csv),
+        "--assume-uncertainty",
+        "5%",
+    ]);
+    assert_clear_error(&out, &["--assume-uncertainty", "REL,ABS"]);
+}

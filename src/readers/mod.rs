@@ -25,7 +25,7 @@ pub mod alta;
 pub mod merl;
 
 use crate::dataset::{DataError, Dataset, ReadOptions};
-use std::io::{BufRead, BufReader, IsTerminal, Read};
+use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -283,6 +283,8 @@ pub struct StderrProgress {
     last_line: Option<Instant>,
     terminal: bool,
     bar: Option<indicatif::ProgressBar>,
+    /// Where the periodic lines go (stderr, or a buffer in tests).
+    sink: Box<dyn std::io::Write>,
 }
 
 impl StderrProgress {
@@ -294,11 +296,15 @@ impl StderrProgress {
             last_line: None,
             terminal: std::io::stderr().is_terminal(),
             bar: None,
+            sink: Box::new(std::io::stderr()),
         }
     }
 
     pub fn update(&mut self, p: Progress) {
-        let now = Instant::now();
+        self.update_at(p, Instant::now());
+    }
+
+    fn update_at(&mut self, p: Progress, now: Instant) {
         if now.duration_since(self.start) < Duration::from_secs(1) {
             return;
         }
@@ -324,7 +330,8 @@ impl StderrProgress {
                 Some(t) if t > 0 => format!("{:.0}%, ", 100.0 * p.bytes as f64 / t as f64),
                 _ => String::new(),
             };
-            eprintln!(
+            let _ = writeln!(
+                self.sink,
                 "reading {}: {pct}{} MB, {} rows, {:.0} s",
                 self.label,
                 p.bytes / 1_000_000,
@@ -383,5 +390,55 @@ impl DataSelection {
         opts.band_nm = self.band;
         opts.max_samples = Some(self.max_samples);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{Arc, Mutex};
+
+    /// A sink the test can read back.
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn progress_lines_off_a_terminal_every_five_seconds_after_the_first() {
+        let out = Shared::default();
+        let t0 = Instant::now();
+        let mut p = StderrProgress::new("big.csv", Some(200_000_000));
+        p.start = t0;
+        p.terminal = false;
+        p.sink = Box::new(out.clone());
+        let at = |s: f64| t0 + Duration::from_secs_f64(s);
+        let step = |bytes: u64| Progress {
+            bytes,
+            rows: (bytes / 50) as usize,
+        };
+        p.update_at(step(10_000_000), at(0.5)); // the first second: silent
+        p.update_at(step(50_000_000), at(1.5)); // printed
+        p.update_at(step(60_000_000), at(4.0)); // within 5 s of the last: silent
+        p.update_at(step(150_000_000), at(6.6)); // printed
+        p.finish();
+        let text = String::from_utf8(out.0.lock().unwrap().clone()).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines,
+            vec![
+                "reading big.csv: 25%, 50 MB, 1000000 rows, 2 s",
+                "reading big.csv: 75%, 150 MB, 3000000 rows, 7 s",
+            ],
+            "{text}"
+        );
     }
 }
