@@ -310,15 +310,40 @@ fn data_errors_are_clear() {
     .unwrap();
     let out = bsdfit(&["fit", p(&f), "--model", "on", "--backend", "cpu"]);
     assert_clear_error(&out, &["two.csv", "2 samples"]);
-    // Duplicate written with a signed angle.
+    // One sample cannot determine the one parameter of lambert: "1 sample", singular.
+    let f = dir.path().join("one.csv");
+    std::fs::write(
+        &f,
+        "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n0,0,10,0,550,0.25,0.01\n",
+    )
+    .unwrap();
+    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
+    let e = assert_clear_error(&out, &["one.csv", "1 sample cannot"]);
+    assert!(!e.contains("1 samples"), "{e}");
+    // A geometry written twice (once with a signed angle) is two independent samples,
+    // announced, not an error (DESIGN §2).
     let f = dir.path().join("dup.csv");
     std::fs::write(
         &f,
         "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n10,0,-20,0,550,0.25,0.01\n10,0,20,180,550,0.24,0.01\n",
     )
     .unwrap();
-    let out = bsdfit(&["fit", p(&f), "--model", "lambert", "--backend", "cpu"]);
-    assert_clear_error(&out, &["dup.csv:4", "duplicate"]);
+    let out = bsdfit(&[
+        "fit",
+        p(&f),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+    ]);
+    assert_ok(&out, "fit on a repeated geometry");
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("dup.csv") && err.contains("measured more than once"),
+        "the repeat is announced:\n{err}"
+    );
 }
 
 #[test]
@@ -389,4 +414,63 @@ fn synth_rejects_out_of_bounds_parameters() {
         p(&dir.path().join("x.csv")),
     ]);
     assert_clear_error(&out, &["noise"]);
+}
+
+#[test]
+fn convert_reads_any_format_and_says_where_it_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let alta = dir.path().join("tape.dat");
+    std::fs::write(
+        &alta,
+        "#SAMPLE \"tape\"\n#DIM 3 1\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n#PARAM_OUT INV_STERADIAN_COSINE_FACTOR\n0.5 0.5 0 1.2\n0.5 -0.5 0 2.4\n0.5 0.2 0.2 0.8\n",
+    )
+    .unwrap();
+    let out_csv = dir.path().join("tape.csv");
+    let out = bsdfit(&["convert", p(&alta), "--out", p(&out_csv)]);
+    assert_clear_error(&out, &["tape.dat", "--assume-uncertainty"]);
+    let out = bsdfit(&[
+        "convert",
+        p(&alta),
+        "--out",
+        p(&out_csv),
+        "--assume-uncertainty",
+        "0.05,0.001",
+    ]);
+    assert_ok(&out, "convert");
+    let err = text(&out.stderr);
+    assert!(err.contains("wrote") && err.contains("3 samples"), "{err}");
+    let csv = std::fs::read_to_string(&out_csv).unwrap();
+    assert!(
+        csv.contains("# material: tape")
+            && csv.contains("(ALTA text)")
+            && csv.contains("# uncertainty: assumed"),
+        "{csv}"
+    );
+    // The converted file fits, and the fit reports the assumption.
+    let out = bsdfit(&[
+        "fit",
+        p(&out_csv),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+    ]);
+    assert_ok(&out, "fit of the converted file");
+    assert!(
+        text(&out.stdout).contains("uncertainties were assumed"),
+        "{}",
+        text(&out.stdout)
+    );
+    // A bad --assume-uncertainty is a clear error.
+    let out = bsdfit(&[
+        "convert",
+        p(&alta),
+        "--out",
+        p(&out_csv),
+        "--assume-uncertainty",
+        "5%",
+    ]);
+    assert_clear_error(&out, &["--assume-uncertainty", "REL,ABS"]);
 }

@@ -3,7 +3,7 @@
 
 mod common;
 
-use bsdfit::data::{normalise_angles, Dataset, Kind, ReadOptions};
+use bsdfit::data::{geometry_key, normalise_angles, Dataset, Kind, ReadOptions};
 use glam::DVec3;
 
 const HEADER: &str = "theta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty";
@@ -270,41 +270,129 @@ fn zero_uncertainty_is_an_error_unless_allowed() {
 }
 
 #[test]
-fn duplicate_rows() {
+fn repeated_geometry_is_independent_samples() {
+    // DESIGN §2: a geometry measured twice is two independent samples, with one notice.
     let mut rows = good_rows();
-    rows.push("10,0,20,0,550,0.2401,0.0030"); // same as row 2
-    let e = err(&file("brdf", &rows), &ReadOptions::default());
+    rows.push("10,0,20,0,550,0.2401,0.0030"); // the geometry of row 2, another value
+    let d = parse(&file("brdf", &rows)).unwrap();
+    assert_eq!(d.len(), 8);
+    assert_eq!(d.samples[7].value, 0.2401);
+    assert_eq!(d.samples[7].line, FIRST_DATA_LINE + 7);
+    assert_eq!(d.notices.len(), 1, "{:?}", d.notices);
     assert!(
-        e.contains(&format!("f.csv:{}:", FIRST_DATA_LINE + 7)),
-        "{e}"
+        d.notices[0].contains("f.csv")
+            && d.notices[0].contains("1 geometry")
+            && d.notices[0].contains("2 samples"),
+        "{:?}",
+        d.notices
     );
+    assert!(!d.notices[0].contains("warning"), "{:?}", d.notices);
+}
+
+#[test]
+fn repeated_geometry_written_with_signed_angles() {
+    // θo = −10, φo = 0 is θo = 10, φo = 180 (DESIGN §1).
+    for extra in [
+        "10,0,10,180,550,0.2601,0.0031", // row 1 (10,0,-10,0)
+        "20,180,35,45,650,0.18,0.0022",  // row 6 (-20,0,35,45)
+        "30,450,60,-90,650,0.19,0.0024", // row 5 (30,90,60,270), φ wrapping past 360
+        "0,45,10,0,550,0.25,0.0031",     // row 0 (0,0,10,0): the azimuth at the pole
+    ] {
+        let mut rows = good_rows();
+        rows.push(extra);
+        let d = parse(&file("brdf", &rows)).unwrap_or_else(|e| panic!("{extra}: {e}"));
+        assert_eq!(d.len(), 8);
+        assert!(
+            d.notices.len() == 1 && d.notices[0].contains("1 geometry"),
+            "{extra}: {:?}",
+            d.notices
+        );
+    }
+    // Same geometry at another wavelength is not a repeat.
+    let mut rows = good_rows();
+    rows.push("10,0,10,180,650,0.2601,0.0031");
+    let d = parse(&file("brdf", &rows)).unwrap();
+    assert_eq!(d.len(), 8);
+    assert!(d.notices.is_empty(), "{:?}", d.notices);
+}
+
+#[test]
+fn byte_identical_repeated_row_warns() {
+    let mut rows = good_rows();
+    rows.push("30,0,-45,0,450,0.2000,0.0025"); // row 3, byte for byte
+    rows.push("10,0,20,0,550,0.2400,0.0030"); // row 2, byte for byte
+    rows.push("10,0,20,0,550,0.24,0.0030"); // row 2's geometry, other text
+    let d = parse(&file("brdf", &rows)).unwrap();
+    assert_eq!(d.len(), 10);
+    let all = d.notices.join("\n");
     assert!(
-        e.contains("duplicate") && e.contains(&(FIRST_DATA_LINE + 2).to_string()),
-        "{e}"
+        all.contains("2 geometries") && all.contains("5 samples"),
+        "{all}"
+    );
+    let warn = d
+        .notices
+        .iter()
+        .find(|n| n.contains("warning"))
+        .unwrap_or_else(|| panic!("no warning in {all}"));
+    assert!(warn.contains("2 rows repeated byte for byte"), "{warn}");
+    assert!(
+        warn.contains(&format!(
+            "line {} repeats line {}",
+            FIRST_DATA_LINE + 7,
+            FIRST_DATA_LINE + 3
+        )) && warn.contains(&format!(
+            "line {} repeats line {}",
+            FIRST_DATA_LINE + 8,
+            FIRST_DATA_LINE + 2
+        )),
+        "{warn}"
     );
 }
 
 #[test]
-fn duplicate_written_with_signed_angle() {
-    // θo = −10, φo = 0 is θo = 10, φo = 180 (DESIGN §1).
-    let mut rows = good_rows();
-    rows.push("10,0,10,180,550,0.2601,0.0031"); // same as row 1 (10,0,-10,0)
-    assert_line_error(&file("brdf", &rows), FIRST_DATA_LINE + 7, "duplicate");
-    // The same on the incident side, with φ wrapping past 360.
-    let mut rows = good_rows();
-    rows.push("20,180,35,45,650,0.18,0.0022"); // same as row 6 (-20,0,35,45)
-    assert_line_error(&file("brdf", &rows), FIRST_DATA_LINE + 7, "duplicate");
-    let mut rows = good_rows();
-    rows.push("30,450,60,-90,650,0.19,0.0024"); // same as row 5 (30,90,60,270)
-    assert_line_error(&file("brdf", &rows), FIRST_DATA_LINE + 7, "duplicate");
-    // At the pole the azimuth means nothing.
-    let mut rows = good_rows();
-    rows.push("0,45,10,0,550,0.25,0.0031"); // same as row 0 (0,0,10,0)
-    assert_line_error(&file("brdf", &rows), FIRST_DATA_LINE + 7, "duplicate");
-    // Same geometry at another wavelength is not a duplicate.
-    let mut rows = good_rows();
-    rows.push("10,0,10,180,650,0.2601,0.0031");
-    assert_eq!(parse(&file("brdf", &rows)).unwrap().len(), 8);
+fn two_scans_through_the_normal_give_one_sample_to_each_plane() {
+    // A BTDF measured on the φt = 0° and 90° planes, the normal point in both scans.
+    let d = parse(&file(
+        "btdf",
+        &[
+            "0,0,-10,0,633,1.0,0.02",
+            "0,0,0,0,633,5.0,0.1",
+            "0,0,10,0,633,1.1,0.02",
+            "0,0,-10,90,633,0.9,0.02",
+            "0,0,0,90,633,5.1,0.1",
+            "0,0,10,90,633,0.8,0.02",
+        ],
+    ))
+    .unwrap();
+    assert_eq!(d.len(), 6);
+    assert_eq!(d.axes, vec![0.0, 90.0]);
+    let axes: Vec<usize> = d.samples.iter().map(|s| s.axis).collect();
+    assert_eq!(axes, vec![0, 0, 0, 1, 1, 1]);
+    assert!(
+        d.notices.len() == 1 && d.notices[0].contains("1 geometry"),
+        "{:?}",
+        d.notices
+    );
+    for s in &d.samples[1..2] {
+        assert!(close(s.wo, -DVec3::Z), "{:?}", s.wo);
+    }
+    assert!(close(d.samples[4].wo, -DVec3::Z));
+    // The plane survives writing and reading back.
+    let e = parse(&d.to_csv()).unwrap();
+    assert_eq!(
+        e.samples.iter().map(|s| s.axis).collect::<Vec<_>>(),
+        vec![0, 0, 0, 1, 1, 1]
+    );
+    // The per-plane subsets each hold both normal samples (the pole is on every plane).
+    assert_eq!(d.axis_subset(1).len(), 4);
+    // A normal sample whose φ is no plane of the file goes to plane 0.
+    let d = parse(&file(
+        "btdf",
+        &["0,0,0,45,633,5.0,0.1", "0,0,10,90,633,1.0,0.02"],
+    ))
+    .unwrap();
+    assert_eq!(d.axes, vec![90.0]);
+    assert_eq!(d.samples[0].axis, 0);
 }
 
 #[test]
@@ -438,7 +526,24 @@ fn normalise_angles_folds_signed_theta() {
     assert_eq!(normalise_angles(-10.0, 0.0), (10.0, 180.0));
     assert_eq!(normalise_angles(-10.0, 270.0), (10.0, 90.0));
     assert_eq!(normalise_angles(10.0, -90.0), (10.0, 270.0));
-    assert_eq!(normalise_angles(0.0, 123.0), (0.0, 0.0));
+    // At the pole the azimuth is kept (it names the plane of a normal sample)…
+    assert_eq!(normalise_angles(0.0, 123.0), (0.0, 123.0));
+    assert_eq!(normalise_angles(0.0, -90.0), (0.0, 270.0));
+    // …but does not make a different geometry.
+    assert_eq!(
+        geometry_key(0.0, 45.0, 0.0, 90.0, 633.0),
+        geometry_key(0.0, 0.0, 0.0, 0.0, 633.0)
+    );
+    assert_eq!(
+        geometry_key(-10.0, 0.0, 20.0, 0.0, 550.0),
+        geometry_key(10.0, 180.0, 20.0, 360.0, 550.0)
+    );
+    assert_ne!(
+        geometry_key(10.0, 0.0, 20.0, 0.0, 550.0),
+        geometry_key(10.0, 0.0, 20.0, 0.0, 551.0)
+    );
+    // A tiny negative azimuth does not round to 360.
+    assert_eq!(normalise_angles(10.0, -1e-20).1, 0.0);
 }
 
 #[test]
@@ -534,4 +639,305 @@ fn btdf_puts_wo_in_the_lower_hemisphere() {
     for s in ss {
         assert!(s.wi.z > 0.0 && s.wo.z < 0.0);
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Robustness of the reader: encodings, delimiters, every bad row at once, sane ranges
+
+#[test]
+fn utf8_bom_is_skipped() {
+    let t = format!("\u{feff}{}", file("brdf", &good_rows()));
+    let d = parse(&t).unwrap_or_else(|e| panic!("BOM rejected: {e}"));
+    assert_eq!(d.len(), 7);
+    // Also when the BOM precedes the header itself.
+    let t = format!("\u{feff}{HEADER}\n0,0,10,0,550,0.25,0.01\n");
+    let e = err(&t, &ReadOptions::default());
+    assert!(e.contains("kind") && !e.contains("theta_i' "), "{e}");
+}
+
+#[test]
+fn tab_or_semicolon_separated_files_get_a_hint() {
+    let t = file("brdf", &good_rows()).replace(',', "\t");
+    assert_line_error(&t, 5, "tabs");
+    let t = file("brdf", &good_rows()).replace(',', ";");
+    assert_line_error(&t, 5, "comma-separated");
+    // A single row with semicolons in a comma file.
+    assert_line_error(
+        &with_row(2, "10;0;20;0;550;0.24;0.003"),
+        FIRST_DATA_LINE + 2,
+        "comma-separated",
+    );
+}
+
+#[test]
+fn trailing_comma_is_named() {
+    let t = file("brdf", &good_rows()).replace(HEADER, &format!("{HEADER},"));
+    assert_line_error(&t, 5, "trailing comma");
+    let t = file("brdf", &good_rows()).replace("theta_o,phi_o", "theta_o,,phi_o");
+    assert_line_error(&t, 5, "empty column name");
+    assert_line_error(
+        &with_row(2, "10,0,20,0,550,0.24,0.003,"),
+        FIRST_DATA_LINE + 2,
+        "trailing comma",
+    );
+}
+
+#[test]
+fn latin1_bytes_are_tolerated_in_comments_only() {
+    // "# opérateur" in Latin-1: é is the single byte 0xE9.
+    let mut bytes =
+        b"# bsdfit dataset v1\n# kind: brdf\n# op\xe9rateur: A. B\xe9n\n# remark \xe9\n".to_vec();
+    bytes.extend_from_slice(format!("{HEADER}\n0,0,10,0,550,0.25,0.01\n").as_bytes());
+    bytes.extend_from_slice(b"# after \xff\n");
+    bytes.extend_from_slice(b"0,0,20,0,550,0.24,0.01\n");
+    let d = Dataset::parse_reader(&bytes[..], "f.csv", &ReadOptions::default(), &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(d.len(), 2);
+    assert!(d.meta.keys().any(|k| k.starts_with("op")), "{:?}", d.meta);
+    // Elsewhere the byte is reported with its line and column.
+    let mut bytes = format!("# kind: brdf\n{HEADER}\n0,0,10,0,550,0.25,0.01\n").into_bytes();
+    bytes.extend_from_slice(b"0,0,20,0,550,0.2\xe9,0.01\n");
+    let e = Dataset::parse_reader(&bytes[..], "f.csv", &ReadOptions::default(), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("f.csv:4:")
+            && e.contains("UTF-8")
+            && e.contains("0xE9")
+            && e.contains("column 17"),
+        "{e}"
+    );
+}
+
+#[test]
+fn every_bad_row_is_reported_at_once() {
+    let mut rows = good_rows();
+    rows[1] = "10,0,-10,0,550,abc,0.0031";
+    rows[4] = "30,0,-45,0,550,0.21,-1";
+    rows[6] = "-20,0,35,45,650,0.18";
+    let e = err(&file("brdf", &rows), &ReadOptions::default());
+    for (k, what) in [(1, "value"), (4, "negative"), (6, "cells")] {
+        assert!(
+            e.contains(&format!("f.csv:{}:", FIRST_DATA_LINE + k)) && e.contains(what),
+            "row {k} ({what}) missing from:\n{e}"
+        );
+    }
+    assert!(e.starts_with("3 bad rows in f.csv"), "{e}");
+    // Beyond 20, the rest are counted.
+    let bad: Vec<String> = (0..45).map(|k| format!("{k},0,20,0,550,x,0.01")).collect();
+    let t = file("brdf", &bad.iter().map(String::as_str).collect::<Vec<_>>());
+    let e = err(&t, &ReadOptions::default());
+    assert_eq!(
+        e.lines().filter(|l| l.starts_with("f.csv:")).count(),
+        20,
+        "{e}"
+    );
+    assert!(
+        e.contains("… and 25 more") && e.starts_with("45 bad rows"),
+        "{e}"
+    );
+    assert!(
+        e.contains(&format!("f.csv:{}:", FIRST_DATA_LINE + 19))
+            && !e.contains(&format!("f.csv:{}:", FIRST_DATA_LINE + 20)),
+        "{e}"
+    );
+}
+
+#[test]
+fn values_and_uncertainties_outside_sane_ranges() {
+    // |value| > 1e7 sr⁻¹ is a unit or exponent mistake.
+    assert_line_error(
+        &with_row(2, "10,0,20,0,550,2e7,3e5"),
+        FIRST_DATA_LINE + 2,
+        "1e7",
+    );
+    // Vanishing uncertainties would give χ²_red = inf: errors naming the line and the
+    // floor option.
+    for row in ["10,0,20,0,550,0.24,1e-31", "10,0,20,0,550,0.24,1e-14"] {
+        let t = with_row(2, row);
+        assert_line_error(&t, FIRST_DATA_LINE + 2, "allow-zero-uncertainty");
+        let e = err(&t, &ReadOptions::default());
+        assert!(e.contains("1e-12") && e.contains("1e-30"), "{e}");
+        let opts = ReadOptions {
+            allow_zero_uncertainty: true,
+            ..Default::default()
+        };
+        let d = Dataset::parse(&t, "f.csv", &opts).unwrap();
+        assert!((d.samples[2].uncertainty - 0.0024).abs() < 1e-15);
+    }
+    // The limits themselves are fine.
+    assert!(parse(&with_row(2, "10,0,20,0,550,1e7,1e5")).is_ok());
+    assert!(parse(&with_row(2, "10,0,20,0,550,0.24,3e-13")).is_ok());
+}
+
+#[test]
+fn progress_is_reported_while_streaming() {
+    let rows: Vec<String> = (0..70_000)
+        .map(|k| format!("{},0,{},0,550,0.25,0.01", k % 89, (k / 89) % 89))
+        .collect();
+    let t = file("brdf", &rows.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut calls = Vec::new();
+    let d = Dataset::parse_reader(t.as_bytes(), "f.csv", &ReadOptions::default(), &mut |p| {
+        calls.push(p)
+    })
+    .unwrap();
+    assert_eq!(d.len(), 70_000);
+    assert_eq!(calls.len(), 2, "one at 65536 lines, one at the end");
+    assert_eq!(calls[1].bytes, t.len() as u64);
+    assert_eq!(calls[1].rows, 70_000);
+}
+
+// ---------------------------------------------------------------------------------------
+// Channel selection messages and bands
+
+fn one_wavelength() -> String {
+    file(
+        "brdf",
+        &["0,0,10,0,550,0.25,0.01", "0,0,20,0,550,0.24,0.01"],
+    )
+}
+
+#[test]
+fn asking_for_more_channels_than_the_file_has_says_so_plainly() {
+    let opts = ReadOptions {
+        wavelengths: Some(vec![450.0, 550.0, 650.0]),
+        ..Default::default()
+    };
+    let e = err(&one_wavelength(), &opts);
+    assert!(
+        e.contains("f.csv")
+            && e.contains("has only 1 wavelength: 550 nm")
+            && e.contains("3 channels"),
+        "{e}"
+    );
+    assert!(!e.contains("already selected"), "{e}");
+    // Two requests near the same single channel.
+    let opts = ReadOptions {
+        wavelengths: Some(vec![560.0, 540.0]),
+        ..Default::default()
+    };
+    let e = err(
+        &file(
+            "brdf",
+            &["0,0,10,0,550,0.25,0.01", "0,0,10,0,700,0.24,0.01"],
+        ),
+        &opts,
+    );
+    assert!(
+        e.contains("560 nm and 540 nm")
+            && e.contains("550 nm channel")
+            && e.contains("550, 700 nm"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_wavelength_far_from_every_channel_is_an_error() {
+    let opts = ReadOptions {
+        wavelengths: Some(vec![480.0]),
+        ..Default::default()
+    };
+    let e = err(&one_wavelength(), &opts);
+    assert!(
+        e.contains("f.csv") && e.contains("within 50 nm of 480 nm") && e.contains("550 nm"),
+        "{e}"
+    );
+    // 50 nm away is still accepted, with a notice.
+    let opts = ReadOptions {
+        wavelengths: Some(vec![500.0]),
+        ..Default::default()
+    };
+    let d = Dataset::parse(&one_wavelength(), "f.csv", &opts).unwrap();
+    assert_eq!(d.channels, vec![550.0]);
+    assert!(d
+        .notices
+        .iter()
+        .any(|n| n.contains("500 nm → nearest present 550 nm")));
+}
+
+#[test]
+fn band_averages_neighbouring_wavelengths() {
+    // Wavelengths 540, 545, 550, 555, 560 and 650 at two geometries; the second geometry
+    // lacks 560 nm.
+    let mut rows = Vec::new();
+    for (k, wl) in [540, 545, 550, 555, 560, 650].iter().enumerate() {
+        rows.push(format!("0,0,10,0,{wl},{},0.01", 0.1 + 0.01 * k as f64));
+        if *wl != 560 {
+            rows.push(format!("20,0,-30,0,{wl},{},0.02", 0.2 + 0.01 * k as f64));
+        }
+    }
+    let t = file("brdf", &rows.iter().map(String::as_str).collect::<Vec<_>>());
+    let opts = ReadOptions {
+        wavelengths: Some(vec![550.0, 650.0]),
+        band_nm: Some(10.0),
+        ..Default::default()
+    };
+    let d = Dataset::parse(&t, "f.csv", &opts).unwrap();
+    assert_eq!(d.channels, vec![550.0, 650.0]);
+    assert_eq!(d.len(), 4);
+    let s = &d.samples[0]; // geometry 1, 550 nm band: values 0.10 … 0.14
+    assert_eq!(s.channel, 0);
+    assert!((s.value - 0.12).abs() < 1e-12, "{}", s.value);
+    assert!((s.uncertainty - (5.0 * 0.01f64 * 0.01).sqrt() / 5.0).abs() < 1e-15);
+    let s = &d.samples[1]; // geometry 2, 550 nm band: four values 0.20 … 0.23
+    assert!((s.value - 0.215).abs() < 1e-12 && (s.uncertainty - 0.01).abs() < 1e-15);
+    let s = &d.samples[2]; // geometry 1, 650 nm: one value
+    assert!(s.channel == 1 && (s.value - 0.15).abs() < 1e-12 && s.uncertainty == 0.01);
+    assert!(
+        d.notices
+            .iter()
+            .any(|n| n.contains("550 nm averages 540, 545, 550, 555, 560 nm")),
+        "{:?}",
+        d.notices
+    );
+    assert!(
+        d.notices.iter().any(|n| n.contains("1 to 5 samples")),
+        "{:?}",
+        d.notices
+    );
+    // Overlapping bands and a band without --wavelengths are errors.
+    let opts = ReadOptions {
+        wavelengths: Some(vec![540.0, 560.0]),
+        band_nm: Some(15.0),
+        ..Default::default()
+    };
+    assert!(err(&t, &opts).contains("bands of both"));
+    let opts = ReadOptions {
+        band_nm: Some(5.0),
+        ..Default::default()
+    };
+    assert!(err(&t, &opts).contains("--band needs --wavelengths"));
+}
+
+#[test]
+fn out_of_plane_data_is_one_plane() {
+    // Up to 32 distinct azimuths are measurement planes…
+    let rows: Vec<String> = (0..32)
+        .map(|k| format!("10,0,40,{},550,0.2,0.01", k * 5))
+        .collect();
+    let d = parse(&file(
+        "brdf",
+        &rows.iter().map(String::as_str).collect::<Vec<_>>(),
+    ))
+    .unwrap();
+    assert_eq!(d.axes.len(), 32);
+    assert!(d.samples.iter().enumerate().all(|(k, s)| s.axis == k));
+    // …more are out-of-plane data (MERL, dense ALTA scans): a single plane, said so.
+    let rows: Vec<String> = (0..33)
+        .map(|k| format!("10,0,40,{},550,0.2,0.01", k * 5))
+        .collect();
+    let d = parse(&file(
+        "brdf",
+        &rows.iter().map(String::as_str).collect::<Vec<_>>(),
+    ))
+    .unwrap();
+    assert_eq!(d.axes, vec![0.0]);
+    assert!(d.samples.iter().all(|s| s.axis == 0));
+    assert!(
+        d.notices
+            .iter()
+            .any(|n| n.contains("33 distinct outgoing azimuths")),
+        "{:?}",
+        d.notices
+    );
 }

@@ -3,6 +3,7 @@
 //! backend) are declared once here and flattened into each command, so every command
 //! accepts the same spelling of the same option.
 
+use crate::data::readers::{self, merl, parse_assume_arg};
 use crate::data::{Dataset, ReadOptions};
 use crate::engine::BackendChoice;
 use anyhow::Result;
@@ -10,6 +11,7 @@ use clap::{Args, Parser, Subcommand};
 use std::path::Path;
 
 mod bench;
+mod convert;
 mod diagnose;
 mod fit;
 mod models;
@@ -48,10 +50,13 @@ enum Command {
     /// Find where a model and the measurement disagree, name the missing effect, add it,
     /// and repeat while the improvement is significant.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
+    /// bsdfit v1 CSV, applying the data-selection options.
+    Convert(convert::ConvertArgs),
 }
 
 /// Data selection and validation, shared by every command that reads measurements.
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Args, Clone, Debug)]
 pub struct DataArgs {
     /// Keep the channels nearest these wavelengths (nm), e.g. 450,550,650.
     #[arg(long, value_delimiter = ',')]
@@ -59,19 +64,42 @@ pub struct DataArgs {
     /// Replace zero uncertainties by a floor (max(1%·|value|, 1e-6)) instead of rejecting them.
     #[arg(long)]
     pub allow_zero_uncertainty: bool,
+    /// For files without uncertainties (ALTA without #VS, MERL): assume
+    /// u = sqrt((REL·|value|)² + ABS²) sr⁻¹, e.g. 0.05,0.001. Every output then says the
+    /// uncertainties were assumed. Without it such files are refused.
+    #[arg(long, value_name = "REL,ABS")]
+    pub assume_uncertainty: Option<String>,
+    /// With --wavelengths: each channel averages every wavelength within ±NM nm of it,
+    /// per geometry (value = mean, u = sqrt(Σu²)/n).
+    #[arg(long, value_name = "NM")]
+    pub band: Option<f64>,
+    /// MERL tables: keep at most N measured cells, a deterministic subsample (a full table
+    /// has about 1.5 million; 0 keeps all).
+    #[arg(long, value_name = "N", default_value_t = merl::DEFAULT_MAX_SAMPLES)]
+    pub max_samples: usize,
 }
 
 impl DataArgs {
-    pub fn read_options(&self) -> ReadOptions {
-        ReadOptions {
+    /// The reader options these flags ask for.
+    pub fn read_options(&self) -> Result<ReadOptions> {
+        Ok(ReadOptions {
             allow_zero_uncertainty: self.allow_zero_uncertainty,
             wavelengths: self.wavelengths.clone(),
-        }
+            assume_uncertainty: self
+                .assume_uncertainty
+                .as_deref()
+                .map(parse_assume_arg)
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--assume-uncertainty: {e}"))?,
+            band_nm: self.band,
+            max_samples: Some(self.max_samples),
+            ..Default::default()
+        })
     }
 
-    /// Read a dataset with these options and print its notices.
+    /// Read a dataset (any format, by content) with these options and print its notices.
     pub fn read(&self, path: &Path) -> Result<Dataset> {
-        let ds = Dataset::read(path, &self.read_options())?;
+        let ds = readers::load_reporting(path, &self.read_options()?)?;
         for n in &ds.notices {
             eprintln!("note: {n}");
         }
@@ -100,6 +128,7 @@ pub fn main() -> i32 {
         Command::Merge(a) => sweep::run_merge(&a),
         Command::Render(a) => render::run(&a),
         Command::Diagnose(a) => diagnose::run(&a),
+        Command::Convert(a) => convert::run(&a),
     };
     match result {
         Ok(()) => 0,

@@ -84,7 +84,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     let paths = expand_data(&args.data)?;
     let mut files = Vec::new();
     for p in &paths {
-        files.push(DataFile::read(p, &args.data_args.read_options())?);
+        files.push(DataFile::read(p, &args.data_args.read_options()?)?);
     }
     anyhow::ensure!(args.restarts > 0, "--restarts must be at least 1");
     let all = tasks(

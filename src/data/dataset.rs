@@ -1,12 +1,17 @@
 //! Goniometric datasets: the v1 CSV format of DESIGN §2, validation, channel selection.
 //!
 //! Every failure is a [`DataError`] naming the file and line; nothing here panics on
-//! user input.
+//! user input. A file's bad rows are all reported at once (up to [`MAX_REPORTED_ERRORS`]).
+//! The v1 reader streams: it reads one line at a time into the final samples, so a file
+//! needs little more memory than its [`Dataset`] (see [`Dataset::parse_reader`]). Other
+//! formats (ALTA, MERL) and the content-sniffing entry point are in [`crate::data::readers`].
 
+use crate::data::readers::Progress;
 use crate::math::direction;
 use glam::DVec3;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
+use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
 
 /// Whether the dataset holds reflectance (BRDF) or transmittance (BTDF) samples.
@@ -53,8 +58,10 @@ pub struct Sample {
     pub uncertainty: f64,
     /// Index into [`Dataset::channels`].
     pub channel: usize,
-    /// Index into [`Dataset::axes`]: the φ plane of the outgoing direction (a sample at
-    /// θo = 0 lies on every plane and is given plane 0).
+    /// Index into [`Dataset::axes`]: the φ plane of the outgoing direction. A sample at
+    /// θo = 0 lies on every plane; it is given the plane of the φo written in its row when
+    /// that is one of the planes (two scans through the normal give one normal sample to
+    /// each plane), else plane 0.
     pub axis: usize,
     /// Incident direction, pointing away from the surface (upper hemisphere).
     pub wi: DVec3,
@@ -76,12 +83,17 @@ pub struct Dataset {
     pub channels: Vec<f64>,
     pub samples: Vec<Sample>,
     /// Measurement planes: distinct φo mod 180° (degrees) of the samples with θo > 0,
-    /// ascending; `[0.0]` when there is none. Anisotropic diffusers are measured on two.
+    /// ascending; `[0.0]` when there is none, or when there are more than [`MAX_PLANES`]
+    /// (out-of-plane data such as MERL tables). Anisotropic diffusers are measured on two.
     pub axes: Vec<f64>,
     /// Where the data came from (for messages); empty for in-memory data.
     pub source: PathBuf,
     /// Human-readable notices produced while reading (e.g. uncertainty floors applied).
     pub notices: Vec<String>,
+    /// `Some((REL, ABS))` when the file carried no uncertainties and they were assumed,
+    /// u = sqrt((REL·|value|)² + ABS²) ([`crate::data::readers::assumed_uncertainty`]); every
+    /// output derived from such data must say so.
+    pub assumed_uncertainty: Option<(f64, f64)>,
 }
 
 /// Problems reading or validating a dataset.
@@ -95,15 +107,78 @@ pub enum DataError {
         line: usize,
         msg: String,
     },
+    /// Several bad rows: the first [`MAX_REPORTED_ERRORS`], one per line of the message,
+    /// then how many more there are.
+    #[error("{}", fmt_lines(.file, .errors, *.more))]
+    Lines {
+        file: String,
+        errors: Vec<(usize, String)>,
+        more: usize,
+    },
 }
+
+fn fmt_lines(file: &str, errors: &[(usize, String)], more: usize) -> String {
+    let mut s = format!("{} bad rows in {file}:", errors.len() + more);
+    for (line, msg) in errors {
+        s += &format!("\n{file}:{line}: {msg}");
+    }
+    if more > 0 {
+        s += &format!("\n… and {more} more");
+    }
+    s
+}
+
+/// "1 sample", "2 samples": `n` followed by the singular or plural noun (an empty noun
+/// gives the bare number).
+pub fn count(n: usize, singular: &str, plural: &str) -> String {
+    let noun = if n == 1 { singular } else { plural };
+    if noun.is_empty() {
+        n.to_string()
+    } else {
+        format!("{n} {noun}")
+    }
+}
+
+/// At most this many bad rows are listed in one error; the rest are counted.
+pub const MAX_REPORTED_ERRORS: usize = 20;
+/// Largest |value| accepted, sr⁻¹. Even a mirror-like BRDF measured with a 0.1° aperture
+/// stays below about 1e6 sr⁻¹; larger values are unit or exponent mistakes and would
+/// dominate every loss.
+pub const MAX_ABS_VALUE: f64 = 1e7;
+/// Smallest accepted uncertainty relative to |value|: below it, double-precision rounding
+/// of the value itself exceeds the stated uncertainty.
+pub const MIN_REL_UNCERTAINTY: f64 = 1e-12;
+/// Smallest accepted uncertainty, sr⁻¹: 1/u² of smaller ones overflows χ² sums (f64
+/// overflows near 1e308, and a residual of 1 sr⁻¹ over u = 1e-160 already does).
+pub const MIN_ABS_UNCERTAINTY: f64 = 1e-30;
+/// More distinct outgoing azimuths (mod 180°) than this and the data are not scans on a
+/// few measurement planes: [`Dataset::axes`] is then the single plane 0.
+pub const MAX_PLANES: usize = 32;
+/// `--wavelengths`: a request farther than this from every wavelength of the file is an
+/// error rather than a silent substitution.
+pub const MAX_WAVELENGTH_GAP_NM: f64 = 50.0;
 
 /// Options that relax or shape reading.
 #[derive(Clone, Debug, Default)]
 pub struct ReadOptions {
-    /// Accept zero uncertainties by replacing them with a floor (and saying so).
+    /// Accept zero (or vanishingly small) uncertainties by replacing them with a floor
+    /// (and saying so).
     pub allow_zero_uncertainty: bool,
     /// Keep only the channels nearest to these wavelengths (nm), in this order.
     pub wavelengths: Option<Vec<f64>>,
+    /// With `wavelengths`: each selected channel averages, per geometry, every wavelength
+    /// of the file within ± this many nm of it: value = mean, u = sqrt(Σu²)/n (the
+    /// standard uncertainty of a mean of n independent values).
+    pub band_nm: Option<f64>,
+    /// For files that carry no uncertainties (ALTA text without `#VS`, MERL binary):
+    /// assume u = sqrt((REL·|value|)² + ABS²) with (REL, ABS). Without it such files are
+    /// refused; with it the dataset records the assumption
+    /// ([`Dataset::assumed_uncertainty`]). Ignored (with a notice) for files that carry
+    /// their own uncertainties.
+    pub assume_uncertainty: Option<(f64, f64)>,
+    /// MERL tables: keep at most this many measured cells, a deterministic subsample;
+    /// `None` is [`crate::data::readers::merl::DEFAULT_MAX_SAMPLES`], `Some(0)` keeps all.
+    pub max_samples: Option<usize>,
 }
 
 pub const COLUMNS: [&str; 7] = [
@@ -134,20 +209,710 @@ pub struct RawRow {
 }
 
 /// Signed-angle convention (DESIGN §1): a negative θ is the same angle at φ + 180°.
-/// Returns (θ, φ) in degrees with θ ≥ 0 and φ in [0, 360).
+/// Returns (θ, φ) in degrees with θ ≥ 0 and φ in [0, 360). At the pole (θ = 0) the
+/// azimuth does not change the direction but is kept as written: it says on which
+/// measurement plane a normal sample was taken ([`geometry_key`] ignores it).
 pub fn normalise_angles(theta: f64, phi: f64) -> (f64, f64) {
     let (t, p) = if theta < 0.0 {
         (-theta, phi + 180.0)
     } else {
         (theta, phi)
     };
-    let p = p.rem_euclid(360.0);
-    // Azimuth is meaningless at the pole; fold it so duplicates are detected.
-    if t == 0.0 {
-        (0.0, 0.0)
-    } else {
-        (t, p)
+    let mut p = p.rem_euclid(360.0) + 0.0; // + 0.0 turns −0 into 0
+    if p >= 360.0 {
+        p = 0.0; // rem_euclid of a tiny negative rounds up to 360
     }
+    (t, p)
+}
+
+/// The identity of a geometry and wavelength: the normalised angles (degrees) rounded to
+/// 1e-6°, the azimuth folded to 0 at a pole (where it means nothing), and the wavelength
+/// to 1e-6 nm. Two rows with the same key measured the same thing.
+pub fn geometry_key(theta_i: f64, phi_i: f64, theta_o: f64, phi_o: f64, wl: f64) -> [i64; 5] {
+    let (ti, pi) = normalise_angles(theta_i, phi_i);
+    let (to, po) = normalise_angles(theta_o, phi_o);
+    let pi = if ti == 0.0 { 0.0 } else { pi };
+    let po = if to == 0.0 { 0.0 } else { po };
+    [ti, pi, to, po, wl].map(|x| (x * 1e6).round() as i64)
+}
+
+fn sample_key(s: &Sample) -> [i64; 5] {
+    geometry_key(
+        s.theta_i.to_degrees(),
+        s.phi_i.to_degrees(),
+        s.theta_o.to_degrees(),
+        s.phi_o.to_degrees(),
+        s.wavelength_nm,
+    )
+}
+
+/// FNV-1a, 64 bits (stable across runs; for grouping rows, not for security).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn fold32(h: u64) -> u32 {
+    (h ^ (h >> 32)) as u32
+}
+
+fn key_hash(k: &[i64; 5]) -> u64 {
+    let mut bytes = [0u8; 40];
+    for (i, x) in k.iter().enumerate() {
+        bytes[i * 8..i * 8 + 8].copy_from_slice(&x.to_le_bytes());
+    }
+    fnv1a(&bytes)
+}
+
+/// Per-row side data kept while reading, for the repeated-geometry pass: 12 bytes a row.
+/// Rows with equal geometry hashes are compared on their exact keys, so a collision of
+/// these 32-bit hashes costs time, never a wrong count; a text-hash collision between two
+/// rows of the same geometry would only add a spurious warning.
+struct RowKey {
+    geometry: u32,
+    /// Hash of the row's text (0 for rows not read from text).
+    text: u32,
+    index: u32,
+}
+
+/// Validates rows one at a time into samples and finishes them into a [`Dataset`]
+/// (repeated geometries, channels, planes). Every reader goes through it, so every format
+/// gets the same checks and messages. Bad rows are collected, not returned at the first.
+pub(crate) struct Builder<'a> {
+    file: &'a str,
+    kind: Kind,
+    opts: &'a ReadOptions,
+    samples: Vec<Sample>,
+    keys: Vec<RowKey>,
+    errors: Vec<(usize, String)>,
+    more_errors: usize,
+    floored: usize,
+    /// Notices of the reader (printed before the builder's own).
+    pub(crate) notices: Vec<String>,
+}
+
+impl<'a> Builder<'a> {
+    pub(crate) fn new(kind: Kind, file: &'a str, opts: &'a ReadOptions) -> Builder<'a> {
+        Builder {
+            file,
+            kind,
+            opts,
+            samples: Vec::new(),
+            keys: Vec::new(),
+            errors: Vec::new(),
+            more_errors: 0,
+            floored: 0,
+            notices: Vec::new(),
+        }
+    }
+
+    /// Record a bad row (the first [`MAX_REPORTED_ERRORS`] are kept, the rest counted).
+    pub(crate) fn error(&mut self, line: usize, msg: String) {
+        if self.errors.len() < MAX_REPORTED_ERRORS {
+            self.errors.push((line, msg));
+        } else {
+            self.more_errors += 1;
+        }
+    }
+
+    /// Rows accepted so far.
+    pub(crate) fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Validate one row (degrees, signed angles allowed) and keep it as a sample.
+    /// `text` is the row as written, for the byte-identical-repeat warning.
+    pub(crate) fn push(&mut self, line: usize, r: RawRow, text: Option<&str>) {
+        for (name, v) in [
+            ("theta_i", r.theta_i),
+            ("phi_i", r.phi_i),
+            ("theta_o", r.theta_o),
+            ("phi_o", r.phi_o),
+            ("wavelength_nm", r.wavelength_nm),
+            ("value", r.value),
+            ("uncertainty", r.uncertainty),
+        ] {
+            if !v.is_finite() {
+                return self.error(line, format!("column {name} is not a finite number ({v})"));
+            }
+        }
+        for (name, v) in [("theta_i", r.theta_i), ("theta_o", r.theta_o)] {
+            if !(-90.0..=90.0).contains(&v) {
+                return self.error(line, format!("{name} = {v}° is outside [-90, 90]"));
+            }
+        }
+        if r.wavelength_nm <= 0.0 {
+            return self.error(
+                line,
+                format!("wavelength_nm = {} must be positive", r.wavelength_nm),
+            );
+        }
+        if r.value.abs() > MAX_ABS_VALUE {
+            return self.error(
+                line,
+                format!(
+                    "value = {} sr⁻¹ is outside the range of a BSDF (|value| ≤ {MAX_ABS_VALUE:e} sr⁻¹; a unit or exponent mistake?)",
+                    r.value
+                ),
+            );
+        }
+        let mut u = r.uncertainty;
+        if u < 0.0 {
+            return self.error(line, format!("uncertainty = {u} is negative"));
+        }
+        let tiny = u < MIN_ABS_UNCERTAINTY || u < MIN_REL_UNCERTAINTY * r.value.abs();
+        if tiny {
+            if !self.opts.allow_zero_uncertainty {
+                let msg = if u == 0.0 {
+                    "uncertainty is zero (pass --allow-zero-uncertainty to use a floor)".into()
+                } else {
+                    format!(
+                        "uncertainty = {u:e} is below max({MIN_REL_UNCERTAINTY:e}·|value|, {MIN_ABS_UNCERTAINTY:e} sr⁻¹): its χ² weight 1/u² would overflow or swamp every other sample (pass --allow-zero-uncertainty to use a floor)"
+                    )
+                };
+                return self.error(line, msg);
+            }
+            u = (UNCERTAINTY_FLOOR_REL * r.value.abs()).max(UNCERTAINTY_FLOOR_ABS);
+            self.floored += 1;
+        }
+        if r.value < -3.0 * u {
+            return self.error(
+                line,
+                format!(
+                    "value = {} is negative beyond 3 uncertainties ({u})",
+                    r.value
+                ),
+            );
+        }
+        let key = geometry_key(r.theta_i, r.phi_i, r.theta_o, r.phi_o, r.wavelength_nm);
+        let (ti, pi) = normalise_angles(r.theta_i, r.phi_i);
+        let (to, po) = normalise_angles(r.theta_o, r.phi_o);
+        let (ti, pi, to, po) = (
+            ti.to_radians(),
+            pi.to_radians(),
+            to.to_radians(),
+            po.to_radians(),
+        );
+        let wi = direction(ti, pi);
+        let mut wo = direction(to, po);
+        if self.kind == Kind::Btdf {
+            wo.z = -wo.z; // θt is measured from −n (DESIGN §1)
+        }
+        let Ok(index) = u32::try_from(self.samples.len()) else {
+            return self.error(line, "more than 4294967295 rows".into());
+        };
+        self.keys.push(RowKey {
+            geometry: fold32(key_hash(&key)),
+            text: text.map(|t| fold32(fnv1a(t.as_bytes())) | 1).unwrap_or(0),
+            index,
+        });
+        self.samples.push(Sample {
+            theta_i: ti,
+            phi_i: pi,
+            theta_o: to,
+            phi_o: po,
+            wavelength_nm: r.wavelength_nm,
+            value: r.value,
+            uncertainty: u,
+            channel: 0,
+            axis: 0,
+            wi,
+            wo,
+            line,
+        });
+    }
+
+    /// The errors so far as one [`DataError`], if any.
+    pub(crate) fn take_errors(&mut self) -> Option<DataError> {
+        if self.errors.is_empty() {
+            return None;
+        }
+        let file = self.file.to_string();
+        let mut errors = std::mem::take(&mut self.errors);
+        let more = std::mem::take(&mut self.more_errors);
+        Some(if errors.len() == 1 && more == 0 {
+            let (line, msg) = errors.pop().expect("one error");
+            DataError::Line { file, line, msg }
+        } else {
+            DataError::Lines { file, errors, more }
+        })
+    }
+
+    /// Check the rows as a whole and build the dataset.
+    pub(crate) fn finish(
+        mut self,
+        material: &str,
+        meta: BTreeMap<String, String>,
+    ) -> Result<Dataset, DataError> {
+        if let Some(e) = self.take_errors() {
+            return Err(e);
+        }
+        let file = self.file;
+        if self.samples.is_empty() {
+            return Err(DataError::File {
+                file: file.to_string(),
+                msg: "no data rows".into(),
+            });
+        }
+        let mut notices = std::mem::take(&mut self.notices);
+        self.repeated_geometries(&mut notices);
+        if self.floored > 0 {
+            notices.push(format!(
+                "{file}: {} replaced by max({}·|value|, {} sr⁻¹)",
+                count(
+                    self.floored,
+                    "zero uncertainty (or vanishingly small)",
+                    "zero uncertainties (or vanishingly small ones)"
+                ),
+                UNCERTAINTY_FLOOR_REL,
+                UNCERTAINTY_FLOOR_ABS
+            ));
+        }
+        let mut samples = std::mem::take(&mut self.samples);
+        let channels = select_channels(&mut samples, file, self.opts, &mut notices)?;
+        if samples.is_empty() {
+            return Err(DataError::File {
+                file: file.into(),
+                msg: "the selection leaves no sample".into(),
+            });
+        }
+        let mut axes = measurement_planes(
+            samples
+                .iter()
+                .map(|s| (s.theta_o.to_degrees(), s.phi_o.to_degrees())),
+        );
+        if axes.len() > MAX_PLANES {
+            // Out-of-plane data (MERL tables, dense ALTA scans): one "plane" per azimuth
+            // is no measurement plane; per-plane fits and checks would multiply by them.
+            notices.push(format!(
+                "{file}: {} distinct outgoing azimuths (mod 180°): the data are not scans on a few planes, so they are treated as one (no per-plane analysis)",
+                axes.len()
+            ));
+            axes = vec![0.0];
+            for s in &mut samples {
+                s.axis = 0;
+            }
+        } else {
+            for s in &mut samples {
+                s.axis = plane_index(&axes, s.theta_o.to_degrees(), s.phi_o.to_degrees());
+            }
+        }
+        samples.shrink_to_fit();
+        Ok(Dataset {
+            kind: self.kind,
+            material: material.to_string(),
+            meta,
+            channels,
+            samples,
+            axes,
+            source: PathBuf::from(file),
+            notices,
+            assumed_uncertainty: None,
+        })
+    }
+
+    /// A geometry measured more than once is a set of independent samples (DESIGN §2);
+    /// say how many there are, and warn about rows repeated byte for byte.
+    fn repeated_geometries(&mut self, notices: &mut Vec<String>) {
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.sort_unstable_by_key(|k| (k.geometry, k.index));
+        let (mut geometries, mut members) = (0usize, 0usize);
+        let mut identical: Vec<(usize, usize)> = Vec::new();
+        let mut identical_count = 0usize;
+        let mut i = 0;
+        while i < keys.len() {
+            let mut j = i + 1;
+            while j < keys.len() && keys[j].geometry == keys[i].geometry {
+                j += 1;
+            }
+            if j - i > 1 {
+                // Same hash: group by the exact key (a hash collision splits the group).
+                let mut group: Vec<([i64; 5], usize, u32)> = keys[i..j]
+                    .iter()
+                    .map(|k| {
+                        let idx = k.index as usize;
+                        (sample_key(&self.samples[idx]), idx, k.text)
+                    })
+                    .collect();
+                group.sort_unstable();
+                let mut a = 0;
+                while a < group.len() {
+                    let mut b = a + 1;
+                    while b < group.len() && group[b].0 == group[a].0 {
+                        b += 1;
+                    }
+                    if b - a > 1 {
+                        geometries += 1;
+                        members += b - a;
+                        for m in a + 1..b {
+                            let (_, idx, text) = group[m];
+                            if text == 0 {
+                                continue;
+                            }
+                            if let Some(first) = group[a..m].iter().find(|g| g.2 == text) {
+                                identical_count += 1;
+                                if identical.len() < 5 {
+                                    identical
+                                        .push((self.samples[first.1].line, self.samples[idx].line));
+                                }
+                            }
+                        }
+                    }
+                    a = b;
+                }
+            }
+            i = j;
+        }
+        let file = self.file;
+        if geometries > 0 {
+            notices.push(format!(
+                "{file}: {} measured more than once ({} in all), kept as independent samples",
+                count(
+                    geometries,
+                    "geometry (and wavelength)",
+                    "geometries (and wavelengths)"
+                ),
+                count(members, "sample", "samples")
+            ));
+        }
+        if identical_count > 0 {
+            let mut s = format!(
+                "{file}: warning: {} repeated byte for byte (a row pasted twice?):",
+                count(identical_count, "row", "rows")
+            );
+            for (a, b) in &identical {
+                s += &format!(" line {b} repeats line {a};");
+            }
+            if identical_count > identical.len() {
+                s += &format!(" … and {} more", identical_count - identical.len());
+            }
+            notices.push(s.trim_end_matches(';').to_string());
+        }
+    }
+}
+
+/// Choose the channels: every wavelength, or the ones nearest to `--wavelengths` (each
+/// within [`MAX_WAVELENGTH_GAP_NM`]), optionally averaged over `--band`. Drops the other
+/// samples and sets [`Sample::channel`].
+fn select_channels(
+    samples: &mut Vec<Sample>,
+    file: &str,
+    opts: &ReadOptions,
+    notices: &mut Vec<String>,
+) -> Result<Vec<f64>, DataError> {
+    let ferr = |msg: String| DataError::File {
+        file: file.into(),
+        msg,
+    };
+    // Wavelengths are positive and finite, so their bit patterns sort as they do.
+    let present: Vec<f64> = samples
+        .iter()
+        .map(|s| s.wavelength_nm.to_bits())
+        .collect::<BTreeSet<u64>>()
+        .into_iter()
+        .map(f64::from_bits)
+        .collect();
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|w| w.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let Some(wanted) = &opts.wavelengths else {
+        if opts.band_nm.is_some() {
+            return Err(ferr(
+                "--band needs --wavelengths: the centres of the bands to average".into(),
+            ));
+        }
+        for s in samples.iter_mut() {
+            s.channel = present
+                .binary_search_by(|p| p.total_cmp(&s.wavelength_nm))
+                .unwrap_or(0);
+        }
+        return Ok(present);
+    };
+    if wanted.is_empty() {
+        return Err(ferr("--wavelengths selects no channel".into()));
+    }
+    if wanted.len() > present.len() {
+        return Err(ferr(format!(
+            "--wavelengths asks for {} ({} nm) but the file has only {}: {} nm",
+            count(wanted.len(), "channel", "channels"),
+            list(wanted),
+            count(present.len(), "wavelength", "wavelengths"),
+            list(&present)
+        )));
+    }
+    let mut chosen: Vec<f64> = Vec::new();
+    for &w in wanted {
+        if !w.is_finite() || w <= 0.0 {
+            return Err(ferr(format!(
+                "--wavelengths: {w} nm is not a positive wavelength"
+            )));
+        }
+        let nearest = present
+            .iter()
+            .copied()
+            .min_by(|a, b| (a - w).abs().total_cmp(&(b - w).abs()))
+            .unwrap_or(w);
+        if (nearest - w).abs() > MAX_WAVELENGTH_GAP_NM {
+            return Err(ferr(format!(
+                "--wavelengths: no wavelength within {MAX_WAVELENGTH_GAP_NM} nm of {w} nm; the file has only: {} nm",
+                list(&present)
+            )));
+        }
+        if let Some(c) = chosen.iter().position(|&c| c == nearest) {
+            return Err(ferr(format!(
+                "--wavelengths: {} nm and {w} nm would both use the {nearest} nm channel; the file has only these wavelengths: {} nm",
+                wanted[c],
+                list(&present)
+            )));
+        }
+        if nearest != w {
+            notices.push(format!(
+                "{file}: wavelength {w} nm → nearest present {nearest} nm"
+            ));
+        }
+        chosen.push(nearest);
+    }
+    let band = match opts.band_nm {
+        None => 0.0,
+        Some(b) if b.is_finite() && b >= 0.0 => b,
+        Some(b) => return Err(ferr(format!("--band {b}: expected a width ≥ 0 nm"))),
+    };
+    if band == 0.0 {
+        samples.retain(|s| chosen.contains(&s.wavelength_nm));
+        for s in samples.iter_mut() {
+            s.channel = chosen
+                .iter()
+                .position(|&c| c == s.wavelength_nm)
+                .unwrap_or(0);
+        }
+        return Ok(chosen);
+    }
+    // Bands: every present wavelength within ±band of a chosen centre joins its channel.
+    let mut member_of: Vec<(f64, usize)> = Vec::new();
+    for (ch, &c) in chosen.iter().enumerate() {
+        let members: Vec<f64> = present
+            .iter()
+            .copied()
+            .filter(|w| (w - c).abs() <= band)
+            .collect();
+        for &w in &members {
+            if let Some(&(_, other)) = member_of.iter().find(|m| m.0 == w) {
+                return Err(ferr(format!(
+                    "--band {band}: {w} nm lies in the bands of both {} nm and {c} nm; narrow the band or space the wavelengths",
+                    chosen[other]
+                )));
+            }
+            member_of.push((w, ch));
+        }
+    }
+    // Group by (channel, geometry) and average.
+    let mut groups: Vec<(usize, [i64; 4], usize)> = samples
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| {
+            let ch = member_of.iter().find(|m| m.0 == s.wavelength_nm)?.1;
+            let k = sample_key(s);
+            Some((ch, [k[0], k[1], k[2], k[3]], i))
+        })
+        .collect();
+    groups.sort_unstable();
+    let mut out: Vec<(usize, Sample)> = Vec::new();
+    let (mut n_min, mut n_max) = (usize::MAX, 0usize);
+    let mut a = 0;
+    while a < groups.len() {
+        let mut b = a + 1;
+        while b < groups.len() && groups[b].0 == groups[a].0 && groups[b].1 == groups[a].1 {
+            b += 1;
+        }
+        let n = b - a;
+        let first = groups[a].2; // smallest index of the group (sorted last)
+        let mut s = samples[first].clone();
+        let mut sum = 0.0;
+        let mut var = 0.0;
+        for g in &groups[a..b] {
+            let m = &samples[g.2];
+            sum += m.value;
+            var += m.uncertainty * m.uncertainty;
+        }
+        s.value = sum / n as f64;
+        s.uncertainty = var.sqrt() / n as f64;
+        s.channel = groups[a].0;
+        s.wavelength_nm = chosen[groups[a].0];
+        out.push((first, s));
+        n_min = n_min.min(n);
+        n_max = n_max.max(n);
+        a = b;
+    }
+    out.sort_unstable_by_key(|(i, _)| *i);
+    *samples = out.into_iter().map(|(_, s)| s).collect();
+    for (ch, &c) in chosen.iter().enumerate() {
+        let members: Vec<f64> = member_of
+            .iter()
+            .filter(|m| m.1 == ch)
+            .map(|m| m.0)
+            .collect();
+        notices.push(format!(
+            "{file}: --band ±{band} nm: channel {c} nm averages {} nm",
+            list(&members)
+        ));
+    }
+    if n_max > 0 {
+        notices.push(format!(
+            "{file}: --band: {} per geometry averaged (value = mean, u = sqrt(Σu²)/n)",
+            if n_min == n_max {
+                count(n_min, "sample", "samples")
+            } else {
+                format!("{n_min} to {n_max} samples")
+            }
+        ));
+    }
+    Ok(chosen)
+}
+
+/// How often (in lines) the readers report progress.
+pub(crate) const PROGRESS_EVERY_LINES: usize = 1 << 16;
+
+fn strip_line_end(mut raw: &[u8]) -> &[u8] {
+    if let Some(r) = raw.strip_suffix(b"\n") {
+        raw = r;
+    }
+    if let Some(r) = raw.strip_suffix(b"\r") {
+        raw = r;
+    }
+    raw
+}
+
+/// The text of one line read as bytes: UTF-8 as is (a BOM on line 1 skipped); a comment
+/// line (`#…`) with other bytes is decoded lossily; any other line with them is an error
+/// message naming the byte.
+pub(crate) fn decode_line(raw: &[u8], line: usize) -> Result<std::borrow::Cow<'_, str>, String> {
+    let mut raw = strip_line_end(raw);
+    if line == 1 {
+        raw = raw.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(raw);
+    }
+    match std::str::from_utf8(raw) {
+        Ok(s) => Ok(std::borrow::Cow::Borrowed(s)),
+        Err(e) => {
+            if raw.trim_ascii_start().starts_with(b"#") {
+                return Ok(String::from_utf8_lossy(raw));
+            }
+            let at = e.valid_up_to();
+            Err(format!(
+                "not valid UTF-8 (byte 0x{:02X} at column {}); save the file as UTF-8",
+                raw.get(at).copied().unwrap_or(0),
+                at + 1
+            ))
+        }
+    }
+}
+
+/// A cell as written: trimmed, one pair of surrounding double quotes removed.
+fn cell(s: &str) -> &str {
+    let s = s.trim();
+    s.strip_prefix('"')
+        .and_then(|t| t.strip_suffix('"'))
+        .map(str::trim)
+        .unwrap_or(s)
+}
+
+fn delimiter_hint(t: &str) -> &'static str {
+    if t.contains('\t') {
+        " (it contains tabs: v1 files are comma-separated)"
+    } else if t.contains(';') {
+        " (it contains ';': v1 files are comma-separated, with '.' as the decimal mark)"
+    } else {
+        ""
+    }
+}
+
+/// The header line: which column holds each of [`COLUMNS`], and how many cells a row has.
+fn parse_header(t: &str) -> Result<([usize; 7], usize), String> {
+    let names: Vec<&str> = t.split(',').map(cell).collect();
+    if names.len() == 1 && !delimiter_hint(t).is_empty() {
+        return Err(format!(
+            "the header has no ','{}: expected {}",
+            delimiter_hint(t),
+            COLUMNS.join(",")
+        ));
+    }
+    if let Some(k) = names.iter().position(|n| n.is_empty()) {
+        let hint = if k + 1 == names.len() {
+            "a trailing comma?"
+        } else {
+            "two commas in a row?"
+        };
+        return Err(format!(
+            "empty column name (column {} of {}; {hint}); expected {}",
+            k + 1,
+            names.len(),
+            COLUMNS.join(",")
+        ));
+    }
+    let mut index = [0usize; 7];
+    for (k, col) in COLUMNS.iter().enumerate() {
+        match names.iter().position(|n| n == col) {
+            Some(p) => index[k] = p,
+            None => {
+                return Err(format!(
+                    "missing column '{col}' (header: {})",
+                    names.join(",")
+                ))
+            }
+        }
+    }
+    if let Some(extra) = names.iter().find(|n| !COLUMNS.contains(n)) {
+        return Err(format!("unexpected column '{extra}'"));
+    }
+    if names.len() != COLUMNS.len() {
+        return Err(format!(
+            "a column is named twice (header: {})",
+            names.join(",")
+        ));
+    }
+    Ok((index, names.len()))
+}
+
+fn parse_row(t: &str, index: &[usize; 7], ncols: usize) -> Result<RawRow, String> {
+    let cells: Vec<&str> = t.split(',').map(cell).collect();
+    if cells.len() != ncols {
+        let hint = if cells.len() == ncols + 1 && cells.last().is_some_and(|c| c.is_empty()) {
+            " (a trailing comma?)"
+        } else {
+            delimiter_hint(t)
+        };
+        return Err(format!(
+            "expected {ncols} cells, found {}{hint}",
+            cells.len()
+        ));
+    }
+    let mut v = [0f64; 7];
+    for k in 0..7 {
+        let c = cells[index[k]];
+        v[k] = c.parse::<f64>().map_err(|_| {
+            let hint = if c.contains(';') {
+                " (';' is not a separator in v1 files)"
+            } else {
+                ""
+            };
+            format!("column {} = '{c}' is not a number{hint}", COLUMNS[k])
+        })?;
+    }
+    Ok(RawRow {
+        theta_i: v[0],
+        phi_i: v[1],
+        theta_o: v[2],
+        phi_o: v[3],
+        wavelength_nm: v[4],
+        value: v[5],
+        uncertainty: v[6],
+    })
 }
 
 impl Dataset {
@@ -159,343 +924,170 @@ impl Dataset {
         file: &str,
         opts: &ReadOptions,
     ) -> Result<Dataset, DataError> {
-        let mut notices = Vec::new();
+        let mut b = Builder::new(kind, file, opts);
+        for &(line, r) in rows {
+            b.push(line, r, None);
+        }
+        b.finish(material, BTreeMap::new())
+    }
+
+    /// Read a dataset file of any supported format (v1 CSV, ALTA text, MERL binary),
+    /// recognised by its content: see [`crate::data::readers::load`].
+    pub fn read(path: &Path, opts: &ReadOptions) -> Result<Dataset, DataError> {
+        crate::data::readers::load(path, opts)
+    }
+
+    /// Parse v1 CSV text; `file` names the source in messages.
+    pub fn parse(text: &str, file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
+        Self::parse_reader(text.as_bytes(), file, opts, &mut |_| {})
+    }
+
+    /// Parse v1 CSV from a reader, one line at a time: each row goes straight into its
+    /// sample, so memory is that of the dataset (128 bytes a sample) plus 12 bytes a row
+    /// for the repeated-geometry pass. `progress` is called every [`PROGRESS_EVERY_LINES`] lines
+    /// and at the end. A UTF-8 byte-order mark is skipped; bytes that are not UTF-8 are
+    /// accepted in comments and reported elsewhere; every bad row is reported (up to
+    /// [`MAX_REPORTED_ERRORS`]).
+    pub fn parse_reader<R: BufRead>(
+        mut reader: R,
+        file: &str,
+        opts: &ReadOptions,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Dataset, DataError> {
+        let mut meta = BTreeMap::new();
+        let mut buf = Vec::with_capacity(256);
+        let (mut line, mut bytes) = (0usize, 0u64);
+        let mut header: Option<([usize; 7], usize)> = None;
+        let mut builder: Option<Builder> = None;
         let line_err = |line: usize, msg: String| DataError::Line {
             file: file.to_string(),
             line,
             msg,
         };
-        if rows.is_empty() {
-            return Err(DataError::File {
-                file: file.to_string(),
-                msg: "no data rows".into(),
-            });
-        }
-        let mut seen: HashMap<[u64; 5], usize> = HashMap::new();
-        let mut floored = 0usize;
-        let mut tmp = Vec::with_capacity(rows.len());
-        for &(line, r) in rows {
-            for (name, v) in [
-                ("theta_i", r.theta_i),
-                ("phi_i", r.phi_i),
-                ("theta_o", r.theta_o),
-                ("phi_o", r.phi_o),
-                ("wavelength_nm", r.wavelength_nm),
-                ("value", r.value),
-                ("uncertainty", r.uncertainty),
-            ] {
-                if !v.is_finite() {
-                    return Err(line_err(
-                        line,
-                        format!("column {name} is not a finite number ({v})"),
-                    ));
-                }
-            }
-            for (name, v) in [("theta_i", r.theta_i), ("theta_o", r.theta_o)] {
-                if !(-90.0..=90.0).contains(&v) {
-                    return Err(line_err(
-                        line,
-                        format!("{name} = {v}° is outside [-90, 90]"),
-                    ));
-                }
-            }
-            if r.wavelength_nm <= 0.0 {
-                return Err(line_err(
-                    line,
-                    format!("wavelength_nm = {} must be positive", r.wavelength_nm),
-                ));
-            }
-            let mut u = r.uncertainty;
-            if u < 0.0 {
-                return Err(line_err(line, format!("uncertainty = {u} is negative")));
-            }
-            if u == 0.0 {
-                if !opts.allow_zero_uncertainty {
-                    return Err(line_err(
-                        line,
-                        "uncertainty is zero (pass --allow-zero-uncertainty to use a floor)".into(),
-                    ));
-                }
-                u = (UNCERTAINTY_FLOOR_REL * r.value.abs()).max(UNCERTAINTY_FLOOR_ABS);
-                floored += 1;
-            }
-            if r.value < -3.0 * u {
-                return Err(line_err(
-                    line,
-                    format!(
-                        "value = {} is negative beyond 3 uncertainties ({u})",
-                        r.value
-                    ),
-                ));
-            }
-            let (ti, pi) = normalise_angles(r.theta_i, r.phi_i);
-            let (to, po) = normalise_angles(r.theta_o, r.phi_o);
-            let key = [ti, pi, to, po, r.wavelength_nm].map(|x| (x * 1e6).round() as i64 as u64);
-            if let Some(first) = seen.insert(key, line) {
-                return Err(line_err(
-                    line,
-                    format!("duplicate of line {first} (same geometry and wavelength)"),
-                ));
-            }
-            tmp.push((line, ti, pi, to, po, r.wavelength_nm, r.value, u));
-        }
-        if floored > 0 {
-            notices.push(format!(
-                "{file}: {floored} zero uncertainties replaced by max({}·|value|, {} sr⁻¹)",
-                UNCERTAINTY_FLOOR_REL, UNCERTAINTY_FLOOR_ABS
-            ));
-        }
-        // Channels: distinct wavelengths, optionally narrowed to the requested ones.
-        let mut present: Vec<f64> = tmp.iter().map(|t| t.5).collect();
-        present.sort_by(|a, b| a.total_cmp(b));
-        present.dedup();
-        let channels = match &opts.wavelengths {
-            None => present.clone(),
-            Some(wanted) => {
-                if wanted.is_empty() {
-                    return Err(DataError::File {
-                        file: file.into(),
-                        msg: "--wavelengths selects no channel".into(),
-                    });
-                }
-                let mut chosen = Vec::new();
-                for &w in wanted {
-                    let nearest = *present
-                        .iter()
-                        .min_by(|a, b| (*a - w).abs().total_cmp(&(*b - w).abs()))
-                        .expect("present is non-empty");
-                    if chosen.contains(&nearest) {
-                        return Err(DataError::File {
-                            file: file.into(),
-                            msg: format!(
-                                "--wavelengths: {w} nm maps to {nearest} nm, already selected (present: {present:?})"
-                            ),
-                        });
-                    }
-                    if nearest != w {
-                        notices.push(format!(
-                            "{file}: wavelength {w} nm → nearest present {nearest} nm"
-                        ));
-                    }
-                    chosen.push(nearest);
-                }
-                chosen
-            }
-        };
-        let axes = measurement_planes(tmp.iter().map(|t| (t.3, t.4)));
-        let mut samples = Vec::new();
-        for (line, ti, pi, to, po, wl, value, u) in tmp {
-            let axis = plane_index(&axes, to, po);
-            let Some(channel) = channels.iter().position(|&c| c == wl) else {
-                continue;
-            };
-            let (ti, pi, to, po) = (
-                ti.to_radians(),
-                pi.to_radians(),
-                to.to_radians(),
-                po.to_radians(),
-            );
-            let wi = direction(ti, pi);
-            let mut wo = direction(to, po);
-            if kind == Kind::Btdf {
-                wo.z = -wo.z; // θt is measured from −n (DESIGN §1)
-            }
-            samples.push(Sample {
-                theta_i: ti,
-                phi_i: pi,
-                theta_o: to,
-                phi_o: po,
-                wavelength_nm: wl,
-                value,
-                uncertainty: u,
-                channel,
-                axis,
-                wi,
-                wo,
-                line,
-            });
-        }
-        if samples.is_empty() {
-            return Err(DataError::File {
-                file: file.into(),
-                msg: "the selection leaves no sample".into(),
-            });
-        }
-        Ok(Dataset {
-            kind,
-            material: material.to_string(),
-            meta: BTreeMap::new(),
-            channels,
-            samples,
-            axes,
-            source: PathBuf::from(file),
-            notices,
-        })
-    }
-
-    /// Read a v1 CSV file.
-    pub fn read(path: &Path, opts: &ReadOptions) -> Result<Dataset, DataError> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| DataError::File {
-            file: file.clone(),
-            msg: format!("cannot read: {e}"),
-        })?;
-        Self::parse(&text, &file, opts)
-    }
-
-    /// Parse v1 CSV text; `file` names the source in messages.
-    pub fn parse(text: &str, file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
-        let mut meta = BTreeMap::new();
-        let mut header_line = None;
-        let mut offset = 0usize; // byte offset of the header line
-                                 // split_inclusive keeps each line's terminator in its length, so the offset is
-                                 // right for CRLF files too.
-        for (idx, line) in text.split_inclusive('\n').enumerate() {
-            let t = line.trim();
-            if t.is_empty() {
-                offset += line.len();
-                continue;
-            }
-            if let Some(rest) = t.strip_prefix('#') {
-                if let Some((k, v)) = rest.split_once(':') {
-                    let key = k.trim().to_string();
-                    // "# bsdfit dataset v1" has no colon; a free-text remark after the value is kept.
-                    meta.insert(key, v.trim().to_string());
-                }
-                offset += line.len();
-                continue;
-            }
-            header_line = Some(idx + 1);
-            break;
-        }
-        let Some(header_line) = header_line else {
-            return Err(DataError::File {
-                file: file.into(),
-                msg: "no header line (expected: theta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty)".into(),
-            });
-        };
-        let kind: Kind = match meta.get("kind") {
-            None => {
-                return Err(DataError::File {
+        loop {
+            buf.clear();
+            let n = reader
+                .read_until(b'\n', &mut buf)
+                .map_err(|e| DataError::File {
                     file: file.into(),
-                    msg: "missing '# kind: brdf|btdf' metadata line".into(),
-                })
+                    msg: format!("cannot read after line {line}: {e}"),
+                })?;
+            if n == 0 {
+                break;
             }
-            Some(k) => k.parse().map_err(|e: String| DataError::File {
-                file: file.into(),
-                msg: e,
-            })?,
-        };
-        let body = &text[offset.min(text.len())..];
-        // File line of each record. csv's own positions point at the first comment or empty
-        // line skipped before a record, and lag by one line in CRLF files, so count the lines
-        // csv reads as records ourselves (v1 has no multi-line quoted cells).
-        let record_lines: Vec<usize> = body
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
-            .map(|(i, _)| i + header_line)
-            .skip(1) // the header
-            .collect();
-        let record_line = |k: usize| record_lines.get(k).copied().unwrap_or(header_line);
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .flexible(true)
-            .comment(Some(b'#'))
-            .trim(csv::Trim::All)
-            .from_reader(body.as_bytes());
-        let headers = rdr
-            .headers()
-            .map_err(|e| DataError::Line {
-                file: file.into(),
-                line: header_line,
-                msg: format!("cannot read header: {e}"),
-            })?
-            .clone();
-        let names: Vec<&str> = headers.iter().collect();
-        let mut index = [0usize; 7];
-        for (k, col) in COLUMNS.iter().enumerate() {
-            match names.iter().position(|n| n == col) {
-                Some(p) => index[k] = p,
-                None => {
-                    return Err(DataError::Line {
-                        file: file.into(),
-                        line: header_line,
-                        msg: format!("missing column '{col}' (header: {})", names.join(",")),
-                    })
-                }
-            }
-        }
-        if let Some(extra) = names.iter().find(|n| !COLUMNS.contains(n)) {
-            return Err(DataError::Line {
-                file: file.into(),
-                line: header_line,
-                msg: format!("unexpected column '{extra}'"),
-            });
-        }
-        let mut rows = Vec::new();
-        for rec in rdr.records() {
-            let rec = rec.map_err(|e| DataError::Line {
-                file: file.into(),
-                line: record_line(rows.len()),
-                msg: format!("malformed CSV: {e}"),
-            })?;
-            let line = record_line(rows.len());
-            if rec.len() != 7 {
-                return Err(DataError::Line {
-                    file: file.into(),
-                    line,
-                    msg: format!("expected 7 cells, found {}", rec.len()),
+            line += 1;
+            bytes += n as u64;
+            if line % PROGRESS_EVERY_LINES == 0 {
+                progress(Progress {
+                    bytes,
+                    rows: builder.as_ref().map_or(0, |b| b.len()),
                 });
             }
-            let mut v = [0f64; 7];
-            for k in 0..7 {
-                let cell = &rec[index[k]];
-                v[k] = cell.parse::<f64>().map_err(|_| DataError::Line {
-                    file: file.into(),
-                    line,
-                    msg: format!("column {} = '{cell}' is not a number", COLUMNS[k]),
-                })?;
-            }
-            rows.push((
-                line,
-                RawRow {
-                    theta_i: v[0],
-                    phi_i: v[1],
-                    theta_o: v[2],
-                    phi_o: v[3],
-                    wavelength_nm: v[4],
-                    value: v[5],
-                    uncertainty: v[6],
+            let text = match decode_line(&buf, line) {
+                Ok(t) => t,
+                Err(msg) => match &mut builder {
+                    Some(b) => {
+                        b.error(line, msg);
+                        continue;
+                    }
+                    None => return Err(line_err(line, msg)),
                 },
-            ));
+            };
+            let t = text.trim();
+            if t.is_empty() {
+                continue;
+            }
+            match (&mut builder, &header) {
+                (Some(b), Some((index, ncols))) => {
+                    if t.starts_with('#') {
+                        continue;
+                    }
+                    match parse_row(t, index, *ncols) {
+                        Ok(r) => b.push(line, r, Some(&text)),
+                        Err(msg) => b.error(line, msg),
+                    }
+                }
+                _ => {
+                    if let Some(rest) = t.strip_prefix('#') {
+                        if let Some((k, v)) = rest.split_once(':') {
+                            // "# bsdfit dataset v1" has no colon; a remark after the value is kept.
+                            meta.insert(k.trim().to_string(), v.trim().to_string());
+                        }
+                        continue;
+                    }
+                    let kind: Kind = match meta.get("kind") {
+                        None => {
+                            return Err(DataError::File {
+                                file: file.into(),
+                                msg: "missing '# kind: brdf|btdf' metadata line".into(),
+                            })
+                        }
+                        Some(k) => k.parse().map_err(|e: String| DataError::File {
+                            file: file.into(),
+                            msg: e,
+                        })?,
+                    };
+                    header = Some(parse_header(t).map_err(|m| line_err(line, m))?);
+                    builder = Some(Builder::new(kind, file, opts));
+                }
+            }
         }
+        let Some(mut b) = builder else {
+            return Err(DataError::File {
+                file: file.into(),
+                msg: format!("no header line (expected: {})", COLUMNS.join(",")),
+            });
+        };
+        progress(Progress {
+            bytes,
+            rows: b.len(),
+        });
         let material = meta.get("material").cloned().unwrap_or_else(|| {
             Path::new(file)
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default()
         });
-        let mut ds = Dataset::from_rows(kind, &material, &rows, file, opts)?;
-        ds.meta = meta;
+        // A v1 file written from data whose uncertainties were assumed says so.
+        let assumed = meta
+            .get("uncertainty")
+            .and_then(|u| crate::data::readers::parse_assumed_note(u));
+        if let (Some(_), Some(note)) = (assumed, meta.get("uncertainty")) {
+            b.notices.push(format!("{file}: uncertainties {note}"));
+        }
+        if opts.assume_uncertainty.is_some() {
+            b.notices.push(format!(
+                "{file}: --assume-uncertainty ignored: the file gives its own uncertainties"
+            ));
+        }
+        let mut ds = b.finish(&material, meta)?;
+        ds.assumed_uncertainty = assumed;
         Ok(ds)
     }
 
     /// Write the v1 CSV format (angles in degrees, θ ≥ 0 with φ carrying the side).
     pub fn to_csv(&self) -> String {
-        let mut out = String::from("# bsdfit dataset v1\n");
-        out += &format!("# material: {}\n", self.material);
-        out += &format!("# kind: {}\n", self.kind);
+        let mut out = Vec::new();
+        self.write_csv(&mut out)
+            .expect("writing to memory cannot fail");
+        String::from_utf8(out).expect("the CSV is UTF-8")
+    }
+
+    /// Write the v1 CSV format to `w`, one row at a time.
+    pub fn write_csv<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
+        writeln!(w, "# bsdfit dataset v1")?;
+        writeln!(w, "# material: {}", one_line(&self.material))?;
+        writeln!(w, "# kind: {}", self.kind)?;
         for (k, v) in &self.meta {
             if k != "material" && k != "kind" {
-                out += &format!("# {k}: {v}\n");
+                writeln!(w, "# {}: {}", one_line(k), one_line(v))?;
             }
         }
-        out += &COLUMNS.join(",");
-        out.push('\n');
+        writeln!(w, "{}", COLUMNS.join(","))?;
         for s in &self.samples {
-            out += &format!(
-                "{},{},{},{},{},{:e},{:e}\n",
+            writeln!(
+                w,
+                "{},{},{},{},{},{:e},{:e}",
                 fmt_deg(s.theta_i),
                 fmt_deg(s.phi_i),
                 fmt_deg(s.theta_o),
@@ -503,14 +1095,17 @@ impl Dataset {
                 s.wavelength_nm,
                 s.value,
                 s.uncertainty
-            );
+            )?;
         }
-        out
+        Ok(())
     }
 
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_csv())
-            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+        let fail = |e: std::io::Error| anyhow::anyhow!("cannot write {}: {e}", path.display());
+        let f = std::fs::File::create(path).map_err(fail)?;
+        let mut w = std::io::BufWriter::new(f);
+        self.write_csv(&mut w).map_err(fail)?;
+        w.flush().map_err(fail)
     }
 
     /// Number of (sample, channel) pairs K.
@@ -536,31 +1131,46 @@ impl Dataset {
     }
 }
 
+/// The plane of an azimuth (degrees): φ mod 180, rounded to 1e-6°.
+fn plane_of_phi(phi_deg: f64) -> f64 {
+    let p = (phi_deg.rem_euclid(180.0) * 1e6).round() / 1e6;
+    if p >= 180.0 {
+        0.0
+    } else {
+        p + 0.0
+    }
+}
+
 /// The plane of an outgoing direction (θ ≥ 0, degrees): φ mod 180, or None at θ = 0.
 fn plane_of(theta_deg: f64, phi_deg: f64) -> Option<f64> {
     if theta_deg == 0.0 {
         return None;
     }
-    let p = (phi_deg.rem_euclid(180.0) * 1e6).round() / 1e6;
-    Some(if p >= 180.0 { 0.0 } else { p })
+    Some(plane_of_phi(phi_deg))
 }
 
 /// Distinct measurement planes of (θo, φo) pairs in degrees (θ ≥ 0), ascending.
 pub fn measurement_planes(pairs: impl Iterator<Item = (f64, f64)>) -> Vec<f64> {
-    let mut planes: Vec<f64> = pairs.filter_map(|(t, p)| plane_of(t, p)).collect();
-    planes.sort_by(|a, b| a.total_cmp(b));
-    planes.dedup();
+    // Planes are in [0, 180): their bit patterns sort as they do.
+    let set: BTreeSet<u64> = pairs
+        .filter_map(|(t, p)| plane_of(t, p))
+        .map(f64::to_bits)
+        .collect();
+    let mut planes: Vec<f64> = set.into_iter().map(f64::from_bits).collect();
     if planes.is_empty() {
         planes.push(0.0);
     }
     planes
 }
 
+/// The index of a direction's plane in `planes`. A direction at the pole lies on every
+/// plane: it goes to the plane of the azimuth written with it when that is one of the
+/// planes (a scan through the normal on that plane), else to plane 0.
 fn plane_index(planes: &[f64], theta_deg: f64, phi_deg: f64) -> usize {
-    match plane_of(theta_deg, phi_deg) {
-        None => 0,
-        Some(p) => planes.iter().position(|&q| q == p).unwrap_or(0),
-    }
+    let p = plane_of(theta_deg, phi_deg).unwrap_or_else(|| plane_of_phi(phi_deg));
+    // `planes` is sorted (measurement_planes): out-of-plane data (MERL, ALTA) has one
+    // plane per distinct azimuth, up to millions.
+    planes.binary_search_by(|q| q.total_cmp(&p)).unwrap_or(0)
 }
 
 impl Dataset {
@@ -575,6 +1185,11 @@ impl Dataset {
         d.axes = vec![self.axes[axis]];
         d
     }
+}
+
+/// Metadata text on one line (a newline would end the comment and corrupt the file).
+fn one_line(s: &str) -> String {
+    s.replace(['\n', '\r'], " ")
 }
 
 /// Degrees with rounding noise from the radian round trip removed.

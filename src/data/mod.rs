@@ -1,5 +1,8 @@
-//! Measurements in: the v1 CSV format, validation, channel selection.
+//! Measurements in: the in-memory [`Dataset`], the v1 CSV format and its validation,
+//! channel selection, and [`readers`] for the other formats (ALTA text, MERL binary),
+//! chosen by content.
 mod dataset;
+pub mod readers;
 pub use dataset::*;
 
 /// The bundled data directory: `./data` if present, else the crate's own `data/`.

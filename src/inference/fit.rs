@@ -249,9 +249,9 @@ pub fn fit_outcome(
     );
     anyhow::ensure!(
         data.len() > model.dim,
-        "{}: {} samples cannot determine the {} parameters of {}",
+        "{}: {} cannot determine the {} parameters of {}",
         data.source.display(),
-        data.len(),
+        crate::data::count(data.len(), "sample", "samples"),
         model.dim,
         model.spec
     );
@@ -379,7 +379,16 @@ fn make_report(
         flat_params: flat.to_vec(),
         flat_std: cov.std,
         correlation: cov.correlation,
-        warnings: cov.warnings,
+        warnings: data
+            .assumed_uncertainty
+            .map(|(rel, abs)| {
+                format!(
+                    "the data's uncertainties were assumed, not measured (u = sqrt((REL·|value|)² + ABS²), REL = {rel}, ABS = {abs} sr⁻¹): χ² and parameter uncertainties rest on that assumption"
+                )
+            })
+            .into_iter()
+            .chain(cov.warnings)
+            .collect(),
     }
 }
 

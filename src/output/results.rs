@@ -224,8 +224,7 @@ impl DataFile {
     pub fn read(path: &Path, opts: &ReadOptions) -> Result<DataFile> {
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let text = String::from_utf8_lossy(&bytes);
-        let data = Dataset::parse(&text, &path.display().to_string(), opts)?;
+        let data = crate::data::readers::parse_bytes(&bytes, &path.display().to_string(), opts)?;
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -234,7 +233,11 @@ impl DataFile {
             name,
             path: path.to_path_buf(),
             // A channel selection makes other data from the same bytes: key it apart.
-            hash: if opts.wavelengths.is_none() && !opts.allow_zero_uncertainty {
+            hash: if opts.wavelengths.is_none()
+                && !opts.allow_zero_uncertainty
+                && opts.assume_uncertainty.is_none()
+                && opts.band_nm.is_none()
+            {
                 content_hash(&bytes)
             } else {
                 content_hash(&[bytes.as_slice(), format!("{opts:?}").as_bytes()].concat())

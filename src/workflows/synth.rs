@@ -145,9 +145,7 @@ pub fn geometry_expr(expr: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
         }
         kind = Some(k);
         for r in part {
-            let (ti, pi) = crate::data::normalise_angles(r[0], r[1]);
-            let (to, po) = crate::data::normalise_angles(r[2], r[3]);
-            if seen.insert([ti, pi, to, po].map(|x| (x * 1e6).round() as i64)) {
+            if seen.insert(crate::data::geometry_key(r[0], r[1], r[2], r[3], 0.0)) {
                 rows.push(r);
             }
         }

@@ -1,0 +1,33 @@
+//! `bsdfit convert`.
+
+use super::DataArgs;
+use crate::data::{count, readers};
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct ConvertArgs {
+    /// Input file (format recognised by content: v1 CSV, ALTA text, MERL binary).
+    pub input: PathBuf,
+    /// Output v1 CSV file.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+}
+
+pub fn run(a: &ConvertArgs) -> Result<()> {
+    let ds = readers::convert(&a.input, &a.out, &a.data_args.read_options()?)?;
+    for n in &ds.notices {
+        eprintln!("note: {n}");
+    }
+    eprintln!(
+        "wrote {} ({}, {} channel(s): {:?} nm)",
+        a.out.display(),
+        count(ds.len(), "sample", "samples"),
+        ds.channel_count(),
+        ds.channels
+    );
+    Ok(())
+}
