@@ -95,6 +95,8 @@ fn synth_then_fit_recovers_sigma_and_writes_the_report() {
         "on",
         "--loss",
         "rmse",
+        "--optimizer",
+        "compass",
         "--backend",
         "cpu",
         "--restarts",

@@ -210,7 +210,7 @@ fn sweep_resumes_shards_merge_and_reports() {
     // 3. A re-run skips every fit and leaves results.csv byte-identical.
     let before = std::fs::read(full.join("results.csv")).unwrap();
     let o = sweep(&brdf, &btdf, &full, &[]);
-    assert!(stderr(&o).contains("0 new fit(s)"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("0 new fits"), "{}", stderr(&o));
     assert_eq!(
         std::fs::read(full.join("results.csv")).unwrap(),
         before,
@@ -262,7 +262,7 @@ fn sweep_resumes_shards_merge_and_reports() {
     std::fs::write(&csv, &text[..cut]).unwrap();
     let o = sweep(&brdf, &btdf, &full, &["--no-pictures"]);
     assert!(
-        stderr(&o).contains("incomplete last line") && stderr(&o).contains("1 new fit(s)"),
+        stderr(&o).contains("incomplete last line") && stderr(&o).contains("1 new fit,"),
         "{}",
         stderr(&o)
     );
@@ -272,7 +272,7 @@ fn sweep_resumes_shards_merge_and_reports() {
     let keep: Vec<&str> = text.lines().take(4).collect();
     std::fs::write(&csv, keep.join("\n") + "\n").unwrap();
     let o = sweep(&brdf, &btdf, &full, &["--no-pictures"]);
-    assert!(stderr(&o).contains("5 new fit(s)"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("5 new fits"), "{}", stderr(&o));
     assert_eq!(deterministic(&rows(&full)), deterministic(&all));
 }
 

@@ -1,5 +1,7 @@
 //! `bsdfit bench`.
 
+use super::checks::batch_memory;
+use super::progress::Progress;
 use super::BackendArgs;
 use crate::bsdf;
 use crate::data::Kind;
@@ -14,7 +16,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ';')]
     pub models: Option<Vec<String>>,
     /// Restarts per batch; a batch holds restarts × (2P + 1) candidates (one compass poll).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
     /// Minimum measuring time per model and backend (seconds).
     #[arg(long, default_value_t = 1.0)]
@@ -22,13 +24,22 @@ pub struct BenchArgs {
     /// Backends to compare: auto (CPU and, if present, GPU), cpu, gpu.
     #[command(flatten)]
     pub backend: BackendArgs,
-    /// Write the rows as JSON here.
+    /// Write the rows as JSON here (checked before measuring; if the write fails
+    /// afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
-    use crate::workflows::bench::{measure, median_speedup};
+    use crate::workflows::bench::{bench_dataset, measure, median_speedup};
+    if let Some(path) = &a.json {
+        crate::output::check_writable_file(path, "--json")?;
+    }
+    anyhow::ensure!(
+        a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 3600.0,
+        "--seconds must be in (0, 3600], got {}",
+        a.seconds
+    );
     let specs: Vec<(Kind, String)> = match &a.models {
         Some(list) => list
             .iter()
@@ -62,28 +73,43 @@ pub fn run(a: BenchArgs) -> Result<()> {
             Err(e) => return Err(e.context("--backend gpu")),
         }
     }
+    // Every batch must fit in memory: checked for all models before measuring any.
+    for (kind, spec) in &specs {
+        if let Ok(data) = bench_dataset(spec, *kind) {
+            if let Ok(m) = bsdf::Model::parse(spec, data.channel_count()) {
+                let cands = a.restarts as u64 * (2 * m.dim as u64 + 1);
+                batch_memory(
+                    "--restarts",
+                    a.restarts,
+                    cands,
+                    m.dim,
+                    data.len(),
+                    spec,
+                    &mut |w| eprintln!("{w}"),
+                )?;
+            }
+        }
+    }
     for b in &backends {
         eprintln!("backend: {}", b.name());
     }
-    let bar = indicatif::ProgressBar::new((specs.len() * backends.len()) as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg:30} [{elapsed_precise}] {bar:30} {pos}/{len} (ETA {eta})",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    let mut progress = Progress::new(
+        "bench",
+        (specs.len() * backends.len()) as u64,
+        "measurements",
     );
     let mut rows = Vec::new();
     for (kind, spec) in &specs {
         for b in &backends {
-            bar.set_message(format!("{spec} on {}", b.id()));
+            progress.set_message(format!("{spec} on {}", b.id()));
             match measure(spec, *kind, b.as_ref(), a.restarts, a.seconds) {
                 Ok(r) => rows.push(r),
-                Err(e) => bar.println(format!("skipping {spec} on {}: {e:#}", b.id())),
+                Err(e) => progress.println(format!("skipping {spec} on {}: {e:#}", b.id())),
             }
-            bar.inc(1);
+            progress.inc(1);
         }
     }
-    bar.finish_and_clear();
+    progress.finish();
     println!(
         "{:<24} {:>8} {:>8} {:>10} {:>14}",
         "model", "backend", "samples", "candidates", "evals/s"
@@ -98,8 +124,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
         println!("median GPU/CPU speed-up over models: {s:.2}x");
     }
     if let Some(path) = &a.json {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = serde_json::to_string_pretty(&rows)? + "\n";
+        crate::output::files::write_result(path, &text, true)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

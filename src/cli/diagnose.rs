@@ -1,5 +1,7 @@
 //! `bsdfit diagnose`.
 
+use super::checks::check_batch_memory;
+use super::progress::{plural, Progress};
 use super::{BackendArgs, DataArgs};
 use crate::engine::{
     self,
@@ -26,10 +28,12 @@ pub struct DiagnoseArgs {
     pub weights: String,
     #[arg(long, value_enum, default_value = "lm")]
     pub optimizer: Optimizer,
-    /// Random restarts per fit (plus the current optimum as one more start).
-    #[arg(long, default_value_t = 16)]
+    /// Random restarts per fit (plus the current optimum as one more start); the same
+    /// default as `fit`.
+    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the random restarts (a non-negative integer).
+    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     /// Significance level (consistency test; F tests at α / number of candidates).
     #[arg(long, default_value_t = 0.01)]
@@ -39,10 +43,12 @@ pub struct DiagnoseArgs {
     pub max_steps: usize,
     #[command(flatten)]
     pub backend: BackendArgs,
-    /// Write the diagnosis (DESIGN §8) as JSON here.
+    /// Write the diagnosis (DESIGN §8) as JSON here (checked before the fits start; if the
+    /// write fails afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Write residual maps, the χ²_red staircase and the candidate tables here.
+    /// Write residual maps, the χ²_red staircase and the candidate tables here (checked
+    /// before the fits start).
     #[arg(long)]
     pub report: Option<PathBuf>,
     #[command(flatten)]
@@ -58,6 +64,12 @@ pub struct DiagnoseArgs {
 }
 
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
+    if let Some(path) = &a.json {
+        crate::output::check_writable_file(path, "--json")?;
+    }
+    if let Some(dir) = &a.report {
+        crate::output::check_writable_dir(dir, "--report")?;
+    }
     let data = a.data_args.read(&a.data)?;
     let metric: Metric = a
         .loss
@@ -72,7 +84,20 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         "--loss {metric} is not defined for {} data",
         data.kind
     );
-    anyhow::ensure!(a.alpha > 0.0 && a.alpha < 1.0, "--alpha must be in (0, 1)");
+    anyhow::ensure!(
+        a.alpha > 0.0 && a.alpha < 1.0,
+        "--alpha must be in (0, 1), got {}",
+        a.alpha
+    );
+    let start = crate::bsdf::Model::for_data(&a.model, &data).context("--model")?;
+    // Extensions add a few parameters to the start model: estimate with three more.
+    check_batch_memory(
+        a.restarts + 1,
+        start.dim + 3,
+        data.len(),
+        &format!("{} and its extensions on {}", start.spec, a.data.display()),
+        &mut |w| eprintln!("{w}"),
+    )?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
     let opts = DiagnoseOptions {
         loss: Loss::new(metric, weights),
@@ -86,16 +111,23 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         ..Default::default()
     };
     println!(
-        "diagnose {} ({} samples, {} channel(s), {} plane(s)) from {}",
+        "diagnose {} ({}, {}, {}) from {}",
         data.material,
-        data.len(),
-        data.channel_count(),
-        data.axes.len(),
+        plural(data.len(), "sample"),
+        plural(data.channel_count(), "channel"),
+        plural(data.axes.len(), "plane"),
         a.model
     );
+    let mut progress = Progress::new("diagnose", 0, "");
+    progress.set_message(format!("fitting {}", a.model));
     let d = diagnose(&data, &a.model, backend.as_ref(), &opts, &mut |line| {
-        println!("{line}")
+        // The latest step or candidate line is what the periodic progress line repeats.
+        if let Some(head) = line.split(" — ").next().filter(|h| !h.trim().is_empty()) {
+            progress.set_message(head.trim().chars().take(60).collect::<String>());
+        }
+        progress.suspend(|| println!("{line}"))
     })?;
+    progress.finish();
     println!(
         "effects: {}\nfinal model: {}",
         if d.effects.is_empty() {
@@ -118,8 +150,8 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
             .join(" → ")
     );
     if let Some(path) = &a.json {
-        std::fs::write(path, serde_json::to_string_pretty(&d.to_json())?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = serde_json::to_string_pretty(&d.to_json())? + "\n";
+        crate::output::files::write_result(path, &text, true)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(dir) = &a.report {

@@ -1,5 +1,7 @@
 //! `bsdfit fit`.
 
+use super::checks::{check_batch_memory, nonfinite_message};
+use super::progress::Progress;
 use super::{BackendArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
@@ -8,6 +10,7 @@ use crate::engine::{
     loss::{Loss, Metric, Weights},
 };
 use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
+use crate::output::files::write_result;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -19,22 +22,30 @@ pub struct FitArgs {
     /// Model spec, e.g. lambert, on, fa(eon), rmg(ggx), btdf(tr)+scale.
     #[arg(long)]
     pub model: String,
-    /// Loss: smape rmse ngan low (BRDF), f cosf logf logcosf (BTDF), chi2 (any).
-    #[arg(long, default_value = "rmse")]
+    /// Loss. Default chi2 = Σ((y′−y)/u)², which fits BRDF and BTDF data alike: every v1
+    /// data file carries a standard uncertainty per value, so χ² weighs each sample by
+    /// what it is worth. The paper's losses remain: smape rmse ngan low (BRDF), f cosf
+    /// logf logcosf (BTDF).
+    #[arg(long, default_value = "chi2")]
     pub loss: String,
-    /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2).
+    /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2). chi2
+    /// already weighs by 1/u².
     #[arg(long, default_value = "uniform")]
     pub weights: String,
-    #[arg(long, value_enum, default_value = "compass")]
-    pub optimizer: Optimizer,
-    /// Number of random restarts (stepped in lockstep).
-    #[arg(long, default_value_t = 32)]
+    /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
+    /// every loss but smape — and compass search for smape.
+    #[arg(long, value_enum)]
+    pub optimizer: Option<Optimizer>,
+    /// Number of random restarts (stepped in lockstep); the same default as `diagnose`.
+    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the random restarts (a non-negative integer).
+    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     #[command(flatten)]
     pub backend: BackendArgs,
-    /// Write the fit report (DESIGN §8) as JSON here.
+    /// Write the fit report (DESIGN §8) as JSON here (checked before the fit starts; if
+    /// the write fails afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Fit each measured φ plane separately (anisotropic samples, paper §2.3.2); the JSON
@@ -64,31 +75,56 @@ pub fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
     Ok(Loss::new(metric, weights))
 }
 
+/// The optimizer of `--optimizer`, or the default for the loss: LM where it applies.
+pub fn optimizer_for(given: Option<Optimizer>, loss: Loss) -> Optimizer {
+    given.unwrap_or(if loss.is_sum_of_squares() {
+        Optimizer::Lm
+    } else {
+        Optimizer::Compass
+    })
+}
+
 pub fn run(a: FitArgs) -> Result<()> {
+    if let Some(path) = &a.json {
+        crate::output::check_writable_file(path, "--json")?;
+    }
     let data = a.data_args.read(&a.data)?;
     let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
+    let model = Model::for_data(&a.model, &data).context("--model")?;
+    check_batch_memory(
+        a.restarts,
+        model.dim,
+        data.len(),
+        &format!("{} on {}", model.spec, a.data.display()),
+        &mut |w| eprintln!("{w}"),
+    )?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
     let opts = FitOptions {
-        optimizer: a.optimizer,
+        optimizer: optimizer_for(a.optimizer, loss),
         restarts: a.restarts,
         seed: a.seed,
         ..Default::default()
     };
     let run = |data: &Dataset| -> Result<FitReport> {
         let model = Model::for_data(&a.model, data).context("--model")?;
-        let bar = indicatif::ProgressBar::new(a.restarts as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} {msg} [{elapsed_precise}] {bar:30} {pos}/{len} restarts converged",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar.set_message(format!("fitting {}", model.spec));
+        let mut progress = Progress::new("fit", a.restarts as u64, "restarts converged");
+        progress.set_message(format!("fitting {}", model.spec));
         let report = fit(&model, data, loss, backend.as_ref(), &opts, &mut |active| {
-            bar.set_position((a.restarts - active) as u64)
+            progress.set_position(a.restarts.saturating_sub(active) as u64)
         })?;
-        bar.finish_and_clear();
+        progress.finish();
         print!("{}", report.summary());
+        if !(report.best.chi2_red.is_finite() && report.best.loss.is_finite()) {
+            anyhow::bail!(nonfinite_message(
+                &model,
+                data,
+                loss,
+                &report.flat_params,
+                report.best.chi2_red,
+                report.best.loss,
+                backend.as_ref(),
+            ));
+        }
         Ok(report)
     };
     let json = if a.per_axis {
@@ -110,8 +146,8 @@ pub fn run(a: FitArgs) -> Result<()> {
         serde_json::to_value(run(&data)?)?
     };
     if let Some(path) = &a.json {
-        let text = serde_json::to_string_pretty(&json)?;
-        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        let text = serde_json::to_string_pretty(&json)? + "\n";
+        write_result(path, &text, true)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

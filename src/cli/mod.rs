@@ -11,13 +11,37 @@ use clap::{Args, Parser, Subcommand};
 use std::path::Path;
 
 mod bench;
+pub mod checks;
 mod convert;
 mod diagnose;
 mod fit;
 mod models;
+pub mod progress;
 mod render;
 mod sweep;
 mod synth;
+
+/// Random restarts of `fit` and `diagnose` (one default for both; `sweep` uses fewer).
+pub const DEFAULT_RESTARTS: usize = 16;
+
+/// Value parser of `--seed`: a non-negative integer (clap would otherwise read `-1` as an
+/// option and suggest `-- -1`).
+pub fn parse_seed(s: &str) -> Result<u64, String> {
+    s.trim().parse::<u64>().map_err(|_| {
+        format!(
+            "--seed takes a non-negative integer (0 to {}), got '{s}'",
+            u64::MAX
+        )
+    })
+}
+
+/// Value parser of `--restarts`: a positive integer.
+pub fn parse_restarts(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("--restarts takes a positive integer, got '{s}'")),
+    }
+}
 
 #[derive(Parser)]
 #[command(

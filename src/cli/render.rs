@@ -48,7 +48,8 @@ pub struct RenderArgs {
     pub error_scale: Option<f64>,
     #[command(flatten)]
     pub data_args: DataArgs,
-    /// Output directory: baseline.png, model.png, error.png, render.json.
+    /// Output directory: baseline.png, model.png, error.png, render.json (created if
+    /// needed; checked before rendering).
     #[arg(long)]
     pub out: std::path::PathBuf,
 }
@@ -56,6 +57,7 @@ pub struct RenderArgs {
 /// The `render` command.
 pub fn run(a: &RenderArgs) -> Result<()> {
     use anyhow::Context;
+    crate::output::check_writable_dir(&a.out, "--out")?;
     let data = a.data_args.read(&a.data)?;
     let baseline = match &a.baseline {
         Some(p) => a.data_args.read(p)?,
@@ -110,7 +112,6 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             ErrorMetric::Rmse => 0.1,
         }),
     };
-    std::fs::create_dir_all(&a.out)?;
     let stats = render_fit(
         &model,
         &flat,
@@ -121,9 +122,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         &a.out.join("error.png"),
         &data.label(),
     )?;
-    std::fs::write(
-        a.out.join("render.json"),
-        serde_json::to_string_pretty(&stats)? + "\n",
+    crate::output::write_atomic(
+        &a.out.join("render.json"),
+        (serde_json::to_string_pretty(&stats)? + "\n").as_bytes(),
     )?;
     println!(
         "{} on {} (baseline {}): mean per-pixel {} = {:.4}, max {:.4} over {} pixels; wrote {}/{{baseline,model,error}}.png",

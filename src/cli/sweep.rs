@@ -1,13 +1,18 @@
 //! `bsdfit sweep` and `bsdfit merge`.
 
+use super::checks::{batch_bytes, batch_candidates, check_batch_memory, nonfinite_message};
+use super::progress::{plural, plural_with, Progress};
 use super::{BackendArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::engine::{self, loss::Loss};
 use crate::inference::fit::{fit, FitOptions};
+use crate::output::files::check_writable_dir;
+use crate::output::report::RunInfo;
 use crate::output::results::{
     read_results, results_csv_text, write_if_changed, write_summaries, Appender, DataFile, FitKey,
     Key, Row, Skipped, DEFAULT_OUT, RESULTS_CSV, SKIPPED_JSON,
 };
+use crate::workflows::sweep::lock::DirLock;
 use crate::workflows::sweep::{
     expand_data, parse_shard, skipped_entry, tasks, write_skipped, Selection, Task,
 };
@@ -40,19 +45,27 @@ pub struct SweepArgs {
     /// compass otherwise). Combinations lm × smape are left out.
     #[arg(long, value_delimiter = ',', default_value = "auto")]
     pub optimizer: Vec<String>,
-    /// Random restarts per fit.
-    #[arg(long, default_value_t = 8)]
+    /// Random restarts per fit. The default, 8, is half of `fit`'s and `diagnose`'s 16
+    /// because a sweep runs hundreds of fits (603 by default): it is a cost choice. The
+    /// `restarts_within_1pct` column shows where more restarts would matter.
+    #[arg(long, default_value_t = 8, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the random restarts (a non-negative integer).
+    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     #[command(flatten)]
     pub backend: BackendArgs,
     #[command(flatten)]
     pub data_args: DataArgs,
-    /// Output directory (results, pictures, report.html).
+    /// Output directory (results, pictures, report.html). One process at a time: a sweep
+    /// or merge holds DIR/.bsdfit.lock while it runs, and another one started on the same
+    /// folder stops with an error naming the holder (a lock left by a killed process on
+    /// this host is taken over).
     #[arg(long, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
-    /// Run only shard I of N (1-based), e.g. 2/4; combine the shards with `bsdfit merge`.
+    /// Run only shard I of N (1-based), e.g. 2/4. Shards that run at the same time must
+    /// each write to their own --out folder (e.g. --out run-1, --out run-2); combine them
+    /// afterwards with `bsdfit merge run-1 run-2 --out DIR`.
     #[arg(long)]
     pub shard: Option<String>,
     /// Skip the plots, renders and report.html (results files only).
@@ -69,7 +82,8 @@ pub struct MergeArgs {
     /// Shard output directories (or their results.csv files).
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
-    /// Output directory; rows already in its results.csv are kept.
+    /// Output directory; rows already in its results.csv are kept. Locked while merge runs
+    /// (DIR/.bsdfit.lock), like a sweep's.
     #[arg(long, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
     /// Skip the plots, renders and report.html (results files only).
@@ -86,7 +100,6 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     for p in &paths {
         files.push(DataFile::read(p, &args.data_args.read_options()?)?);
     }
-    anyhow::ensure!(args.restarts > 0, "--restarts must be at least 1");
     let all = tasks(
         &files,
         &Selection {
@@ -101,8 +114,15 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
         .enumerate()
         .filter(|(i, _)| shard.is_none_or(|(k, n)| i % n == k - 1))
         .collect();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    // The folder is checked and locked before anything is read from it or fitted.
+    let _lock = if args.dry_run {
+        None
+    } else {
+        check_writable_dir(&args.out, "--out")?;
+        Some(DirLock::acquire(&args.out, "sweep", &mut |m| {
+            eprintln!("note: {m}")
+        })?)
+    };
     let csv_path = args.out.join(RESULTS_CSV);
     let mut rows = read_results(&csv_path, !args.dry_run, &mut |m| eprintln!("note: {m}"))?;
     let done: BTreeSet<Key> = rows.iter().map(Row::key).collect();
@@ -124,9 +144,9 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
         .map(|(i, n)| format!(" (shard {i}/{n})"))
         .unwrap_or_default();
     eprintln!(
-        "sweep{shard_note}: {} data set(s), {} task(s) of {}; {} already in {}, {} to run",
-        files.len(),
-        mine.len(),
+        "sweep{shard_note}: {}, {} of {}; {} already in {}, {} to run",
+        plural_with(files.len(), "data set", "data sets"),
+        plural(mine.len(), "task"),
         all.len(),
         mine.len() - todo.len(),
         csv_path.display(),
@@ -150,18 +170,12 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     let mut skipped: Vec<Skipped> = Vec::new();
     let mut unavailable: HashMap<String, String> = HashMap::new();
     let mut new_rows = 0usize;
+    let mut workers = 0usize;
+    let t_fits = Instant::now();
     if !todo.is_empty() {
-        let backend = engine::select(args.backend.backend, &mut |m| eprintln!("{m}"))?;
-        let mut app = Appender::open(&csv_path)?;
-        let bar = indicatif::ProgressBar::new(todo.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} fits (ETA {eta}) {wide_msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
         // Models that cannot be built are skipped up front (cheap, sequential).
         let mut runnable: Vec<(&Task, Model)> = Vec::new();
+        let mut unbuilt = 0u64;
         for t in &todo {
             let f = &files[t.data];
             match Model::for_data(&t.model, &f.data) {
@@ -172,19 +186,40 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                         .insert(t.model.clone(), reason.clone())
                         .is_none()
                     {
-                        say(&bar, format!("skipping {}: {reason}", t.model));
+                        eprintln!("skipping {}: {reason}", t.model);
                     }
                     skipped.push(skipped_entry(f, t, "skipped", reason));
-                    bar.inc(1);
+                    unbuilt += 1;
                 }
             }
         }
+        // The largest batch of the sweep must fit in memory (checked before any fit).
+        if let Some((t, m)) = runnable.iter().max_by_key(|(t, m)| {
+            batch_bytes(
+                batch_candidates(args.restarts, m.dim),
+                m.dim,
+                files[t.data].data.len(),
+            )
+        }) {
+            let f = &files[t.data];
+            check_batch_memory(
+                args.restarts,
+                m.dim,
+                f.data.len(),
+                &format!("{} on {} (the sweep's largest fit)", m.spec, f.name),
+                &mut |w| eprintln!("{w}"),
+            )?;
+        }
+        let backend = engine::select(args.backend.backend, &mut |m| eprintln!("{m}"))?;
+        let mut app = Appender::open(&csv_path)?;
+        let mut progress = Progress::new("sweep", todo.len() as u64, "fits");
+        progress.inc(unbuilt);
         // Fits run on one worker per core (a fit's batches are small, so one fit alone
         // leaves cores idle); this thread appends every finished fit to results.csv at
         // once, so an interrupted run loses at most the fits in flight. Each fit is
         // deterministic on its own, and results.csv is rewritten in canonical order at
         // the end, so the outcome does not depend on which worker finished first.
-        let workers = std::thread::available_parallelism()
+        workers = std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1)
             .clamp(1, runnable.len().max(1));
@@ -220,16 +255,32 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
             }
             drop(tx);
             for (i, result) in rx {
-                let (t, _) = &runnable[i];
+                let (t, model) = &runnable[i];
                 let f = &files[t.data];
                 let loss = Loss::new(t.loss, t.weights);
-                bar.set_message(format!(
+                progress.set_message(format!(
                     "{} · {} · {}/{} · {}",
                     f.name, t.model, t.loss, t.weights, t.optimizer
                 ));
                 match result {
                     Ok(Ok(report)) => {
-                        let row = Row::from_report(&report, f);
+                        let mut row = Row::from_report(&report, f);
+                        if !(report.best.chi2_red.is_finite() && report.best.loss.is_finite()) {
+                            // Kept (the fit ran), but flagged with the samples that cause it.
+                            let msg = nonfinite_message(
+                                model,
+                                &f.data,
+                                loss,
+                                &report.flat_params,
+                                report.best.chi2_red,
+                                report.best.loss,
+                                backend,
+                            );
+                            progress.println(format!("warning: {msg}"));
+                            let mut w = row.warnings_json();
+                            w.push(msg);
+                            row.warnings = serde_json::to_string(&w)?;
+                        }
                         if let Err(e) = app.push(&row) {
                             stop.store(true, std::sync::atomic::Ordering::SeqCst);
                             return Err(e);
@@ -238,10 +289,10 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                         new_rows += 1;
                     }
                     Ok(Err(e)) => {
-                        say(
-                            &bar,
-                            format!("fit failed: {} · {} · {loss}: {e:#}", f.name, t.model),
-                        );
+                        progress.println(format!(
+                            "fit failed: {} · {} · {loss}: {e:#}",
+                            f.name, t.model
+                        ));
                         skipped.push(skipped_entry(f, t, "failed", format!("{e:#}")));
                     }
                     Err(p) => {
@@ -250,27 +301,33 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                             .cloned()
                             .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
                             .unwrap_or_else(|| "panic".into());
-                        say(
-                            &bar,
-                            format!("fit panicked: {} · {} · {loss}: {msg}", f.name, t.model),
-                        );
+                        progress.println(format!(
+                            "fit panicked: {} · {} · {loss}: {msg}",
+                            f.name, t.model
+                        ));
                         skipped.push(skipped_entry(f, t, "failed", format!("panic: {msg}")));
                     }
                 }
-                bar.inc(1);
+                progress.inc(1);
             }
             Ok(())
         })?;
-        bar.finish_and_clear();
+        progress.finish();
     }
+    let fit_wall = t_fits.elapsed().as_secs_f64();
     // Canonical results.csv (unchanged bytes when nothing new ran), then summaries.
-    write_if_changed(&csv_path, &results_csv_text(&rows)?)?;
+    write_if_changed(&csv_path, &results_csv_text(&rows)?).with_context(|| {
+        format!(
+            "{} still holds every row, as appended during the run (not in canonical order)",
+            csv_path.display()
+        )
+    })?;
     write_summaries(&args.out, &rows)?;
     write_skipped(&args.out, &skipped, &rows, &files)?;
     eprintln!(
-        "{} new fit(s), {} row(s) in {}, {} skipped/failed, {:.1} s",
-        new_rows,
-        rows.len(),
+        "{}, {} in {}, {} skipped/failed, {:.1} s",
+        plural_with(new_rows, "new fit", "new fits"),
+        plural(rows.len(), "row"),
         csv_path.display(),
         skipped.len(),
         t0.elapsed().as_secs_f64()
@@ -278,15 +335,20 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     if shard.is_some() {
         eprintln!("shard done; combine the shards with `bsdfit merge DIR... --out DIR` (it writes the pictures and report)");
     } else if !args.no_pictures {
-        crate::output::report::publish(&args.out, &rows, &mut |m| eprintln!("{m}"))?;
+        let run = RunInfo {
+            new_fits: new_rows,
+            wall_seconds: fit_wall,
+            workers,
+        };
+        crate::output::report::publish(&args.out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
     }
     Ok(())
 }
 
 /// The `merge` command: union the rows of shard directories into `--out`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    check_writable_dir(&args.out, "--out")?;
+    let _lock = DirLock::acquire(&args.out, "merge", &mut |m| eprintln!("note: {m}"))?;
     let out_csv = args.out.join(RESULTS_CSV);
     let mut rows = read_results(&out_csv, true, &mut |m| eprintln!("note: {m}"))?;
     let mut by_key: BTreeMap<Key, usize> =
@@ -304,6 +366,15 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         anyhow::ensure!(csv.exists(), "{} not found", csv.display());
         if csv.canonicalize().ok() == out_csv.canonicalize().ok() {
             continue;
+        }
+        if let Some((h, alive)) = DirLock::holder(&dir) {
+            if alive != Some(false) {
+                eprintln!(
+                    "warning: {} is still in use by {}; merging the rows it holds so far (merge again when it has finished)",
+                    dir.display(),
+                    h.describe()
+                );
+            }
         }
         let part = read_results(&csv, false, &mut |m| eprintln!("note: {m}"))?;
         let (mut added, mut same) = (0, 0);
@@ -331,11 +402,19 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             }
         }
         eprintln!(
-            "{}: {added} row(s) added, {same} already present",
-            csv.display()
+            "{}: {} added, {same} already present",
+            csv.display(),
+            plural(added, "row")
         );
-        if let Ok(text) = std::fs::read_to_string(dir.join(SKIPPED_JSON)) {
-            skipped.extend(serde_json::from_str::<Vec<Skipped>>(&text).unwrap_or_default());
+        let sk = dir.join(SKIPPED_JSON);
+        if let Ok(text) = std::fs::read_to_string(&sk) {
+            match serde_json::from_str::<Vec<Skipped>>(&text) {
+                Ok(v) => skipped.extend(v),
+                Err(e) => eprintln!(
+                    "note: {} is not a list of skipped fits ({e}); ignored",
+                    sk.display()
+                ),
+            }
         }
     }
     write_if_changed(&out_csv, &results_csv_text(&rows)?)?;
@@ -348,14 +427,9 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         &args.out.join(SKIPPED_JSON),
         &(serde_json::to_string_pretty(&skipped)? + "\n"),
     )?;
-    eprintln!("{} row(s) in {}", rows.len(), out_csv.display());
+    eprintln!("{} in {}", plural(rows.len(), "row"), out_csv.display());
     if !args.no_pictures {
-        crate::output::report::publish(&args.out, &rows, &mut |m| eprintln!("{m}"))?;
+        crate::output::report::publish(&args.out, &rows, None, &mut |m| eprintln!("{m}"))?;
     }
     Ok(())
-}
-
-/// A line for the user above the progress bar (printed even when the bar is hidden).
-fn say(bar: &indicatif::ProgressBar, msg: String) {
-    bar.suspend(|| eprintln!("{msg}"));
 }

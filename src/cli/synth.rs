@@ -24,7 +24,8 @@ pub struct SynthArgs {
     /// Noise as REL,ABS: u = sqrt((REL·f)² + ABS²).
     #[arg(long, default_value = "0.015,0.0001")]
     pub noise: String,
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the noise (a non-negative integer).
+    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     /// Wavelengths (nm), one per channel; default 450,550,650 (BRDF) or 633 (BTDF).
     #[arg(long, value_delimiter = ',')]
@@ -88,10 +89,10 @@ pub fn run(a: SynthArgs) -> Result<()> {
     ds.meta.insert("synth_geometry".into(), geometry.clone());
     ds.write(&a.out)?;
     eprintln!(
-        "wrote {} ({} samples, {} channel(s), geometry {geometry})",
+        "wrote {} ({}, {}, geometry {geometry})",
         a.out.display(),
-        ds.len(),
-        ds.channel_count()
+        super::progress::plural(ds.len(), "sample"),
+        super::progress::plural(ds.channel_count(), "channel")
     );
     Ok(())
 }

@@ -36,7 +36,10 @@ pub struct Series {
     pub curve: Vec<(f64, f64)>,
     /// Measured points (x, y, u).
     pub points: Vec<(f64, f64, f64)>,
+    /// Draw the curve dashed (kept for callers; [`Series::dash`] chooses the pattern).
     pub dashed: bool,
+    /// The curve's line pattern.
+    pub dash: Dash,
 }
 
 /// One chart.
@@ -48,6 +51,12 @@ pub struct Panel {
     pub series: Vec<Series>,
     /// Force a log y axis (None: automatic, when the values span more than two decades).
     pub log_y: Option<bool>,
+}
+
+/// `c` blended towards white by `t` (0: unchanged, 1: white).
+pub fn lighten(c: (u8, u8, u8), t: f64) -> (u8, u8, u8) {
+    let f = |v: u8| (v as f64 + (255.0 - v as f64) * t).round() as u8;
+    (f(c.0), f(c.1), f(c.2))
 }
 
 fn rgb(c: (u8, u8, u8)) -> RGBColor {
@@ -95,9 +104,18 @@ impl Panel {
         let log = self
             .log_y
             .unwrap_or(ymax > 0.0 && pos_min.is_finite() && ymax / pos_min > 100.0);
+        // Room at the top for the legend (upper right), growing with its entries, so it
+        // does not cover the data.
+        let entries = self.series.iter().filter(|s| !s.label.is_empty()).count();
+        let room = if entries == 0 {
+            0.05
+        } else {
+            (0.08 + 0.055 * entries as f64).min(0.45)
+        };
         if log {
             let lo = (pos_min.max(ymax * 1e-5)).max(1e-12) * 0.7;
             let hi = ymax.max(lo * 10.0) * 1.5;
+            let hi = hi * (hi / lo).powf(room / (1.0 - room));
             ((x0 - pad, x1 + pad), (lo, hi), true)
         } else {
             let ymin = ys.iter().cloned().fold(f64::INFINITY, f64::min).min(0.0);
@@ -106,7 +124,8 @@ impl Panel {
             } else {
                 ymin + 1.0
             };
-            ((x0 - pad, x1 + pad), (ymin, hi + 0.05 * (hi - ymin)), false)
+            let top = hi + (hi - ymin) * room / (1.0 - room);
+            ((x0 - pad, x1 + pad), (ymin, top), false)
         }
     }
 }
@@ -125,10 +144,54 @@ fn fmt_tick(v: f64) -> String {
     }
 }
 
+/// The line pattern of a model curve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Dash {
+    #[default]
+    Solid,
+    /// 6 px dashes.
+    Dashed,
+    /// Dots.
+    Dotted,
+    /// 12 px dashes.
+    Long,
+}
+
+impl Dash {
+    /// The n-th pattern, for telling several fits apart besides their colour.
+    pub fn nth(n: usize) -> Dash {
+        [Dash::Solid, Dash::Dashed, Dash::Dotted, Dash::Long][n % 4]
+    }
+    /// (dash, gap) in pixels; None for solid.
+    fn pattern(self) -> Option<(u32, u32)> {
+        match self {
+            Dash::Solid => None,
+            Dash::Dashed => Some((6, 4)),
+            Dash::Dotted => Some((2, 3)),
+            Dash::Long => Some((12, 5)),
+        }
+    }
+}
+
+impl Series {
+    fn line_dash(&self) -> Dash {
+        if self.dash == Dash::Solid && self.dashed {
+            Dash::Dashed
+        } else {
+            self.dash
+        }
+    }
+}
+
+/// Width of model curves (px): thin, so that overlapping curves and the measured points
+/// under them stay visible.
+const CURVE_WIDTH: u32 = 1;
+
 macro_rules! draw_chart {
     ($chart:expr, $panel:expr, $ylo:expr) => {{
         let chart = &mut $chart;
         let panel: &Panel = $panel;
+        // Values at or below `ylo` (log axes: ≤ 0, or below the axis) are drawn at `ylo`.
         let ylo: f64 = $ylo;
         chart
             .configure_mesh()
@@ -136,18 +199,19 @@ macro_rules! draw_chart {
             .y_desc(panel.y_label.as_str())
             .x_label_formatter(&|v| fmt_tick(*v))
             .y_label_formatter(&|v| fmt_tick(*v))
-            .light_line_style(RGBColor(235, 235, 235))
-            .bold_line_style(RGBColor(215, 215, 215))
+            .light_line_style(RGBColor(240, 240, 240))
+            .bold_line_style(RGBColor(220, 220, 220))
             .label_style(("sans-serif", 13))
             .axis_desc_style(("sans-serif", 14))
             .draw()
             .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+        let mut floored = 0usize;
         for s in &panel.series {
             let c = rgb(s.color);
             let style = ShapeStyle {
                 color: c.to_rgba(),
                 filled: false,
-                stroke_width: 2,
+                stroke_width: CURVE_WIDTH,
             };
             let curve: Vec<(f64, f64)> = s
                 .curve
@@ -155,53 +219,99 @@ macro_rules! draw_chart {
                 .filter(|p| p.1.is_finite())
                 .map(|&(x, y)| (x, y.max(ylo)))
                 .collect();
-            if !curve.is_empty() {
-                let anno = if s.dashed {
-                    chart
-                        .draw_series(DashedLineSeries::new(curve, 6, 4, style))
-                        .map_err(|e| anyhow::anyhow!("plot: {e}"))?
-                } else {
-                    chart
-                        .draw_series(LineSeries::new(curve, style))
-                        .map_err(|e| anyhow::anyhow!("plot: {e}"))?
-                };
-                if !s.label.is_empty() {
-                    anno.label(s.label.as_str())
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-                }
-            }
             let pts: Vec<(f64, f64, f64)> = s
                 .points
                 .iter()
                 .filter(|p| p.1.is_finite())
                 .cloned()
                 .collect();
+            let dash = s.line_dash();
+            if !curve.is_empty() {
+                let anno = match dash.pattern() {
+                    Some((d, g)) => chart
+                        .draw_series(DashedLineSeries::new(curve, d, g, style))
+                        .map_err(|e| anyhow::anyhow!("plot: {e}"))?,
+                    None => chart
+                        .draw_series(LineSeries::new(curve, style))
+                        .map_err(|e| anyhow::anyhow!("plot: {e}"))?,
+                };
+                if !s.label.is_empty() {
+                    let with_dot = !pts.is_empty();
+                    anno.label(s.label.as_str()).legend(move |(x, y)| {
+                        let line: DynElement<_, _> = match dash.pattern() {
+                            Some((d, g)) => plotters::element::DashedPathElement::new(
+                                vec![(x, y), (x + 22, y)],
+                                d,
+                                g,
+                                style,
+                            )
+                            .into_dyn(),
+                            None => PathElement::new(vec![(x, y), (x + 22, y)], style).into_dyn(),
+                        };
+                        let dot =
+                            Circle::new((x + 11, y), if with_dot { 3 } else { 0 }, c.filled());
+                        EmptyElement::at((0, 0)) + line + dot
+                    });
+                }
+            }
             if !pts.is_empty() {
+                // Error bars (±u, floored on log axes) with short caps, then the markers.
                 chart
                     .draw_series(pts.iter().map(|&(x, y, u)| {
                         PathElement::new(
                             vec![(x, (y - u).max(ylo)), (x, (y + u).max(ylo))],
-                            c.stroke_width(1),
+                            c.mix(0.7).stroke_width(1),
                         )
                     }))
                     .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
                 let a = chart
-                    .draw_series(
-                        pts.iter()
-                            .filter(|p| p.1 >= ylo)
-                            .map(|&(x, y, _)| Circle::new((x, y), 3, c.filled())),
-                    )
+                    .draw_series(pts.iter().filter(|p| p.1 > ylo).map(|&(x, y, _)| {
+                        EmptyElement::at((x, y))
+                            + Circle::new((0, 0), 3, c.filled())
+                            + Circle::new((0, 0), 3, WHITE.stroke_width(1))
+                    }))
                     .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
                 if s.curve.is_empty() && !s.label.is_empty() {
                     a.label(s.label.as_str())
-                        .legend(move |(x, y)| Circle::new((x + 9, y), 3, c.filled()));
+                        .legend(move |(x, y)| Circle::new((x + 11, y), 3, c.filled()));
                 }
+                // Values the axis cannot show (≤ 0 on a log axis): an open triangle
+                // pointing down at the bottom edge.
+                let low: Vec<f64> = pts.iter().filter(|p| p.1 <= ylo).map(|p| p.0).collect();
+                floored += low.len();
+                chart
+                    .draw_series(low.iter().map(|&x| {
+                        EmptyElement::at((x, ylo))
+                            + PathElement::new(
+                                vec![(-4, -9), (4, -9), (0, -2), (-4, -9)],
+                                c.stroke_width(1),
+                            )
+                    }))
+                    .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
             }
+        }
+        if floored > 0 {
+            let grey = RGBColor(90, 90, 90);
+            chart
+                .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                .map_err(|e| anyhow::anyhow!("plot: {e}"))?
+                .label("measured ≤ 0 or below the axis (at its bottom edge)")
+                .legend(move |(x, y)| {
+                    PathElement::new(
+                        vec![
+                            (x + 7, y - 4),
+                            (x + 15, y - 4),
+                            (x + 11, y + 3),
+                            (x + 7, y - 4),
+                        ],
+                        grey.stroke_width(1),
+                    )
+                });
         }
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
+            .background_style(WHITE.mix(0.9))
             .border_style(RGBColor(180, 180, 180))
             .label_font(("sans-serif", 13))
             .draw()
@@ -209,37 +319,44 @@ macro_rules! draw_chart {
     }};
 }
 
-/// Draw panels side by side into an SVG file.
+/// Draw panels side by side into an SVG file (written atomically).
 pub fn write_svg(path: &Path, panels: &[Panel], panel_size: (u32, u32)) -> Result<()> {
-    if let Some(d) = path.parent() {
-        std::fs::create_dir_all(d)?;
-    }
+    let svg = svg_text(panels, panel_size)?;
+    crate::output::files::write_atomic(path, svg.as_bytes())
+}
+
+/// Panels side by side as SVG text.
+pub fn svg_text(panels: &[Panel], panel_size: (u32, u32)) -> Result<String> {
     let n = panels.len().max(1) as u32;
-    let root = SVGBackend::new(path, (panel_size.0 * n, panel_size.1)).into_drawing_area();
-    root.fill(&WHITE)
-        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-    let areas = root.split_evenly((1, n as usize));
-    for (area, panel) in areas.iter().zip(panels) {
-        let ((x0, x1), (y0, y1), log) = panel.ranges();
-        let mut b = ChartBuilder::on(area);
-        b.caption(panel.title.as_str(), ("sans-serif", 16))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(62);
-        if log {
-            let mut chart = b
-                .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
-                .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-            draw_chart!(chart, panel, y0);
-        } else {
-            let mut chart = b
-                .build_cartesian_2d(x0..x1, y0..y1)
-                .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-            draw_chart!(chart, panel, f64::NEG_INFINITY);
+    let mut svg = String::new();
+    {
+        let root =
+            SVGBackend::with_string(&mut svg, (panel_size.0 * n, panel_size.1)).into_drawing_area();
+        root.fill(&WHITE)
+            .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+        let areas = root.split_evenly((1, n as usize));
+        for (area, panel) in areas.iter().zip(panels) {
+            let ((x0, x1), (y0, y1), log) = panel.ranges();
+            let mut b = ChartBuilder::on(area);
+            b.caption(panel.title.as_str(), ("sans-serif", 16))
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(62);
+            if log {
+                let mut chart = b
+                    .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+                    .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+                draw_chart!(chart, panel, y0);
+            } else {
+                let mut chart = b
+                    .build_cartesian_2d(x0..x1, y0..y1)
+                    .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+                draw_chart!(chart, panel, f64::NEG_INFINITY);
+            }
         }
+        root.present().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
     }
-    root.present().map_err(|e| anyhow::anyhow!("plot: {e}"))?;
-    Ok(())
+    Ok(svg)
 }
 
 /// A fitted model to draw: label, compiled model, flat parameters.
@@ -338,7 +455,9 @@ pub fn brdf_panel(data: &Dataset, fit: &Fitted, title: &str) -> Panel {
             color: PALETTE[k % PALETTE.len()],
             curve,
             points: brdf_points(data, ch, ti),
-            dashed: false,
+            // Curves that coincide (e.g. Lambert at every θi) stay visible as patterns.
+            dash: Dash::nth(k),
+            ..Default::default()
         });
     }
     Panel {
@@ -428,6 +547,14 @@ fn btdf_range(data: &Dataset) -> (f64, f64) {
     (if lo_side { -hi } else { 0.0 }, hi)
 }
 
+/// Do two curves on the same abscissae coincide (to 1e-9 relative)?
+fn same_curve(a: &[(f64, f64)], b: &[(f64, f64)]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(p, q)| {
+            p.0 == q.0 && (p.1 == q.1 || (p.1 - q.1).abs() <= 1e-9 * p.1.abs().max(q.1.abs()))
+        })
+}
+
 fn plane_label(data: &Dataset, ti: f64, axis: usize, groups: &[(f64, usize)]) -> String {
     let mut parts = Vec::new();
     if groups.iter().any(|g| g.0 != groups[0].0) {
@@ -442,8 +569,8 @@ fn plane_label(data: &Dataset, ti: f64, axis: usize, groups: &[(f64, usize)]) ->
     parts.join(", ")
 }
 
-/// BTDF panel: several fits overlaid (one colour per fit; dashed on the second plane),
-/// measured points in black/grey per plane.
+/// BTDF panel: several fits overlaid (one colour and line pattern per fit; lighter on
+/// the second and later planes or incidences), measured points in black/grey per plane.
 pub fn btdf_panel(data: &Dataset, fits: &[Fitted], title: &str) -> Panel {
     let ch = 0;
     let groups = btdf_groups(data);
@@ -469,6 +596,7 @@ pub fn btdf_panel(data: &Dataset, fits: &[Fitted], title: &str) -> Panel {
         });
     }
     for (fi, fit) in fits.iter().enumerate() {
+        let mut drawn: Vec<Vec<(f64, f64)>> = Vec::new();
         for (gi, &(ti, axis)) in groups.iter().enumerate() {
             let pl = plane_label(data, ti, axis, &groups);
             let label = match (single, pl.is_empty()) {
@@ -477,15 +605,26 @@ pub fn btdf_panel(data: &Dataset, fits: &[Fitted], title: &str) -> Panel {
                 (false, _) if gi == 0 => fit.label.clone(),
                 _ => String::new(),
             };
+            let curve = btdf_curve(data, fit, ti, axis, ch, lo, hi);
+            // An isotropic fit gives the same curve on every plane: draw it once (several
+            // fits), so the first plane's curve is not painted over.
+            if !single && drawn.iter().any(|c| same_curve(c, &curve)) {
+                continue;
+            }
+            drawn.push(curve.clone());
             series.push(Series {
                 label,
                 color: if single {
                     PALETTE[gi % PALETTE.len()]
-                } else {
+                } else if gi == 0 {
                     PALETTE[fi % PALETTE.len()]
+                } else {
+                    lighten(PALETTE[fi % PALETTE.len()], 0.45)
                 },
-                curve: btdf_curve(data, fit, ti, axis, ch, lo, hi),
-                dashed: !single && gi > 0,
+                curve,
+                // Each fit (or, for one fit, each plane/incidence) its own colour and line
+                // pattern, so coinciding curves stay visible.
+                dash: Dash::nth(if single { gi } else { fi }),
                 ..Default::default()
             });
         }

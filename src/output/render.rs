@@ -77,8 +77,7 @@ fn pixel_geometry(o: &RenderOptions) -> Vec<Option<(DVec3, DVec3, f64)>> {
     (0..n * n)
         .map(|k| {
             let (px, py) = (k % n, k / n);
-            let x = 2.0 * (px as f64 + 0.5) / n as f64 - 1.0;
-            let y = 1.0 - 2.0 * (py as f64 + 0.5) / n as f64;
+            let (x, y) = disc_coords(px as u32, py as u32, n as u32);
             let r2 = x * x + y * y;
             if r2 >= 1.0 {
                 return None;
@@ -247,14 +246,46 @@ fn srgb(x: f64) -> u8 {
     (s * 255.0).round() as u8
 }
 
-/// Write a linear image as an sRGB PNG (background dark grey; NaN pixels magenta).
+/// Is pixel (x, y) of an n × n render on the sphere's disc (lit or not)? The same pixel
+/// centres as [`pixel_geometry`]: the disc is round and fills the square image.
+pub fn on_disc(x: u32, y: u32, n: u32) -> bool {
+    let (u, v) = disc_coords(x, y, n);
+    u * u + v * v < 1.0
+}
+
+/// The sphere's radius as a fraction of half the image width (a margin shows its limb).
+const DISC: f64 = 0.94;
+
+/// Orthographic image-plane coordinates of pixel (x, y)'s centre in units of the sphere's
+/// radius: x right, y up, the same scale on both axes (square pixels, round sphere).
+fn disc_coords(x: u32, y: u32, n: u32) -> (f64, f64) {
+    let n = n as f64;
+    (
+        (2.0 * (x as f64 + 0.5) / n - 1.0) / DISC,
+        (1.0 - 2.0 * (y as f64 + 0.5) / n) / DISC,
+    )
+}
+
+/// Background of the renders: a light grey checkerboard (8 px squares), so that the
+/// sphere's dark limb and unlit side stand out against it.
+pub fn background(x: u32, y: u32) -> [u8; 3] {
+    if ((x / 8) + (y / 8)).is_multiple_of(2) {
+        [196, 196, 196]
+    } else {
+        [172, 172, 172]
+    }
+}
+
+/// Write a linear image as an sRGB PNG: the sphere (unlit side black, as it is: the
+/// light is directional) on a grey checkerboard; NaN pixels magenta.
 pub fn write_png(path: &Path, img: &Image, exposure: f64) -> Result<()> {
     let n = img.size;
     let mut buf = image::RgbImage::new(n, n);
     for (k, p) in img.px.iter().enumerate() {
         let (x, y) = ((k as u32) % n, (k as u32) / n);
         let c = match p {
-            None => [24, 24, 24],
+            None if on_disc(x, y, n) => [0, 0, 0],
+            None => background(x, y),
             Some(c) if c.iter().any(|v| !v.is_finite()) => [255, 0, 255],
             Some(c) => [
                 srgb(c[0] * exposure),
@@ -264,11 +295,15 @@ pub fn write_png(path: &Path, img: &Image, exposure: f64) -> Result<()> {
         };
         buf.put_pixel(x, y, image::Rgb(c));
     }
-    if let Some(d) = path.parent() {
-        std::fs::create_dir_all(d)?;
-    }
-    buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+    save_png(path, &buf)
+}
+
+/// Encode a PNG in memory and write it atomically (the error names `path`).
+fn save_png(path: &Path, buf: &image::RgbImage) -> Result<()> {
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    buf.write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    crate::output::files::write_atomic(path, bytes.get_ref())
 }
 
 /// Per-pixel error between a model image and the baseline (None outside the sphere;
@@ -346,17 +381,24 @@ pub fn coverage(data: &Dataset, o: &RenderOptions) -> Vec<bool> {
         .collect()
 }
 
+/// Colour of the error image where the sphere is not lit (no error is defined there).
+pub const UNLIT_RGB: [u8; 3] = [40, 40, 40];
+/// Colour of the error image where the geometry lies beyond the measured angles.
+pub const BEYOND_RGB: [u8; 3] = [110, 128, 150];
+
 /// Write the error image as a PNG (value / scale through [`colormap`]; a colour bar at the
 /// bottom edge, 0 on the left to `scale` on the right; NaN pixels — beyond the measured
-/// angles — mid grey).
+/// angles — slate blue-grey [`BEYOND_RGB`], the unlit side dark grey [`UNLIT_RGB`], the
+/// background the renders' checkerboard).
 pub fn write_error_png(path: &Path, err: &[Option<f64>], size: u32, scale: f64) -> Result<()> {
     let bar = (size / 16).max(6);
     let mut buf = image::RgbImage::new(size, size + bar);
     for (k, e) in err.iter().enumerate() {
         let (x, y) = ((k as u32) % size, (k as u32) / size);
         let c = match e {
-            None => [24, 24, 24],
-            Some(v) if v.is_nan() => [96, 96, 96],
+            None if on_disc(x, y, size) => UNLIT_RGB,
+            None => background(x, y),
+            Some(v) if v.is_nan() => BEYOND_RGB,
             Some(v) => colormap(v / scale),
         };
         buf.put_pixel(x, y, image::Rgb(c));
@@ -367,11 +409,7 @@ pub fn write_error_png(path: &Path, err: &[Option<f64>], size: u32, scale: f64) 
             buf.put_pixel(x, y, image::Rgb(c));
         }
     }
-    if let Some(d) = path.parent() {
-        std::fs::create_dir_all(d)?;
-    }
-    buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
+    save_png(path, &buf)
 }
 
 /// Summary of one render, written beside the images as JSON.

@@ -15,6 +15,7 @@
 
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
+use crate::output::files::write_atomic;
 use crate::output::plot::{self, Fitted, Panel};
 use crate::output::render::{self, RenderOptions, RenderStats};
 use crate::output::results::{self, current_rows, fmt_num, rankings, Row, Skipped};
@@ -23,8 +24,27 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+/// "1 fit", "3 fits".
+fn plural(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
+}
+
+/// "12.3 s", "4 min 05 s".
+fn fmt_secs(s: f64) -> String {
+    if s < 60.0 {
+        format!("{s:.1} s")
+    } else {
+        let m = (s / 60.0).floor();
+        format!("{m:.0} min {:02.0} s", (s - 60.0 * m).floor())
+    }
+}
+
 /// Bumped when the pictures or report change for the same results.
-const REPORT_VERSION: &str = "report-v4";
+const REPORT_VERSION: &str = "report-v5";
 
 /// File-name-safe slug of a fit.
 pub fn slug(r: &Row) -> String {
@@ -244,8 +264,25 @@ fn stamp(out: &Path) -> String {
     )
 }
 
-/// Write pictures and report.html for `rows` into `out`.
-pub fn publish(out: &Path, rows: &[Row], notice: &mut dyn FnMut(String)) -> Result<()> {
+/// What the run that calls [`publish`] did, for the report's header.
+#[derive(Clone, Copy, Debug)]
+pub struct RunInfo {
+    /// Fits this run added to results.csv.
+    pub new_fits: usize,
+    /// Wall-clock seconds this run spent fitting.
+    pub wall_seconds: f64,
+    /// Fits that ran at the same time.
+    pub workers: usize,
+}
+
+/// Write pictures and report.html for `rows` into `out`; `run` is what the calling sweep
+/// did (None for `merge`: the shards' wall times are not known).
+pub fn publish(
+    out: &Path,
+    rows: &[Row],
+    run: Option<&RunInfo>,
+    notice: &mut dyn FnMut(String),
+) -> Result<()> {
     let t0 = std::time::Instant::now();
     let stamp_path = out.join("report.stamp");
     let st = stamp(out);
@@ -481,9 +518,9 @@ pub fn publish(out: &Path, rows: &[Row], notice: &mut dyn FnMut(String)) -> Resu
         match stats {
             Ok(mut s) => {
                 s.baseline = base_name.clone();
-                std::fs::write(
-                    out.join(format!("{rel}stats.json")),
-                    serde_json::to_string_pretty(&s)? + "\n",
+                write_atomic(
+                    &out.join(format!("{rel}stats.json")),
+                    (serde_json::to_string_pretty(&s)? + "\n").as_bytes(),
                 )?;
                 renders.insert(rel, s);
             }
@@ -496,6 +533,7 @@ pub fn publish(out: &Path, rows: &[Row], notice: &mut dyn FnMut(String)) -> Resu
         .unwrap_or_default();
     let html = report_html(
         rows,
+        run,
         &cur,
         &ranks,
         &datas,
@@ -506,8 +544,8 @@ pub fn publish(out: &Path, rows: &[Row], notice: &mut dyn FnMut(String)) -> Resu
         &skipped,
         &problems,
     );
-    std::fs::write(out.join("report.html"), html)?;
-    std::fs::write(&stamp_path, st)?;
+    write_atomic(&out.join("report.html"), html.as_bytes())?;
+    write_atomic(&stamp_path, st.as_bytes())?;
     notice(format!(
         "wrote {} ({} fit plots, {} renders) in {:.1} s",
         out.join("report.html").display(),
@@ -560,6 +598,10 @@ fn params_table(fits: &[(&str, &Row)]) -> String {
         }
         s += "</tr>";
     }
+    let undetermined = fits.iter().any(|(_, r)| {
+        let sd = r.param_std_json();
+        names.iter().any(|n| fmt_value(sd.get(n)).contains('–'))
+    });
     for (label, f) in [("loss", 0), ("χ²_red", 1), ("restarts within 1 %", 2)] {
         let _ = write!(s, "<tr class=\"sum\"><td>{label}</td>");
         for (_, r) in fits {
@@ -572,7 +614,11 @@ fn params_table(fits: &[(&str, &Row)]) -> String {
         }
         s += "</tr>";
     }
-    s + "</table>"
+    s += "</table>";
+    if undetermined {
+        s += "<p class=\"meta\">± –: no standard uncertainty, because the data do not determine that parameter (the fit barely changes along it, e.g. a parameter of a term the data do not need or one that trades off exactly against another; see the fit's warnings in results.json).</p>";
+    }
+    s
 }
 
 fn figure(src: &str, caption: &str, class: &str) -> String {
@@ -605,7 +651,7 @@ fn render_strip(
     h += &figure(
         &format!("{rel}error.png"),
         &format!(
-            "per-pixel {} (colour scale 0…{}; grey: beyond the measured angles): mean {:.4}",
+            "per-pixel {} (colour scale 0…{}, bar below; blue-grey: beyond the measured angles; dark grey: unlit): mean {:.4}",
             s.metric.to_uppercase(),
             s.error_scale,
             s.mean_error
@@ -632,6 +678,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[allow(clippy::too_many_arguments)]
 fn report_html(
     all: &[Row],
+    run: Option<&RunInfo>,
     cur: &[&Row],
     ranks: &[results::Ranking],
     datas: &BTreeMap<String, DataInfo>,
@@ -667,16 +714,31 @@ figure.wide img{width:1180px}figure.plot img{width:760px}code{font-size:12px}nav
             })
         })
         .count();
+    let restarts = restarts
+        .iter()
+        .map(|r| r.to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let timing = match run {
+        Some(r) if r.new_fits > 0 => format!(
+            "; wall-clock time of the last sweep run: {} for {} ({} at a time)",
+            fmt_secs(r.wall_seconds),
+            plural(r.new_fits, "new fit"),
+            r.workers.max(1)
+        ),
+        Some(_) => "; the last sweep run found every fit already in results.csv".into(),
+        None => String::new(),
+    };
     let _ = writeln!(
         h,
-        "<h1>bsdfit benchmark report</h1><p class=\"meta\">bsdfit {} · {} fits ({} rows in results.csv) on {} data sets · restarts {:?} · backend(s) {} · {:.1} s of fitting in total. Source files: <a href=\"results.csv\">results.csv</a>, <a href=\"results.json\">results.json</a>, <a href=\"rankings.md\">rankings.md</a>, <a href=\"skipped.json\">skipped.json</a>.</p>",
+        "<h1>bsdfit benchmark report</h1><p class=\"meta\">bsdfit {} · {} ({} in results.csv) on {} · restarts {} · backend(s) {} · sum of per-fit times {} (fits ran in parallel){timing}. Source files: <a href=\"results.csv\">results.csv</a>, <a href=\"results.json\">results.json</a>, <a href=\"rankings.md\">rankings.md</a>, <a href=\"skipped.json\">skipped.json</a>.</p>",
         env!("CARGO_PKG_VERSION"),
-        cur.len(),
-        all.len(),
-        ranks.len(),
+        plural(cur.len(), "fit"),
+        plural(all.len(), "row"),
+        plural(ranks.len(), "data set"),
         restarts,
         esc(&backends.into_iter().collect::<Vec<_>>().join(", ")),
-        secs
+        fmt_secs(secs)
     );
     if synthetic > 0 {
         let _ = writeln!(h, "<p class=\"note\">{synthetic} of the {} data sets are <b>synthetic</b> (made by <code>bsdfit synth</code> from a known model; their true parameters are listed with each). They emulate the paper's sample types; they are not measurements.</p>", datas.len());
@@ -898,7 +960,7 @@ figure.wide img{width:1180px}figure.plot img{width:760px}code{font-size:12px}nav
                 Kind::Btdf => {
                     h += "<h3>NDF families</h3>";
                     let cap = if ds.axes.len() > 1 {
-                        "Best variant of each NDF family (isotropic fits: one curve serves both planes; the second plane's is dashed)."
+                        "Best variant of each NDF family (one colour and line pattern per model; isotropic fits: one curve serves both planes, the second plane's drawn lighter)."
                     } else {
                         "Best variant of each NDF family."
                     };

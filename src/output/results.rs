@@ -18,7 +18,6 @@ use crate::inference::fit::FitReport;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub const RESULTS_CSV: &str = "results.csv";
@@ -318,8 +317,13 @@ pub fn read_results(path: &Path, repair: bool, notice: &mut dyn FnMut(String)) -
         ));
         bytes.truncate(keep);
         if repair {
-            let f = std::fs::OpenOptions::new().write(true).open(path)?;
-            f.set_len(keep as u64)?;
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .and_then(|f| f.set_len(keep as u64))
+                .with_context(|| {
+                    format!("cannot cut the incomplete line off {}", path.display())
+                })?;
         }
     }
     if bytes.is_empty() {
@@ -328,7 +332,12 @@ pub fn read_results(path: &Path, repair: bool, notice: &mut dyn FnMut(String)) -
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_reader(bytes.as_slice());
-    let header: Vec<String> = rdr.headers()?.iter().map(str::to_string).collect();
+    let header: Vec<String> = rdr
+        .headers()
+        .with_context(|| format!("cannot read the header of {}", path.display()))?
+        .iter()
+        .map(str::to_string)
+        .collect();
     let expected = header_names();
     if header != expected {
         bail!(
@@ -410,20 +419,12 @@ pub fn results_csv_text(rows: &[Row]) -> Result<String> {
     )?)
 }
 
-/// Write `text` to `path` atomically, and only if it changes the file.
-pub fn write_if_changed(path: &Path, text: &str) -> Result<bool> {
-    if std::fs::read(path).ok().as_deref() == Some(text.as_bytes()) {
-        return Ok(false);
-    }
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(true)
-}
+pub use crate::output::files::write_if_changed;
 
 /// Appends rows to results.csv, flushing after each.
 pub struct Appender {
     w: csv::Writer<std::fs::File>,
+    path: PathBuf,
 }
 
 impl Appender {
@@ -438,15 +439,20 @@ impl Appender {
             .with_context(|| format!("cannot open {}", path.display()))?;
         let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(f);
         if new {
-            w.write_record(header_names())?;
-            w.flush()?;
+            w.write_record(header_names())
+                .and_then(|_| w.flush().map_err(csv::Error::from))
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
-        Ok(Appender { w })
+        Ok(Appender {
+            w,
+            path: path.to_path_buf(),
+        })
     }
     pub fn push(&mut self, row: &Row) -> Result<()> {
-        self.w.serialize(row)?;
-        self.w.flush()?;
-        Ok(())
+        self.w
+            .serialize(row)
+            .and_then(|_| self.w.flush().map_err(csv::Error::from))
+            .with_context(|| format!("cannot append a row to {}", self.path.display()))
     }
 }
 
@@ -636,13 +642,7 @@ fn rankings_markdown(rows: &[Row]) -> String {
     s
 }
 
-/// Convenience for callers: write a file, creating its directory.
+/// Convenience for callers: write a file atomically, creating its directory.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    if let Some(d) = path.parent() {
-        std::fs::create_dir_all(d)?;
-    }
-    let mut f =
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?;
-    f.write_all(bytes)?;
-    Ok(())
+    crate::output::files::write_atomic(path, bytes)
 }

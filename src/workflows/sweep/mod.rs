@@ -12,6 +12,8 @@
 //! `results.json`, `rankings.md`, `skipped.json` are written, and then the pictures and
 //! `report.html` ([`crate::output::report`]).
 
+pub mod lock;
+
 use crate::bsdf;
 use crate::data::Kind;
 use crate::engine::loss::{Loss, Metric, Weights};
