@@ -117,7 +117,6 @@ impl DataArgs {
                 .map_err(|e| anyhow::anyhow!("--assume-uncertainty: {e}"))?,
             band_nm: self.band,
             max_samples: Some(self.max_samples),
-            ..Default::default()
         })
     }
 
