@@ -40,7 +40,7 @@ fn upper(theta: f64, phi: f64) -> DVec3 {
     )
 }
 
-/// ωt(θt, φt) = (sinθt cosφt, sinθt sinφt, −cosθt) (DESIGN §1).
+/// ωt(θt, φt) = (sinθt cosφt, sinθt sinφt, −cosθt) (docs/conventions.md).
 fn lower(theta_t: f64, phi_t: f64) -> DVec3 {
     DVec3::new(
         theta_t.sin() * phi_t.cos(),

@@ -2,7 +2,7 @@
 //! incidences 0°, 30°, 60° (θt −80…80° in 2.5° steps, 1% noise) is fitted with
 //! Levenberg–Marquardt (the paper's BTDF optimizer) and compass search. At oblique incidence
 //! α, η_t and S are separately identifiable; at normal incidence only they trade off
-//! (DESIGN §3), and the fit must say so instead of printing confident values.
+//! (docs/models.md), and the fit must say so instead of printing confident values.
 
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;

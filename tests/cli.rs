@@ -1,4 +1,4 @@
-//! The command line end to end (DESIGN §8): `synth` then `fit --json`, and clear errors
+//! The command line end to end (docs/output.md): `synth` then `fit --json`, and clear errors
 //! (exit code 1, file and line named, never a panic) for bad input.
 
 mod common;
@@ -303,7 +303,7 @@ fn data_errors_are_clear() {
         "cpu",
     ]);
     assert_clear_error(&out, &["on.csv", "650"]);
-    // Fewer samples than parameters (DESIGN §2).
+    // Fewer samples than parameters (docs/conventions.md).
     let f = dir.path().join("two.csv");
     std::fs::write(
         &f,
@@ -323,7 +323,7 @@ fn data_errors_are_clear() {
     let e = assert_clear_error(&out, &["one.csv", "1 sample cannot"]);
     assert!(!e.contains("1 samples"), "{e}");
     // A geometry written twice (once with a signed angle) is two independent samples,
-    // announced, not an error (DESIGN §2).
+    // announced, not an error (docs/conventions.md).
     let f = dir.path().join("dup.csv");
     std::fs::write(
         &f,

@@ -1,5 +1,5 @@
-//! The v1 dataset format (DESIGN §2): reading, validation messages (file and line),
-//! round trips, channel selection and the signed-angle convention (DESIGN §1).
+//! The v1 dataset format (docs/conventions.md): reading, validation messages (file and line),
+//! round trips, channel selection and the signed-angle convention (docs/conventions.md).
 
 mod common;
 
@@ -271,7 +271,7 @@ fn zero_uncertainty_is_an_error_unless_allowed() {
 
 #[test]
 fn repeated_geometry_is_independent_samples() {
-    // DESIGN §2: a geometry measured twice is two independent samples, with one notice.
+    // docs/conventions.md: a geometry measured twice is two independent samples, with one notice.
     let mut rows = good_rows();
     rows.push("10,0,20,0,550,0.2401,0.0030"); // the geometry of row 2, another value
     let d = parse(&file("brdf", &rows)).unwrap();
@@ -291,7 +291,7 @@ fn repeated_geometry_is_independent_samples() {
 
 #[test]
 fn repeated_geometry_written_with_signed_angles() {
-    // θo = −10, φo = 0 is θo = 10, φo = 180 (DESIGN §1).
+    // θo = −10, φo = 0 is θo = 10, φo = 180 (docs/conventions.md).
     for extra in [
         "10,0,10,180,550,0.2601,0.0031", // row 1 (10,0,-10,0)
         "20,180,35,45,650,0.18,0.0022",  // row 6 (-20,0,35,45)

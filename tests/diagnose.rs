@@ -1,4 +1,4 @@
-//! The discrepancy workflow (issue #6, DESIGN §7): for every effect of the catalogue,
+//! The discrepancy workflow (issue #6, docs/diagnose.md): for every effect of the catalogue,
 //! data in which the effect is present, a start model without it, and the assertion that
 //! `diagnose` names the effect and that χ²_red falls by ≥ 5× to below 3; controls with
 //! nothing missing must add no effect.
@@ -336,7 +336,7 @@ fn two_hidden_effects_are_found() {
 // ---------------------------------------------------------------------------------------
 // BTDF effects
 
-/// scale: S = 0.58. Only separable from η_t with oblique incidence (DESIGN §3: at normal
+/// scale: S = 0.58. Only separable from η_t with oblique incidence (docs/models.md: at normal
 /// incidence α, η_t and S trade off), so the rows have θi = 0, 25 and 50°.
 #[test]
 fn hidden_scale_is_found() {
@@ -557,7 +557,7 @@ fn control_false_positive_rate_over_many_seeds() {
 }
 
 // ---------------------------------------------------------------------------------------
-// CLI: the JSON of DESIGN §8 and the report
+// CLI: the JSON of docs/output.md and the report
 
 #[test]
 fn cli_writes_the_design_json_and_report() {

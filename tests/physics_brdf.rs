@@ -368,7 +368,7 @@ fn check_thin_micrograin_layer(comb: &str) {
             .unwrap_or_else(|| panic!("{spec}: no tau0"));
         assert!(
             (tau.decl.lo - 1e-3).abs() < 1e-12,
-            "{spec}: tau0 lower bound {} (DESIGN: 1e-3)",
+            "{spec}: tau0 lower bound {} (declared: 1e-3)",
             tau.decl.lo
         );
         for (k, mut flat) in param_sets(&model, 20, 31).into_iter().enumerate() {

@@ -1,4 +1,4 @@
-//! Parameter recovery: synthesize data from known parameters (DESIGN §8 `synth`), fit it
+//! Parameter recovery: synthesize data from known parameters (docs/output.md `synth`), fit it
 //! back on the CPU reference with the χ² loss, and check every parameter against the truth
 //! with the fit's own standard uncertainties, and χ²_red against 1.
 //!
@@ -314,7 +314,7 @@ fn lm_rejects_smape() {
     assert!(e.to_string().contains("smape"), "{e}");
 }
 
-/// DESIGN §2: fewer samples than parameters is an error.
+/// docs/conventions.md: fewer samples than parameters is an error.
 #[test]
 fn too_few_samples_is_an_error() {
     let rows: Vec<(usize, RawRow)> = [10.0, 20.0]

@@ -1,5 +1,5 @@
 // Shared scattering math in f32: the GPU twin of src/math/mod.rs.
-// Conventions (DESIGN §1): normal on +z, directions point away from the surface.
+// Conventions (docs/conventions.md): normal on +z, directions point away from the surface.
 
 const PI: f32 = 3.14159265358979;
 const INV_PI: f32 = 0.318309886183791;

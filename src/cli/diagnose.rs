@@ -43,7 +43,7 @@ pub struct DiagnoseArgs {
     pub max_steps: usize,
     #[command(flatten)]
     pub backend: BackendArgs,
-    /// Write the diagnosis (DESIGN §8) as JSON here (checked before the fits start; if the
+    /// Write the diagnosis (docs/output.md) as JSON here (checked before the fits start; if the
     /// write fails afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,

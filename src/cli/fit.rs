@@ -44,7 +44,7 @@ pub struct FitArgs {
     pub seed: u64,
     #[command(flatten)]
     pub backend: BackendArgs,
-    /// Write the fit report (DESIGN §8) as JSON here (checked before the fit starts; if
+    /// Write the fit report (docs/output.md) as JSON here (checked before the fit starts; if
     /// the write fails afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,

@@ -1,4 +1,4 @@
-//! Goniometric datasets: the v1 CSV format of DESIGN §2, validation, channel selection.
+//! Goniometric datasets: the v1 CSV format of docs/conventions.md, validation, channel selection.
 //!
 //! Every failure is a [`DataError`] naming the file and line; nothing here panics on
 //! user input. A file's bad rows are all reported at once (up to [`MAX_REPORTED_ERRORS`]).
@@ -208,7 +208,7 @@ pub struct RawRow {
     pub uncertainty: f64,
 }
 
-/// Signed-angle convention (DESIGN §1): a negative θ is the same angle at φ + 180°.
+/// Signed-angle convention (docs/conventions.md): a negative θ is the same angle at φ + 180°.
 /// Returns (θ, φ) in degrees with θ ≥ 0 and φ in [0, 360). At the pole (θ = 0) the
 /// azimuth does not change the direction but is kept as written: it says on which
 /// measurement plane a normal sample was taken ([`geometry_key`] ignores it).
@@ -400,7 +400,7 @@ impl<'a> Builder<'a> {
         let wi = direction(ti, pi);
         let mut wo = direction(to, po);
         if self.kind == Kind::Btdf {
-            wo.z = -wo.z; // θt is measured from −n (DESIGN §1)
+            wo.z = -wo.z; // θt is measured from −n (docs/conventions.md)
         }
         let Ok(index) = u32::try_from(self.samples.len()) else {
             return self.error(line, "more than 4294967295 rows".into());
@@ -515,7 +515,7 @@ impl<'a> Builder<'a> {
         })
     }
 
-    /// A geometry measured more than once is a set of independent samples (DESIGN §2);
+    /// A geometry measured more than once is a set of independent samples (docs/conventions.md);
     /// say how many there are, and warn about rows repeated byte for byte.
     fn repeated_geometries(&mut self, notices: &mut Vec<String>) {
         let mut keys = std::mem::take(&mut self.keys);

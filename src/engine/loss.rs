@@ -1,4 +1,4 @@
-//! Losses of the benchmark (DESIGN §4, paper §2.2 and §2.3.2) and χ².
+//! Losses of the benchmark (docs/losses.md, paper §2.2 and §2.3.2) and χ².
 //!
 //! Every loss is a sum over the K (sample, channel) pairs of a per-sample term, then a
 //! finalisation. Per sample we precompute a weight `w` (uncertainty weight × geometric

@@ -1,4 +1,4 @@
-//! Parameter standard uncertainties and correlations at an optimum (DESIGN §5, issue 4).
+//! Parameter standard uncertainties and correlations at an optimum (docs/losses.md, issue 4).
 //!
 //! With r_k = √w_k (g(y′_k) − g(y_k)) the loss's weighted residuals and J their Jacobian
 //! (central differences), the estimator's covariance propagated from the measurement

@@ -1,5 +1,5 @@
 //! One fit: a model, a dataset, a loss, multi-start optimisation on a backend, and the
-//! report of DESIGN §8 (best loss, χ²_red, parameters with standard uncertainties).
+//! report of docs/output.md (best loss, χ²_red, parameters with standard uncertainties).
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
@@ -59,7 +59,7 @@ impl Default for FitOptions {
     }
 }
 
-/// The best parameters of a fit (DESIGN §8 `best`).
+/// The best parameters of a fit (docs/output.md `best`).
 #[derive(Clone, Debug, Serialize)]
 pub struct Best {
     pub loss: f64,
@@ -70,7 +70,7 @@ pub struct Best {
     pub param_std: Map<String, Value>,
 }
 
-/// The JSON report of one fit (DESIGN §8), with extras after the contract's fields.
+/// The JSON report of one fit (docs/output.md), with extras after the contract's fields.
 #[derive(Clone, Debug, Serialize)]
 pub struct FitReport {
     pub model: String,
@@ -202,7 +202,7 @@ pub struct FitOutcome {
     pub seconds: f64,
 }
 
-/// Fit `model` to `data` under `loss` and report it (DESIGN §8).
+/// Fit `model` to `data` under `loss` and report it (docs/output.md).
 pub fn fit(
     model: &Model,
     data: &Dataset,

@@ -1,6 +1,6 @@
 //! Shared scattering math in f64: the CPU twin of `shaders/common.wgsl`.
 //!
-//! Conventions (DESIGN §1): local frame with the normal on +z, directions point away
+//! Conventions (docs/conventions.md): local frame with the normal on +z, directions point away
 //! from the surface, μ = cos θ = z. Special functions (ln Γ, incomplete gamma and beta,
 //! χ² and F tails, Gauss–Legendre quadrature) live in [`special`].
 

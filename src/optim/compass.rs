@@ -7,9 +7,9 @@ use super::{sanitize, BatchObjective, RestartResult};
 
 #[derive(Clone, Debug)]
 pub struct CompassOptions {
-    /// Initial step as a fraction of the unit box (DESIGN §5: 0.25).
+    /// Initial step as a fraction of the unit box (docs/losses.md: 0.25).
     pub initial_step: f64,
-    /// Stop when the step falls below this (DESIGN §5: 1e-4).
+    /// Stop when the step falls below this (docs/losses.md: 1e-4).
     pub min_step: f64,
     /// Maximum candidate evaluations per restart.
     pub max_evaluations: usize,

@@ -2,7 +2,7 @@
 //!
 //! | format | recognised by | reader |
 //! |---|---|---|
-//! | bsdfit v1 CSV (DESIGN §2) | a `# bsdfit dataset v1` line or a header naming `theta_i` | [`Dataset::parse_reader`] |
+//! | bsdfit v1 CSV (docs/conventions.md) | a `# bsdfit dataset v1` line or a header naming `theta_i` | [`Dataset::parse_reader`] |
 //! | ALTA text | a leading `#DIM`, `#PARAM_IN`, `#PARAM_OUT`, `#VS` or `#ALTA` line | [`alta`] |
 //! | MERL binary | three little-endian int32 dimensions (90, 90, 180), or dimensions whose table of doubles has exactly the file's size | [`merl`] |
 //!

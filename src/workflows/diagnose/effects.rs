@@ -1,11 +1,11 @@
-//! The effect catalogue (DESIGN §7) as data: every effect a model may be missing, the
+//! The effect catalogue (docs/diagnose.md) as data: every effect a model may be missing, the
 //! residual signature that points to it, and how an extension that adds it is made from
 //! the current spec. [`super::extensions`] generates the candidates from [`EFFECTS`] and
 //! from nothing else; the effect names are written here only.
 
 use crate::data::Kind;
 
-/// A physical effect a model may be missing (DESIGN §7; the names are a contract).
+/// A physical effect a model may be missing (docs/diagnose.md; the names are a contract).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Effect {
     SpecularLobe,
@@ -71,7 +71,7 @@ pub struct EffectEntry {
     pub effect: Effect,
     /// The contract name (`specular_lobe`, …).
     pub name: &'static str,
-    /// The residual signature DESIGN §7 gives for the effect.
+    /// The residual signature docs/diagnose.md gives for the effect.
     pub signature: &'static str,
     /// How the extensions that add the effect are made; empty for an effect that is
     /// declared but not generated yet.
@@ -246,7 +246,7 @@ impl Effect {
         self.entry().name
     }
 
-    /// The residual signature DESIGN §7 gives for the effect.
+    /// The residual signature docs/diagnose.md gives for the effect.
     pub fn signature(self) -> &'static str {
         self.entry().signature
     }

@@ -1,4 +1,4 @@
-//! Candidate extensions of a spec (DESIGN §7's effect → extension table) and the
+//! Candidate extensions of a spec (docs/diagnose.md's effect → extension table) and the
 //! embedding of the current optimum in an extension's parameters.
 
 use super::effects::{Make, EFFECTS};
@@ -41,7 +41,7 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
 }
 
 /// Every applicable extension of `spec` for `data`, from the effect catalogue
-/// [`EFFECTS`] (DESIGN §7's effect → extension table), each checked to parse for the
+/// [`EFFECTS`] (docs/diagnose.md's effect → extension table), each checked to parse for the
 /// data's channels and planes. For a core term M (its suffixes are kept):
 ///
 /// BRDF:

@@ -1,10 +1,10 @@
-//! The diagnosis as JSON: DESIGN §8's contract and the candidate tables of `--report`.
+//! The diagnosis as JSON: docs/output.md's contract and the candidate tables of `--report`.
 
 use super::Diagnosis;
 use serde_json::{json, Value};
 
 impl Diagnosis {
-    /// DESIGN §8: `{start_model, final_model, effects, steps: [{model, effect, chi2_red,
+    /// docs/output.md: `{start_model, final_model, effects, steps: [{model, effect, chi2_red,
     /// loss, evidence}]}`.
     pub fn to_json(&self) -> Value {
         json!({

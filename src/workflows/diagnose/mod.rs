@@ -1,4 +1,4 @@
-//! The discrepancy workflow (DESIGN §7, issue #6): fit a start model, decide whether the
+//! The discrepancy workflow (docs/diagnose.md, issue #6): fit a start model, decide whether the
 //! misfit exceeds the uncertainties, say in words where the model and the measurement
 //! disagree, fit every applicable extension of the model from the effect catalogue, adopt
 //! the best significant one, name its effect, and repeat until nothing significant remains.
@@ -36,7 +36,7 @@
 //! and the embedding of the current optimum), `fit` (the fits), `regions` (residual
 //! statistics over angular regions and their sentences), `score` (F test, BIC,
 //! identifiability, consistency), `path` (adoption, greedy path, backtracking: the
-//! [`diagnose`] driver), `json` (DESIGN §8 output), `report` (SVG panels and HTML).
+//! [`diagnose`] driver), `json` (docs/output.md output), `report` (SVG panels and HTML).
 
 mod effects;
 mod extensions;
@@ -75,7 +75,7 @@ pub struct DiagnoseOptions {
     pub alpha: f64,
     /// Most effects to add.
     pub max_steps: usize,
-    /// Stop as soon as χ²_red is consistent with the uncertainties (DESIGN §7). Turning it
+    /// Stop as soon as χ²_red is consistent with the uncertainties (docs/diagnose.md). Turning it
     /// off makes every round fit and test the candidates anyway (used to measure the false
     /// positive rate of the F/BIC gates on their own).
     pub stop_when_consistent: bool,

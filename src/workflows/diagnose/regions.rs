@@ -56,7 +56,7 @@ fn stat(words: String, mask: Vec<bool>, z: &[f64]) -> Option<RegionStat> {
     })
 }
 
-/// The statistics of z over every angular region of DESIGN §7 that the data covers:
+/// The statistics of z over every angular region of docs/diagnose.md that the data covers:
 /// BRDF — near the mirror and the retro direction (5° and 15°), the source (backscatter)
 /// side, the forward side away from the mirror, grazing θo ≥ 60°, the tails more than 30°
 /// from the mirror; BTDF — near the transmission peak (the brightest sample of each
