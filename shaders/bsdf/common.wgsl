@@ -17,32 +17,6 @@ fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     return clamp(0.5 * a * a * (1.0 + b * b), 0.0, 1.0);
 }
 
-// Trowbridge–Reitz / GGX NDF (Walter 2007, Eq. 33).
-fn ggx_d(cos_m: f32, alpha: f32) -> f32 {
-    if (cos_m <= 0.0) {
-        return 0.0;
-    }
-    let a2 = alpha * alpha;
-    let c2 = cos_m * cos_m;
-    let t = c2 * (a2 - 1.0) + 1.0;
-    return a2 / (PI * t * t);
-}
-
-// Smith Λ for GGX (Heitz 2014, Eq. 72).
-fn ggx_lambda(cos_v: f32, alpha: f32) -> f32 {
-    let c2 = max(cos_v * cos_v, 1e-30);
-    let tan2 = max((1.0 - c2) / c2, 0.0);
-    return 0.5 * (sqrt(1.0 + alpha * alpha * tan2) - 1.0);
-}
-
-// Smith G1 for GGX (Walter 2007, Eq. 34).
-fn ggx_g1(cos_v: f32, cos_vm: f32, alpha: f32) -> f32 {
-    if (cos_v * cos_vm <= 0.0) {
-        return 0.0;
-    }
-    return 1.0 / (1.0 + ggx_lambda(cos_v, alpha));
-}
-
 // Beckmann NDF (Walter 2007, Eq. 25).
 fn beckmann_d(cos_m: f32, alpha: f32) -> f32 {
     if (cos_m <= 0.0) {

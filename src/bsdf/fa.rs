@@ -6,6 +6,7 @@
 
 use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -39,6 +40,7 @@ impl Bsdf for FresnelAggregate {
     fn wgsl(&self) -> WgslFn {
         WgslFn {
             sources: vec![
+                MICROFACET_WGSL,
                 ("ggx", include_str!("../../shaders/bsdf/ggx.wgsl")),
                 ("fa", include_str!("../../shaders/bsdf/fa.wgsl")),
             ],

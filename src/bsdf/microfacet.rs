@@ -13,8 +13,23 @@
 //! D is normalised so that ∫ D(m) m.z dω_m = 1 and is 0 for m.z ≤ 0. Λ does not depend on
 //! the side of ω (the sign of ω.z).
 
+use super::WgslFn;
 use glam::DVec3;
 use std::f64::consts::PI;
+
+/// The WGSL twin, for the `sources` of every model that uses it.
+pub const MICROFACET_WGSL: (&str, &str) = (
+    "microfacet",
+    include_str!("../../shaders/bsdf/microfacet.wgsl"),
+);
+
+/// A node whose twin is one file `shaders/bsdf/<name>.wgsl` defining `<name>_eval` on top
+/// of `microfacet.wgsl` ([`WgslFn::single`] with this module's twin).
+pub fn single_wgsl(name: &'static str, source: &'static str) -> WgslFn {
+    let mut w = WgslFn::single(name, source);
+    w.sources.insert(0, MICROFACET_WGSL);
+    w
+}
 
 /// A microfacet normal distribution D(m).
 pub trait Distribution {
@@ -178,6 +193,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         let eps = f64::EPSILON;
         let (mut worst_d, mut worst_near_peak, mut worst_g) = (0.0f64, 0.0f64, 0.0f64);
+        let mut worst_model = 0.0f64;
         for _ in 0..200_000 {
             let alpha = (1e-3f64.ln() * rng.random::<f64>()).exp();
             let gamma = rng.random_range(0.5..4.0);
@@ -204,6 +220,39 @@ mod tests {
                 let err = (ggx.g1_over_mu(w) - old).abs() / old;
                 assert!(err <= 1e-12, "G1/mu {alpha} {w}");
             }
+            // The models: ggx (and fa's lobe) and the retro lobe, old transcriptions.
+            let old_lobe = |wi: DVec3, wo: DVec3| {
+                let h = half_vector(wi, wo);
+                crate::math::ggx_d(h.z, alpha)
+                    * crate::math::ggx_g1(wi.z, wi.dot(h), alpha)
+                    * crate::math::ggx_g1(wo.z, wo.dot(h), alpha)
+                    / (4.0 * wi.z * wo.z)
+            };
+            let old = crate::math::fresnel_dielectric(wi.dot(h), 1.5) * old_lobe(wi, wo);
+            let new = crate::bsdf::ggx::ggx_reflect(1.0, alpha, 1.5, wi, wo);
+            let rel = (new - old).abs() / old;
+            assert!(
+                rel <= 1e-12 + 8.0 * eps / t,
+                "ggx {alpha} {wi} {wo}: {old} {new}"
+            );
+            if t >= 1e-3 {
+                worst_model = worst_model.max(rel);
+            }
+            let back = DVec3::new(-wo.x, -wo.y, wo.z);
+            let old = old_lobe(wi, back);
+            let new = crate::bsdf::retro::retro_lobe(1.0, alpha, wi, wo);
+            let tb = {
+                let hb = half_vector(wi, back);
+                hb.z * hb.z * (alpha * alpha - 1.0) + 1.0
+            };
+            let rel = (new - old).abs() / old;
+            assert!(
+                rel <= 1e-12 + 8.0 * eps / tb,
+                "retro {alpha} {wi} {wo}: {old} {new}"
+            );
+            if tb >= 1e-3 {
+                worst_model = worst_model.max(rel);
+            }
             let (c2, s2) = cos2_sin2(h);
             for (old, new) in [
                 (crate::bsdf::btdf::tr_d(c2, s2, alpha), ggx.d(h)),
@@ -220,7 +269,7 @@ mod tests {
             }
         }
         eprintln!(
-            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; btdf forms bit-identical"
+            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; ggx and retro lobes {worst_model:.1e} (old t ≥ 1e-3); btdf forms bit-identical"
         );
     }
 }
