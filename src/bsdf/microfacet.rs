@@ -14,8 +14,10 @@
 //! the side of ω (the sign of ω.z).
 
 use super::WgslFn;
+use crate::math::ln_gamma;
 use glam::DVec3;
 use std::f64::consts::PI;
+use std::sync::OnceLock;
 
 /// The WGSL twin, for the `sources` of every model that uses it.
 pub const MICROFACET_WGSL: (&str, &str) = (
@@ -171,12 +173,315 @@ pub fn gtr_norm(a2: f64, gamma: f64) -> f64 {
     a_term * ratio / PI
 }
 
+// ---------------------------------------------------------------------------------------
+// Generalized Gaussian (Holzschuch & Pacanowski 2017)
+
+/// Holzschuch–Pacanowski generalized Gaussian of width β and shape p (Holzschuch &
+/// Pacanowski 2017; p = 1 is Beckmann of α = β), with its per-evaluation constants. Its
+/// Smith Λ comes from the table [`gg_lambda_table`].
+#[derive(Clone, Copy, Debug)]
+pub struct Gg {
+    pub beta: f64,
+    pub p: f64,
+    /// Characteristic slope of the β = 1 distribution, r_c = (1/p)^(1/(2p)); the table's
+    /// abscissa is b = r_c · β tanθ.
+    pub rc: f64,
+    /// J0 = lim Λ/(β tanθ) = Γ(3/(2p)) / (π Γ(1/p)), the mean positive 1-D slope at β = 1.
+    pub j0: f64,
+    /// ln of the normalisation p / (π β² Γ(1/p)).
+    pub ln_norm: f64,
+}
+
+impl Gg {
+    pub fn new(beta: f64, p: f64) -> Gg {
+        let lg = ln_gamma(1.0 / p);
+        Gg {
+            beta,
+            p,
+            rc: (-p.ln() / (2.0 * p)).exp(),
+            j0: (ln_gamma(1.5 / p) - lg).exp() / PI,
+            ln_norm: p.ln() - lg - (PI * beta * beta).ln(),
+        }
+    }
+
+    /// μ (1 + Λ) = μ + T̂ · J0 · (β sinθ + μ / r_c), T̂ from the table at x = b/(1+b),
+    /// b = r_c β tanθ; finite at μ = 0.
+    fn mu_one_plus_lambda(&self, w: DVec3) -> (f64, f64) {
+        let mu = w.z.abs();
+        let bs = self.beta * (w.x * w.x + w.y * w.y).sqrt();
+        let b = bs * self.rc;
+        let x = b / (mu + b);
+        let t = gg_lambda_table().interpolate(self.p, x);
+        (mu, mu + t * self.j0 * (bs + mu / self.rc))
+    }
+}
+
+impl Distribution for Gg {
+    /// p / (π β² Γ(1/p)) · exp(−(tan²θm/β²)^p) / cos⁴θm.
+    fn d(&self, m: DVec3) -> f64 {
+        let (c2, s2) = cos2_sin2(m);
+        if m.z <= 0.0 || c2 < C2_MIN {
+            return 0.0;
+        }
+        let z = s2 / c2 / (self.beta * self.beta);
+        let e = if z > 0.0 {
+            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
+        } else {
+            0.0
+        };
+        (self.ln_norm - e - 2.0 * c2.ln()).exp()
+    }
+}
+
+impl Masking for Gg {
+    fn lambda(&self, w: DVec3) -> f64 {
+        let (mu, s) = self.mu_one_plus_lambda(w);
+        (s - mu) / mu
+    }
+
+    fn g1_over_mu(&self, w: DVec3) -> f64 {
+        1.0 / self.mu_one_plus_lambda(w).1
+    }
+}
+
+/// Points in ln p of the GG Λ table (p from [`GG_P_LO`] to [`GG_P_HI`], uniform in ln p).
+pub const GG_NP: usize = 33;
+/// Points in x = b/(1+b) of the GG Λ table (x from 0 to 1 inclusive, uniform).
+pub const GG_NA: usize = 129;
+pub const GG_P_LO: f64 = 0.2;
+pub const GG_P_HI: f64 = 5.0;
+
+/// Tabulated Smith Λ of the generalized Gaussian NDF, computed once in f64.
+///
+/// Layout: `data[ip * na + ia]`, ip ∈ [0, np), ia ∈ [0, na).
+/// - ip ↔ ln p = ln_p_lo + ip · (ln_p_hi − ln_p_lo)/(np − 1);
+/// - ia ↔ x = ia/(na − 1), with x = b/(1 + b), b = r_c(p) · a, a = β tanθ,
+///   r_c(p) = (1/p)^(1/(2p)) (the characteristic slope of the β = 1 distribution);
+/// - value T̂ = Λ / (J0(p) · (a + 1/r_c(p))), J0(p) = Γ(3/(2p)) / (π Γ(1/p)); T̂ → 1 as
+///   x → 1 (Λ ≈ J0 a − ½ for large a) and T̂ → 0 as x → 0.
+///
+/// Λ = T̂ · J0 · (a + 1/r_c), bilinear in (ln p, x) ([`LambdaTable::interpolate`], the same
+/// arithmetic as `gg_table` in `shaders/bsdf/microfacet.wgsl`, which reads an f32 copy bound
+/// as `LUT`). Factoring out J0 and scaling a by r_c remove the p-dependence that bilinear
+/// interpolation handles badly (J0 spans 0.2 … 25 over the p range).
+#[derive(Clone, Debug)]
+pub struct LambdaTable {
+    pub np: usize,
+    pub na: usize,
+    pub ln_p_lo: f64,
+    pub ln_p_hi: f64,
+    pub data: Vec<f64>,
+}
+
+impl LambdaTable {
+    fn compute() -> LambdaTable {
+        let (ln_p_lo, ln_p_hi) = (GG_P_LO.ln(), GG_P_HI.ln());
+        let mut data = Vec::with_capacity(GG_NP * GG_NA);
+        for ip in 0..GG_NP {
+            let p = (ln_p_lo + ip as f64 * (ln_p_hi - ln_p_lo) / (GG_NP - 1) as f64).exp();
+            for ia in 0..GG_NA {
+                data.push(gg_table_value(p, ia as f64 / (GG_NA - 1) as f64));
+            }
+        }
+        LambdaTable {
+            np: GG_NP,
+            na: GG_NA,
+            ln_p_lo,
+            ln_p_hi,
+            data,
+        }
+    }
+
+    /// Bilinear T̂ at (p, x), clamped to the table's range.
+    pub fn interpolate(&self, p: f64, x: f64) -> f64 {
+        let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
+            * (self.np - 1) as f64;
+        let ip = (fp as usize).min(self.np - 2);
+        let u = fp - ip as f64;
+        let fa = x.clamp(0.0, 1.0) * (self.na - 1) as f64;
+        let ia = (fa as usize).min(self.na - 2);
+        let v = fa - ia as f64;
+        let k = ip * self.na + ia;
+        let d = &self.data;
+        let t0 = d[k] + (d[k + 1] - d[k]) * v;
+        let t1 = d[k + self.na] + (d[k + self.na + 1] - d[k + self.na]) * v;
+        t0 + (t1 - t0) * u
+    }
+
+    /// Λ at shape p and a = β tanθ, from the table.
+    pub fn lambda(&self, p: f64, a: f64) -> f64 {
+        let g = Gg::new(1.0, p);
+        let b = g.rc * a;
+        if !b.is_finite() {
+            return f64::INFINITY;
+        }
+        self.interpolate(p, b / (1.0 + b)) * g.j0 * (a + 1.0 / g.rc)
+    }
+
+    /// The f32 copy the GPU reads (same layout).
+    pub fn to_f32(&self) -> Vec<f32> {
+        self.data.iter().map(|&v| v as f32).collect()
+    }
+}
+
+/// The GG Λ table, computed on first use (~4k one-dimensional integrals).
+pub fn gg_lambda_table() -> &'static LambdaTable {
+    static TABLE: OnceLock<LambdaTable> = OnceLock::new();
+    TABLE.get_or_init(LambdaTable::compute)
+}
+
+/// The exact table value T̂(p, x) by numerical integration.
+pub fn gg_table_value(p: f64, x: f64) -> f64 {
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let g = Gg::new(1.0, p);
+    let a = x / (1.0 - x) / g.rc;
+    gg_lambda_exact(p, a) / (g.j0 * (a + 1.0 / g.rc))
+}
+
+/// Smith Λ of the generalized Gaussian at a = β tanθ by direct f64 integration.
+///
+/// With ν = 1/a and the β = 1 slope density P22(r) = p/(πΓ(1/p)) exp(−r^(2p)),
+/// Λ = a ∫∫_{s > ν} (s − ν) P22 ds dt = a ∫_ν^∞ 2 (√(r² − ν²) − ν acos(ν/r)) P22(r) r dr
+/// (Heitz 2014, Eq. 72 with the azimuth integrated analytically). Substituting
+/// r = ν cosh u makes the integrand smooth at r = ν; 8-point Gauss–Legendre panels of
+/// width min(¼, ½/p) in u up to r^(2p) = 60 give ~1e-13 relative accuracy.
+pub fn gg_lambda_exact(p: f64, a: f64) -> f64 {
+    if a.is_nan() || a <= 0.0 {
+        return 0.0;
+    }
+    if !a.is_finite() {
+        return f64::INFINITY;
+    }
+    a * gg_j(p, 1.0 / a)
+}
+
+/// J(ν) = ∫_ν^∞ (s − ν) P2(s) ds for the β = 1 GG slope distribution.
+fn gg_j(p: f64, nu: f64) -> f64 {
+    const X: [f64; 4] = [
+        0.183_434_642_495_649_8,
+        0.525_532_409_916_329,
+        0.796_666_477_413_626_7,
+        0.960_289_856_497_536_3,
+    ];
+    const W: [f64; 4] = [
+        0.362_683_783_378_362,
+        0.313_706_645_877_887_3,
+        0.222_381_034_453_374_5,
+        0.101_228_536_290_376_3,
+    ];
+    let c = (p.ln() - ln_gamma(1.0 / p)).exp() / PI;
+    if nu <= 0.0 {
+        return (ln_gamma(1.5 / p) - ln_gamma(1.0 / p)).exp() / PI;
+    }
+    let rmax = 60f64.powf(1.0 / (2.0 * p));
+    if nu >= rmax {
+        return 0.0;
+    }
+    let umax = (rmax / nu).acosh();
+    let h = (0.5 / p).min(0.25);
+    let n = ((umax / h).ceil() as usize).max(4);
+    let h = umax / n as f64;
+    let f = |u: f64| {
+        let (sh, ch) = (u.sinh(), u.cosh());
+        // sinh u − atan(sinh u) = √(r²−ν²)/ν − acos(ν/r), by its series where it cancels
+        let diff = if sh < 0.1 {
+            let s2 = sh * sh;
+            sh * s2
+                * (1.0 / 3.0 - s2 * (1.0 / 5.0 - s2 * (1.0 / 7.0 - s2 * (1.0 / 9.0 - s2 / 11.0))))
+        } else {
+            sh - sh.atan()
+        };
+        let r = nu * ch;
+        2.0 * nu * diff * c * (-(2.0 * p * r.ln()).exp()).exp() * r * nu * sh
+    };
+    let mut sum = 0.0;
+    for k in 0..n {
+        let mid = (k as f64 + 0.5) * h;
+        for j in 0..4 {
+            let dx = 0.5 * h * X[j];
+            sum += W[j] * (f(mid - dx) + f(mid + dx));
+        }
+    }
+    sum * 0.5 * h
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bsdf::btdf::Ndf;
     use crate::math::half_vector;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    /// Transcriptions of the (c², s²) forms `btdf` used before this module (temporary).
+    mod old {
+        use super::super::*;
+        use crate::bsdf::btdf::{refraction, transmit};
+
+        pub fn walter(
+            wi: DVec3,
+            wo: DVec3,
+            eta: f64,
+            d: impl Fn(f64, f64) -> f64,
+            g1_over_mu: impl Fn(DVec3) -> f64,
+        ) -> f64 {
+            let Some(r) = refraction(wi, wo, eta) else {
+                return 0.0;
+            };
+            let c2 = r.m.z * r.m.z;
+            let s2 = r.m.x * r.m.x + r.m.y * r.m.y;
+            transmit(&r, eta, d(c2, s2), g1_over_mu(wi), g1_over_mu(wo))
+        }
+
+        pub fn tr_d(c2: f64, s2: f64, alpha: f64) -> f64 {
+            let a2 = alpha * alpha;
+            let t = a2 * c2 + s2;
+            a2 / (PI * t * t)
+        }
+
+        pub fn beckmann_d(c2: f64, s2: f64, alpha: f64) -> f64 {
+            if c2 < C2_MIN {
+                return 0.0;
+            }
+            let a2 = alpha * alpha;
+            (-(s2 / c2) / a2 - 2.0 * c2.ln()).exp() / (PI * a2)
+        }
+
+        pub fn gtr_d(c2: f64, s2: f64, alpha: f64, gamma: f64) -> f64 {
+            let a2 = (alpha * alpha).max(1e-12);
+            crate::math::gtr_norm(a2, gamma) * (-gamma * (a2 * c2 + s2).ln()).exp()
+        }
+
+        pub fn tr_g1_over_mu(v: DVec3, alpha: f64) -> f64 {
+            let mu = v.z.abs();
+            let s2 = v.x * v.x + v.y * v.y;
+            2.0 / (mu + (mu * mu + alpha * alpha * s2).sqrt())
+        }
+
+        pub fn gg_d(g: &Gg, c2: f64, s2: f64) -> f64 {
+            if c2 < C2_MIN {
+                return 0.0;
+            }
+            let z = s2 / c2 / (g.beta * g.beta);
+            let e = if z > 0.0 {
+                (g.p * z.ln()).clamp(-80.0, 80.0).exp()
+            } else {
+                0.0
+            };
+            (g.ln_norm - e - 2.0 * c2.ln()).exp()
+        }
+
+        pub fn gg_g1_over_mu(g: &Gg, v: DVec3) -> f64 {
+            let mu = v.z.abs();
+            let bs = g.beta * (v.x * v.x + v.y * v.y).sqrt();
+            let w = bs * g.rc;
+            let x = w / (mu + w);
+            let t = gg_lambda_table().interpolate(g.p, x);
+            1.0 / (mu + t * g.j0 * (bs + mu / g.rc))
+        }
+    }
 
     fn random_dir(rng: &mut ChaCha8Rng) -> DVec3 {
         let mu: f64 = rng.random_range(1e-4..1.0);
@@ -194,6 +499,7 @@ mod tests {
         let eps = f64::EPSILON;
         let (mut worst_d, mut worst_near_peak, mut worst_g) = (0.0f64, 0.0f64, 0.0f64);
         let mut worst_model = 0.0f64;
+        let mut btdf_valid = 0;
         for _ in 0..200_000 {
             let alpha = (1e-3f64.ln() * rng.random::<f64>()).exp();
             let gamma = rng.random_range(0.5..4.0);
@@ -216,9 +522,7 @@ mod tests {
                 let err = (new - old).abs() / old;
                 assert!(err <= 1e-12, "G1 {alpha} {w}: {old} {new}");
                 worst_g = worst_g.max(err);
-                let old = crate::bsdf::btdf::tr_g1_over_mu(w, alpha);
-                let err = (ggx.g1_over_mu(w) - old).abs() / old;
-                assert!(err <= 1e-12, "G1/mu {alpha} {w}");
+                assert!(ggx.g1_over_mu(w) == old::tr_g1_over_mu(w, alpha));
             }
             // The models: ggx (and fa's lobe) and the retro lobe, old transcriptions.
             let old_lobe = |wi: DVec3, wo: DVec3| {
@@ -253,23 +557,66 @@ mod tests {
             if tb >= 1e-3 {
                 worst_model = worst_model.max(rel);
             }
-            let (c2, s2) = cos2_sin2(h);
-            for (old, new) in [
-                (crate::bsdf::btdf::tr_d(c2, s2, alpha), ggx.d(h)),
+            // The btdf terms, whole: Eq. 1 with the old (c², s²) closures.
+            let eta = rng.random_range(1.01..3.0);
+            let (bi, bo) = (wi, DVec3::new(wo.x, wo.y, -wo.z));
+            let beta = alpha.max(3e-3);
+            let p = rng.random_range(0.2..5.0);
+            let gg = Gg::new(beta, p);
+            for (ndf, params, old) in [
                 (
-                    crate::bsdf::btdf::beckmann_d(c2, s2, alpha),
-                    Beckmann { alpha }.d(h),
+                    Ndf::Tr,
+                    vec![alpha, eta],
+                    old::walter(
+                        bi,
+                        bo,
+                        eta,
+                        |c2, s2| old::tr_d(c2, s2, alpha),
+                        |v| old::tr_g1_over_mu(v, alpha),
+                    ),
                 ),
                 (
-                    crate::bsdf::btdf::gtr_d(c2, s2, alpha, gamma),
-                    Gtr { alpha, gamma }.d(h),
+                    Ndf::Beckmann,
+                    vec![alpha, eta],
+                    old::walter(
+                        bi,
+                        bo,
+                        eta,
+                        |c2, s2| old::beckmann_d(c2, s2, alpha),
+                        |v| old::tr_g1_over_mu(v, alpha),
+                    ),
+                ),
+                (
+                    Ndf::Gtr,
+                    vec![alpha, gamma, eta],
+                    old::walter(
+                        bi,
+                        bo,
+                        eta,
+                        |c2, s2| old::gtr_d(c2, s2, alpha, gamma),
+                        |v| old::tr_g1_over_mu(v, alpha),
+                    ),
+                ),
+                (
+                    Ndf::Gg,
+                    vec![beta, p, eta],
+                    old::walter(
+                        bi,
+                        bo,
+                        eta,
+                        |c2, s2| old::gg_d(&gg, c2, s2),
+                        |v| old::gg_g1_over_mu(&gg, v),
+                    ),
                 ),
             ] {
-                assert!(old == new, "btdf form {alpha} {h}: {old} {new}");
+                let new = ndf.eval(&params, bi, bo);
+                assert!(old == new, "{ndf:?} {params:?} {bi} {bo}: {old} {new}");
+                btdf_valid += (new > 0.0) as usize;
             }
         }
+        assert!(btdf_valid > 10_000, "{btdf_valid}");
         eprintln!(
-            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; ggx and retro lobes {worst_model:.1e} (old t ≥ 1e-3); btdf forms bit-identical"
+            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; ggx and retro lobes {worst_model:.1e} (old t ≥ 1e-3); btdf terms bit-identical ({btdf_valid} non-zero)"
         );
     }
 }
