@@ -500,6 +500,7 @@ mod tests {
         let (mut worst_d, mut worst_near_peak, mut worst_g) = (0.0f64, 0.0f64, 0.0f64);
         let mut worst_model = 0.0f64;
         let mut btdf_valid = 0;
+        let mut worst_mg = 0.0f64;
         for _ in 0..200_000 {
             let alpha = (1e-3f64.ln() * rng.random::<f64>()).exp();
             let gamma = rng.random_range(0.5..4.0);
@@ -557,6 +558,20 @@ mod tests {
             if tb >= 1e-3 {
                 worst_model = worst_model.max(rel);
             }
+            // The micrograin NDF (its old explicit form), τ0 in its box.
+            let tau0 = (1e-3f64.ln() * rng.random::<f64>()).exp().min(0.999);
+            let beta = alpha.max(1e-2);
+            let old = {
+                let l0 = crate::bsdf::micrograin::lambda0(tau0);
+                let b2 = beta * beta;
+                let s2 = h.x * h.x + h.y * h.y;
+                let d = b2 * h.z * h.z + s2;
+                (l0 / tau0) * (-l0 * s2 / d).exp() * b2 / PI / (d * d)
+            };
+            let new = crate::bsdf::micrograin::ndf(tau0, beta, h);
+            let rel = (new - old).abs() / old;
+            assert!(rel <= 1e-13, "mg ndf {tau0} {beta} {h}: {old} {new}");
+            worst_mg = worst_mg.max(rel);
             // The btdf terms, whole: Eq. 1 with the old (c², s²) closures.
             let eta = rng.random_range(1.01..3.0);
             let (bi, bo) = (wi, DVec3::new(wo.x, wo.y, -wo.z));
@@ -616,7 +631,7 @@ mod tests {
         }
         assert!(btdf_valid > 10_000, "{btdf_valid}");
         eprintln!(
-            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; ggx and retro lobes {worst_model:.1e} (old t ≥ 1e-3); btdf terms bit-identical ({btdf_valid} non-zero)"
+            "worst relative change: GGX D {worst_d:.1e} (old t ≥ 1e-3), {worst_near_peak:.1e} (old t < 1e-3); G1 {worst_g:.1e}; ggx and retro lobes {worst_model:.1e} (old t ≥ 1e-3); btdf terms bit-identical ({btdf_valid} non-zero); micrograin D {worst_mg:.1e}"
         );
     }
 }
