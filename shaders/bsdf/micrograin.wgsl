@@ -1,6 +1,6 @@
 // Micrograin layer shared math (Lucas, Ribardière, Pacanowski, Barla 2023, ACM TOG 42(6)):
 // visibility weight (Eqs. 21–23), NDF (Eq. 17), Smith Λ series (supplemental) and the rough
-// dielectric grain. f32 twin of src/model/micrograin.rs (same clamps, same 32-term series).
+// dielectric grain. f32 twin of src/bsdf/micrograin.rs (same clamps, same 32-term series).
 // Uses PI, INV_PI and fresnel_dielectric from common.wgsl, ggx_d_vec from microfacet.wgsl.
 
 const MG_MU_MIN: f32 = 1e-6;

@@ -2,7 +2,7 @@
 //! f = ggx(α, η, k_s) + (1 − F(μi; η)) (1 − F(μo; η)) · f_B,
 //! the base seen through the interface that makes the highlight. B is one of
 //! `lambert on eon vmf`. The lobe's parameters are named `lobe.*`, the base's `base.*`.
-//! Twin: `shaders/fa.wgsl`.
+//! Twin: `shaders/bsdf/fa.wgsl`.
 
 use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};

@@ -2,7 +2,7 @@
 //! D of Eq. 33 and the separable Smith G of Eq. 23/34):
 //! f = k_s · F(ωi·h; η) · D(h) · G1(ωi) G1(ωo) / (4 μi μo), F the exact dielectric
 //! Fresnel; D and G1 are [`super::microfacet::Ggx`] (no cancellation at small α).
-//! Twin: `shaders/ggx.wgsl`.
+//! Twin: `shaders/bsdf/ggx.wgsl`.
 
 use super::microfacet::{self, reflection};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};

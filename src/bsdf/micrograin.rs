@@ -1,6 +1,7 @@
 //! Shared math of the micrograin layer (`dmg(B)`, `rmg(B)`): S. Lucas, M. Ribardière,
 //! R. Pacanowski, P. Barla, "A Micrograin BSDF Model for the Rendering of Porous Layers",
-//! ACM TOG 42(6), SIGGRAPH Asia 2023 (HAL hal-04220006). Twin: `shaders/micrograin.wgsl`.
+//! ACM TOG 42(6), SIGGRAPH Asia 2023 (HAL hal-04220006).
+//! Twin: `shaders/bsdf/micrograin.wgsl` (with `microfacet.wgsl`).
 //!
 //! Equation numbers are those of the paper as cited in the reference code we followed:
 //! the authors' Shadertoy (shadertoy.com/view/cly3Dt) through its line-for-line C++ port
@@ -50,8 +51,8 @@ pub const LAMBDA_TERMS: usize = 32;
 pub const LAMBDA_TAIL_EPS: f64 = 1e-17;
 /// Smallest cosine used where 1/μ appears in w.
 pub const MU_MIN: f64 = 1e-6;
-/// Internal parameter clamps (identical in `shaders/micrograin.wgsl`); the declared bounds
-/// lie inside them.
+/// Internal parameter clamps (identical in `shaders/bsdf/micrograin.wgsl`); the declared
+/// bounds lie inside them.
 pub const TAU_MIN: f64 = 1e-6;
 pub const TAU_MAX: f64 = 0.9999;
 pub const BETA_MIN: f64 = 1e-4;

@@ -2,7 +2,7 @@
 //! lobe of Belcour et al. 2014: k_r · D(h̄) · G1(ωi) G1(ωo) / (4 μi μo) with GGX D and Smith
 //! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z) ([`super::microfacet::Ggx`]). It
 //! peaks at ωo = ωi.
-//! Twin: `shaders/retro.wgsl`.
+//! Twin: `shaders/bsdf/retro.wgsl`.
 
 use super::microfacet::{reflection, single_wgsl, Ggx};
 use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
