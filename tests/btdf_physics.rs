@@ -50,28 +50,15 @@ fn lower(theta_t: f64, phi_t: f64) -> DVec3 {
     )
 }
 
-const GL_X: [f64; 4] = [
-    0.183_434_642_495_649_8,
-    0.525_532_409_916_329,
-    0.796_666_477_413_626_7,
-    0.960_289_856_497_536_3,
-];
-const GL_W: [f64; 4] = [
-    0.362_683_783_378_362,
-    0.313_706_645_877_887_3,
-    0.222_381_034_453_374_5,
-    0.101_228_536_290_376_3,
-];
-
 /// Composite 8-point Gauss–Legendre on [a, b] with n panels.
 fn gauss(a: f64, b: f64, n: usize, mut f: impl FnMut(f64) -> f64) -> f64 {
+    let nodes = bsdfit::math::gauss_legendre(8, -1.0, 1.0);
     let h = (b - a) / n as f64;
     let mut s = 0.0;
     for k in 0..n {
         let mid = a + (k as f64 + 0.5) * h;
-        for j in 0..4 {
-            let d = 0.5 * h * GL_X[j];
-            s += GL_W[j] * (f(mid - d) + f(mid + d));
+        for &(x, w) in &nodes {
+            s += w * f(mid + 0.5 * h * x);
         }
     }
     s * 0.5 * h
