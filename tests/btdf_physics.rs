@@ -5,9 +5,9 @@
 //! the accuracy of the GG Smith Λ table. No assertion lets a NaN through: every check is
 //! written `assert!(x.is_finite() && …)` or as `!(err <= tol)` → failure.
 
-use bsdfit::bsdf::btdf::{
-    beckmann_d, gg_lambda_exact, gg_lambda_table, gtr_d, tr_d, GgShape, GG_NA, GG_NP, GG_P_HI,
-    GG_P_LO,
+use bsdfit::bsdf::microfacet::{
+    gg_lambda_exact, gg_lambda_table, gtr_norm, Beckmann, Distribution, Gg, Ggx, Gtr, GG_NA, GG_NP,
+    GG_P_HI, GG_P_LO,
 };
 use bsdfit::bsdf::Model;
 use bsdfit::math::ln_gamma;
@@ -20,6 +20,7 @@ use std::f64::consts::PI;
 // helpers
 
 type Ndf2 = Box<dyn Fn(f64, f64) -> f64>;
+type Ndf = Box<dyn Distribution>;
 type G1Fn = Box<dyn Fn(f64) -> f64>;
 
 fn model(spec: &str) -> Model {
@@ -49,28 +50,15 @@ fn lower(theta_t: f64, phi_t: f64) -> DVec3 {
     )
 }
 
-const GL_X: [f64; 4] = [
-    0.183_434_642_495_649_8,
-    0.525_532_409_916_329,
-    0.796_666_477_413_626_7,
-    0.960_289_856_497_536_3,
-];
-const GL_W: [f64; 4] = [
-    0.362_683_783_378_362,
-    0.313_706_645_877_887_3,
-    0.222_381_034_453_374_5,
-    0.101_228_536_290_376_3,
-];
-
 /// Composite 8-point Gauss–Legendre on [a, b] with n panels.
 fn gauss(a: f64, b: f64, n: usize, mut f: impl FnMut(f64) -> f64) -> f64 {
+    let nodes = bsdfit::math::gauss_legendre(8, -1.0, 1.0);
     let h = (b - a) / n as f64;
     let mut s = 0.0;
     for k in 0..n {
         let mid = a + (k as f64 + 0.5) * h;
-        for j in 0..4 {
-            let d = 0.5 * h * GL_X[j];
-            s += GL_W[j] * (f(mid - d) + f(mid + d));
+        for &(x, w) in &nodes {
+            s += w * f(mid + 0.5 * h * x);
         }
     }
     s * 0.5 * h
@@ -338,26 +326,21 @@ fn zero_outside_the_transmission_configuration() {
 
 #[test]
 fn every_ndf_is_normalised() {
-    // ∫ D(m) cosθm dω = ∫ P22 d²slope = ∫ 2π r² P22(r) d(ln r), P22 = D cos⁴θm.
-    fn integral(d: &dyn Fn(f64, f64) -> f64) -> f64 {
+    // ∫ D(m) cosθm dω = ∫ P22 d²slope = ∫ 2π r² P22(r) d(ln r), P22 = D cos⁴θm, at the
+    // microfacet normal m = (r, 0, 1)/√(1 + r²) of slope r.
+    fn integral(d: &dyn Distribution) -> f64 {
         gauss(-40.0, 40.0, 4000, |t| {
             let r = t.exp();
-            let c2 = 1.0 / (1.0 + r * r);
-            let s2 = r * r * c2;
-            2.0 * PI * r * r * d(c2, s2) * c2 * c2
+            let m = DVec3::new(r, 0.0, 1.0) / (1.0 + r * r).sqrt();
+            let c2 = m.z * m.z;
+            2.0 * PI * r * r * d.d(m) * c2 * c2
         })
     }
     let mut checked = 0;
     for alpha in [1e-3, 0.05, 0.3, 1.0] {
-        let cases: Vec<(String, Ndf2)> = vec![
-            (
-                format!("tr α={alpha}"),
-                Box::new(move |c2, s2| tr_d(c2, s2, alpha)),
-            ),
-            (
-                format!("beckmann α={alpha}"),
-                Box::new(move |c2, s2| beckmann_d(c2, s2, alpha)),
-            ),
+        let cases: Vec<(String, Ndf)> = vec![
+            (format!("tr α={alpha}"), Box::new(Ggx { alpha })),
+            (format!("beckmann α={alpha}"), Box::new(Beckmann { alpha })),
         ];
         for (name, d) in cases {
             let v = integral(&*d);
@@ -365,7 +348,7 @@ fn every_ndf_is_normalised() {
             checked += 1;
         }
         for gamma in [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0] {
-            let v = integral(&|c2, s2| gtr_d(c2, s2, alpha, gamma));
+            let v = integral(&Gtr { alpha, gamma });
             // γ ≤ 1 with α = 1e-3: the tail ∝ r^(2γ−4)… is long but integrable; the
             // normalisation is still exact to the quadrature's accuracy.
             assert!(
@@ -377,8 +360,7 @@ fn every_ndf_is_normalised() {
     }
     for beta in [3e-3, 0.05, 0.3, 1.0] {
         for p in [0.2, 0.35, 0.5, 1.0, 2.0, 3.3, 5.0] {
-            let g = GgShape::new(beta, p);
-            let v = integral(&|c2, s2| g.d(c2, s2));
+            let v = integral(&Gg::new(beta, p));
             assert!(
                 v.is_finite() && (v - 1.0).abs() < 1e-6,
                 "gg β={beta} p={p}: {v}"
@@ -524,7 +506,8 @@ fn matches_walter_literally_with_its_reciprocity() {
                 "btdf(gtr)" => {
                     let (a, g) = (flat[0], flat[1]);
                     (
-                        Box::new(move |c, _| bsdfit::math::gtr_d(c, a, g)),
+                        // Burley's c(α, γ) / (α² cos² + sin²)^γ, sin² = cos² tan²
+                        Box::new(move |c, t2| gtr_norm(a * a, g) * (c * c * (a * a + t2)).powf(-g)),
                         Box::new(walter_tr_g1(a)),
                     )
                 }
@@ -621,12 +604,11 @@ fn gtr_with_gamma_two_is_tr() {
 fn gg_with_p_one_is_beckmann() {
     // D: identical up to rounding (Γ(1) = 1).
     for beta in [3e-3, 0.05, 0.2, 0.6, 1.0] {
-        let g = GgShape::new(beta, 1.0);
+        let g = Gg::new(beta, 1.0);
         for k in 0..200 {
             let theta = 1.57 * k as f64 / 200.0;
-            let (s, c) = theta.sin_cos();
-            let (c2, s2) = (c * c, s * s);
-            let (a, b) = (g.d(c2, s2), beckmann_d(c2, s2, beta));
+            let m = upper(theta, 0.3);
+            let (a, b) = (g.d(m), Beckmann { alpha: beta }.d(m));
             assert!(
                 a.is_finite() && (a - b).abs() <= 1e-12 * b.abs() + 1e-300,
                 "β={beta} θ={theta}: {a} vs {b}"
@@ -708,7 +690,7 @@ fn gg_lambda_integral_matches_independent_references() {
         assert!(err.is_finite() && err < 1e-12, "p=1 a={a}: {err}");
     }
     for p in [0.2, 0.45, 2.0, 5.0] {
-        let g = GgShape::new(1.0, p);
+        let g = Gg::new(1.0, p);
         let norm = (p.ln() - ln_gamma(1.0 / p)).exp() / PI;
         for a in [0.1, 0.5, 1.0, 1.3, 3.0, 20.0] {
             // ∫ max(0, 1 − a r cosφ) P22(r) r dr dφ over the slope plane (β = 1, tanθ = a).
@@ -774,7 +756,7 @@ fn gg_lambda_table_interpolation_error() {
     let (mut worst, mut at) = (0.0f64, (0.0, 0.0));
     for (up, x) in points {
         let p = (GG_P_LO.ln() + up * (GG_P_HI.ln() - GG_P_LO.ln())).exp();
-        let g = GgShape::new(1.0, p);
+        let g = Gg::new(1.0, p);
         let a = x / (1.0 - x) / g.rc;
         let exact = gg_lambda_exact(p, a);
         let err = lambda_err(t.lambda(p, a), exact);
@@ -793,11 +775,11 @@ fn gg_lambda_table_interpolation_error() {
 
 #[test]
 fn wgsl_twins_match_the_rust_constants_and_validate() {
-    let gg = include_str!("../shaders/bsdf/btdf_gg.wgsl");
-    assert!(gg.contains(&format!("const BTDF_GG_NP: u32 = {GG_NP}u;")));
-    assert!(gg.contains(&format!("const BTDF_GG_NA: u32 = {GG_NA}u;")));
-    let lo: f64 = grab(gg, "const BTDF_GG_LNP_LO: f32 = ");
-    let hi: f64 = grab(gg, "const BTDF_GG_LNP_HI: f32 = ");
+    let mf = include_str!("../shaders/bsdf/microfacet.wgsl");
+    assert!(mf.contains(&format!("const GG_NP: u32 = {GG_NP}u;")));
+    assert!(mf.contains(&format!("const GG_NA: u32 = {GG_NA}u;")));
+    let lo: f64 = grab(mf, "const GG_LNP_LO: f32 = ");
+    let hi: f64 = grab(mf, "const GG_LNP_HI: f32 = ");
     assert!((lo - GG_P_LO.ln()).abs() < 1e-15 && (hi - GG_P_HI.ln()).abs() < 1e-15);
     // The sources parse and validate with the declarations the engine provides.
     let src = format!(
@@ -806,8 +788,8 @@ fn wgsl_twins_match_the_rust_constants_and_validate() {
          let v = btdf_tr_eval(0u, wi, wo) + btdf_beckmann_eval(0u, wi, wo) + btdf_gtr_eval(0u, wi, wo) + btdf_gg_eval(0u, wi, wo);\n \
          P[7] = btdf_diffuse_eval(0u, wi, wo, btdf_absorb_eval(0u, wi, wo, btdf_scale_eval(0u, wi, wo, v)));\n}}\n",
         include_str!("../shaders/bsdf/common.wgsl"),
+        mf,
         include_str!("../shaders/bsdf/btdf.wgsl"),
-        gg
     );
     let module =
         naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));

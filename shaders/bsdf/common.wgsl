@@ -17,69 +17,6 @@ fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     return clamp(0.5 * a * a * (1.0 + b * b), 0.0, 1.0);
 }
 
-// Trowbridge–Reitz / GGX NDF (Walter 2007, Eq. 33).
-fn ggx_d(cos_m: f32, alpha: f32) -> f32 {
-    if (cos_m <= 0.0) {
-        return 0.0;
-    }
-    let a2 = alpha * alpha;
-    let c2 = cos_m * cos_m;
-    let t = c2 * (a2 - 1.0) + 1.0;
-    return a2 / (PI * t * t);
-}
-
-// Smith Λ for GGX (Heitz 2014, Eq. 72).
-fn ggx_lambda(cos_v: f32, alpha: f32) -> f32 {
-    let c2 = max(cos_v * cos_v, 1e-30);
-    let tan2 = max((1.0 - c2) / c2, 0.0);
-    return 0.5 * (sqrt(1.0 + alpha * alpha * tan2) - 1.0);
-}
-
-// Smith G1 for GGX (Walter 2007, Eq. 34).
-fn ggx_g1(cos_v: f32, cos_vm: f32, alpha: f32) -> f32 {
-    if (cos_v * cos_vm <= 0.0) {
-        return 0.0;
-    }
-    return 1.0 / (1.0 + ggx_lambda(cos_v, alpha));
-}
-
-// Beckmann NDF (Walter 2007, Eq. 25).
-fn beckmann_d(cos_m: f32, alpha: f32) -> f32 {
-    if (cos_m <= 0.0) {
-        return 0.0;
-    }
-    let c2 = cos_m * cos_m;
-    let tan2 = (1.0 - c2) / c2;
-    let a2 = alpha * alpha;
-    return exp(-tan2 / a2) / (PI * a2 * c2 * c2);
-}
-
-// Normalisation of Burley's GTR with its γ = 1 and α = 1 limits (see src/math/mod.rs).
-fn gtr_norm(a2: f32, gamma: f32) -> f32 {
-    let ln_a2 = log(a2);
-    let x = (1.0 - gamma) * ln_a2;
-    var ratio = 1.0 - 0.5 * x;
-    if (abs(x) >= 1e-4) {
-        ratio = x / (exp(x) - 1.0);
-    }
-    var a_term = 1.0 + 0.5 * ln_a2;
-    if (abs(ln_a2) >= 1e-4) {
-        a_term = (a2 - 1.0) / ln_a2;
-    }
-    return a_term * ratio * INV_PI;
-}
-
-// Burley 2012 generalised Trowbridge–Reitz NDF; γ = 2 is GGX.
-fn gtr_d(cos_m: f32, alpha: f32, gamma: f32) -> f32 {
-    if (cos_m <= 0.0) {
-        return 0.0;
-    }
-    let a2 = max(alpha * alpha, 1e-12);
-    let c2 = cos_m * cos_m;
-    let denom = a2 * c2 + (1.0 - c2);
-    return gtr_norm(a2, gamma) * pow(denom, -gamma);
-}
-
 fn half_vector(wi: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
     let h = wi + wo;
     let len = length(h);

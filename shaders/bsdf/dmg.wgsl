@@ -1,4 +1,4 @@
-// dmg(B): diffuse micrograin layer over a base (Lucas et al. 2023). Twin of src/model/dmg.rs.
+// dmg(B): diffuse micrograin layer over a base (Lucas et al. 2023). Twin of src/bsdf/dmg.rs.
 // Parameters at P[o]: tau0, beta, rho_g; `base` is the base model's value.
 fn dmg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {

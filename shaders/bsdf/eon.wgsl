@@ -1,4 +1,4 @@
-// Energy-preserving Oren–Nayar (Portsmouth, Kutz, Hill 2025). Twin of src/model/eon.rs,
+// Energy-preserving Oren–Nayar (Portsmouth, Kutz, Hill 2025). Twin of src/bsdf/eon.rs,
 // which cites the equations. Parameters at P[o]: rho, r.
 
 const C1_FON: f32 = 0.287793409;   // 1/2 − 2/(3π)

@@ -1,4 +1,4 @@
-// Fresnel aggregate: GGX lobe + Fresnel-transmitted diffuse base. Twin of src/model/fa.rs.
+// Fresnel aggregate: GGX lobe + Fresnel-transmitted diffuse base. Twin of src/bsdf/fa.rs.
 // Parameters at P[o]: lobe.alpha, lobe.eta, lobe.ks; `base` is the base model's value.
 fn fa_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {

@@ -1,4 +1,4 @@
-// Lambertian reflection: f = ρ/π. Twin of src/model/lambert.rs.
+// Lambertian reflection: f = ρ/π. Twin of src/bsdf/lambert.rs.
 // Parameters at P[o]: rho.
 fn lambert_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {

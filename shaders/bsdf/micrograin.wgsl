@@ -1,7 +1,7 @@
 // Micrograin layer shared math (Lucas, Ribardière, Pacanowski, Barla 2023, ACM TOG 42(6)):
 // visibility weight (Eqs. 21–23), NDF (Eq. 17), Smith Λ series (supplemental) and the rough
-// dielectric grain. f32 twin of src/model/micrograin.rs (same clamps, same 32-term series).
-// Uses PI, INV_PI and fresnel_dielectric from common.wgsl.
+// dielectric grain. f32 twin of src/bsdf/micrograin.rs (same clamps, same 32-term series).
+// Uses PI, INV_PI and fresnel_dielectric from common.wgsl, ggx_d_vec from microfacet.wgsl.
 
 const MG_MU_MIN: f32 = 1e-6;
 const MG_TAU_MIN: f32 = 1e-6;
@@ -51,7 +51,8 @@ fn mg_weight(tau0_in: f32, beta_in: f32, mu_i: f32, mu_o: f32) -> f32 {
     return clamp(mg_one_minus_exp_neg(l0 * e), 0.0, 1.0);
 }
 
-// Micrograin NDF (Eq. 17) at the unit micro-normal h.
+// Micrograin NDF (Eq. 17) at the unit micro-normal h: GGX(alpha = beta) reweighted by
+// (Lambda0/tau0) e^{-Lambda0 u}, u = sin^2 / (beta^2 cos^2 + sin^2).
 fn mg_ndf(tau0_in: f32, beta_in: f32, h: vec3<f32>) -> f32 {
     if (h.z <= 0.0) {
         return 0.0;
@@ -60,11 +61,9 @@ fn mg_ndf(tau0_in: f32, beta_in: f32, h: vec3<f32>) -> f32 {
     let beta = mg_clamp_beta(beta_in);
     let lt = mg_l0_over_tau(tau0);
     let l0 = lt * tau0;
-    let b2 = beta * beta;
     let s2 = h.x * h.x + h.y * h.y;
-    let d = b2 * h.z * h.z + s2;
-    let u = s2 / d;
-    return lt * exp(-l0 * u) * b2 * INV_PI / (d * d);
+    let u = s2 / (beta * beta * (h.z * h.z) + s2);
+    return lt * exp(-l0 * u) * ggx_d_vec(h, beta);
 }
 
 // vec2(σ, S): σ = μ/γβ, S = Λ·σ, so G1 = σ/(σ + S). Expects clamped τ0, β.

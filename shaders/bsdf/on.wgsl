@@ -1,4 +1,4 @@
-// Oren–Nayar 1994 qualitative model. Twin of src/model/on.rs (see there for the
+// Oren–Nayar 1994 qualitative model. Twin of src/bsdf/on.rs (see there for the
 // vector form of the angular term). Parameters at P[o]: rho, sigma.
 fn on_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     let mu_i = wi.z;

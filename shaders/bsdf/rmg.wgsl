@@ -1,5 +1,5 @@
 // rmg(B): rough dielectric micrograin layer over a base (Lucas et al. 2023). Twin of
-// src/model/rmg.rs. Parameters at P[o]: tau0, beta, rho_g, eta_g; `base` is the base value.
+// src/bsdf/rmg.rs. Parameters at P[o]: tau0, beta, rho_g, eta_g; `base` is the base value.
 fn rmg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {
         return 0.0;

@@ -1,5 +1,5 @@
 // VMF diffuse (d'Eon & Weidlich, "VMF Diffuse: A Unified Rough Diffuse BRDF", CGF 43(4),
-// EGSR 2024; reference shadertoy MXKSWW). f32 twin of src/model/vmf.rs, which documents the
+// EGSR 2024; reference shadertoy MXKSWW). f32 twin of src/bsdf/vmf.rs, which documents the
 // formula, the sources and the deviations. Parameters at P[o]: rho, r.
 // Every global name here starts with vmf_/Vmf/VMF_ (one composed module holds all models).
 

@@ -10,7 +10,8 @@
 //! Parameters: τ0 [1e-3, 0.999] (log scale, see [`super::micrograin::TAU0`]), β [1e-2, 1]
 //! (linear: in dmg β only enters w through β² tan²θ, which matters for β ≳ 0.1, so a log box
 //! would spend half its length where dmg hardly changes), ρ_g rgb [0, 1]; then B's as `base.*`.
-//! B ∈ `lambert on eon vmf ggx`. Twins: `shaders/micrograin.wgsl` + `shaders/dmg.wgsl`.
+//! B ∈ `lambert on eon vmf ggx`. Twins: `shaders/bsdf/micrograin.wgsl` +
+//! `shaders/bsdf/dmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{layer, layer_wgsl, weight, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0};
 use super::{Bsdf, Entry, Node, ParamDecl, WgslFn};

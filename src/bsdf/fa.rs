@@ -2,10 +2,11 @@
 //! f = ggx(α, η, k_s) + (1 − F(μi; η)) (1 − F(μo; η)) · f_B,
 //! the base seen through the interface that makes the highlight. B is one of
 //! `lambert on eon vmf`. The lobe's parameters are named `lobe.*`, the base's `base.*`.
-//! Twin: `shaders/fa.wgsl`.
+//! Twin: `shaders/bsdf/fa.wgsl`.
 
 use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -39,6 +40,7 @@ impl Bsdf for FresnelAggregate {
     fn wgsl(&self) -> WgslFn {
         WgslFn {
             sources: vec![
+                MICROFACET_WGSL,
                 ("ggx", include_str!("../../shaders/bsdf/ggx.wgsl")),
                 ("fa", include_str!("../../shaders/bsdf/fa.wgsl")),
             ],

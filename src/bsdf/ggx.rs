@@ -1,23 +1,22 @@
 //! GGX microfacet reflection (Walter, Marschner, Li, Torrance 2007, Eq. 20 with the GGX
 //! D of Eq. 33 and the separable Smith G of Eq. 23/34):
 //! f = k_s · F(ωi·h; η) · D(h) · G1(ωi) G1(ωo) / (4 μi μo), F the exact dielectric
-//! Fresnel. Twin: `shaders/ggx.wgsl`.
+//! Fresnel; D and G1 are [`super::microfacet::Ggx`] (no cancellation at small α).
+//! Twin: `shaders/bsdf/ggx.wgsl`.
 
+use super::microfacet::{self, reflection};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::{fresnel_dielectric, ggx_d, ggx_g1, half_vector};
+use crate::math::{fresnel_dielectric, half_vector};
 use glam::DVec3;
 
 /// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
 pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
-    let (mu_i, mu_o) = (wi.z, wo.z);
-    if mu_i <= 0.0 || mu_o <= 0.0 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
         return 0.0;
     }
     let h = half_vector(wi, wo);
-    let ih = wi.dot(h);
-    let g = ggx_g1(mu_i, ih, alpha) * ggx_g1(mu_o, wo.dot(h), alpha);
-    ks * fresnel_dielectric(ih, eta) * ggx_d(h.z, alpha) * g / (4.0 * mu_i * mu_o)
+    ks * fresnel_dielectric(wi.dot(h), eta) * reflection(&microfacet::Ggx { alpha }, wi, wo, h)
 }
 
 /// Parameters of a GGX lobe (also the `lobe.*` parameters of `fa`).
@@ -41,7 +40,7 @@ impl Bsdf for Ggx {
         ggx_reflect(p[0], p[1], p[2], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn::single("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))
+        microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))
     }
 }
 

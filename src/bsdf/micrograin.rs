@@ -1,6 +1,7 @@
 //! Shared math of the micrograin layer (`dmg(B)`, `rmg(B)`): S. Lucas, M. Ribardière,
 //! R. Pacanowski, P. Barla, "A Micrograin BSDF Model for the Rendering of Porous Layers",
-//! ACM TOG 42(6), SIGGRAPH Asia 2023 (HAL hal-04220006). Twin: `shaders/micrograin.wgsl`.
+//! ACM TOG 42(6), SIGGRAPH Asia 2023 (HAL hal-04220006).
+//! Twin: `shaders/bsdf/micrograin.wgsl` (with `microfacet.wgsl`).
 //!
 //! Equation numbers are those of the paper as cited in the reference code we followed:
 //! the authors' Shadertoy (shadertoy.com/view/cly3Dt) through its line-for-line C++ port
@@ -17,7 +18,8 @@
 //!   w = 1 − (1−τ⁺i)(1−τ⁺o)/(1−τ0) (Eq. 23) = 1 − (1−τ0)^E, E = ½(γβ(θi)/μi + γβ(θo)/μo).
 //!   w ∈ [τ0, 1], symmetric in (ωi, ωo), w = τ0 at normal incidence and exitance, → 1 at grazing.
 //! * NDF (Eq. 17): D(m) = (Λ0/τ0) (1−τ0)^u β² / (π d²), d = β² cos²θm + sin²θm,
-//!   u = sin²θm / d: a GGX(α = β) lobe reweighted by (Λ0/τ0) e^{−Λ0 u}; ∫ D cos θm dω = 1.
+//!   u = sin²θm / d: a GGX(α = β) lobe ([`super::microfacet::Ggx`]) reweighted by
+//!   (Λ0/τ0) e^{−Λ0 u}; ∫ D cos θm dω = 1.
 //! * Smith Λ of that NDF ("Eq. in supplemental"): the authors' shader evaluates a 7-term
 //!   series Λ = (F0 + … + F6)/(e^{Λ0} − 1). Here we sum the same series to N = 32 terms in a
 //!   recurrence form (σ = μ/γβ, c = β sinθ/γβ):
@@ -36,6 +38,7 @@
 //! inside w; G1/μ is computed as 1/(γβ (σ + Λσ)), finite at μ → 0, so nothing divides by
 //! zero at grazing.
 
+use super::microfacet::{cos2_sin2, Distribution, Ggx, MICROFACET_WGSL};
 use super::{ParamDecl, Role, WgslFn};
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -48,8 +51,8 @@ pub const LAMBDA_TERMS: usize = 32;
 pub const LAMBDA_TAIL_EPS: f64 = 1e-17;
 /// Smallest cosine used where 1/μ appears in w.
 pub const MU_MIN: f64 = 1e-6;
-/// Internal parameter clamps (identical in `shaders/micrograin.wgsl`); the declared bounds
-/// lie inside them.
+/// Internal parameter clamps (identical in `shaders/bsdf/micrograin.wgsl`); the declared
+/// bounds lie inside them.
 pub const TAU_MIN: f64 = 1e-6;
 pub const TAU_MAX: f64 = 0.9999;
 pub const BETA_MIN: f64 = 1e-4;
@@ -62,10 +65,12 @@ pub const BETA_MIN: f64 = 1e-4;
 /// The bases of a micrograin layer: any leaf BRDF (a diffuse base or a lone lobe).
 pub const MICROGRAIN_BASES: &[Role] = &[Role::DiffuseBase, Role::SpecularLobe];
 
-/// The WGSL of a micrograin layer `name`: the shared micrograin functions, then its own file.
+/// The WGSL of a micrograin layer `name`: the microfacet and shared micrograin functions,
+/// then its own file.
 pub fn layer_wgsl(name: &'static str, source: &'static str) -> WgslFn {
     WgslFn {
         sources: vec![
+            MICROFACET_WGSL,
             (
                 "micrograin",
                 include_str!("../../shaders/bsdf/micrograin.wgsl"),
@@ -125,11 +130,9 @@ pub fn ndf(tau0: f64, beta: f64, h: DVec3) -> f64 {
     }
     let (tau0, beta) = (clamp_tau(tau0), clamp_beta(beta));
     let l0 = lambda0(tau0);
-    let b2 = beta * beta;
-    let s2 = h.x * h.x + h.y * h.y;
-    let d = b2 * h.z * h.z + s2;
-    let u = s2 / d;
-    (l0 / tau0) * (-l0 * u).exp() * b2 * FRAC_1_PI / (d * d)
+    let (c2, s2) = cos2_sin2(h);
+    let u = s2 / (beta * beta * c2 + s2);
+    (l0 / tau0) * (-l0 * u).exp() * Ggx { alpha: beta }.d(h)
 }
 
 /// (σ, S) with σ = μ/γβ and S = Λ·σ, from the first `terms` terms of the Λ series.
@@ -406,13 +409,15 @@ mod tests {
     #[test]
     fn tau0_to_zero_gives_ggx_and_the_shared_functions_are_finite() {
         // τ0 → 0: D → GGX(α = β), Λ → Λ_GGX(β).
+        use crate::bsdf::microfacet::{Distribution, Ggx, Masking};
         let t = 1e-6;
         for &b in &[0.05, 0.3, 1.0] {
             for &mu in &[0.05, 0.4, 0.9] {
                 let h = dir_mu(mu, 0.0);
-                let (d, dg) = (ndf(t, b, h), crate::math::ggx_d(mu, b));
+                let ggx = Ggx { alpha: b };
+                let (d, dg) = (ndf(t, b, h), ggx.d(h));
                 assert!((d - dg).abs() < 1e-5 * dg, "{b} {mu}: {d} {dg}");
-                let (l, lg) = (lambda(t, b, mu), crate::math::ggx_lambda(mu, b));
+                let (l, lg) = (lambda(t, b, mu), ggx.lambda(h));
                 assert!((l - lg).abs() < 1e-5 * lg.max(1e-9), "{b} {mu}: {l} {lg}");
             }
         }

@@ -1,11 +1,13 @@
 //! `M+retro`: adds a retroreflective lobe to any BRDF M (DESIGN §3), the "back-vector"
 //! lobe of Belcour et al. 2014: k_r · D(h̄) · G1(ωi) G1(ωo) / (4 μi μo) with GGX D and Smith
-//! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z). It peaks at ωo = ωi.
-//! Twin: `shaders/retro.wgsl`.
+//! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z) ([`super::microfacet::Ggx`]). It
+//! peaks at ωo = ωi.
+//! Twin: `shaders/bsdf/retro.wgsl`.
 
+use super::microfacet::{reflection, single_wgsl, Ggx};
 use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use crate::math::{ggx_d, ggx_g1, half_vector};
+use crate::math::half_vector;
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -13,14 +15,12 @@ pub struct Retro;
 
 /// The back-vector retro lobe alone.
 pub fn retro_lobe(kr: f64, alpha: f64, wi: DVec3, wo: DVec3) -> f64 {
-    let (mu_i, mu_o) = (wi.z, wo.z);
-    if mu_i <= 0.0 || mu_o <= 0.0 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
         return 0.0;
     }
     let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
     let h = half_vector(wi, wo_back);
-    let g = ggx_g1(mu_i, wi.dot(h), alpha) * ggx_g1(mu_o, wo_back.dot(h), alpha);
-    kr * ggx_d(h.z, alpha) * g / (4.0 * mu_i * mu_o)
+    kr * reflection(&Ggx { alpha }, wi, wo_back, h)
 }
 
 impl Bsdf for Retro {
@@ -40,7 +40,7 @@ impl Bsdf for Retro {
         children[0] + retro_lobe(p[0], p[1], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
-        WgslFn::single("retro", include_str!("../../shaders/bsdf/retro.wgsl"))
+        single_wgsl("retro", include_str!("../../shaders/bsdf/retro.wgsl"))
     }
 }
 

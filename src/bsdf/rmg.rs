@@ -17,7 +17,7 @@
 //! Parameters: τ0 [1e-3, 0.999] (log), β [1e-2, 1] (log: it is the GGX roughness of the NDF
 //! as τ0 → 0, and the width of the specular lobe, like `ggx`'s α), ρ_g rgb [0, 1],
 //! η_g [1, 5]; then B's as `base.*`. B ∈ `lambert on eon vmf ggx`.
-//! Twins: `shaders/micrograin.wgsl` + `shaders/rmg.wgsl`.
+//! Twins: `shaders/bsdf/micrograin.wgsl` + `shaders/bsdf/rmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{
     layer, layer_wgsl, rough_grain, weight, BETA_LO, ETA_G, MICROGRAIN_BASES, RHO_G, TAU0,

@@ -1,0 +1,540 @@
+//! Microfacet distributions in vector form: the normal distribution D(m) and the Smith
+//! masking Λ(ω) / G1(ω, m) of GGX (Trowbridge–Reitz), Beckmann, Burley's GTR and the
+//! generalized Gaussian, shared by the reflection lobes (`ggx`, the lobe of `fa`, `+retro`),
+//! the transmission terms (`btdf`) and the micrograin NDF. Twin: `shaders/bsdf/microfacet.wgsl`.
+//!
+//! Conventions (DESIGN §1): local frame with the macro-normal on +z; m and ω are unit
+//! vectors. Every form takes cos²θ = z² and sin²θ = x² + y² from the components, never
+//! sin²θ = 1 − cos²θ: near a sharp peak (α ≲ 1e-2) 1 − cos²θ keeps only the rounding of
+//! cos θ (f32: 6e-8, while sin²θ is ~α² = 4e-6 at α = 2e-3), and the textbook GGX
+//! denominator cos²θ (α² − 1) + 1 cancels the same way. GGX is written
+//! D = α² / (π (α² cos²θ + sin²θ)²), which has no cancellation at all.
+//!
+//! D is normalised so that ∫ D(m) m.z dω_m = 1 and is 0 for m.z ≤ 0. Λ does not depend on
+//! the side of ω (the sign of ω.z).
+
+use super::WgslFn;
+use crate::math::ln_gamma;
+use glam::DVec3;
+use std::f64::consts::PI;
+use std::sync::OnceLock;
+
+/// The WGSL twin, for the `sources` of every model that uses it.
+pub const MICROFACET_WGSL: (&str, &str) = (
+    "microfacet",
+    include_str!("../../shaders/bsdf/microfacet.wgsl"),
+);
+
+/// A node whose twin is one file `shaders/bsdf/<name>.wgsl` defining `<name>_eval` on top
+/// of `microfacet.wgsl` ([`WgslFn::single`] with this module's twin).
+pub fn single_wgsl(name: &'static str, source: &'static str) -> WgslFn {
+    let mut w = WgslFn::single(name, source);
+    w.sources.insert(0, MICROFACET_WGSL);
+    w
+}
+
+/// A microfacet normal distribution D(m).
+pub trait Distribution {
+    /// D at the unit microfacet normal `m` (0 below the surface, m.z ≤ 0).
+    fn d(&self, m: DVec3) -> f64;
+}
+
+/// Smith masking of a distribution (Heitz 2014): Λ(ω) and the G1 built from it.
+pub trait Masking {
+    /// Smith Λ at the unit direction `w` (infinite at grazing, w.z = 0).
+    fn lambda(&self, w: DVec3) -> f64;
+
+    /// G1(ω)/|ω.z| = 1 / (|ω.z| (1 + Λ(ω))) without the side test, in a form that stays
+    /// finite as ω.z → 0 (what the BTDF's |μ| divisions need).
+    fn g1_over_mu(&self, w: DVec3) -> f64;
+
+    /// Smith G1(ω, m) = χ⁺((ω·m)/(ω·n)) / (1 + Λ(ω)) (Walter 2007, Eq. 34 for GGX): zero
+    /// when ω and m lie on opposite sides relative to the macro-normal.
+    fn g1(&self, w: DVec3, m: DVec3) -> f64 {
+        if w.dot(m) * w.z <= 0.0 {
+            return 0.0;
+        }
+        w.z.abs() * self.g1_over_mu(w)
+    }
+}
+
+/// cos²θ and sin²θ of a unit vector, from its components.
+pub fn cos2_sin2(v: DVec3) -> (f64, f64) {
+    (v.z * v.z, v.x * v.x + v.y * v.y)
+}
+
+/// The microfacet reflection kernel D(h) G1(ωi, h) G1(ωo, h) / (4 μi μo) at the unit half
+/// vector `h` of ωi and ωo (Walter 2007, Eq. 20 without its Fresnel factor); ωi and ωo
+/// must be above the surface.
+pub fn reflection<M: Distribution + Masking>(ndf: &M, wi: DVec3, wo: DVec3, h: DVec3) -> f64 {
+    ndf.d(h) * ndf.g1(wi, h) * ndf.g1(wo, h) / (4.0 * wi.z * wo.z)
+}
+
+// ---------------------------------------------------------------------------------------
+// GGX / Trowbridge–Reitz
+
+/// GGX (Trowbridge–Reitz) of roughness α (Walter 2007, Eqs. 33–34; Heitz 2014, Eq. 72).
+#[derive(Clone, Copy, Debug)]
+pub struct Ggx {
+    pub alpha: f64,
+}
+
+impl Distribution for Ggx {
+    /// α² / (π (α² cos²θm + sin²θm)²).
+    fn d(&self, m: DVec3) -> f64 {
+        if m.z <= 0.0 {
+            return 0.0;
+        }
+        let a2 = self.alpha * self.alpha;
+        let (c2, s2) = cos2_sin2(m);
+        let t = a2 * c2 + s2;
+        a2 / (PI * t * t)
+    }
+}
+
+impl Masking for Ggx {
+    /// ½ (√(1 + α² tan²θ) − 1) = α² sin²θ / (2 μ (μ + √(μ² + α² sin²θ))), μ = |cos θ|.
+    fn lambda(&self, w: DVec3) -> f64 {
+        let mu = w.z.abs();
+        let as2 = self.alpha * self.alpha * (w.x * w.x + w.y * w.y);
+        as2 / (2.0 * mu * (mu + (mu * mu + as2).sqrt()))
+    }
+
+    /// 2 / (μ + √(μ² + α² sin²θ)).
+    fn g1_over_mu(&self, w: DVec3) -> f64 {
+        let mu = w.z.abs();
+        let s2 = w.x * w.x + w.y * w.y;
+        2.0 / (mu + (mu * mu + self.alpha * self.alpha * s2).sqrt())
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Beckmann and GTR (the `btdf` terms pair them with the GGX Λ, as the benchmark paper)
+
+/// Below this cos²θm the exponential NDFs (Beckmann, GG) are returned as 0; they are
+/// below e^-(10^6) there for every parameter in bounds.
+pub const C2_MIN: f64 = 1e-30;
+
+/// Beckmann of roughness α (Walter 2007, Eq. 25).
+#[derive(Clone, Copy, Debug)]
+pub struct Beckmann {
+    pub alpha: f64,
+}
+
+impl Distribution for Beckmann {
+    /// exp(−tan²θm/α²) / (π α² cos⁴θm).
+    fn d(&self, m: DVec3) -> f64 {
+        let (c2, s2) = cos2_sin2(m);
+        if m.z <= 0.0 || c2 < C2_MIN {
+            return 0.0;
+        }
+        let a2 = self.alpha * self.alpha;
+        (-(s2 / c2) / a2 - 2.0 * c2.ln()).exp() / (PI * a2)
+    }
+}
+
+/// Burley's generalized Trowbridge–Reitz (Burley 2012, Appendix B): γ = 2 is GGX, γ = 1
+/// Berry.
+#[derive(Clone, Copy, Debug)]
+pub struct Gtr {
+    pub alpha: f64,
+    pub gamma: f64,
+}
+
+impl Distribution for Gtr {
+    /// c(α, γ) / (α² cos²θm + sin²θm)^γ, normalised by [`gtr_norm`].
+    fn d(&self, m: DVec3) -> f64 {
+        if m.z <= 0.0 {
+            return 0.0;
+        }
+        let a2 = (self.alpha * self.alpha).max(1e-12);
+        let (c2, s2) = cos2_sin2(m);
+        gtr_norm(a2, self.gamma) * (-self.gamma * (a2 * c2 + s2).ln()).exp()
+    }
+}
+
+/// Normalisation constant of GTR: (γ−1)(α²−1) / (π (1 − (α²)^(1−γ))), with its limits
+/// at γ = 1 and α = 1 taken analytically (the plain form is 0/0 there).
+pub fn gtr_norm(a2: f64, gamma: f64) -> f64 {
+    let ln_a2 = a2.ln();
+    // (γ−1)(α²−1) / (1 − e^x) with x = (1−γ) ln α², i.e. (α²−1)/ln α² · x/(e^x − 1),
+    // each factor → 1 at its 0/0 point.
+    let x = (1.0 - gamma) * ln_a2;
+    let ratio = if x.abs() < 1e-8 {
+        1.0 - 0.5 * x
+    } else {
+        x / x.exp_m1()
+    };
+    let a_term = if ln_a2.abs() < 1e-8 {
+        1.0 + 0.5 * ln_a2
+    } else {
+        (a2 - 1.0) / ln_a2
+    };
+    a_term * ratio / PI
+}
+
+// ---------------------------------------------------------------------------------------
+// Generalized Gaussian (Holzschuch & Pacanowski 2017)
+
+/// Holzschuch–Pacanowski generalized Gaussian of width β and shape p (Holzschuch &
+/// Pacanowski 2017; p = 1 is Beckmann of α = β), with its per-evaluation constants. Its
+/// Smith Λ comes from the table [`gg_lambda_table`].
+#[derive(Clone, Copy, Debug)]
+pub struct Gg {
+    pub beta: f64,
+    pub p: f64,
+    /// Characteristic slope of the β = 1 distribution, r_c = (1/p)^(1/(2p)); the table's
+    /// abscissa is b = r_c · β tanθ.
+    pub rc: f64,
+    /// J0 = lim Λ/(β tanθ) = Γ(3/(2p)) / (π Γ(1/p)), the mean positive 1-D slope at β = 1.
+    pub j0: f64,
+    /// ln of the normalisation p / (π β² Γ(1/p)).
+    pub ln_norm: f64,
+}
+
+impl Gg {
+    pub fn new(beta: f64, p: f64) -> Gg {
+        let lg = ln_gamma(1.0 / p);
+        Gg {
+            beta,
+            p,
+            rc: (-p.ln() / (2.0 * p)).exp(),
+            j0: (ln_gamma(1.5 / p) - lg).exp() / PI,
+            ln_norm: p.ln() - lg - (PI * beta * beta).ln(),
+        }
+    }
+
+    /// (μ, μ Λ) with μ Λ = T̂ · J0 · (β sinθ + μ / r_c), T̂ from the table at x = b/(1+b),
+    /// b = r_c β tanθ; finite at μ = 0.
+    fn mu_lambda(&self, w: DVec3) -> (f64, f64) {
+        let mu = w.z.abs();
+        let bs = self.beta * (w.x * w.x + w.y * w.y).sqrt();
+        let b = bs * self.rc;
+        let x = b / (mu + b);
+        let t = gg_lambda_table().interpolate(self.p, x);
+        (mu, t * self.j0 * (bs + mu / self.rc))
+    }
+}
+
+impl Distribution for Gg {
+    /// p / (π β² Γ(1/p)) · exp(−(tan²θm/β²)^p) / cos⁴θm.
+    fn d(&self, m: DVec3) -> f64 {
+        let (c2, s2) = cos2_sin2(m);
+        if m.z <= 0.0 || c2 < C2_MIN {
+            return 0.0;
+        }
+        let z = s2 / c2 / (self.beta * self.beta);
+        let e = if z > 0.0 {
+            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
+        } else {
+            0.0
+        };
+        (self.ln_norm - e - 2.0 * c2.ln()).exp()
+    }
+}
+
+impl Masking for Gg {
+    fn lambda(&self, w: DVec3) -> f64 {
+        let (mu, mu_lambda) = self.mu_lambda(w);
+        mu_lambda / mu
+    }
+
+    fn g1_over_mu(&self, w: DVec3) -> f64 {
+        let (mu, mu_lambda) = self.mu_lambda(w);
+        1.0 / (mu + mu_lambda)
+    }
+}
+
+/// Points in ln p of the GG Λ table (p from [`GG_P_LO`] to [`GG_P_HI`], uniform in ln p).
+pub const GG_NP: usize = 33;
+/// Points in x = b/(1+b) of the GG Λ table (x from 0 to 1 inclusive, uniform).
+pub const GG_NA: usize = 129;
+pub const GG_P_LO: f64 = 0.2;
+pub const GG_P_HI: f64 = 5.0;
+
+/// Tabulated Smith Λ of the generalized Gaussian NDF, computed once in f64.
+///
+/// Layout: `data[ip * na + ia]`, ip ∈ [0, np), ia ∈ [0, na).
+/// - ip ↔ ln p = ln_p_lo + ip · (ln_p_hi − ln_p_lo)/(np − 1);
+/// - ia ↔ x = ia/(na − 1), with x = b/(1 + b), b = r_c(p) · a, a = β tanθ,
+///   r_c(p) = (1/p)^(1/(2p)) (the characteristic slope of the β = 1 distribution);
+/// - value T̂ = Λ / (J0(p) · (a + 1/r_c(p))), J0(p) = Γ(3/(2p)) / (π Γ(1/p)); T̂ → 1 as
+///   x → 1 (Λ ≈ J0 a − ½ for large a) and T̂ → 0 as x → 0.
+///
+/// Λ = T̂ · J0 · (a + 1/r_c), bilinear in (ln p, x) ([`LambdaTable::interpolate`], the same
+/// arithmetic as `gg_table` in `shaders/bsdf/microfacet.wgsl`, which reads an f32 copy bound
+/// as `LUT`). Factoring out J0 and scaling a by r_c remove the p-dependence that bilinear
+/// interpolation handles badly (J0 spans 0.2 … 25 over the p range).
+#[derive(Clone, Debug)]
+pub struct LambdaTable {
+    pub np: usize,
+    pub na: usize,
+    pub ln_p_lo: f64,
+    pub ln_p_hi: f64,
+    pub data: Vec<f64>,
+}
+
+impl LambdaTable {
+    fn compute() -> LambdaTable {
+        let (ln_p_lo, ln_p_hi) = (GG_P_LO.ln(), GG_P_HI.ln());
+        let mut data = Vec::with_capacity(GG_NP * GG_NA);
+        for ip in 0..GG_NP {
+            let p = (ln_p_lo + ip as f64 * (ln_p_hi - ln_p_lo) / (GG_NP - 1) as f64).exp();
+            for ia in 0..GG_NA {
+                data.push(gg_table_value(p, ia as f64 / (GG_NA - 1) as f64));
+            }
+        }
+        LambdaTable {
+            np: GG_NP,
+            na: GG_NA,
+            ln_p_lo,
+            ln_p_hi,
+            data,
+        }
+    }
+
+    /// Bilinear T̂ at (p, x), clamped to the table's range.
+    pub fn interpolate(&self, p: f64, x: f64) -> f64 {
+        let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
+            * (self.np - 1) as f64;
+        let ip = (fp as usize).min(self.np - 2);
+        let u = fp - ip as f64;
+        let fa = x.clamp(0.0, 1.0) * (self.na - 1) as f64;
+        let ia = (fa as usize).min(self.na - 2);
+        let v = fa - ia as f64;
+        let k = ip * self.na + ia;
+        let d = &self.data;
+        let t0 = d[k] + (d[k + 1] - d[k]) * v;
+        let t1 = d[k + self.na] + (d[k + self.na + 1] - d[k + self.na]) * v;
+        t0 + (t1 - t0) * u
+    }
+
+    /// Λ at shape p and a = β tanθ, from the table.
+    pub fn lambda(&self, p: f64, a: f64) -> f64 {
+        let g = Gg::new(1.0, p);
+        let b = g.rc * a;
+        if !b.is_finite() {
+            return f64::INFINITY;
+        }
+        self.interpolate(p, b / (1.0 + b)) * g.j0 * (a + 1.0 / g.rc)
+    }
+
+    /// The f32 copy the GPU reads (same layout).
+    pub fn to_f32(&self) -> Vec<f32> {
+        self.data.iter().map(|&v| v as f32).collect()
+    }
+}
+
+/// The GG Λ table, computed on first use (~4k one-dimensional integrals).
+pub fn gg_lambda_table() -> &'static LambdaTable {
+    static TABLE: OnceLock<LambdaTable> = OnceLock::new();
+    TABLE.get_or_init(LambdaTable::compute)
+}
+
+/// The exact table value T̂(p, x) by numerical integration.
+pub fn gg_table_value(p: f64, x: f64) -> f64 {
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let g = Gg::new(1.0, p);
+    let a = x / (1.0 - x) / g.rc;
+    gg_lambda_exact(p, a) / (g.j0 * (a + 1.0 / g.rc))
+}
+
+/// Smith Λ of the generalized Gaussian at a = β tanθ by direct f64 integration.
+///
+/// With ν = 1/a and the β = 1 slope density P22(r) = p/(πΓ(1/p)) exp(−r^(2p)),
+/// Λ = a ∫∫_{s > ν} (s − ν) P22 ds dt = a ∫_ν^∞ 2 (√(r² − ν²) − ν acos(ν/r)) P22(r) r dr
+/// (Heitz 2014, Eq. 72 with the azimuth integrated analytically). Substituting
+/// r = ν cosh u makes the integrand smooth at r = ν; 8-point Gauss–Legendre panels of
+/// width min(¼, ½/p) in u up to r^(2p) = 60 give ~1e-13 relative accuracy.
+pub fn gg_lambda_exact(p: f64, a: f64) -> f64 {
+    if a.is_nan() || a <= 0.0 {
+        return 0.0;
+    }
+    if !a.is_finite() {
+        return f64::INFINITY;
+    }
+    a * gg_j(p, 1.0 / a)
+}
+
+/// J(ν) = ∫_ν^∞ (s − ν) P2(s) ds for the β = 1 GG slope distribution.
+fn gg_j(p: f64, nu: f64) -> f64 {
+    const X: [f64; 4] = [
+        0.183_434_642_495_649_8,
+        0.525_532_409_916_329,
+        0.796_666_477_413_626_7,
+        0.960_289_856_497_536_3,
+    ];
+    const W: [f64; 4] = [
+        0.362_683_783_378_362,
+        0.313_706_645_877_887_3,
+        0.222_381_034_453_374_5,
+        0.101_228_536_290_376_3,
+    ];
+    let c = (p.ln() - ln_gamma(1.0 / p)).exp() / PI;
+    if nu <= 0.0 {
+        return (ln_gamma(1.5 / p) - ln_gamma(1.0 / p)).exp() / PI;
+    }
+    let rmax = 60f64.powf(1.0 / (2.0 * p));
+    if nu >= rmax {
+        return 0.0;
+    }
+    let umax = (rmax / nu).acosh();
+    let h = (0.5 / p).min(0.25);
+    let n = ((umax / h).ceil() as usize).max(4);
+    let h = umax / n as f64;
+    let f = |u: f64| {
+        let (sh, ch) = (u.sinh(), u.cosh());
+        // sinh u − atan(sinh u) = √(r²−ν²)/ν − acos(ν/r), by its series where it cancels
+        let diff = if sh < 0.1 {
+            let s2 = sh * sh;
+            sh * s2
+                * (1.0 / 3.0 - s2 * (1.0 / 5.0 - s2 * (1.0 / 7.0 - s2 * (1.0 / 9.0 - s2 / 11.0))))
+        } else {
+            sh - sh.atan()
+        };
+        let r = nu * ch;
+        2.0 * nu * diff * c * (-(2.0 * p * r.ln()).exp()).exp() * r * nu * sh
+    };
+    let mut sum = 0.0;
+    for k in 0..n {
+        let mid = (k as f64 + 0.5) * h;
+        for j in 0..4 {
+            let dx = 0.5 * h * X[j];
+            sum += W[j] * (f(mid - dx) + f(mid + dx));
+        }
+    }
+    sum * 0.5 * h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The vector forms against independent closed forms in θ (cos θ and tan θ from the
+    /// angle, not from the vector's components) at moderate roughness (α, β ∈ [0.05, 1]),
+    /// where the cosine forms are well conditioned in f64. Tolerance 1e-12 relative (the
+    /// exponential NDFs: 1e-12 · (1 + exponent), the exponent's own rounding, where D is a
+    /// normal f64).
+    #[test]
+    fn vector_forms_match_the_closed_forms_in_theta() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        // Below f64's normal range (far in the exponential tails) digits are lost anyway.
+        const NORMAL: f64 = 1e-300;
+        let close = |a: f64, b: f64, tol: f64| a.is_finite() && (a - b).abs() <= tol * b.abs();
+        for _ in 0..20_000 {
+            let alpha: f64 = (0.05f64.ln() * rng.random::<f64>()).exp();
+            let theta: f64 = rng.random_range(0.0..1.55);
+            let phi: f64 = rng.random_range(0.0..2.0 * PI);
+            let v = DVec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
+            let (c, t2) = (theta.cos(), theta.tan().powi(2));
+            let a2 = alpha * alpha;
+
+            // GGX: D = α² / (π cos⁴ (α² + tan²)²), Λ = ½ (√(1 + α² tan²) − 1).
+            let ggx = Ggx { alpha };
+            let d = a2 / (PI * c.powi(4) * (a2 + t2).powi(2));
+            assert!(close(ggx.d(v), d, 1e-12), "GGX D α {alpha} θ {theta}");
+            // (the closed form's √(1 + x) − 1 cancels at small x: compare |ΔΛ|/(1 + Λ))
+            let lambda = 0.5 * ((1.0 + a2 * t2).sqrt() - 1.0);
+            let gl = ggx.lambda(v);
+            assert!(
+                gl.is_finite() && (gl - lambda).abs() <= 1e-12 * (1.0 + lambda),
+                "GGX Λ α {alpha} θ {theta}: {gl} {lambda}"
+            );
+            let g1 = 1.0 / (1.0 + lambda);
+            assert!(close(ggx.g1(v, DVec3::Z), g1, 1e-12), "GGX G1");
+            assert!(close(ggx.g1_over_mu(-v) * c, g1, 1e-12), "GGX G1/μ below");
+            // χ⁺: a microfacet facing away from ω masks it completely.
+            assert_eq!(ggx.g1(v, DVec3::new(-v.x, -v.y, -v.z)), 0.0);
+
+            // Beckmann: exp(−tan²/α²) / (π α² cos⁴).
+            let x = t2 / a2;
+            let d = (-x).exp() / (PI * a2 * c.powi(4));
+            let db = Beckmann { alpha }.d(v);
+            assert!(
+                close(db, d, 1e-12 * (1.0 + x)) || d < NORMAL,
+                "Beckmann α {alpha} θ {theta}: {db} {d}"
+            );
+
+            // GTR: c(α, γ) / (α² cos² + 1 − cos²)^γ; γ = 2 is GGX.
+            let gamma: f64 = rng.random_range(0.5..4.0);
+            let d = gtr_norm(a2, gamma) * (a2 * c * c + 1.0 - c * c).powf(-gamma);
+            assert!(close(Gtr { alpha, gamma }.d(v), d, 1e-12), "GTR γ {gamma}");
+            let gtr2 = Gtr { alpha, gamma: 2.0 };
+            assert!(close(gtr2.d(v), ggx.d(v), 1e-12), "GTR γ = 2 vs GGX");
+
+            // GG: p / (π β² Γ(1/p)) exp(−(tan²/β²)^p) / cos⁴; Λ from the table at β tanθ.
+            let p: f64 = rng.random_range(0.2..5.0);
+            let gg = Gg::new(alpha, p);
+            let x = (t2 / a2).powf(p);
+            let d = p / (PI * a2 * ln_gamma(1.0 / p).exp()) * (-x).exp() / c.powi(4);
+            assert!(
+                close(gg.d(v), d, 1e-12 * (1.0 + x)) || d < NORMAL,
+                "GG D p {p}"
+            );
+            // (|ΔΛ|/(1 + Λ): the relative error of G1; Λ is ~1e-25 at small tanθ/β.)
+            let lambda = gg_lambda_table().lambda(p, alpha * theta.tan());
+            let gl = gg.lambda(v);
+            assert!(
+                gl.is_finite() && (gl - lambda).abs() <= 1e-12 * (1.0 + lambda),
+                "GG Λ p {p} θ {theta}: {gl} {lambda}"
+            );
+            assert!(close(gg.g1(v, DVec3::Z), 1.0 / (1.0 + lambda), 1e-12));
+        }
+        // Below the surface D is 0; at grazing Λ = ∞, G1 = 0 and G1/μ stays finite.
+        let (below, grazing) = (DVec3::new(0.6, 0.0, -0.8), DVec3::X);
+        assert_eq!(Ggx { alpha: 0.3 }.d(below), 0.0);
+        assert_eq!(Beckmann { alpha: 0.3 }.d(below), 0.0);
+        assert_eq!(
+            Gtr {
+                alpha: 0.3,
+                gamma: 1.5
+            }
+            .d(below),
+            0.0
+        );
+        assert_eq!(Gg::new(0.3, 2.0).d(below), 0.0);
+        assert_eq!(Ggx { alpha: 0.3 }.lambda(grazing), f64::INFINITY);
+        assert!((Ggx { alpha: 0.3 }.g1_over_mu(grazing) - 2.0 / 0.3).abs() < 1e-15);
+        let gg = Gg::new(0.3, 2.0);
+        assert!(gg.g1_over_mu(grazing).is_finite() && gg.g1_over_mu(grazing) > 0.0);
+    }
+
+    /// The point of the vector form: at a sharp peak (α = 2e-3, θh up to 0.1°) evaluated in
+    /// f32, α² cos² + sin² keeps f32's relative accuracy where the textbook
+    /// cos² (α² − 1) + 1 loses it (the GPU twin computes the former).
+    #[test]
+    fn ggx_vector_form_is_accurate_in_f32_at_small_alpha() {
+        let alpha = 2e-3f64;
+        let (mut worst_new, mut worst_old) = (0.0f64, 0.0f64);
+        for k in 0..=100 {
+            let th = (0.1f64 * k as f64 / 100.0).to_radians();
+            let m = DVec3::new(th.sin() * 0.6, th.sin() * 0.8, th.cos());
+            let exact = Ggx { alpha }.d(m);
+            let (a, mz, s2) = (
+                alpha as f32,
+                m.z as f32,
+                (m.x as f32).powi(2) + (m.y as f32).powi(2),
+            );
+            let a2 = a * a;
+            let t_new = a2 * (mz * mz) + s2;
+            let t_old = mz * mz * (a2 - 1.0) + 1.0;
+            let d = |t: f32| (a2 / (std::f32::consts::PI * t * t)) as f64;
+            worst_new = worst_new.max((d(t_new) - exact).abs() / exact);
+            worst_old = worst_old.max((d(t_old) - exact).abs() / exact);
+        }
+        eprintln!("f32 GGX D at α = 2e-3, θh ≤ 0.1°: vector form {worst_new:.1e}, cosine form {worst_old:.1e}");
+        assert!(worst_new < 1e-6, "vector form in f32: {worst_new:e}");
+        assert!(
+            worst_old > 1e-2,
+            "the cosine form was expected to fail: {worst_old:e}"
+        );
+    }
+}
