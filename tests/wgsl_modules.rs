@@ -46,3 +46,22 @@ fn eval_model_calls_nested_nodes_with_their_offsets() {
     assert!(src.contains("fa_eval(b + 2u, wi, wo, v0)"), "{src}");
     assert!(src.contains("retro_eval(b + 0u, wi, wo, v1)"), "{src}");
 }
+
+/// The WGSL twins read their parameters only through the accessors generated from the Rust
+/// declarations, so the two sides cannot disagree on the order.
+#[test]
+fn twins_read_parameters_only_through_generated_accessors() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/bsdf");
+    let mut offenders = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            if code.contains("P[") {
+                offenders.push(format!("{}:{}: {line}", path.display(), i + 1));
+            }
+        }
+    }
+    assert!(offenders.is_empty(), "{}", offenders.join("\n"));
+}

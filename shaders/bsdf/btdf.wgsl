@@ -1,7 +1,7 @@
 // Microfacet transmission (paper Eq. 1, Walter et al. 2007) with the TR, Beckmann, GTR
 // (TR Smith G) and GG (its own Smith G, from the LUT) distributions of microfacet.wgsl, and
 // the BTDF suffixes. Twin of src/bsdf/btdf.rs.
-// Parameters at P[o]: tr: alpha, eta; beckmann: alpha, eta; gtr: alpha, gamma, eta;
+// Parameters (generated accessors, declaration order): tr: alpha, eta; beckmann: alpha, eta; gtr: alpha, gamma, eta;
 // gg: beta, p, eta; scale: scale; absorb: tau; diffuse: kd. Suffixes get the wrapped
 // model's value as `inner`.
 
@@ -61,42 +61,42 @@ fn btdf_transmit(g: BtdfGeom, d: f32, g1i_over_mu: f32, g1o_over_mu: f32) -> f32
 }
 
 fn btdf_tr_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let alpha = P[o];
-    let g = btdf_geometry(wi, wo, P[o + 1u]);
+    let alpha = btdf_tr_alpha(o);
+    let g = btdf_geometry(wi, wo, btdf_tr_eta(o));
     return btdf_transmit(g, ggx_d_vec(g.m, alpha), ggx_g1_over_mu(wi, alpha), ggx_g1_over_mu(wo, alpha));
 }
 
 fn btdf_beckmann_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let alpha = P[o];
-    let g = btdf_geometry(wi, wo, P[o + 1u]);
+    let alpha = btdf_beckmann_alpha(o);
+    let g = btdf_geometry(wi, wo, btdf_beckmann_eta(o));
     return btdf_transmit(g, beckmann_d_vec(g.m, alpha), ggx_g1_over_mu(wi, alpha), ggx_g1_over_mu(wo, alpha));
 }
 
 fn btdf_gtr_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let alpha = P[o];
-    let g = btdf_geometry(wi, wo, P[o + 2u]);
-    return btdf_transmit(g, gtr_d_vec(g.m, alpha, P[o + 1u]), ggx_g1_over_mu(wi, alpha), ggx_g1_over_mu(wo, alpha));
+    let alpha = btdf_gtr_alpha(o);
+    let g = btdf_geometry(wi, wo, btdf_gtr_eta(o));
+    return btdf_transmit(g, gtr_d_vec(g.m, alpha, btdf_gtr_gamma(o)), ggx_g1_over_mu(wi, alpha), ggx_g1_over_mu(wo, alpha));
 }
 
 // The GG Smith G from the Lambda table (LUT).
 fn btdf_gg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let s = gg_new(P[o], P[o + 1u]);
-    let g = btdf_geometry(wi, wo, P[o + 2u]);
+    let s = gg_new(btdf_gg_beta(o), btdf_gg_p(o));
+    let g = btdf_geometry(wi, wo, btdf_gg_eta(o));
     return btdf_transmit(g, gg_d_vec(g.m, s), gg_g1_over_mu(wi, s), gg_g1_over_mu(wo, s));
 }
 
 // Suffixes.
 fn btdf_scale_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
-    return inner * P[o];
+    return inner * btdf_scale_scale(o);
 }
 
 fn btdf_absorb_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
-    return inner * exp(-P[o] / max(abs(wo.z), 1e-20));
+    return inner * exp(-btdf_absorb_tau(o) / max(abs(wo.z), 1e-20));
 }
 
 fn btdf_diffuse_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
     if (wi.z > 0.0 && wo.z < 0.0) {
-        return inner + P[o] * INV_PI;
+        return inner + btdf_diffuse_kd(o) * INV_PI;
     }
     return inner;
 }

@@ -1,5 +1,5 @@
 // Energy-preserving Oren–Nayar (Portsmouth, Kutz, Hill 2025). Twin of src/bsdf/eon.rs,
-// which cites the equations. Parameters at P[o]: rho, r.
+// which cites the equations. Parameters (generated accessors, declaration order): rho, r.
 
 const C1_FON: f32 = 0.287793409;   // 1/2 − 2/(3π)
 const C2_FON: f32 = 0.072488718;   // 2/3 − 28/(15π)
@@ -27,8 +27,8 @@ fn eon_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {
         return 0.0;
     }
-    let rho = P[o];
-    let r = P[o + 1u];
+    let rho = eon_rho(o);
+    let r = eon_r(o);
     let f_ss = f_fon(rho, r, wi, wo);
     let af = 1.0 / (1.0 + C1_FON * r);
     let e_avg = af * (1.0 + C2_FON * r);

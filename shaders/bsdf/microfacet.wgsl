@@ -160,3 +160,12 @@ fn gg_g1_over_mu(w: vec3<f32>, s: Gg) -> f32 {
     let t = gg_table(s.p, x);
     return 1.0 / (mu + t * s.j0 * (bs + mu / s.rc));
 }
+
+// The GGX reflection lobe k_s·F·D·G2/(4 μi μo) of `ggx` and of fa's lobe (Walter 2007).
+fn ggx_reflect(ks: f32, alpha: f32, eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    if (wi.z <= 0.0 || wo.z <= 0.0) {
+        return 0.0;
+    }
+    let h = half_vector(wi, wo);
+    return ks * fresnel_dielectric(dot(wi, h), eta) * ggx_reflection(alpha, wi, wo, h);
+}

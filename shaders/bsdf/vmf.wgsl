@@ -1,6 +1,6 @@
 // VMF diffuse (d'Eon & Weidlich, "VMF Diffuse: A Unified Rough Diffuse BRDF", CGF 43(4),
 // EGSR 2024; reference shadertoy MXKSWW). f32 twin of src/bsdf/vmf.rs, which documents the
-// formula, the sources and the deviations. Parameters at P[o]: rho, r.
+// formula, the sources and the deviations. Parameters (generated accessors, declaration order): rho, r.
 // Every global name here starts with vmf_/Vmf/VMF_ (one composed module holds all models).
 
 const VMF_SQRT_PI: f32 = 1.77245385090552;
@@ -176,8 +176,8 @@ fn vmf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {
         return 0.0;
     }
-    let rho = P[o];
-    let r = min(P[o + 1u], 1.0);
+    let rho = vmf_rho(o);
+    let r = min(vmf_r(o), 1.0);
     if (!(r > 0.0)) {
         return rho * INV_PI;
     }

@@ -18,7 +18,7 @@ pub enum Scale {
 /// One parameter, declared once by the model that owns it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamDecl {
-    /// Stable ASCII name (DESIGN §3), without the role prefix of nested models.
+    /// Stable ASCII name (docs/models.md), without the role prefix of nested models.
     pub name: &'static str,
     pub lo: f64,
     pub hi: f64,

@@ -3,7 +3,7 @@
 //! Layers", ACM TOG 42(6), 2023:
 //! f = w·ρ_g/π + (1 − w)·f_B, with the grains' visibility weight
 //! w = 1 − (1 − τ0)^{½(γβ(θi)/μi + γβ(θo)/μo)}, γβ(θ) = √(β² sin²θ + cos²θ) (Eqs. 21–23,
-//! see [`super::micrograin`]). The Lambertian grain f_grain = ρ_g/π is the DESIGN §3
+//! see [`super::micrograin`]). The Lambertian grain f_grain = ρ_g/π is the docs/models.md
 //! simplification: the authors' renderer integrates a Lambertian microfacet over the
 //! micrograin NDF stochastically, which has no closed form.
 //!

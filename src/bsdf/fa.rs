@@ -41,7 +41,6 @@ impl Bsdf for FresnelAggregate {
         WgslFn {
             sources: vec![
                 MICROFACET_WGSL,
-                ("ggx", include_str!("../../shaders/bsdf/ggx.wgsl")),
                 ("fa", include_str!("../../shaders/bsdf/fa.wgsl")),
             ],
             function: "fa_eval".into(),

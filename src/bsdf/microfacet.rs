@@ -3,7 +3,7 @@
 //! generalized Gaussian, shared by the reflection lobes (`ggx`, the lobe of `fa`, `+retro`),
 //! the transmission terms (`btdf`) and the micrograin NDF. Twin: `shaders/bsdf/microfacet.wgsl`.
 //!
-//! Conventions (DESIGN §1): local frame with the macro-normal on +z; m and ω are unit
+//! Conventions (docs/conventions.md): local frame with the macro-normal on +z; m and ω are unit
 //! vectors. Every form takes cos²θ = z² and sin²θ = x² + y² from the components, never
 //! sin²θ = 1 − cos²θ: near a sharp peak (α ≲ 1e-2) 1 − cos²θ keeps only the rounding of
 //! cos θ (f32: 6e-8, while sin²θ is ~α² = 4e-6 at α = 2e-3), and the textbook GGX

@@ -1,4 +1,4 @@
-//! `M+retro`: adds a retroreflective lobe to any BRDF M (DESIGN §3), the "back-vector"
+//! `M+retro`: adds a retroreflective lobe to any BRDF M (docs/models.md), the "back-vector"
 //! lobe of Belcour et al. 2014: k_r · D(h̄) · G1(ωi) G1(ωo) / (4 μi μo) with GGX D and Smith
 //! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z) ([`super::microfacet::Ggx`]). It
 //! peaks at ωo = ωi.

@@ -92,6 +92,33 @@ pub fn accessors_source(node: &Node) -> String {
     src
 }
 
+/// The accessors of every node function of the catalogue (a shader file may define several,
+/// e.g. every `btdf(·)` variant, and is included whole): generated once from the
+/// declarations of every spec the registry derives.
+pub fn all_accessors() -> &'static str {
+    static ALL: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    ALL.get_or_init(|| {
+        let mut done: Vec<String> = Vec::new();
+        let mut src =
+            String::from("\n// ---- parameter accessors (generated from the declarations)\n");
+        for kind in [crate::data::Kind::Brdf, crate::data::Kind::Btdf] {
+            for spec in crate::bsdf::every_spec(kind) {
+                let Ok(model) = Model::parse(&spec, 1) else {
+                    continue;
+                };
+                for node in model.nodes() {
+                    let function = node.bsdf.wgsl().function;
+                    if !done.contains(&function) {
+                        src += &accessors_source(node);
+                        done.push(function);
+                    }
+                }
+            }
+        }
+        src
+    })
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
@@ -108,15 +135,9 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
         (s * c).max(1)
     );
     src += COMMON;
+    src += all_accessors();
     let mut included: Vec<&str> = Vec::new();
-    let mut accessors: Vec<String> = Vec::new();
     for node in model.nodes() {
-        let function = node.bsdf.wgsl().function;
-        if !accessors.contains(&function) {
-            src += &format!("\n// ---- parameters of {function} (generated)\n");
-            src += &accessors_source(node);
-            accessors.push(function);
-        }
         for (name, text) in node.bsdf.wgsl().sources {
             if !included.contains(&name) {
                 included.push(name);
