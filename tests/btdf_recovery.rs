@@ -4,33 +4,20 @@
 //! α, η_t and S are separately identifiable; at normal incidence only they trade off
 //! (docs/models.md), and the fit must say so instead of printing confident values.
 
+mod common;
+
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::inference::fit::{fit, FitOptions, FitReport, Optimizer};
-use bsdfit::workflows::synth::{geometry, synthesize, Noise};
+use common::synth_geometry;
 
 const SPEC: &str = "btdf(tr)+scale";
 const TRUTH: &str = "alpha=0.25,eta=1.45,scale=0.7";
 
 fn oblique_data(seed: u64) -> Dataset {
-    let model = Model::parse(SPEC, 1).unwrap();
-    let truth = model.params_from_assignments(TRUTH).unwrap();
-    let (_, rows) = geometry("oblique").unwrap();
-    synthesize(
-        &model,
-        &truth,
-        &rows,
-        &[633.0],
-        Noise {
-            rel: 0.01,
-            abs: 1e-5,
-        },
-        seed,
-        "tr+scale",
-    )
-    .unwrap()
+    synth_geometry(SPEC, TRUTH, "oblique", &[633.0], (0.01, 1e-5), seed).2
 }
 
 fn run(data: &Dataset, optimizer: Optimizer, loss: Loss) -> FitReport {

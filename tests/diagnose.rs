@@ -8,11 +8,13 @@
 //! and parameter values used nowhere else, a different noise level per test. Each
 //! geometry is chosen so the hidden effect is identifiable, as each test says.
 
+mod common;
+
 use bsdfit::bsdf::Model;
 use bsdfit::data::{Dataset, Kind};
 use bsdfit::engine::{self, Backend, BackendChoice};
 use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect};
-use bsdfit::workflows::synth::{synthesize, Noise};
+use common::synth_rows;
 use std::sync::OnceLock;
 
 /// One backend for the whole file: the GPU (lavapipe here and in CI) when present.
@@ -88,25 +90,9 @@ fn synth(spec: &str, params: &str, rows: &[[f64; 4]], noise: (f64, f64), seed: u
     } else {
         vec![470.0, 540.0, 610.0]
     };
-    let planes = bsdfit::data::measurement_planes(
-        rows.iter()
-            .map(|r| bsdfit::data::normalise_angles(r[2], r[3])),
-    );
-    let model = Model::parse_for(spec, wl.len(), &planes).unwrap();
-    let flat = model.params_from_assignments(params).unwrap();
-    synthesize(
-        &model,
-        &flat,
-        rows,
-        &wl,
-        Noise {
-            rel: noise.0,
-            abs: noise.1,
-        },
-        seed,
-        &format!("hidden {spec}"),
-    )
-    .unwrap()
+    let mut data = synth_rows(spec, params, rows, &wl, noise, seed).2;
+    data.material = format!("hidden {spec}");
+    data
 }
 
 /// Run the workflow and print its staircase (collected into the table).

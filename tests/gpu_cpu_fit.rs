@@ -2,33 +2,24 @@
 //! same seed reaches the same best loss within 1% on the GPU engine (f32, lavapipe in CI)
 //! and the CPU reference (f64), and the same parameters within their uncertainties.
 
-use bsdfit::bsdf::Model;
+mod common;
+
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::inference::fit::{fit, FitOptions};
-use bsdfit::workflows::synth::{geometry, synthesize, Noise};
+use common::synth_geometry;
 
 #[test]
 fn fa_lambert_reaches_the_same_optimum_on_gpu_and_cpu() {
-    let model = Model::parse("fa(lambert)", 3).unwrap();
-    let truth = model
-        .params_from_assignments("lobe.alpha=0.12,lobe.eta=1.6,lobe.ks=0.9,base.rho=0.15:0.35:0.55")
-        .unwrap();
-    let (_, rows) = geometry("specular").unwrap();
-    let data = synthesize(
-        &model,
-        &truth,
-        &rows,
+    let (model, _, data) = synth_geometry(
+        "fa(lambert)",
+        "lobe.alpha=0.12,lobe.eta=1.6,lobe.ks=0.9,base.rho=0.15:0.35:0.55",
+        "specular",
         &[450.0, 550.0, 650.0],
-        Noise {
-            rel: 0.015,
-            abs: 1e-4,
-        },
+        (0.015, 1e-4),
         17,
-        "glossy",
-    )
-    .unwrap();
+    );
     let gpu = GpuBackend::new().expect("a Vulkan adapter (CI installs lavapipe)");
     let opts = FitOptions {
         restarts: 8,

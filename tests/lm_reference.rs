@@ -3,7 +3,8 @@
 //! Both must reach the same minimum: cost within 1e-6 relative (+1e-12 absolute) and
 //! parameters within 1e-4 in the unit box.
 
-use bsdfit::bsdf::Model;
+mod common;
+
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::engine::Backend;
@@ -11,6 +12,7 @@ use bsdfit::engine::Problem;
 use bsdfit::inference::fit::UnitBox;
 use bsdfit::optim::lm::{minimize, LmOptions};
 use bsdfit::optim::{BatchObjective, BatchResiduals};
+use common::synth_geometry;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use std::cell::RefCell;
@@ -147,25 +149,14 @@ fn exponential_decay_with_offset() {
 fn oren_nayar_brdf_fit() {
     // A real fitting problem: Oren–Nayar on synthetic in-plane data, residuals from the
     // CPU backend through the optimizers' unit box (RMSE loss, uniform weights).
-    let model = Model::parse("on", 3).unwrap();
-    let truth = model
-        .params_from_assignments("rho=0.3:0.5:0.7,sigma=0.6")
-        .unwrap();
-    let (_, rows) = bsdfit::workflows::synth::geometry("inplane10").unwrap();
-    let noise = bsdfit::workflows::synth::Noise {
-        rel: 0.015,
-        abs: 1e-4,
-    };
-    let data = bsdfit::workflows::synth::synthesize(
-        &model,
-        &truth,
-        &rows,
-        &[450.0, 550.0, 650.0],
-        noise,
-        4,
+    let (model, _, data) = synth_geometry(
         "on",
-    )
-    .unwrap();
+        "rho=0.3:0.5:0.7,sigma=0.6",
+        "inplane10",
+        &[450.0, 550.0, 650.0],
+        (0.015, 1e-4),
+        4,
+    );
     let loss = Loss::new(Metric::Rmse, Weights::Uniform);
     let cpu = CpuBackend::new();
     let mut eval = cpu

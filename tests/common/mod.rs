@@ -182,3 +182,56 @@ pub fn sphere_integral_with(grid: Grid, axis: DVec3, g: &dyn Fn(DVec3) -> f64) -
 pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_bsdfit")
 }
+
+/// Synthetic data from `spec` with `params` (`name=value,…`, as `bsdfit synth --params`) on
+/// `rows` (θi, φi, θo, φo in degrees), one channel per wavelength of `wavelengths`, with
+/// noise u = sqrt((rel·f)² + abs²) drawn from `seed`: the synth → fit scaffolding of the
+/// recovery, GPU-vs-CPU, LM and diagnose tests. Returns the model (compiled for the rows'
+/// measurement planes), the true flat parameters and the data.
+pub fn synth_rows(
+    spec: &str,
+    params: &str,
+    rows: &[[f64; 4]],
+    wavelengths: &[f64],
+    noise: (f64, f64),
+    seed: u64,
+) -> (Model, Vec<f64>, bsdfit::data::Dataset) {
+    let planes = bsdfit::data::measurement_planes(
+        rows.iter()
+            .map(|r| bsdfit::data::normalise_angles(r[2], r[3])),
+    );
+    let model = Model::parse_for(spec, wavelengths.len(), &planes)
+        .unwrap_or_else(|e| panic!("{spec}: {e}"));
+    let truth = model
+        .params_from_assignments(params)
+        .unwrap_or_else(|e| panic!("{spec}: {e}"));
+    let noise = bsdfit::workflows::synth::Noise {
+        rel: noise.0,
+        abs: noise.1,
+    };
+    let data = bsdfit::workflows::synth::synthesize(
+        &model,
+        &truth,
+        rows,
+        wavelengths,
+        noise,
+        seed,
+        &format!("synthetic {spec}"),
+    )
+    .unwrap_or_else(|e| panic!("{spec}: {e}"));
+    (model, truth, data)
+}
+
+/// [`synth_rows`] on a named geometry of `bsdfit models`.
+pub fn synth_geometry(
+    spec: &str,
+    params: &str,
+    geometry: &str,
+    wavelengths: &[f64],
+    noise: (f64, f64),
+    seed: u64,
+) -> (Model, Vec<f64>, bsdfit::data::Dataset) {
+    let (_, rows) = bsdfit::workflows::synth::geometry(geometry)
+        .unwrap_or_else(|e| panic!("geometry {geometry}: {e}"));
+    synth_rows(spec, params, &rows, wavelengths, noise, seed)
+}
