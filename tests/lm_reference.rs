@@ -166,8 +166,10 @@ fn oren_nayar_brdf_fit() {
             loss,
         })
         .unwrap();
+    let space = bsdfit::inference::constraints::Constraints::none(&model);
     let obj = RefCell::new(UnitBox {
         model: &model,
+        space: &space,
         eval: eval.as_mut(),
         loss_terms: Some(loss.terms(&data)),
     });

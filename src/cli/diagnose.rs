@@ -2,7 +2,7 @@
 
 use super::checks::check_batch_memory;
 use super::progress::{plural, Progress};
-use super::{BackendArgs, DataArgs};
+use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::engine::{
     self,
     loss::{Loss, Metric, Weights},
@@ -52,6 +52,8 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     #[command(flatten)]
+    pub constraints: ConstraintArgs,
+    #[command(flatten)]
     pub data_args: DataArgs,
     /// Keep the greedy path even when it ends with the misfit exceeding the uncertainties
     /// (by default each step is then revisited once with another effect's best candidate).
@@ -90,6 +92,9 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         a.alpha
     );
     let start = crate::bsdf::Model::for_data(&a.model, &data).context("--model")?;
+    // Every name must be a parameter of the start model (extensions keep its names).
+    let constraints = a.constraints.spec(true);
+    crate::inference::constraints::Constraints::resolve(&start, &a.constraints.spec(false), false)?;
     // Extensions add a few parameters to the start model: estimate with three more.
     check_batch_memory(
         a.restarts + 1,
@@ -108,6 +113,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         max_steps: a.max_steps,
         parallel: a.parallel,
         backtrack: !a.no_backtrack,
+        constraints,
         ..Default::default()
     };
     println!(

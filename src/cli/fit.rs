@@ -2,7 +2,7 @@
 
 use super::checks::{check_batch_memory, nonfinite_message};
 use super::progress::Progress;
-use super::{BackendArgs, DataArgs};
+use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
 use crate::engine::{
@@ -53,6 +53,8 @@ pub struct FitArgs {
     #[arg(long)]
     pub per_axis: bool,
     #[command(flatten)]
+    pub constraints: ConstraintArgs,
+    #[command(flatten)]
     pub data_args: DataArgs,
 }
 
@@ -91,6 +93,9 @@ pub fn run(a: FitArgs) -> Result<()> {
     let data = a.data_args.read(&a.data)?;
     let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
     let model = Model::for_data(&a.model, &data).context("--model")?;
+    let constraints = a.constraints.spec(false);
+    // Resolve now: a misspelt name fails before any work.
+    crate::inference::constraints::Constraints::resolve(&model, &constraints, false)?;
     check_batch_memory(
         a.restarts,
         model.dim,
@@ -103,6 +108,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         optimizer: optimizer_for(a.optimizer, loss),
         restarts: a.restarts,
         seed: a.seed,
+        constraints,
         ..Default::default()
     };
     let run = |data: &Dataset| -> Result<FitReport> {

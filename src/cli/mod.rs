@@ -130,6 +130,38 @@ impl DataArgs {
     }
 }
 
+/// What a user imposes on the fitted parameters, shared by fit, sweep and diagnose.
+/// NAME is a parameter's full name (`lobe.alpha`), a flat entry (`rho[1]`, `alpha@phi90`)
+/// or its last component when that is unambiguous (`alpha`); `bsdfit models` lists them.
+#[derive(Args, Clone, Debug, Default)]
+pub struct ConstraintArgs {
+    /// Hold a parameter at a value: not fitted, not counted among the parameters of χ²_red,
+    /// standard uncertainty 0. Repeatable; `rho=0.4:0.5:0.6` gives one value per channel.
+    #[arg(long, value_name = "NAME=VALUE")]
+    pub fix: Vec<String>,
+    /// Narrow a parameter's search range to [LO, HI] (inside its declared range). A fit
+    /// that ends on a bound says so. Repeatable.
+    #[arg(long, value_name = "NAME=LO:HI")]
+    pub bounds: Vec<String>,
+    /// Gaussian prior: adds ((θ − MEAN)/SD)² to χ² as one more residual (reported in the
+    /// JSON; χ²_red counts it as an observation). Needs the chi2 loss. Repeatable.
+    #[arg(long, value_name = "NAME=MEAN:SD")]
+    pub prior: Vec<String>,
+}
+
+impl ConstraintArgs {
+    /// The options as a spec; `lenient` for runs over several models (a model that lacks
+    /// a parameter ignores its options).
+    pub fn spec(&self, lenient: bool) -> crate::inference::constraints::ConstraintSpec {
+        crate::inference::constraints::ConstraintSpec {
+            fix: self.fix.clone(),
+            bounds: self.bounds.clone(),
+            priors: self.prior.clone(),
+            lenient,
+        }
+    }
+}
+
 /// Where the models are evaluated, shared by every command that fits or measures.
 #[derive(Args, Clone, Copy, Debug)]
 pub struct BackendArgs {

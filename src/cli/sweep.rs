@@ -2,9 +2,10 @@
 
 use super::checks::{batch_bytes, batch_candidates, check_batch_memory, nonfinite_message};
 use super::progress::{plural, plural_with, Progress};
-use super::{BackendArgs, DataArgs};
+use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::engine::{self, loss::Loss};
+use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::fit::{fit, FitOptions};
 use crate::output::files::check_writable_dir;
 use crate::output::report::RunInfo;
@@ -56,6 +57,8 @@ pub struct SweepArgs {
     #[command(flatten)]
     pub backend: BackendArgs,
     #[command(flatten)]
+    pub constraints: ConstraintArgs,
+    #[command(flatten)]
     pub data_args: DataArgs,
     /// Output directory (results, pictures, report.html). One process at a time: a sweep
     /// or merge holds DIR/.bsdfit.lock while it runs, and another one started on the same
@@ -89,6 +92,23 @@ pub struct MergeArgs {
     /// Skip the plots, renders and report.html (results files only).
     #[arg(long)]
     pub no_pictures: bool,
+}
+
+/// The run's constraint options as one canonical text (the `constraints` column).
+fn constraints_text(c: &ConstraintSpec) -> String {
+    let mut items: Vec<String> = Vec::new();
+    items.extend(c.fix.iter().map(|s| format!("fix {}", s.trim())));
+    items.extend(c.bounds.iter().map(|s| format!("bounds {}", s.trim())));
+    items.extend(c.priors.iter().map(|s| format!("prior {}", s.trim())));
+    items.join("; ")
+}
+
+fn describe_constraints(text: &str) -> &str {
+    if text.is_empty() {
+        "none"
+    } else {
+        text
+    }
 }
 
 /// The `sweep` command.
@@ -125,6 +145,16 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     };
     let csv_path = args.out.join(RESULTS_CSV);
     let mut rows = read_results(&csv_path, !args.dry_run, &mut |m| eprintln!("note: {m}"))?;
+    let constraints = args.constraints.spec(true);
+    let constraints_text = constraints_text(&constraints);
+    if let Some(r) = rows.iter().find(|r| r.constraints != constraints_text) {
+        anyhow::bail!(
+            "{} holds fits made under other constraints ({}) than this run's ({}); use another --out directory",
+            csv_path.display(),
+            describe_constraints(&r.constraints),
+            describe_constraints(&constraints_text)
+        );
+    }
     let done: BTreeSet<Key> = rows.iter().map(Row::key).collect();
     let key_of = |t: &Task| Key {
         data_hash: files[t.data].hash.clone(),
@@ -210,6 +240,14 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                 &mut |w| eprintln!("{w}"),
             )?;
         }
+        if !constraints.is_empty() {
+            let models: Vec<&Model> = runnable.iter().map(|(_, m)| m).collect();
+            constraints.check_names_against(&models)?;
+            for (_, m) in &runnable {
+                Constraints::resolve(m, &constraints, true)
+                    .with_context(|| format!("model {}", m.spec))?;
+            }
+        }
         let backend = engine::select(args.backend.backend, &mut |m| eprintln!("{m}"))?;
         let mut app = Appender::open(&csv_path)?;
         let mut progress = Progress::new("sweep", todo.len() as u64, "fits");
@@ -231,6 +269,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
             for _ in 0..workers {
                 let tx = tx.clone();
                 let (runnable, next, stop, files) = (&runnable, &next, &stop, &files);
+                let constraints = &constraints;
                 scope.spawn(move || loop {
                     let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
                     if i >= runnable.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
@@ -241,6 +280,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                         optimizer: t.optimizer,
                         restarts: args.restarts,
                         seed: args.seed,
+                        constraints: constraints.clone(),
                         ..Default::default()
                     };
                     let loss = Loss::new(t.loss, t.weights);
@@ -265,6 +305,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                 match result {
                     Ok(Ok(report)) => {
                         let mut row = Row::from_report(&report, f);
+                        row.constraints = constraints_text.clone();
                         if !(report.best.chi2_red.is_finite() && report.best.loss.is_finite()) {
                             // Kept (the fit ran), but flagged with the samples that cause it.
                             let msg = nonfinite_message(
@@ -377,6 +418,15 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             }
         }
         let part = read_results(&csv, false, &mut |m| eprintln!("note: {m}"))?;
+        if let (Some(a), Some(b)) = (rows.first(), part.first()) {
+            anyhow::ensure!(
+                a.constraints == b.constraints,
+                "{} holds fits made under other constraints ({}) than the rows merged so far ({}); merge them into another --out directory",
+                csv.display(),
+                describe_constraints(&b.constraints),
+                describe_constraints(&a.constraints)
+            );
+        }
         let (mut added, mut same) = (0, 0);
         for r in part {
             match by_key.get(&r.key()) {

@@ -18,6 +18,7 @@ use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::{Loss, Metric, Term};
 use crate::engine::Evaluator;
+use crate::inference::constraints::Constraints;
 use nalgebra::DMatrix;
 
 #[derive(Clone, Debug, Default)]
@@ -80,23 +81,27 @@ fn residual_rows(
     Ok((rows, w_sigma2, chi2))
 }
 
+/// Covariance of the fitted parameters of `space` at `flat` (fixed parameters get none;
+/// each prior is one more residual row (θ − mean)/sd, with unit variance).
 pub fn covariance(
     model: &Model,
     data: &Dataset,
     loss: Loss,
     eval: &mut dyn Evaluator,
     flat: &[f64],
+    space: &Constraints,
 ) -> anyhow::Result<Covariance> {
-    let p = model.dim;
-    let k = data.len();
-    let decls = model.flat_decls();
-    let unit = model.to_unit(flat);
-    // Batch: the point itself, then (+, −) per parameter.
+    let free = &space.free;
+    let p = free.len();
+    let k = data.len() + space.priors.len();
+    let decls = &space.decls;
+    let unit = space.to_unit(flat);
+    // Batch: the point itself, then (+, −) per free parameter.
     let mut batch = flat.to_vec();
     let mut steps = Vec::with_capacity(p);
-    for j in 0..p {
-        let up = (unit[j] + DU).min(1.0);
-        let dn = (unit[j] - DU).max(0.0);
+    for (c, &j) in free.iter().enumerate() {
+        let up = (unit[c] + DU).min(1.0);
+        let dn = (unit[c] - DU).max(0.0);
         let mut plus = flat.to_vec();
         let mut minus = flat.to_vec();
         plus[j] = decls[j].from_unit(up);
@@ -105,18 +110,26 @@ pub fn covariance(
         batch.extend(plus);
         batch.extend(minus);
     }
-    let (rows, w_sigma2, chi2) = residual_rows(data, loss, eval, &batch)?;
+    let (rows, mut w_sigma2, chi2) = residual_rows(data, loss, eval, &batch)?;
     let mut jac = DMatrix::<f64>::zeros(k, p);
-    for j in 0..p {
-        let (plus, minus) = (&rows[1 + 2 * j], &rows[2 + 2 * j]);
-        for i in 0..k {
-            jac[(i, j)] = if steps[j] != 0.0 {
-                (plus[i] - minus[i]) / steps[j]
+    for c in 0..p {
+        let (plus, minus) = (&rows[1 + 2 * c], &rows[2 + 2 * c]);
+        for i in 0..data.len() {
+            jac[(i, c)] = if steps[c] != 0.0 {
+                (plus[i] - minus[i]) / steps[c]
             } else {
                 0.0
             };
         }
     }
+    // Prior rows: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd.
+    for (q, prior) in space.priors.iter().enumerate() {
+        if let Some(c) = free.iter().position(|&j| j == prior.index) {
+            jac[(data.len() + q, c)] = 1.0 / prior.sd;
+        }
+        w_sigma2.push(1.0);
+    }
+    let chi2 = chi2 + space.prior_chi2(flat);
     let dof = (k.saturating_sub(p)).max(1) as f64;
     let birge = (chi2 / dof).max(1.0);
     let jtj = jac.transpose() * &jac;
@@ -125,7 +138,9 @@ pub fn covariance(
         weighted.row_mut(i).scale_mut(*ws);
     }
     let meat = jac.transpose() * weighted;
-    let names = model.flat_names();
+    let all_names = model.flat_names();
+    let names: Vec<&str> = free.iter().map(|&j| all_names[j].as_str()).collect();
+    let free_decls: Vec<_> = free.iter().map(|&j| decls[j]).collect();
     let mut out = Covariance {
         std: vec![None; p],
         correlation: vec![vec![None; p]; p],
@@ -134,13 +149,13 @@ pub fn covariance(
     if jtj.iter().any(|v| !v.is_finite()) {
         out.warnings
             .push("the Jacobian is not finite at the optimum; no parameter uncertainties".into());
-        return Ok(out);
+        return Ok(expand(out, free, model.dim));
     }
     let svd = jtj.clone().svd(true, true);
     let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
         out.warnings
             .push("SVD failed; no parameter uncertainties".into());
-        return Ok(out);
+        return Ok(expand(out, free, model.dim));
     };
     let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
     let mut inv = DMatrix::<f64>::zeros(p, p);
@@ -175,7 +190,7 @@ pub fn covariance(
     }
     let undetermined_names: Vec<&str> = (0..p)
         .filter(|&j| undetermined[j])
-        .map(|j| names[j].as_str())
+        .map(|j| names[j])
         .collect();
     if !undetermined_names.is_empty() {
         out.warnings.push(format!(
@@ -185,7 +200,7 @@ pub fn covariance(
     }
     for j in 0..p {
         if let Some(s) = out.std[j] {
-            let range = decls[j].hi - decls[j].lo;
+            let range = free_decls[j].hi - free_decls[j].lo;
             if s > range {
                 out.warnings.push(format!(
                     "{} is not determined by the data: std {s:.3e} exceeds its range {range}",
@@ -228,11 +243,8 @@ pub fn covariance(
                     .iter()
                     .any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
                 if r > 0.99 && !pairwise {
-                    let others: Vec<&str> = det
-                        .iter()
-                        .filter(|&&o| o != j)
-                        .map(|&o| names[o].as_str())
-                        .collect();
+                    let others: Vec<&str> =
+                        det.iter().filter(|&&o| o != j).map(|&o| names[o]).collect();
                     out.warnings.push(format!(
                         "{} is not separately determined from {} (multiple correlation {r:.4}): the data constrain only a combination",
                         names[j],
@@ -242,5 +254,22 @@ pub fn covariance(
             }
         }
     }
-    Ok(out)
+    Ok(expand(out, free, model.dim))
+}
+
+/// The covariance of the free parameters laid out over the model's whole flat vector
+/// (fixed parameters: no standard uncertainty, no correlation).
+fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
+    let mut out = Covariance {
+        std: vec![None; dim],
+        correlation: vec![vec![None; dim]; dim],
+        warnings: free_cov.warnings,
+    };
+    for (a, &ja) in free.iter().enumerate() {
+        out.std[ja] = free_cov.std[a];
+        for (b, &jb) in free.iter().enumerate() {
+            out.correlation[ja][jb] = free_cov.correlation[a][b];
+        }
+    }
+    out
 }

@@ -5,6 +5,7 @@ use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::{chi2, Loss};
 use crate::engine::{Backend, Evaluator, Problem};
+use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::covariance::{covariance, Covariance};
 use crate::optim::{compass, lm, random_starts, BatchObjective, BatchResiduals, RestartResult};
 use serde::Serialize;
@@ -43,6 +44,8 @@ pub struct FitOptions {
     pub initial_points: Vec<Vec<f64>>,
     pub compass: compass::CompassOptions,
     pub lm: lm::LmOptions,
+    /// `--fix`, `--bounds`, `--prior` (resolved against each model fitted).
+    pub constraints: ConstraintSpec,
 }
 
 impl Default for FitOptions {
@@ -55,6 +58,7 @@ impl Default for FitOptions {
             initial_points: vec![],
             compass: Default::default(),
             lm: Default::default(),
+            constraints: Default::default(),
         }
     }
 }
@@ -98,11 +102,22 @@ pub struct FitReport {
     /// Correlation matrix of the flat parameters (null entries where undetermined).
     pub correlation: Vec<Vec<Option<f64>>>,
     pub warnings: Vec<String>,
+    /// Degrees of freedom of χ²_red: samples + priors − fitted parameters.
+    pub dof: usize,
+    /// Fitted parameters (the flat vector's, less those fixed by `--fix`).
+    pub n_params: usize,
+    /// What `--fix`, `--bounds` and `--prior` imposed (absent when nothing was):
+    /// `{fixed: {name: value}, bounds: {name: [lo, hi]}, priors: [{name, index, mean, sd}],
+    /// chi2_prior}`. Fixed parameters have a standard uncertainty of 0.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub constraints: Option<Value>,
 }
 
 /// Adapts an evaluator (physical parameters) to the optimizers' unit box.
+/// The optimizers see the free parameters only ([`Constraints`]); priors add residuals.
 pub struct UnitBox<'m, 'e> {
     pub model: &'m Model,
+    pub space: &'m Constraints,
     pub eval: &'m mut (dyn Evaluator + 'e),
     pub loss_terms: Option<crate::engine::loss::LossTerms>,
 }
@@ -110,19 +125,26 @@ pub struct UnitBox<'m, 'e> {
 impl UnitBox<'_, '_> {
     fn to_physical(&self, points: &[f64]) -> Vec<f64> {
         points
-            .chunks(self.model.dim)
-            .flat_map(|u| self.model.from_unit(u))
+            .chunks(self.space.dim())
+            .flat_map(|u| self.space.from_unit(u))
             .collect()
     }
 }
 
 impl BatchObjective for UnitBox<'_, '_> {
     fn dim(&self) -> usize {
-        self.model.dim
+        self.space.dim()
     }
     fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
         let phys = self.to_physical(points);
-        self.eval.costs(&phys)
+        let mut costs = self.eval.costs(&phys)?;
+        if !self.space.priors.is_empty() {
+            // Priors come with the χ² loss only, whose cost is the plain sum of squares.
+            for (c, flat) in costs.iter_mut().zip(phys.chunks(self.model.dim)) {
+                *c += self.space.prior_chi2(flat);
+            }
+        }
+        Ok(costs)
     }
 }
 
@@ -132,19 +154,25 @@ impl BatchResiduals for UnitBox<'_, '_> {
         let values = self.eval.values(&phys)?;
         let t = self.loss_terms.as_ref().expect("residuals need loss terms");
         let k = t.y.len();
-        Ok(values
-            .chunks(k)
-            .flat_map(|row| row.iter().enumerate().map(|(j, &v)| t.residual(j, v)))
-            .collect())
+        let mut out = Vec::with_capacity(self.residual_count() * (values.len() / k.max(1)));
+        for (row, flat) in values.chunks(k).zip(phys.chunks(self.model.dim)) {
+            out.extend(row.iter().enumerate().map(|(j, &v)| t.residual(j, v)));
+            out.extend(self.space.prior_residuals(flat));
+        }
+        Ok(out)
     }
     fn residual_count(&self) -> usize {
-        self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0)
+        self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0) + self.space.priors.len()
     }
     fn normal_equations(
         &mut self,
         points: &[f64],
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        if self.space.dim() != self.model.dim || !self.space.priors.is_empty() {
+            // The backend's reduction knows neither fixed parameters nor prior rows.
+            return crate::optim::normal_equations_on_host(self, points, steps);
+        }
         // The backend reduces them where it evaluates the model (on the GPU: on the device).
         let unit = crate::optim::difference_points(points, steps, self.model.dim);
         let phys = self.to_physical(&unit);
@@ -156,13 +184,13 @@ impl BatchResiduals for UnitBox<'_, '_> {
 /// of `restarts × screen` random draws.
 fn screened_starts(
     obj: &mut dyn BatchObjective,
-    model: &Model,
+    space: &Constraints,
     opts: &FitOptions,
 ) -> anyhow::Result<Vec<Vec<f64>>> {
     let mut starts: Vec<Vec<f64>> = opts
         .initial_points
         .iter()
-        .map(|p| model.to_unit(p))
+        .map(|p| space.to_unit(p))
         .collect();
     let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
     if opts.screen <= 1 {
@@ -195,6 +223,12 @@ pub struct FitOutcome {
     pub values: Vec<f64>,
     /// χ² = Σ ((y′ − y)/u)² at the best parameters.
     pub chi2: f64,
+    /// Σ ((θ − mean)/sd)² of the priors at the best parameters (0 without priors).
+    pub chi2_prior: f64,
+    /// Degrees of freedom: samples + priors − fitted parameters.
+    pub dof: usize,
+    /// The constraints the fit was made under.
+    pub constraints: Constraints,
     pub cov: Covariance,
     /// Restarts whose final loss is within 1% of the best.
     pub within: usize,
@@ -212,21 +246,7 @@ pub fn fit(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<FitReport> {
     let o = fit_outcome(model, data, loss, backend, opts, progress)?;
-    let chi2_red = o.chi2 / (data.len() - model.dim) as f64;
-    Ok(make_report(
-        model,
-        data,
-        loss,
-        opts,
-        backend,
-        o.loss,
-        chi2_red,
-        &o.flat,
-        o.cov,
-        o.within,
-        o.evaluations,
-        o.seconds,
-    ))
+    Ok(make_report(model, data, loss, opts, backend, o))
 }
 
 /// Fit `model` to `data` under `loss`: multi-start optimisation on `backend`, then χ² and
@@ -247,12 +267,18 @@ pub fn fit_outcome(
         data.source.display(),
         data.kind
     );
+    let space = Constraints::resolve(model, &opts.constraints, opts.constraints.lenient)?;
     anyhow::ensure!(
-        data.len() > model.dim,
+        space.priors.is_empty() || loss.metric == crate::engine::loss::Metric::Chi2,
+        "--prior needs --loss chi2: a prior is a χ² term, and {} is not in χ²'s units",
+        loss.metric
+    );
+    anyhow::ensure!(
+        data.len() + space.priors.len() > space.dim(),
         "{}: {} cannot determine the {} parameters of {}",
         data.source.display(),
         crate::data::count(data.len(), "sample", "samples"),
-        model.dim,
+        space.dim(),
         model.spec
     );
     anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
@@ -269,10 +295,11 @@ pub fn fit_outcome(
         let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
         let mut obj = UnitBox {
             model,
+            space: &space,
             eval: eval.as_mut(),
             loss_terms: terms,
         };
-        let starts = screened_starts(&mut obj, model, opts)?;
+        let starts = screened_starts(&mut obj, &space, opts)?;
         match opts.optimizer {
             Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
             Optimizer::Lm => {
@@ -305,12 +332,16 @@ pub fn fit_outcome(
         .iter()
         .filter(|r| r.cost <= best_r.cost + tol)
         .count();
-    let flat = model.from_unit(&best_r.x);
+    let flat = space.from_unit(&best_r.x);
     let values = eval.values(&flat)?;
     let chi2 = chi2(data, &values);
-    let cov = covariance(model, data, loss, eval.as_mut(), &flat)?;
+    let mut cov = covariance(model, data, loss, eval.as_mut(), &flat, &space)?;
+    cov.warnings.extend(space.on_bound_warnings(&flat));
     Ok(FitOutcome {
         loss: best_r.cost,
+        chi2_prior: space.prior_chi2(&flat),
+        dof: data.len() + space.priors.len() - space.dim(),
+        constraints: space,
         flat,
         values,
         chi2,
@@ -321,21 +352,28 @@ pub fn fit_outcome(
     })
 }
 
-#[allow(clippy::too_many_arguments)]
 fn make_report(
     model: &Model,
     data: &Dataset,
     loss: Loss,
     opts: &FitOptions,
     backend: &dyn Backend,
-    best_loss: f64,
-    chi2_red: f64,
-    flat: &[f64],
-    cov: Covariance,
-    within: usize,
-    evaluations: u64,
-    seconds: f64,
+    o: FitOutcome,
 ) -> FitReport {
+    // χ²_red counts each prior as one observation (module doc of `constraints`).
+    let chi2_red = (o.chi2 + o.chi2_prior) / o.dof as f64;
+    let flat = &o.flat;
+    let mut cov = o.cov;
+    for (j, f) in o.constraints.fixed.iter().enumerate() {
+        if f.is_some() {
+            cov.std[j] = Some(0.0); // fixed: exact by assumption
+        }
+    }
+    let constraints = (!o.constraints.is_trivial()).then(|| {
+        let mut v = o.constraints.to_json();
+        v["chi2_prior"] = serde_json::json!(o.chi2_prior);
+        v
+    });
     let group = |vals: &[Option<f64>]| -> Map<String, Value> {
         let mut m = Map::new();
         for p in &model.params {
@@ -360,10 +398,10 @@ fn make_report(
         optimizer: opts.optimizer.to_string(),
         backend: backend.id().to_string(),
         restarts: opts.restarts,
-        evaluations,
-        seconds,
+        evaluations: o.evaluations,
+        seconds: o.seconds,
         best: Best {
-            loss: best_loss,
+            loss: o.loss,
             chi2_red,
             params,
             param_std,
@@ -374,7 +412,7 @@ fn make_report(
         channels: data.channels.clone(),
         axes: model.axes.clone(),
         seed: opts.seed,
-        restarts_within_1pct: within,
+        restarts_within_1pct: o.within,
         flat_names: model.flat_names(),
         flat_params: flat.to_vec(),
         flat_std: cov.std,
@@ -389,6 +427,9 @@ fn make_report(
             .into_iter()
             .chain(cov.warnings)
             .collect(),
+        dof: o.dof,
+        n_params: o.constraints.dim(),
+        constraints,
     }
 }
 
@@ -415,8 +456,14 @@ impl FitReport {
             self.best.loss,
             self.best.chi2_red
         );
+        let fixed = self
+            .constraints
+            .as_ref()
+            .and_then(|c| c.get("fixed"))
+            .and_then(Value::as_object);
         for (i, name) in self.flat_names.iter().enumerate() {
             let std = match self.flat_std[i] {
+                _ if fixed.is_some_and(|f| f.contains_key(name)) => "(fixed)".into(),
                 Some(s) => format!("± {s:.3e}"),
                 None => "(not determined)".into(),
             };
@@ -426,6 +473,24 @@ impl FitReport {
             "  {} restarts ({} within 1% of best), {} evaluations, {:.2} s on {}\n",
             self.restarts, self.restarts_within_1pct, self.evaluations, self.seconds, self.backend
         );
+        if let Some(priors) = self
+            .constraints
+            .as_ref()
+            .and_then(|c| c.get("priors"))
+            .and_then(Value::as_array)
+            .filter(|p| !p.is_empty())
+        {
+            let chi2_prior = self
+                .constraints
+                .as_ref()
+                .and_then(|c| c["chi2_prior"].as_f64());
+            s += &format!(
+                "  {} in χ² (their share: {:.3}); χ²_red = (χ² + priors)/(samples + priors − fitted) with {} degrees of freedom\n",
+                crate::data::count(priors.len(), "prior", "priors"),
+                chi2_prior.unwrap_or(f64::NAN),
+                self.dof
+            );
+        }
         for w in &self.warnings {
             s += &format!("  warning: {w}\n");
         }

@@ -32,15 +32,7 @@ pub trait BatchResiduals: BatchObjective {
         points: &[f64],
         steps: &[f64],
     ) -> anyhow::Result<Vec<NormalEquations>> {
-        let p = self.dim();
-        let k = self.residual_count();
-        let batch = difference_points(points, steps, p);
-        let res = self.residuals(&batch)?;
-        Ok(res
-            .chunks(k * (p + 1))
-            .zip(steps.chunks(p))
-            .map(|(rows, h)| NormalEquations::from_residuals(rows, h, k))
-            .collect())
+        normal_equations_on_host(self, points, steps)
     }
 
     /// Σ r² of N points (+∞ where not finite).
@@ -52,6 +44,25 @@ pub trait BatchResiduals: BatchObjective {
             .map(|r| sanitize(r.iter().map(|v| v * v).sum()))
             .collect())
     }
+}
+
+/// The normal equations formed on the host from [`BatchResiduals::residuals`] (the
+/// default of [`BatchResiduals::normal_equations`], callable by implementations that
+/// override it for some problems only).
+pub fn normal_equations_on_host<R: BatchResiduals + ?Sized>(
+    obj: &mut R,
+    points: &[f64],
+    steps: &[f64],
+) -> anyhow::Result<Vec<NormalEquations>> {
+    let p = obj.dim();
+    let k = obj.residual_count();
+    let batch = difference_points(points, steps, p);
+    let res = obj.residuals(&batch)?;
+    Ok(res
+        .chunks(k * (p + 1))
+        .zip(steps.chunks(p))
+        .map(|(rows, h)| NormalEquations::from_residuals(rows, h, k))
+        .collect())
 }
 
 /// Per point: the point, then the point moved by each signed step (N × (P + 1) × P).

@@ -9,7 +9,8 @@
 //! `optimizer`, `restarts`, `seed`, `samples` (K), `n_params` (P), `best_loss`,
 //! `chi2_red`, `restarts_within_1pct`, `evaluations`, `params` and `param_std` (JSON
 //! objects name → value, an array for per-channel parameters; null where undetermined),
-//! `warnings` (JSON array), `seconds`, `backend`. Every column but the last two is
+//! `warnings` (JSON array), `seconds`, `backend`, `constraints` (the run's `--fix`,
+//! `--bounds`, `--prior`, `;`-separated). Every column but `seconds` and `backend` is
 //! deterministic for a given backend.
 
 use crate::bsdf::Model;
@@ -55,6 +56,10 @@ pub struct Row {
     pub warnings: String,
     pub seconds: f64,
     pub backend: String,
+    /// The `--fix`/`--bounds`/`--prior` options of the run, `;`-separated (empty: none).
+    /// One results folder holds fits made under one set of constraints.
+    #[serde(default)]
+    pub constraints: String,
 }
 
 /// The identity of a fit: resumption and shards depend on it being deterministic.
@@ -133,7 +138,7 @@ impl Row {
             restarts: r.restarts,
             seed: r.seed,
             samples: r.samples,
-            n_params: r.flat_params.len(),
+            n_params: r.n_params,
             best_loss: r.best.loss,
             chi2_red: r.best.chi2_red,
             restarts_within_1pct: r.restarts_within_1pct,
@@ -143,6 +148,7 @@ impl Row {
             warnings: serde_json::to_string(&r.warnings).unwrap_or_else(|_| "[]".into()),
             seconds: (r.seconds * 1000.0).round() / 1000.0,
             backend: r.backend.clone(),
+            constraints: String::new(),
         }
     }
 
@@ -339,7 +345,8 @@ pub fn read_results(path: &Path, repair: bool, notice: &mut dyn FnMut(String)) -
         .map(str::to_string)
         .collect();
     let expected = header_names();
-    if header != expected {
+    // Files written before the `constraints` column existed read as unconstrained.
+    if header != expected && header[..] != expected[..expected.len() - 1] {
         bail!(
             "{} has columns {:?}, not this version's {:?}; use another --out directory",
             path.display(),
@@ -386,6 +393,7 @@ fn header_names() -> Vec<String> {
         warnings: String::new(),
         seconds: 0.0,
         backend: String::new(),
+        constraints: String::new(),
     };
     let mut w = csv::WriterBuilder::new()
         .has_headers(true)

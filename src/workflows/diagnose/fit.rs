@@ -20,8 +20,12 @@ pub struct FitResult {
     pub values: Vec<f64>,
     /// Normalized residuals z = (y′ − y)/u.
     pub z: Vec<f64>,
+    /// χ² of the data plus the priors' (`--prior`).
     pub chi2: f64,
+    /// Samples + priors − fitted parameters.
     pub dof: usize,
+    /// Fitted parameters (the model's, less those fixed by `--fix`).
+    pub params: usize,
     pub chi2_red: f64,
     /// Best value of the driving loss.
     pub loss: f64,
@@ -47,13 +51,6 @@ pub fn fit_model(
     opts: &DiagnoseOptions,
     seeds: &[Vec<f64>],
 ) -> Result<FitResult> {
-    anyhow::ensure!(
-        data.len() > model.dim,
-        "{} samples cannot determine the {} parameters of {}",
-        data.len(),
-        model.dim,
-        model.spec
-    );
     // SMAPE is not a sum of squares: LM cannot fit it, compass can.
     let optimizer = if opts.optimizer == Optimizer::Lm && !opts.loss.is_sum_of_squares() {
         Optimizer::Compass
@@ -66,18 +63,20 @@ pub fn fit_model(
         seed: opts.seed,
         screen: opts.screen,
         initial_points: seeds.to_vec(),
+        constraints: opts.constraints.clone(),
         ..Default::default()
     };
     let o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
-    let dof = data.len() - model.dim;
+    let chi2 = o.chi2 + o.chi2_prior;
     Ok(FitResult {
         model: model.clone(),
         z: normalised_residuals(data, &o.values),
         flat: o.flat,
         values: o.values,
-        chi2: o.chi2,
-        dof,
-        chi2_red: o.chi2 / dof as f64,
+        chi2,
+        dof: o.dof,
+        params: o.constraints.dim(),
+        chi2_red: chi2 / o.dof as f64,
         loss: o.loss,
         cov: o.cov,
         seconds: o.seconds,

@@ -85,6 +85,9 @@ pub struct DiagnoseOptions {
     /// Fit a round's candidates concurrently (one thread each) on the shared backend;
     /// otherwise one after the other, each fit batching all its restarts.
     pub parallel: bool,
+    /// `--fix`, `--bounds`, `--prior`, applied to every model of the path that has the
+    /// parameter named (a fixed value stays fixed in every extension).
+    pub constraints: crate::inference::constraints::ConstraintSpec,
 }
 
 impl Default for DiagnoseOptions {
@@ -100,6 +103,7 @@ impl Default for DiagnoseOptions {
             stop_when_consistent: true,
             backtrack: true,
             parallel: false,
+            constraints: Default::default(),
         }
     }
 }

@@ -202,7 +202,7 @@ fn extend_path(
 /// BIC of a path's final model: χ² + P ln K.
 fn path_bic(steps: &[Step], k: usize) -> f64 {
     let f = &steps.last().expect("a step").fit;
-    bic(f.chi2, f.model.dim, k)
+    bic(f.chi2, f.params, k)
 }
 
 /// Run the discrepancy workflow from `start` on `data`. `log` receives progress lines

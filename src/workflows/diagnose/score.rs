@@ -105,7 +105,7 @@ pub(super) fn score(
             }
         }
     };
-    let dp = fit.model.dim as i64 - current.model.dim as i64;
+    let dp = fit.params as i64 - current.params as i64;
     let delta_chi2 = current.chi2 - fit.chi2;
     let s = fit.chi2_red.max(1.0);
     let delta_bic = stats::delta_bic(current.chi2, fit.chi2, dp, k, 1.0);
