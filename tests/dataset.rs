@@ -77,12 +77,12 @@ fn valid_file_reads() {
     assert_eq!(d.channels, vec![450.0, 550.0, 650.0]);
     assert!(d.notices.is_empty(), "{:?}", d.notices);
     for (k, s) in d.samples.iter().enumerate() {
-        assert_eq!(s.line, FIRST_DATA_LINE + k, "line of sample {k}");
+        assert_eq!(s.line as usize, FIRST_DATA_LINE + k, "line of sample {k}");
         assert_eq!(d.channels[s.channel], s.wavelength_nm);
         assert!(s.theta_i >= 0.0 && s.theta_o >= 0.0);
-        assert!((s.wi.length() - 1.0).abs() < 1e-12 && (s.wo.length() - 1.0).abs() < 1e-12);
+        assert!((s.wi().length() - 1.0).abs() < 1e-12 && (s.wo().length() - 1.0).abs() < 1e-12);
         assert!(
-            s.wi.z >= 0.0 && s.wo.z >= 0.0,
+            s.wi().z >= 0.0 && s.wo().z >= 0.0,
             "BRDF directions in the upper hemisphere"
         );
     }
@@ -115,12 +115,12 @@ fn to_csv_round_trips() {
         assert_eq!(a.uncertainty, b.uncertainty);
         assert_eq!(a.channel, b.channel);
         assert!(
-            close(a.wi, b.wi) && close(a.wo, b.wo),
+            close(a.wi(), b.wi()) && close(a.wo(), b.wo()),
             "{:?} {:?} vs {:?} {:?}",
-            a.wi,
-            a.wo,
-            b.wi,
-            b.wo
+            a.wi(),
+            a.wo(),
+            b.wi(),
+            b.wo()
         );
     }
     // And once more: writing is a fixed point.
@@ -146,7 +146,7 @@ fn btdf_round_trips_with_lower_hemisphere() {
     let e = parse(&d.to_csv()).unwrap();
     assert_eq!(e.kind, Kind::Btdf);
     for (a, b) in d.samples.iter().zip(&e.samples) {
-        assert!(close(a.wo, b.wo) && close(a.wi, b.wi));
+        assert!(close(a.wo(), b.wo()) && close(a.wi(), b.wi()));
         assert_eq!(a.value, b.value);
     }
 }
@@ -277,7 +277,7 @@ fn repeated_geometry_is_independent_samples() {
     let d = parse(&file("brdf", &rows)).unwrap();
     assert_eq!(d.len(), 8);
     assert_eq!(d.samples[7].value, 0.2401);
-    assert_eq!(d.samples[7].line, FIRST_DATA_LINE + 7);
+    assert_eq!(d.samples[7].line as usize, FIRST_DATA_LINE + 7);
     assert_eq!(d.notices.len(), 1, "{:?}", d.notices);
     assert!(
         d.notices[0].contains("f.csv")
@@ -374,9 +374,9 @@ fn two_scans_through_the_normal_give_one_sample_to_each_plane() {
         d.notices
     );
     for s in &d.samples[1..2] {
-        assert!(close(s.wo, -DVec3::Z), "{:?}", s.wo);
+        assert!(close(s.wo(), -DVec3::Z), "{:?}", s.wo());
     }
-    assert!(close(d.samples[4].wo, -DVec3::Z));
+    assert!(close(d.samples[4].wo(), -DVec3::Z));
     // The plane survives writing and reading back.
     let e = parse(&d.to_csv()).unwrap();
     assert_eq!(
@@ -459,7 +459,7 @@ fn crlf_line_endings() {
     let t = file("brdf", &good_rows()).replace('\n', "\r\n");
     let d = parse(&t).unwrap_or_else(|e| panic!("CRLF file rejected: {e}"));
     assert_eq!(d.len(), 7);
-    assert_eq!(d.samples[6].line, FIRST_DATA_LINE + 6);
+    assert_eq!(d.samples[6].line as usize, FIRST_DATA_LINE + 6);
     let t = with_row(3, "30,0,-45,0,450,x,0.0025").replace('\n', "\r\n");
     assert_line_error(&t, FIRST_DATA_LINE + 3, "value");
 }
@@ -562,11 +562,15 @@ fn signed_angles_give_the_right_directions() {
     let (s45, c45) = (45f64.to_radians().sin(), 45f64.to_radians().cos());
     let ss = d.samples.as_slice();
     // Row 1: wi in +x, wo on the other side (−x): the in-plane mirror geometry.
-    assert!(close(ss[0].wi, DVec3::new(s30, 0.0, c30)), "{:?}", ss[0].wi);
     assert!(
-        close(ss[0].wo, DVec3::new(-s45, 0.0, c45)),
+        close(ss[0].wi(), DVec3::new(s30, 0.0, c30)),
         "{:?}",
-        ss[0].wo
+        ss[0].wi()
+    );
+    assert!(
+        close(ss[0].wo(), DVec3::new(-s45, 0.0, c45)),
+        "{:?}",
+        ss[0].wo()
     );
     assert!(
         (ss[0].theta_o - 45f64.to_radians()).abs() < 1e-12
@@ -574,26 +578,34 @@ fn signed_angles_give_the_right_directions() {
     );
     // Row 2: the same pair mirrored.
     assert!(
-        close(ss[1].wi, DVec3::new(-s30, 0.0, c30)),
+        close(ss[1].wi(), DVec3::new(-s30, 0.0, c30)),
         "{:?}",
-        ss[1].wi
+        ss[1].wi()
     );
-    assert!(close(ss[1].wo, DVec3::new(s45, 0.0, c45)), "{:?}", ss[1].wo);
+    assert!(
+        close(ss[1].wo(), DVec3::new(s45, 0.0, c45)),
+        "{:?}",
+        ss[1].wo()
+    );
     // Row 3: the plane φ = 90°: wi along +y, wo along −y.
     let (s10, c10) = (10f64.to_radians().sin(), 10f64.to_radians().cos());
     let (s20, c20) = (20f64.to_radians().sin(), 20f64.to_radians().cos());
-    assert!(close(ss[2].wi, DVec3::new(0.0, s10, c10)), "{:?}", ss[2].wi);
     assert!(
-        close(ss[2].wo, DVec3::new(0.0, -s20, c20)),
+        close(ss[2].wi(), DVec3::new(0.0, s10, c10)),
         "{:?}",
-        ss[2].wo
+        ss[2].wi()
+    );
+    assert!(
+        close(ss[2].wo(), DVec3::new(0.0, -s20, c20)),
+        "{:?}",
+        ss[2].wo()
     );
     // Row 4: out of plane.
     let (s60, c60) = (60f64.to_radians().sin(), 60f64.to_radians().cos());
-    assert!(close(ss[3].wi, DVec3::Z));
+    assert!(close(ss[3].wi(), DVec3::Z));
     assert!(
         close(
-            ss[3].wo,
+            ss[3].wo(),
             DVec3::new(
                 s60 * 30f64.to_radians().cos(),
                 s60 * 30f64.to_radians().sin(),
@@ -601,7 +613,7 @@ fn signed_angles_give_the_right_directions() {
             )
         ),
         "{:?}",
-        ss[3].wo
+        ss[3].wo()
     );
 }
 
@@ -620,24 +632,24 @@ fn btdf_puts_wo_in_the_lower_hemisphere() {
     let ss = d.samples.as_slice();
     // Straight through at normal incidence: θt = 0 is −n.
     assert!(
-        close(ss[0].wi, DVec3::Z) && close(ss[0].wo, -DVec3::Z),
+        close(ss[0].wi(), DVec3::Z) && close(ss[0].wo(), -DVec3::Z),
         "{:?}",
-        ss[0].wo
+        ss[0].wo()
     );
     let (s20, c20) = (20f64.to_radians().sin(), 20f64.to_radians().cos());
     assert!(
-        close(ss[1].wo, DVec3::new(-s20, 0.0, -c20)),
+        close(ss[1].wo(), DVec3::new(-s20, 0.0, -c20)),
         "{:?}",
-        ss[1].wo
+        ss[1].wo()
     );
     let (s15, c15) = (15f64.to_radians().sin(), 15f64.to_radians().cos());
     assert!(
-        close(ss[2].wo, DVec3::new(0.0, s15, -c15)),
+        close(ss[2].wo(), DVec3::new(0.0, s15, -c15)),
         "{:?}",
-        ss[2].wo
+        ss[2].wo()
     );
     for s in ss {
-        assert!(s.wi.z > 0.0 && s.wo.z < 0.0);
+        assert!(s.wi().z > 0.0 && s.wo().z < 0.0);
     }
 }
 

@@ -34,7 +34,7 @@ fn check(result: Result<Dataset, bsdfit::data::DataError>) -> Result<(), TestCas
                 );
                 prop_assert!(s.channel < d.channels.len() && s.axis < d.axes.len());
                 prop_assert!(
-                    (s.wi.length() - 1.0).abs() < 1e-9 && (s.wo.length() - 1.0).abs() < 1e-9
+                    (s.wi().length() - 1.0).abs() < 1e-9 && (s.wo().length() - 1.0).abs() < 1e-9
                 );
             }
         }

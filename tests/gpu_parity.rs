@@ -133,8 +133,8 @@ fn compare_model_values(
                 let s = &data.samples[j];
                 first_bad.get_or_insert_with(|| format!(
                     "candidate {n} sample {j} (wi {:?} wo {:?} ch {}): gpu {gv} cpu {cv} (bound {bound:.3e}); params {:?}",
-                    s.wi,
-                    s.wo,
+                    s.wi(),
+                    s.wo(),
                     s.channel,
                     &params[n * model.dim..(n + 1) * model.dim]
                 ));

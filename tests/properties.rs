@@ -41,10 +41,10 @@ proptest! {
         prop_assert_eq!(a.len(), b.len());
         for (x, y) in a.samples.iter().zip(&b.samples) {
             prop_assert!((x.theta_i - y.theta_i).abs() < 1e-9 && (x.theta_o - y.theta_o).abs() < 1e-9);
-            prop_assert!((x.wi - y.wi).length() < 1e-9 && (x.wo - y.wo).length() < 1e-9);
+            prop_assert!((x.wi() - y.wi()).length() < 1e-9 && (x.wo() - y.wo()).length() < 1e-9);
             prop_assert_eq!(x.value, y.value);
             prop_assert_eq!(x.uncertainty, y.uncertainty);
-            prop_assert!((x.wo.z < 0.0) == (kind == Kind::Btdf) || x.wo.z == 0.0);
+            prop_assert!((x.wo().z < 0.0) == (kind == Kind::Btdf) || x.wo().z == 0.0);
         }
     }
 

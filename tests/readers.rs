@@ -151,14 +151,24 @@ fn alta_parametrizations_recover_directions_values_peak_and_reciprocity() {
             // Directions: ωi = L and ωo = V, exactly (at normal incidence an isotropic
             // parametrization fixes only θo and the angle between the two).
             if p.isotropic() && theta(wi) == 0.0 {
-                assert!(close(s.wi, DVec3::Z, 1e-12), "{what}: {:?}", s.wi);
-                assert!((s.wo.z - wo.z).abs() < 1e-9, "{what}");
+                assert!(close(s.wi(), DVec3::Z, 1e-12), "{what}: {:?}", s.wi());
+                assert!((s.wo().z - wo.z).abs() < 1e-9, "{what}");
             } else {
-                assert!(close(s.wi, wi, 1e-9), "{what}: wi {:?} vs {:?}", s.wi, wi);
-                assert!(close(s.wo, wo, 1e-9), "{what}: wo {:?} vs {:?}", s.wo, wo);
+                assert!(
+                    close(s.wi(), wi, 1e-9),
+                    "{what}: wi {:?} vs {:?}",
+                    s.wi(),
+                    wi
+                );
+                assert!(
+                    close(s.wo(), wo, 1e-9),
+                    "{what}: wo {:?} vs {:?}",
+                    s.wo(),
+                    wo
+                );
             }
             // Values: the BRDF at the recovered directions.
-            let f = brdf(s.wi, s.wo);
+            let f = brdf(s.wi(), s.wo());
             assert!(
                 (s.value - f).abs() <= 1e-9 * f,
                 "{what}: {} vs {f}",
@@ -176,11 +186,11 @@ fn alta_parametrizations_recover_directions_values_peak_and_reciprocity() {
                 .max_by(|a, b| a.value.total_cmp(&b.value))
                 .unwrap();
             assert!(
-                close(best.wo, mirror(best.wi), 1e-9),
+                close(best.wo(), mirror(best.wi()), 1e-9),
                 "{}: θi = {ti}: peak at {:?}, mirror {:?}",
                 p.name(),
-                best.wo,
-                mirror(best.wi)
+                best.wo(),
+                mirror(best.wi())
             );
             assert!(best.value > 3.0);
         }
@@ -225,7 +235,7 @@ fn alta_cosine_factor_and_rgb_outputs() {
     let d = alta::parse(&text, "cos.alta", &ReadOptions::default()).unwrap();
     assert_eq!(d.len(), pairs.len());
     for (s, &(_, wo)) in d.samples.iter().zip(&pairs) {
-        let f = brdf(s.wi, s.wo);
+        let f = brdf(s.wi(), s.wo());
         assert!((s.value - f).abs() <= 1e-9 * f, "{} vs {f}", s.value);
         // #VS 2: (a₋ + a₊)/(2√3), divided by cos θo as the value is.
         let u = 0.04 / (2.0 * 3f64.sqrt()) / wo.z;
@@ -493,7 +503,7 @@ fn merl_writer_reader_round_trip() {
     assert_eq!(d.len(), 3 * merl::DEFAULT_MAX_SAMPLES);
     assert_eq!(d.assumed_uncertainty, Some((0.05, 0.001)));
     for s in &d.samples {
-        let f = brdf(s.wi, s.wo);
+        let f = brdf(s.wi(), s.wo());
         let k = match s.wavelength_nm as u64 {
             650 => 1.0,
             550 => 2.0,
@@ -518,10 +528,10 @@ fn merl_writer_reader_round_trip() {
         .max_by(|a, b| a.value.total_cmp(&b.value))
         .unwrap();
     assert!(
-        close(best.wo, mirror(best.wi), 0.05),
+        close(best.wo(), mirror(best.wi()), 0.05),
         "{:?} {:?}",
-        best.wi,
-        best.wo
+        best.wi(),
+        best.wo()
     );
     // Deterministic subsample: the same file gives the same samples; --max-samples N.
     let opts = ReadOptions {
@@ -559,7 +569,7 @@ fn merl_unmeasured_cells_are_dropped() {
     assert!(cut
         .samples
         .iter()
-        .all(|s| s.line != idx + 1 && s.line != idx2 + 1));
+        .all(|s| s.line as usize != idx + 1 && s.line as usize != idx2 + 1));
     assert!(cut.notices[0].contains("unmeasured"), "{:?}", cut.notices);
     let n = |d: &Dataset| {
         d.notices[0]
@@ -726,7 +736,7 @@ fn convert_writes_v1_with_provenance() {
     assert_eq!(back.assumed_uncertainty, Some((0.05, 0.001)));
     for (a, b) in d.samples.iter().zip(&back.samples) {
         assert_eq!(a.value, b.value);
-        assert!(close(a.wi, b.wi, 1e-9) && close(a.wo, b.wo, 1e-9));
+        assert!(close(a.wi(), b.wi(), 1e-9) && close(a.wo(), b.wo(), 1e-9));
     }
 }
 
@@ -790,7 +800,7 @@ fn real_yellow_tape() {
     );
     // Retro peaks (ωo = ωi) and mirror peaks are both there at each incidence.
     for t in [15.0f64, 30.0, 60.0] {
-        let near = |w: DVec3, s: &Sample| (s.wo - w).length() < 0.03;
+        let near = |w: DVec3, s: &Sample| (s.wo() - w).length() < 0.03;
         let wi = dir(t.to_radians(), 0.0);
         let retro = d
             .samples

@@ -58,17 +58,38 @@ pub struct Sample {
     pub uncertainty: f64,
     /// Index into [`Dataset::channels`].
     pub channel: usize,
+    /// 1-based line in the source file (0 for synthetic data never written).
+    pub line: u32,
     /// Index into [`Dataset::axes`]: the φ plane of the outgoing direction. A sample at
     /// θo = 0 lies on every plane; it is given the plane of the φo written in its row when
     /// that is one of the planes (two scans through the normal give one normal sample to
     /// each plane), else plane 0.
     pub axis: usize,
+    /// A transmission sample (BTDF): the outgoing direction is in the lower hemisphere.
+    pub transmitted: bool,
+}
+
+// The directions are computed from the angles when needed, not stored: a sample is 80
+// bytes, so reading a file takes well under twice its size (tests/reader_memory.rs).
+const _: () = assert!(std::mem::size_of::<Sample>() == 80);
+
+impl Sample {
     /// Incident direction, pointing away from the surface (upper hemisphere).
-    pub wi: DVec3,
-    /// Outgoing direction: upper hemisphere for a BRDF, lower for a BTDF.
-    pub wo: DVec3,
-    /// 1-based line in the source file (0 for synthetic data never written).
-    pub line: usize,
+    #[inline]
+    pub fn wi(&self) -> DVec3 {
+        direction(self.theta_i, self.phi_i)
+    }
+    /// Outgoing direction: upper hemisphere for a BRDF, lower for a BTDF (θt is measured
+    /// from −n, docs/conventions.md).
+    #[inline]
+    pub fn wo(&self) -> DVec3 {
+        let w = direction(self.theta_o, self.phi_o);
+        if self.transmitted {
+            DVec3::new(w.x, w.y, -w.z)
+        } else {
+            w
+        }
+    }
 }
 
 /// A dataset in memory: metadata, channels (distinct wavelengths) and samples.
@@ -397,11 +418,6 @@ impl<'a> Builder<'a> {
             to.to_radians(),
             po.to_radians(),
         );
-        let wi = direction(ti, pi);
-        let mut wo = direction(to, po);
-        if self.kind == Kind::Btdf {
-            wo.z = -wo.z; // θt is measured from −n (docs/conventions.md)
-        }
         let Ok(index) = u32::try_from(self.samples.len()) else {
             return self.error(line, "more than 4294967295 rows".into());
         };
@@ -420,9 +436,8 @@ impl<'a> Builder<'a> {
             uncertainty: u,
             channel: 0,
             axis: 0,
-            wi,
-            wo,
-            line,
+            transmitted: self.kind == Kind::Btdf,
+            line: u32::try_from(line).unwrap_or(u32::MAX),
         });
     }
 
@@ -556,8 +571,10 @@ impl<'a> Builder<'a> {
                             if let Some(first) = group[a..m].iter().find(|g| g.2 == text) {
                                 identical_count += 1;
                                 if identical.len() < 5 {
-                                    identical
-                                        .push((self.samples[first.1].line, self.samples[idx].line));
+                                    identical.push((
+                                        self.samples[first.1].line as usize,
+                                        self.samples[idx].line as usize,
+                                    ));
                                 }
                             }
                         }

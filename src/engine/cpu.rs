@@ -25,6 +25,13 @@ impl Backend for CpuBackend {
     fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
         Ok(Box::new(CpuEvaluator {
             problem,
+            // Directions once per fit, not once per evaluation (a sample stores angles).
+            directions: problem
+                .data
+                .samples
+                .iter()
+                .map(|s| (s.wi(), s.wo()))
+                .collect(),
             terms: problem.loss.terms(problem.data),
             evaluations: AtomicU64::new(0),
         }))
@@ -33,6 +40,8 @@ impl Backend for CpuBackend {
 
 pub struct CpuEvaluator<'a> {
     problem: Problem<'a>,
+    /// (ωi, ωo) of every sample.
+    directions: Vec<(glam::DVec3, glam::DVec3)>,
     terms: LossTerms,
     evaluations: AtomicU64,
 }
@@ -49,8 +58,9 @@ impl CpuEvaluator<'_> {
                 v
             })
             .collect();
-        for (k, s) in self.problem.data.samples.iter().enumerate() {
-            f(k, model.root.eval(&views[model.group_of(s)], s.wi, s.wo));
+        let samples = self.problem.data.samples.iter().zip(&self.directions);
+        for (k, (s, &(wi, wo))) in samples.enumerate() {
+            f(k, model.root.eval(&views[model.group_of(s)], wi, wo));
         }
     }
 

@@ -265,19 +265,10 @@ impl Backend for GpuBackend {
             .iter()
             .map(|&k| {
                 let s = &problem.data.samples[k];
+                let (wi, wo) = (s.wi(), s.wo());
                 GpuSample {
-                    wi: [
-                        s.wi.x as f32,
-                        s.wi.y as f32,
-                        s.wi.z as f32,
-                        terms.w[k] as f32,
-                    ],
-                    wo: [
-                        s.wo.x as f32,
-                        s.wo.y as f32,
-                        s.wo.z as f32,
-                        terms.a[k] as f32,
-                    ],
+                    wi: [wi.x as f32, wi.y as f32, wi.z as f32, terms.w[k] as f32],
+                    wo: [wo.x as f32, wo.y as f32, wo.z as f32, terms.a[k] as f32],
                     ext: [
                         s.value as f32,
                         terms.transform(k, s.value) as f32,

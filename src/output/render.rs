@@ -159,8 +159,8 @@ impl Tabulated {
         );
         let mut entries = vec![Vec::new(); data.channels.len()];
         for s in &data.samples {
-            entries[s.channel].push((feature(s.wi, s.wo), s.value));
-            entries[s.channel].push((feature(s.wo, s.wi), s.value));
+            entries[s.channel].push((feature(s.wi(), s.wo()), s.value));
+            entries[s.channel].push((feature(s.wo(), s.wi()), s.value));
         }
         Ok(Tabulated {
             entries,

@@ -253,7 +253,7 @@ pub fn synthesize_angular(
         } else {
             ch
         };
-        let f = model.eval(flat, group, s.wi, s.wo);
+        let f = model.eval(flat, group, s.wi(), s.wo());
         if !f.is_finite() {
             return Err(format!(
                 "model {} is not finite at line {}",

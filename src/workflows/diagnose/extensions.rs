@@ -314,8 +314,8 @@ mod tests {
                         1e-6
                     };
                     for s in &data.samples {
-                        let a = old.eval(&flat, old.group_of(s), s.wi, s.wo);
-                        let b = new.eval(&nf, new.group_of(s), s.wi, s.wo);
+                        let a = old.eval(&flat, old.group_of(s), s.wi(), s.wo());
+                        let b = new.eval(&nf, new.group_of(s), s.wi(), s.wo());
                         assert!(
                             (a - b).abs() <= tol * a.abs().max(1e-3),
                             "{start} → {} (trial {trial}): {a} vs {b}",
