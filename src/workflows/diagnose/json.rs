@@ -44,6 +44,11 @@ impl Diagnosis {
                             "delta_bic_scaled": num(c.delta_bic_scaled),
                             "significant": c.significant,
                             "identifiable": c.identifiable,
+                            "on_bound": c.on_bound,
+                            "removal_in_flagged_regions": c.removal_flagged.map(num),
+                            "removal_outside": c.removal_outside.map(num),
+                            "removal_by_region": c.removal.iter().map(|(w, r)| json!({"region": w, "removed": num(*r)})).collect::<Vec<_>>(),
+                            "adoptable": c.adoptable(),
                             "verdict": c.verdict,
                         })).collect::<Vec<_>>(),
                     })

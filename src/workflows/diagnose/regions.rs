@@ -68,8 +68,8 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
     let by = |f: &dyn Fn(&Sample) -> bool| data.samples.iter().map(f).collect::<Vec<bool>>();
     match data.kind {
         Kind::Brdf => {
-            let mirror = |s: &Sample| angle_deg(s.wo, DVec3::new(-s.wi.x, -s.wi.y, s.wi.z));
-            let retro = |s: &Sample| angle_deg(s.wo, s.wi);
+            let mirror = |s: &Sample| angle_deg(s.wo(), DVec3::new(-s.wi().x, -s.wi().y, s.wi().z));
+            let retro = |s: &Sample| angle_deg(s.wo(), s.wi());
             for r in [5.0, 15.0] {
                 regions.push((
                     format!("within {r}° of the mirror direction"),
@@ -82,7 +82,7 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
                     by(&|s| retro(s) <= r + 0.5 && retro(s) < mirror(s)),
                 ));
             }
-            let side = |s: &Sample| s.wo.x * s.wi.x + s.wo.y * s.wi.y;
+            let side = |s: &Sample| s.wo().x * s.wi().x + s.wo().y * s.wi().y;
             regions.push((
                 "on the source (backscatter) side".into(),
                 by(&|s| side(s) > 1e-9),
@@ -122,7 +122,7 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
             for r in [5.0, 15.0] {
                 regions.push((
                     format!("within {r}° of the transmission peak"),
-                    by(&|s| angle_deg(s.wo, peak(s).wo) <= r + 0.5),
+                    by(&|s| angle_deg(s.wo(), peak(s).wo()) <= r + 0.5),
                 ));
             }
             regions.push((
@@ -192,18 +192,18 @@ fn sentence(r: &RegionStat) -> String {
     )
 }
 
-/// Where the residuals say the model misses, in words: up to three regions whose mean z
-/// exceeds 1σ in size and 3 in significance (mean·√n), each localized to its most
-/// concentrated sub-region, overlapping regions reported once.
-pub fn describe_regions(data: &Dataset, z: &[f64]) -> String {
+/// Where the residuals say the model misses: up to three regions whose mean z exceeds 1σ
+/// in size and 3 in significance (mean·√n), each localized to its most concentrated
+/// sub-region, overlapping regions reported once. Most significant first.
+pub fn flagged_regions(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
     let stats = region_stats(data, z);
     let passes = |r: &RegionStat| r.n >= 3 && r.mean.abs() >= 1.0 && r.t().abs() >= 3.0;
     let mut order: Vec<&RegionStat> = stats.iter().filter(|r| passes(r)).collect();
     order.sort_by(|a, b| b.t().abs().total_cmp(&a.t().abs()));
     let mut covered = vec![false; z.len()];
-    let mut said: Vec<String> = Vec::new();
+    let mut flagged: Vec<RegionStat> = Vec::new();
     for r in order {
-        if said.len() == 3 {
+        if flagged.len() == 3 {
             break;
         }
         // At most half of a region may repeat what was said already.
@@ -239,8 +239,30 @@ pub fn describe_regions(data: &Dataset, z: &[f64]) -> String {
         for (c, &m) in covered.iter_mut().zip(&r.mask) {
             *c |= m;
         }
-        said.push(sentence(best));
+        flagged.push(best.clone());
     }
+    flagged
+}
+
+impl RegionStat {
+    /// Σ z² over the region's samples.
+    pub fn chi2(&self, z: &[f64]) -> f64 {
+        z.iter()
+            .zip(&self.mask)
+            .filter(|(_, &m)| m)
+            .map(|(v, _)| v * v)
+            .sum()
+    }
+
+    /// Whether sample `k` lies in the region.
+    pub fn contains(&self, k: usize) -> bool {
+        self.mask[k]
+    }
+}
+
+/// Where the residuals say the model misses, in words ([`flagged_regions`]).
+pub fn describe_regions(data: &Dataset, z: &[f64]) -> String {
+    let said: Vec<String> = flagged_regions(data, z).iter().map(sentence).collect();
     if said.is_empty() {
         let (j, zmax) = z.iter().enumerate().fold((0, 0.0f64), |acc, (j, &v)| {
             if v.abs() > acc.1.abs() {
@@ -276,8 +298,8 @@ mod tests {
             .samples
             .iter()
             .map(|s| {
-                let m = angle_deg(s.wo, DVec3::new(-s.wi.x, -s.wi.y, s.wi.z));
-                if m <= 15.5 && s.theta_i.to_degrees() >= 29.5 && m < angle_deg(s.wo, s.wi) {
+                let m = angle_deg(s.wo(), DVec3::new(-s.wi().x, -s.wi().y, s.wi().z));
+                if m <= 15.5 && s.theta_i.to_degrees() >= 29.5 && m < angle_deg(s.wo(), s.wi()) {
                     -4.0
                 } else {
                     0.1
