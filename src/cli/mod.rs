@@ -14,6 +14,8 @@ mod bench;
 pub mod checks;
 mod convert;
 mod diagnose;
+mod eval;
+mod export;
 mod fit;
 mod models;
 pub mod progress;
@@ -77,6 +79,13 @@ enum Command {
     /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
     /// bsdfit v1 CSV, applying the data-selection options.
     Convert(convert::ConvertArgs),
+    /// Evaluate a saved fit (`fit --json`) at the geometries of a data file or of a named
+    /// geometry: a v1 CSV of model values with their standard uncertainties propagated
+    /// from the fit's covariance.
+    Eval(eval::EvalArgs),
+    /// Write a saved fit (`fit --json`) for use elsewhere: a dense v1 table, a MERL binary
+    /// BRDF table, or a Mitsuba 3 <bsdf> (for models with an exact counterpart).
+    Export(export::ExportArgs),
 }
 
 /// Data selection and validation, shared by every command that reads measurements.
@@ -152,6 +161,8 @@ pub fn main() -> i32 {
         Command::Render(a) => render::run(&a),
         Command::Diagnose(a) => diagnose::run(&a),
         Command::Convert(a) => convert::run(&a),
+        Command::Eval(a) => eval::run(&a),
+        Command::Export(a) => export::run(&a),
     };
     match result {
         Ok(()) => 0,
