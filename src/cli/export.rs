@@ -71,7 +71,7 @@ pub fn run(a: &ExportArgs) -> Result<()> {
                 "--rgb applies to --format merl and mitsuba"
             );
             let file = match a.plane {
-                Some(p) => FitFile::Single(file.select(Some(p), &fit_path)?),
+                Some(p) => FitFile::Single(Box::new(file.select(Some(p), &fit_path)?)),
                 None => file,
             };
             let grid = Grid {

@@ -54,7 +54,7 @@ pub struct SavedFit {
 /// What a fit JSON holds: one fit, or one fit per measurement plane (`fit --per-axis`).
 #[derive(Clone, Debug)]
 pub enum FitFile {
-    Single(SavedFit),
+    Single(Box<SavedFit>),
     /// (φ of the plane in degrees, its fit), in the file's order.
     PerAxis(Vec<(f64, SavedFit)>),
 }
@@ -121,13 +121,13 @@ impl FitFile {
                 "{file}: a `bsdfit diagnose` report; fit its final model with `bsdfit fit --model SPEC --json FIT.json` and use that"
             );
         }
-        Ok(FitFile::Single(SavedFit::from_value(&v, file)?))
+        Ok(FitFile::Single(Box::new(SavedFit::from_value(&v, file)?)))
     }
 
     /// The single fit, or the fit of plane `plane` (degrees) of a per-axis file.
     pub fn select(self, plane: Option<f64>, file: &str) -> Result<SavedFit> {
         match (self, plane) {
-            (FitFile::Single(f), None) => Ok(f),
+            (FitFile::Single(f), None) => Ok(*f),
             (FitFile::Single(_), Some(p)) => anyhow::bail!(
                 "--plane {p}: {file} holds one fit, not one per plane (`fit --per-axis`); omit --plane"
             ),

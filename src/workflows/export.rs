@@ -178,7 +178,7 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
     }
     let mut warnings = Vec::new();
     let fits: Vec<&SavedFit> = match file {
-        FitFile::Single(f) => vec![f],
+        FitFile::Single(f) => vec![f.as_ref()],
         FitFile::PerAxis(v) => v.iter().map(|(_, f)| f).collect(),
     };
     let mut undetermined: Vec<String> = Vec::new();
