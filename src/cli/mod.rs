@@ -14,6 +14,8 @@ mod bench;
 pub mod checks;
 mod convert;
 mod diagnose;
+mod eval;
+mod export;
 mod fit;
 mod models;
 pub mod progress;
@@ -77,6 +79,25 @@ enum Command {
     /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
     /// bsdfit v1 CSV, applying the data-selection options.
     Convert(convert::ConvertArgs),
+    /// Evaluate a saved fit (`fit --json`) at the geometries of a data file or of a named
+    /// geometry: a v1 CSV of model values with their standard uncertainties propagated
+    /// from the fit's covariance.
+    ///
+    /// u² = gᵀ cov g, g = ∂f/∂θ by central differences, cov = diag(std)·corr·diag(std)
+    /// from the report: the uncertainty of the model value due to the fitted parameters
+    /// (not the scatter of new measurements). A parameter the fit could not determine
+    /// (null std) counts with zero variance; a warning names it and counts the rows where
+    /// the uncertainty is then a lower bound. Runs on the CPU; no GPU is needed.
+    Eval(eval::EvalArgs),
+    /// Write a saved fit (`fit --json`) for use elsewhere: a dense v1 table, a MERL binary
+    /// BRDF table, or a Mitsuba 3 <bsdf> (for models with an exact counterpart).
+    ///
+    /// tabulated: the model and its propagated uncertainty (as `eval`) at θi, θo = 0…85°
+    /// by 5° and φo = 0…345° by 15° with φi = 0 by default. merl and mitsuba take R, G, B
+    /// from a one-channel fit (grey), a three-channel fit (longest wavelength → R) or
+    /// --rgb. mitsuba writes only exact counterparts (lambert → diffuse; ggx →
+    /// roughconductor with k = 0) and names them when it refuses a model.
+    Export(export::ExportArgs),
 }
 
 /// Data selection and validation, shared by every command that reads measurements.
@@ -184,6 +205,8 @@ pub fn main() -> i32 {
         Command::Render(a) => render::run(&a),
         Command::Diagnose(a) => diagnose::run(&a),
         Command::Convert(a) => convert::run(&a),
+        Command::Eval(a) => eval::run(&a),
+        Command::Export(a) => export::run(&a),
     };
     match result {
         Ok(()) => 0,

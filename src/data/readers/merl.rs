@@ -283,23 +283,40 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
 /// whose directions are above the horizon; the other cells hold −1 (unmeasured). Values
 /// are stored divided by [`SCALE`].
 pub fn encode(mut f: impl FnMut(f64, f64, f64) -> [f64; 3]) -> Vec<u8> {
-    let mut values = vec![-1.0f64; 3 * CELLS];
-    for idx in 0..CELLS {
-        let (th, td, pd) = cell_angles(idx);
-        if cell_directions(th, td, pd).is_none() {
-            continue;
-        }
-        let rgb = f(th, td, pd);
-        for c in 0..3 {
-            values[c * CELLS + idx] = rgb[c] / SCALE[c];
-        }
-    }
+    let cells: Vec<Option<[f64; 3]>> = (0..CELLS)
+        .map(|idx| {
+            let (th, td, pd) = cell_angles(idx);
+            cell_directions(th, td, pd).map(|_| f(th, td, pd))
+        })
+        .collect();
+    serialise(&cells)
+}
+
+/// [`encode`] with `f` evaluated on every core (rayon): a full table is 1.46 M cells, and
+/// a fitted model costs about a microsecond per cell and channel.
+pub fn encode_par(f: impl Fn(f64, f64, f64) -> [f64; 3] + Sync) -> Vec<u8> {
+    use rayon::prelude::*;
+    let cells: Vec<Option<[f64; 3]>> = (0..CELLS)
+        .into_par_iter()
+        .map(|idx| {
+            let (th, td, pd) = cell_angles(idx);
+            cell_directions(th, td, pd).map(|_| f(th, td, pd))
+        })
+        .collect();
+    serialise(&cells)
+}
+
+/// The file bytes of a table given per cell (`None`: unmeasured, stored as −1).
+fn serialise(cells: &[Option<[f64; 3]>]) -> Vec<u8> {
     let mut out = Vec::with_capacity(FILE_BYTES);
     for d in DIMS {
         out.extend_from_slice(&(d as i32).to_le_bytes());
     }
-    for v in values {
-        out.extend_from_slice(&v.to_le_bytes());
+    for c in 0..3 {
+        for cell in cells {
+            let v = cell.map_or(-1.0, |rgb| rgb[c] / SCALE[c]);
+            out.extend_from_slice(&v.to_le_bytes());
+        }
     }
     out
 }

@@ -1,0 +1,161 @@
+//! `bsdfit export`.
+
+use crate::inference::saved::FitFile;
+use crate::output::files::{write_atomic, write_result};
+use crate::workflows::export::{self, Grid, MITSUBA_EXACT};
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// A dense v1 CSV table of the model and its propagated uncertainty on a regular grid
+    /// (--theta-step, --theta-max, --phi-step); BRDF and BTDF.
+    Tabulated,
+    /// A MERL binary table (90 × 90 × 180 half/difference cells, R, G, B); BRDF only.
+    Merl,
+    /// A Mitsuba 3 `<bsdf>` XML element, for the models with an exact counterpart
+    /// (lambert → diffuse, ggx → roughconductor with k = 0).
+    Mitsuba,
+}
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// A fit report written by `bsdfit fit --json`.
+    pub fit: PathBuf,
+    /// What to write: tabulated (v1 CSV on a grid), merl (MERL binary BRDF table) or
+    /// mitsuba (Mitsuba 3 XML, exact counterparts only).
+    #[arg(long, value_enum)]
+    pub format: Format,
+    /// Output file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// For a report of `fit --per-axis` (one fit per plane): the plane φ (degrees) whose
+    /// fit to export.
+    #[arg(long, value_name = "PHI", allow_hyphen_values = true)]
+    pub plane: Option<f64>,
+    /// merl, mitsuba: the fit channels (nearest wavelengths, nm) that become R, G, B.
+    /// Default: a one-channel fit gives the same value to R, G and B; a three-channel fit
+    /// gives its longest wavelength to R and its shortest to B; other fits need this.
+    #[arg(long, value_name = "R_NM,G_NM,B_NM", value_delimiter = ',')]
+    pub rgb: Option<Vec<f64>>,
+    /// tabulated: step of θi and θo (θt), degrees; θ = 0, step, 2·step, … ≤ --theta-max.
+    #[arg(long, default_value_t = Grid::default().theta_step, value_name = "DEG")]
+    pub theta_step: f64,
+    /// tabulated: largest θi and θo (θt), degrees, below 90.
+    #[arg(long, default_value_t = Grid::default().theta_max, value_name = "DEG")]
+    pub theta_max: f64,
+    /// tabulated: step of φo (φt) over [0, 360) degrees, with φi = 0 (a model with
+    /// per-plane parameters is tabulated on its planes only).
+    #[arg(long, default_value_t = Grid::default().phi_step, value_name = "DEG")]
+    pub phi_step: f64,
+}
+
+pub fn run(a: &ExportArgs) -> Result<()> {
+    crate::output::check_writable_file(&a.out, "--out")?;
+    let fit_path = a.fit.display().to_string();
+    let file = FitFile::read(&a.fit)?;
+    if a.format != Format::Tabulated {
+        for (name, v) in [
+            ("--theta-step", a.theta_step != Grid::default().theta_step),
+            ("--theta-max", a.theta_max != Grid::default().theta_max),
+            ("--phi-step", a.phi_step != Grid::default().phi_step),
+        ] {
+            anyhow::ensure!(!v, "{name} applies to --format tabulated only");
+        }
+    }
+    match a.format {
+        Format::Tabulated => {
+            anyhow::ensure!(
+                a.rgb.is_none(),
+                "--rgb applies to --format merl and mitsuba"
+            );
+            let file = match a.plane {
+                Some(p) => FitFile::Single(Box::new(file.select(Some(p), &fit_path)?)),
+                None => file,
+            };
+            let grid = Grid {
+                theta_step: a.theta_step,
+                theta_max: a.theta_max,
+                phi_step: a.phi_step,
+            };
+            let channels = export::fit_channels(&file);
+            let planes = export::fit_planes(&file);
+            let rows = grid.rows(planes.as_deref(), channels.len())?;
+            let kind = match &file {
+                FitFile::Single(f) => f.model.kind,
+                FitFile::PerAxis(v) => v[0].1.model.kind,
+            };
+            let grid_text = format!(
+                "θi, θ{} = 0…{}° by {}°, {}",
+                if kind == crate::data::Kind::Btdf {
+                    "t"
+                } else {
+                    "o"
+                },
+                a.theta_max,
+                a.theta_step,
+                match &planes {
+                    Some(p) => format!(
+                        "on the fit's planes φ = {}° (and + 180°)",
+                        p.iter()
+                            .map(|x| x.to_string())
+                            .collect::<Vec<_>>()
+                            .join("°, ")
+                    ),
+                    None => format!("φo = 0…360° by {}°, φi = 0", a.phi_step),
+                }
+            );
+            let what = format!("a grid ({grid_text})");
+            let ds = export::geometry_dataset(kind, &rows, &channels, "grid")?;
+            let mut p = export::predict(&file, &fit_path, &ds, &what)?;
+            p.data.meta.insert("grid".into(), grid_text);
+            for w in &p.warnings {
+                eprintln!("warning: {w}");
+            }
+            write_result(&a.out, &p.data.to_csv(), false)?;
+            eprintln!(
+                "wrote {} ({} on {what})",
+                a.out.display(),
+                crate::data::count(p.data.len(), "sample", "samples"),
+            );
+        }
+        Format::Merl => {
+            let fit = file.select(a.plane, &fit_path)?;
+            let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
+            let bytes = export::merl_table(&fit, rgb)?;
+            write_atomic(&a.out, &bytes)?;
+            eprintln!(
+                "wrote {} (MERL table of {}: R, G, B = fit channels {} nm)",
+                a.out.display(),
+                fit.model.spec,
+                rgb.map(|g| fit.channels[g].to_string()).join(", ")
+            );
+            note_fit_warnings(&fit.warnings);
+        }
+        Format::Mitsuba => {
+            let fit = file.select(a.plane, &fit_path)?;
+            let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
+            let xml = export::mitsuba_xml(&fit, rgb, &fit_path)?;
+            write_result(&a.out, &xml, true)?;
+            eprintln!(
+                "wrote {} (Mitsuba 3 <bsdf> of {}: {})",
+                a.out.display(),
+                fit.model.spec,
+                MITSUBA_EXACT
+                    .iter()
+                    .find(|(n, _)| *n == fit.model.root.bsdf.name())
+                    .map_or("", |(_, to)| to)
+            );
+            note_fit_warnings(&fit.warnings);
+        }
+    }
+    Ok(())
+}
+
+/// A table or XML carries no uncertainty: repeat what the fit could not establish.
+fn note_fit_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("note: the fit says: {w}");
+    }
+}
