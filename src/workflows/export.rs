@@ -138,7 +138,7 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
                 k,
                 resolver
                     .resolve(s)
-                    .map(|(prop, g)| prop.eval(g, s.wi, s.wo)),
+                    .map(|(prop, g)| prop.eval(g, s.wi(), s.wo())),
             )
         })
         .collect();
