@@ -102,11 +102,10 @@ pub fn lobe_children(inner: Node) -> Vec<Node> {
 
 /// Whether `node` is a retro lobe (it has an efficiency slot), e.g. the root of `M+mrm`.
 pub fn is_retro_lobe(node: &Node) -> bool {
-    node.children.len() == 2
-        && matches!(
-            node.children[1].bsdf.name(),
-            n if n == NO_FALLOFF.name || n == ENTRY.name
-        )
+    node.children.len() == 2 && {
+        let slot = node.children[1].bsdf.name();
+        slot == NO_FALLOFF.name || slot == ENTRY.name
+    }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).

@@ -11,19 +11,20 @@
 //! `+falloff`) and F on the back-vector:
 //! - `+mrm`: k_r (the paper's colour multiplier ρ) in [0, 10] times the exact dielectric
 //!   Fresnel F(c; η_r) (Walter 2007, Eq. 22), whose F0 is at most 0.44 for η_r ≤ 5;
-//! - `+mrm82`: k_r in [0, 1] times the "F82-tint" Fresnel of OpenPBR (Kutz, Hasan, Edmondson 2021) that the
-//!   paper fits to the 3M yellow tape (F0 = 0.19, F82 = 0):
+//! - `+mrm82`: k_r in [0, 1] times the "F82-tint" Fresnel of OpenPBR (Kutz, Hasan,
+//!   Edmondson 2021) that the paper fits to the 3M yellow tape (F0 = 0.19, F82 = 0):
 //!   F(μ) = S(μ) − μ(1 − μ)⁶ (1 − F82) S(μ̄) / (μ̄ (1 − μ̄)⁶), S(μ) = F0 + (1 − F0)(1 − μ)⁵,
 //!   μ̄ = 1/7, clamped to [0, 1]: with F82 < 1 and a small F0 the formula dips below 0 for
 //!   μ slightly above μ̄ (e.g. −0.07 at μ = 0.2 for F0 = 0.19, F82 = 0).
 //!
 //! G2 is the **height-correlated** Smith masking-shadowing
-//! G2 = 1 / (1 + Λ(ωi) + Λ(ω̄o)) (Heitz 2014, Eq. 99), as in the paper's reference code,
-//! rather than the separable G1·G1 of `+retro`: it is the more accurate of the two for
-//! uncorrelated directions (Heitz 2014, §6: the separable form counts a microfacet hidden
-//! from both directions twice), and at the retro peak ωi and ω̄o are mirror images on
-//! opposite azimuths, which is where height correlation matters and direction correlation
-//! does not. The two differ only towards grazing angles (Λ ~ α² tan²θ / 4).
+//! G2 = 1 / (1 + Λ(ωi) + Λ(ω̄o)) (Heitz 2014, Eq. 99; the paper allows any reciprocal G2),
+//! rather than the separable G1·G1 of `+retro`: the separable form treats masking and
+//! shadowing as independent although both are likely for the same low-lying microfacets,
+//! so it overestimates the occlusion (Heitz 2014, §6); and at the retro peak ωi and ω̄o
+//! lie on opposite azimuths, where the correlation through height is what remains (the
+//! correlation through direction matters only when the two directions are close). The two
+//! differ only towards grazing angles (Λ ~ α² tan²θ / 4).
 //!
 //! Properties (checked by tests/physics_brdf.rs): reciprocal (ωi·b = ω̄o·b, and swapping ωi
 //! and ωo mirrors b, which an isotropic D does not see; the paper's §3.1); the lobe's
