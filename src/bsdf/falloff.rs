@@ -54,7 +54,7 @@ const NO_FALLOFF: Entry = Entry::suffix(
     Some(Kind::Brdf),
     InCatalogue::No,
     "a retro lobe's efficiency slot without +falloff (E = 1)",
-    |inner| Ok(inner),
+    |_| Err("the efficiency slot is not a spec suffix".into()),
 );
 
 impl Bsdf for NoFalloff {
