@@ -233,6 +233,37 @@ fn hidden_retro_lobe_is_found() {
     );
 }
 
+/// retro_falloff: a retroreflective sheet whose retro peak falls with the entrance angle
+/// (efficiency (μi μo)^q, q = 1.3, on a back-vector lobe over a rough diffuse base), started
+/// from the same model without the efficiency. Identifiable because the retro peak is
+/// sampled (1–4° from it) at five incidences from 5° to 65°, over which μi^(2q) falls
+/// 25-fold.
+#[test]
+fn hidden_retro_falloff_is_found() {
+    let rows = brdf_rows(
+        &[5.0, 20.0, 35.0, 50.0, 65.0],
+        &steps(-81.0, 81.0, 9.0),
+        30.0,
+        &[],
+        &[-4.0, -2.0, -1.0, 1.0, 2.0, 4.0],
+    );
+    let data = synth(
+        "eon+retro+falloff",
+        "rho=0.36:0.47:0.28,r=0.4,kr=0.8,alpha_r=0.07,q=1.3",
+        &rows,
+        (0.015, 1e-4),
+        4353,
+    );
+    let d = run("retro_falloff", &data, "eon+retro", 23);
+    assert_found(&d, Effect::RetroFalloff);
+    assert_eq!(d.steps[1].model, "eon+retro+falloff");
+    assert!(
+        d.steps[0].evidence.contains("retro direction"),
+        "{}",
+        d.steps[0].evidence
+    );
+}
+
 /// grazing_decay: dark micrograins over a bright Oren–Nayar base (dmg). Identifiable
 /// because θo reaches 86° at every incidence, where the grains hide the base.
 #[test]

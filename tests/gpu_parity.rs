@@ -81,6 +81,7 @@ fn all_specs() -> Vec<(Kind, String)> {
     }
     // Nested combinations beyond one suffix on a core model.
     v.push((Kind::Brdf, "rmg(ggx)+retro".into()));
+    v.push((Kind::Brdf, "fa(vmf)+mrm82+falloff".into()));
     v.push((Kind::Btdf, "btdf(gtr)+scale+diffuse".into()));
     v
 }
@@ -178,7 +179,7 @@ fn every_model_matches_the_cpu_reference() {
 
 /// Sharp lobes at α = 0.002 on their peaks: GGX reflection (`ggx`, the lobe of
 /// `fa(lambert)`) within 0.05° of the mirror direction and exactly on it, the `+retro`
-/// lobe within 0.05° of ωo = ωi and exactly on it. The f32 GGX must be written without
+/// and MRM lobes (with and without `+falloff`) within 0.05° of ωo = ωi and exactly on it. The f32 GGX must be written without
 /// the cos²θh(α² − 1) + 1 cancellation (it alone costs up to 5 % there). Bound, per value:
 /// |gpu − cpu| ≤ PEAK_REL · |cpu| with PEAK_REL = REL = 2e-3 (purely relative: every value
 /// here is on a lobe); NaN never passes.
@@ -194,6 +195,16 @@ fn small_alpha_peaks_match_the_cpu_reference() {
             false,
         ),
         ("lambert+retro", "rho=0.5,kr=0.3,alpha_r=0.002", true),
+        (
+            "lambert+mrm82+falloff",
+            "rho=0.5,kr=0.7,f0=0.2,alpha_r=0.002,f82=0.3,q=2",
+            true,
+        ),
+        (
+            "lambert+mrm",
+            "rho=0.5,kr=0.3,alpha_r=0.002,eta_r=2.5",
+            true,
+        ),
     ];
     // Offsets (Δθo, Δφo) in degrees from the peak: exactly on it, then within 0.05°.
     let offsets = [

@@ -45,6 +45,8 @@ models! {
     rmg => [ENTRY],
     fa => [ENTRY],
     retro => [ENTRY],
+    mrm => [ENTRY, F82_ENTRY],
+    falloff => [ENTRY],
     btdf => [ENTRY, SCALE_ENTRY, ABSORB_ENTRY, DIFFUSE_ENTRY],
     peraxis => [ENTRY],
 }

@@ -198,13 +198,40 @@ pub fn catalogue(kind: Kind) -> Vec<String> {
 pub fn every_spec(kind: Kind) -> Vec<String> {
     let mut out = catalogue_for(kind, 2);
     let cores: Vec<String> = out.iter().filter(|s| !s.contains('+')).cloned().collect();
-    for e in REGISTRY.iter().filter(|e| e.catalogue == InCatalogue::No) {
-        if !e.kind.is_none_or(|k| k == kind) {
-            continue;
-        }
+    let extra: Vec<&Entry> = REGISTRY
+        .iter()
+        .copied()
+        .filter(|e| e.catalogue == InCatalogue::No && e.kind.is_none_or(|k| k == kind))
+        .collect();
+    let builds = |spec: &str| Ast::parse(spec).is_ok_and(|a| build(&a).is_ok());
+    for e in &extra {
         match e.build {
             Builder::Leaf(_) | Builder::Layer(_) | Builder::Term(_) => out.push(e.name.to_string()),
-            Builder::Suffix(_) => out.extend(cores.iter().map(|c| format!("{c}+{}", e.name))),
+            Builder::Suffix(_) => {
+                let on_cores: Vec<String> = cores
+                    .iter()
+                    .map(|c| format!("{c}+{}", e.name))
+                    .filter(|s| builds(s))
+                    .collect();
+                if !on_cores.is_empty() {
+                    out.extend(on_cores);
+                    continue;
+                }
+                // A suffix that only follows another one (`+falloff` scales the retro lobe
+                // before it): after each suffix it accepts, on the first core model (the
+                // suffix's code does not depend on the core).
+                for t in extra
+                    .iter()
+                    .filter(|t| matches!(t.build, Builder::Suffix(_)))
+                {
+                    if let Some(c) = cores.iter().find(|c| builds(&format!("{c}+{}", t.name))) {
+                        let s = format!("{c}+{}+{}", t.name, e.name);
+                        if builds(&s) {
+                            out.push(s);
+                        }
+                    }
+                }
+            }
         }
     }
     out.dedup();

@@ -1,9 +1,11 @@
 //! `M+retro`: adds a retroreflective lobe to any BRDF M (docs/models.md), the "back-vector"
 //! lobe of Belcour et al. 2014: k_r · D(h̄) · G1(ωi) G1(ωo) / (4 μi μo) with GGX D and Smith
 //! G on h̄ = normalize(ωi + ω̄o), ω̄o = (−o_x, −o_y, o_z) ([`super::microfacet::Ggx`]). It
-//! peaks at ωo = ωi.
+//! peaks at ωo = ωi. Like every retro lobe it multiplies its value by its efficiency slot
+//! (`+falloff`, [`super::falloff`]): f = f_M + E · lobe, E = 1 without `+falloff`.
 //! Twin: `shaders/bsdf/retro.wgsl`.
 
+use super::falloff;
 use super::microfacet::{reflection, single_wgsl, Ggx};
 use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
@@ -34,10 +36,11 @@ impl Bsdf for Retro {
         ]
     }
     fn child_roles(&self) -> &'static [&'static str] {
-        &[""]
+        // The wrapped model M and the efficiency slot, both unprefixed.
+        &["", ""]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        children[0] + retro_lobe(p[0], p[1], wi, wo)
+        children[0] + children[1] * retro_lobe(p[0], p[1], wi, wo)
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("retro", include_str!("../../shaders/bsdf/retro.wgsl"))
@@ -60,5 +63,11 @@ pub fn build(inner: Node) -> Result<Node, String> {
     if inner.bsdf.name() == "retro" {
         return Err("+retro given twice".into());
     }
-    Ok(Node::with(Retro, vec![inner]))
+    if falloff::is_retro_lobe(&inner) {
+        return Err(format!(
+            "+retro after +{}: a model takes one retro lobe",
+            inner.bsdf.name()
+        ));
+    }
+    Ok(Node::with(Retro, falloff::lobe_children(inner)))
 }

@@ -22,11 +22,18 @@ pub fn run() -> Result<()> {
         if e.catalogue == bsdf::InCatalogue::No {
             // Models outside the default sweep still appear among the examples.
             match e.role {
-                bsdf::Role::Suffix => examples.push(format!(
-                    "{}+{}",
-                    bsdf::catalogue(e.kind.unwrap_or(Kind::Brdf))[0],
-                    e.name
-                )),
+                // The first spec the registry derives with it (`lambert+retro`, or
+                // `lambert+retro+falloff` for a suffix that follows another).
+                bsdf::Role::Suffix => {
+                    let tail = format!("+{}", e.name);
+                    let kind = e.kind.unwrap_or(Kind::Brdf);
+                    examples.push(
+                        bsdf::every_spec(kind)
+                            .into_iter()
+                            .find(|s| s.ends_with(&tail))
+                            .unwrap_or_else(|| format!("{}{tail}", bsdf::catalogue(kind)[0])),
+                    )
+                }
                 _ => examples.push(e.name.to_string()),
             }
         }

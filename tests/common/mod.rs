@@ -235,3 +235,32 @@ pub fn synth_geometry(
         .unwrap_or_else(|e| panic!("geometry {geometry}: {e}"));
     synth_rows(spec, params, &rows, wavelengths, noise, seed)
 }
+
+/// Rows (θi, φi, θo, φo in degrees) shaped like the measurements of retroreflective tapes
+/// (the 3M tapes of Belcour et al. 2014): incidences θi = 15, 30, 60° in the plane φi = 0,
+/// outgoing directions over the hemisphere (θo = 2.5…82.5° in 5° steps, φo every 15°), and
+/// dense points within 4° of the retro direction (on and off the plane of incidence) and of
+/// the mirror direction, where the lobes are narrow.
+pub fn tape_rows() -> Vec<[f64; 4]> {
+    let mut rows = Vec::new();
+    for ti in [15.0, 30.0, 60.0] {
+        for k in 0..17 {
+            let to = 2.5 + 5.0 * k as f64;
+            for j in 0..24 {
+                rows.push([ti, 0.0, to, 15.0 * j as f64]);
+            }
+        }
+        for d in [
+            -4.0, -3.0, -2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0,
+        ] {
+            for po in [0.0, 2.0, 358.0, 5.0, 355.0] {
+                rows.push([ti, 0.0, ti + d, po]);
+            }
+            if d != 0.0 {
+                rows.push([ti, 0.0, ti + d, 180.0]);
+            }
+        }
+        rows.push([ti, 0.0, ti, 180.0]);
+    }
+    rows
+}

@@ -11,6 +11,7 @@ pub enum Effect {
     SpecularLobe,
     Backscatter,
     RetroLobe,
+    RetroFalloff,
     GrazingDecay,
     Scale,
     Absorption,
@@ -199,6 +200,9 @@ pub const EFFECTS: &[EffectEntry] = &[
             true,
         )],
     },
+    // The MRM lobe with the F82-tint Fresnel (docs/models.md): k_r = 0 (the declared
+    // neutral) is the current model, and F0 = F82 = 1 gives the Fresnel-free back-vector
+    // lobe of `+retro` up to the height-correlated G2.
     EffectEntry {
         effect: Effect::RetroLobe,
         name: "retro_lobe",
@@ -206,7 +210,23 @@ pub const EFFECTS: &[EffectEntry] = &[
         rules: &[rule(
             Kind::Brdf,
             Make::Suffix {
-                name: "retro",
+                name: "mrm82",
+                min_planes: 1,
+            },
+            true,
+        )],
+    },
+    // The entrance-angle efficiency (μi μo)^q of the retro lobe already in the model (q = 0
+    // is the current model). Only a spec with a retro lobe (`+retro`, `+mrm`, `+mrm82`)
+    // accepts `+falloff`; for any other the candidate does not parse and is not generated.
+    EffectEntry {
+        effect: Effect::RetroFalloff,
+        name: "retro_falloff",
+        signature: "the retro peak too bright at large θi and too dark at small θi",
+        rules: &[rule(
+            Kind::Brdf,
+            Make::Suffix {
+                name: "falloff",
                 min_planes: 1,
             },
             true,
@@ -289,6 +309,7 @@ mod tests {
                 "diffuse_floor",
                 "grazing_decay",
                 "long_tail",
+                "retro_falloff",
                 "retro_lobe",
                 "scale",
                 "specular_lobe"

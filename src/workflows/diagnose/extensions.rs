@@ -49,7 +49,9 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
 /// - `specular_lobe`: a diffuse base B → `fa(B)`;
 /// - `diffuse_floor`: `ggx` → `fa(lambert)` (a Lambertian term under the lobe);
 /// - `grazing_decay`: a base B → `dmg(B)`, `rmg(B)`;
-/// - `retro_lobe`: M → `M+retro`.
+/// - `retro_lobe`: M → `M+mrm82` (the MRM lobe);
+/// - `retro_falloff`: a model with a retro lobe, `M+mrm82` → `M+mrm82+falloff` (only such
+///   specs accept `+falloff`; the others' candidates do not parse and are dropped).
 ///
 /// BTDF, `btdf(N)` with suffixes: `scale` → `+scale`, `absorption` → `+absorb`,
 /// `diffuse_floor` → `+diffuse`, `anisotropy` → `+peraxis` (only with ≥ 2 φ planes),
@@ -187,7 +189,7 @@ mod tests {
         let two = dataset(Kind::Btdf, &geometry("ptb1"), 1);
         // The candidates in the order of the catalogue (the order of candidates.json).
         type Want = &'static [(&'static str, Effect)];
-        let cases: [(&str, &Dataset, Want); 6] = [
+        let cases: [(&str, &Dataset, Want); 7] = [
             (
                 "lambert",
                 &brdf,
@@ -198,7 +200,7 @@ mod tests {
                     ("fa(lambert)", SpecularLobe),
                     ("dmg(lambert)", GrazingDecay),
                     ("rmg(lambert)", GrazingDecay),
-                    ("lambert+retro", RetroLobe),
+                    ("lambert+mrm82", RetroLobe),
                 ],
             ),
             (
@@ -208,6 +210,17 @@ mod tests {
                     ("fa(on)+retro", Backscatter),
                     ("fa(eon)+retro", Backscatter),
                     ("fa(vmf)+retro", Backscatter),
+                    ("fa(lambert)+retro+falloff", RetroFalloff),
+                ],
+            ),
+            (
+                "eon+mrm82",
+                &brdf,
+                &[
+                    ("fa(eon)+mrm82", SpecularLobe),
+                    ("dmg(eon)+mrm82", GrazingDecay),
+                    ("rmg(eon)+mrm82", GrazingDecay),
+                    ("eon+mrm82+falloff", RetroFalloff),
                 ],
             ),
             (
@@ -217,7 +230,7 @@ mod tests {
                     ("fa(lambert)", DiffuseFloor),
                     ("dmg(ggx)", GrazingDecay),
                     ("rmg(ggx)", GrazingDecay),
-                    ("ggx+retro", RetroLobe),
+                    ("ggx+mrm82", RetroLobe),
                 ],
             ),
             (
@@ -293,6 +306,8 @@ mod tests {
             ("vmf", &brdf),
             ("ggx", &brdf),
             ("fa(lambert)", &brdf),
+            ("fa(lambert)+mrm82", &brdf),
+            ("lambert+retro", &brdf),
             ("dmg(lambert)", &brdf),
             ("btdf(tr)", &btdf),
             ("btdf(beckmann)+scale", &btdf),
