@@ -207,14 +207,27 @@ pub const EFFECTS: &[EffectEntry] = &[
         effect: Effect::RetroLobe,
         name: "retro_lobe",
         signature: "a sharp excess within a few degrees of ωo = ωi",
-        rules: &[rule(
-            Kind::Brdf,
-            Make::Suffix {
-                name: "mrm82",
-                min_planes: 1,
-            },
-            true,
-        )],
+        // Both lobes are offered: on real tapes `+mrm82`'s k_r and F0 trade off and k_r can
+        // end on its bound 1, and such a step is not adopted; `+retro` (k_r up to 10, no
+        // Fresnel) then carries the effect, and the residuals choose between them.
+        rules: &[
+            rule(
+                Kind::Brdf,
+                Make::Suffix {
+                    name: "retro",
+                    min_planes: 1,
+                },
+                true,
+            ),
+            rule(
+                Kind::Brdf,
+                Make::Suffix {
+                    name: "mrm82",
+                    min_planes: 1,
+                },
+                true,
+            ),
+        ],
     },
     // The entrance-angle efficiency (μi μo)^q of the retro lobe already in the model (q = 0
     // is the current model). Only a spec with a retro lobe (`+retro`, `+mrm`, `+mrm82`)
