@@ -41,10 +41,20 @@ fn every_generated_module_validates() {
 fn eval_model_calls_nested_nodes_with_their_offsets() {
     let m = Model::parse("fa(eon)+retro", 3).unwrap();
     let src = bsdfit::engine::wgsl::eval_model_source(&m);
-    // retro (offset 0: kr, alpha_r) wraps fa (offset 2: alpha, eta, ks) over eon (offset 5).
+    // retro (offset 0: kr, alpha_r) wraps fa (offset 2: alpha, eta, ks) over eon (offset 5:
+    // rho, r), and multiplies its lobe by its efficiency slot (E = 1, no parameter).
     assert!(src.contains("eon_eval(b + 5u, wi, wo)"), "{src}");
     assert!(src.contains("fa_eval(b + 2u, wi, wo, v0)"), "{src}");
-    assert!(src.contains("retro_eval(b + 0u, wi, wo, v1)"), "{src}");
+    assert!(src.contains("falloff_none_eval(b + 7u, wi, wo)"), "{src}");
+    assert!(src.contains("retro_eval(b + 0u, wi, wo, v1, v2)"), "{src}");
+    // With +falloff the slot holds the efficiency, whose q follows the model's parameters:
+    // mrm82 (0: kr, alpha_r, f0, f82), fa (4), eon (7), then q at 9.
+    let m = Model::parse("fa(eon)+mrm82+falloff", 3).unwrap();
+    let src = bsdfit::engine::wgsl::eval_model_source(&m);
+    assert!(src.contains("eon_eval(b + 7u, wi, wo)"), "{src}");
+    assert!(src.contains("fa_eval(b + 4u, wi, wo, v0)"), "{src}");
+    assert!(src.contains("falloff_eval(b + 9u, wi, wo)"), "{src}");
+    assert!(src.contains("mrm82_eval(b + 0u, wi, wo, v1, v2)"), "{src}");
 }
 
 /// The WGSL twins read their parameters only through the accessors generated from the Rust
