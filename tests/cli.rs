@@ -5,51 +5,8 @@ mod common;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn bsdfit(args: &[&str]) -> Output {
-    Command::new(common::bin())
-        .args(args)
-        .output()
-        .expect("run bsdfit")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn assert_ok(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed ({:?})\nstdout:\n{}\nstderr:\n{}",
-        out.status.code(),
-        text(&out.stdout),
-        text(&out.stderr)
-    );
-}
-
-/// The command must fail with exit code 1, no panic, and a message containing every needle.
-fn assert_clear_error(out: &Output, needles: &[&str]) -> String {
-    let err = text(&out.stderr);
-    assert_eq!(
-        out.status.code(),
-        Some(1),
-        "expected exit code 1, got {:?}; stderr:\n{err}",
-        out.status.code()
-    );
-    assert!(
-        !err.contains("panicked"),
-        "panic instead of an error:\n{err}"
-    );
-    for n in needles {
-        assert!(err.contains(n), "expected '{n}' in stderr:\n{err}");
-    }
-    err
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
+use common::cli::{assert_clear_error, assert_ok, bsdfit, p, text};
 
 /// An Oren–Nayar dataset (σ = 0.7 rad, 3 channels, inplane10, 1.5% noise) in `dir`.
 fn synth_on(dir: &Path) -> PathBuf {

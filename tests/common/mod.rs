@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests: seeded randomness, directions, quadrature.
 #![allow(dead_code)]
 
+pub mod cli;
+
 use bsdfit::bsdf::Model;
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
