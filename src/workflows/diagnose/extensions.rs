@@ -49,7 +49,7 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
 /// - `specular_lobe`: a diffuse base B → `fa(B)`;
 /// - `diffuse_floor`: `ggx` → `fa(lambert)` (a Lambertian term under the lobe);
 /// - `grazing_decay`: a base B → `dmg(B)`, `rmg(B)`;
-/// - `retro_lobe`: M → `M+mrm82` (the MRM lobe);
+/// - `retro_lobe`: M → `M+retro` (back-vector GGX) and `M+mrm82` (the MRM lobe);
 /// - `retro_falloff`: a model with a retro lobe, `M+mrm82` → `M+mrm82+falloff` (only such
 ///   specs accept `+falloff`; the others' candidates do not parse and are dropped).
 ///
@@ -200,6 +200,7 @@ mod tests {
                     ("fa(lambert)", SpecularLobe),
                     ("dmg(lambert)", GrazingDecay),
                     ("rmg(lambert)", GrazingDecay),
+                    ("lambert+retro", RetroLobe),
                     ("lambert+mrm82", RetroLobe),
                 ],
             ),
@@ -230,6 +231,7 @@ mod tests {
                     ("fa(lambert)", DiffuseFloor),
                     ("dmg(ggx)", GrazingDecay),
                     ("rmg(ggx)", GrazingDecay),
+                    ("ggx+retro", RetroLobe),
                     ("ggx+mrm82", RetroLobe),
                 ],
             ),
