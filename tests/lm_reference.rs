@@ -90,7 +90,7 @@ fn compare(name: &str, dim: usize, start: &[f64], f: &dyn Fn(&[f64]) -> Vec<f64>
         fd_step: 1e-7,
         ..Default::default()
     };
-    let out = minimize(&mut ours, &[start.to_vec()], &opts, &|s| s, &mut |_| {}).unwrap();
+    let out = minimize(&mut ours, &[start.to_vec()], &opts, &|_, s| s, &mut |_| {}).unwrap();
     let (reference, report) = LevenbergMarquardt::new().minimize(Reference {
         x: DVector::from_column_slice(start),
         f,
@@ -171,7 +171,8 @@ fn oren_nayar_brdf_fit() {
         model: &model,
         space: &space,
         eval: eval.as_mut(),
-        loss_terms: Some(loss.terms(&data)),
+        loss_terms: vec![loss.terms(&data)],
+        start_problem: vec![],
     });
     let f = |u: &[f64]| obj.borrow_mut().residuals(u).unwrap();
     compare("oren-nayar", model.dim, &[0.5, 0.5, 0.5, 0.5], &f);

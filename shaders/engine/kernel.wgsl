@@ -19,7 +19,7 @@ struct Sample {
 
 struct Dims {
     n_candidates: u32,
-    n_samples: u32,
+    n_problems: u32,
     dim: u32,
     groups_x: u32,
 }
@@ -28,12 +28,17 @@ struct Dims {
 @group(0) @binding(1) var<storage, read> samples: array<Sample>;
 // slots[g * S + j]: index in a candidate's flat vector of scalar j for group g (a channel,
 // or a (plane, channel) pair under `+peraxis`; C counts the groups);
-// then slots[S * C + g] = first sample of group g, slots[S * C + C] = sample count.
+// then per problem q (several independent fits share a dispatch, their samples one after
+// the other): slots[S * C + q * (C + 1) + g] = first sample of group g of problem q, and
+// slots[S * C + q * (C + 1) + C] = one past its last sample.
 @group(0) @binding(2) var<storage, read> slots: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
 // Lookup table of models that need one (GG's Smith Λ); a single zero otherwise.
 @group(0) @binding(5) var<storage, read> LUT: array<f32>;
+// owners[2c] = the problem of candidate c; owners[2c + 1] = where its row of model values
+// starts in `out` (values entry point only).
+@group(0) @binding(6) var<storage, read> owners: array<u32>;
 
 var<workgroup> partial: array<f32, CL * SL>;
 
@@ -54,6 +59,11 @@ fn slice(lid: vec3<u32>) -> u32 {
     return lid.y;
 }
 
+// Where problem q's sample ranges start in `slots`.
+fn ranges(q: u32) -> u32 {
+    return S * C + q * (C + 1u);
+}
+
 fn candidate(wg: vec3<u32>, lid: vec3<u32>) -> u32 {
     return (wg.x + wg.y * dims.groups_x) * CL + lid.x;
 }
@@ -63,11 +73,13 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
     let c = candidate(wg, lid);
     let live = c < dims.n_candidates;
     var acc = 0.0;
+    var r = 0u;
     if (live) {
+        r = ranges(owners[2u * c]);
         load_params(c);
         for (var ch = 0u; ch < C; ch = ch + 1u) {
-            let end = slots[S * C + ch + 1u];
-            for (var k = slots[S * C + ch] + slice(lid); k < end; k = k + SL) {
+            let end = slots[r + ch + 1u];
+            for (var k = slots[r + ch] + slice(lid); k < end; k = k + SL) {
                 let s = samples[k];
                 let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
                 acc = acc + loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
@@ -86,7 +98,7 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
         acc = partial[lid.x];
     }
     if (live && lid.y == 0u) {
-        out[c] = loss_finish(acc, f32(dims.n_samples));
+        out[c] = loss_finish(acc, f32(slots[r + C] - slots[r]));
     }
 }
 
@@ -96,12 +108,14 @@ fn values(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
     if (c >= dims.n_candidates) {
         return;
     }
+    let r = ranges(owners[2u * c]);
+    let row = owners[2u * c + 1u];
     load_params(c);
     for (var ch = 0u; ch < C; ch = ch + 1u) {
-        let end = slots[S * C + ch + 1u];
-        for (var k = slots[S * C + ch] + slice(lid); k < end; k = k + SL) {
+        let end = slots[r + ch + 1u];
+        for (var k = slots[r + ch] + slice(lid); k < end; k = k + SL) {
             let s = samples[k];
-            out[c * dims.n_samples + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
         }
     }
 }

@@ -22,31 +22,46 @@ impl Backend for CpuBackend {
     fn id(&self) -> &'static str {
         "cpu"
     }
-    fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
+    fn prepare_many<'a>(
+        &'a self,
+        problems: &[Problem<'a>],
+    ) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
+        super::check_shared(problems)?;
         Ok(Box::new(CpuEvaluator {
-            problem,
-            // Directions once per fit, not once per evaluation (a sample stores angles).
-            directions: problem
-                .data
-                .samples
+            parts: problems
                 .iter()
-                .map(|s| (s.wi(), s.wo()))
+                .map(|&problem| Part {
+                    problem,
+                    // Directions once per fit, not once per evaluation (a sample stores
+                    // angles).
+                    directions: problem
+                        .data
+                        .samples
+                        .iter()
+                        .map(|s| (s.wi(), s.wo()))
+                        .collect(),
+                    terms: problem.loss.terms(problem.data),
+                })
                 .collect(),
-            terms: problem.loss.terms(problem.data),
             evaluations: AtomicU64::new(0),
         }))
     }
 }
 
-pub struct CpuEvaluator<'a> {
+/// One problem of a batch, with what its evaluations reuse.
+struct Part<'a> {
     problem: Problem<'a>,
     /// (ωi, ωo) of every sample.
     directions: Vec<(glam::DVec3, glam::DVec3)>,
     terms: LossTerms,
+}
+
+pub struct CpuEvaluator<'a> {
+    parts: Vec<Part<'a>>,
     evaluations: AtomicU64,
 }
 
-impl CpuEvaluator<'_> {
+impl Part<'_> {
     /// Calls `f(k, y′_k)` for every sample of one candidate.
     fn for_each_value(&self, flat: &[f64], mut f: impl FnMut(usize, f64)) {
         let model = self.problem.model;
@@ -63,65 +78,93 @@ impl CpuEvaluator<'_> {
             f(k, model.root.eval(&views[model.group_of(s)], wi, wo));
         }
     }
+}
 
-    fn check(&self, params: &[f64]) -> anyhow::Result<usize> {
-        let p = self.problem.model.dim;
+impl CpuEvaluator<'_> {
+    fn check(&self, owners: &[usize], params: &[f64]) -> anyhow::Result<()> {
+        let p = self.dim();
         anyhow::ensure!(
-            p > 0 && params.len().is_multiple_of(p),
-            "parameter batch of {} values is not a multiple of P = {p}",
-            params.len()
+            p > 0 && params.len() == owners.len() * p,
+            "parameter batch of {} values is not {} candidates of P = {p}",
+            params.len(),
+            owners.len()
         );
-        Ok(params.len() / p)
+        anyhow::ensure!(
+            owners.iter().all(|&q| q < self.parts.len()),
+            "a candidate names a problem outside the batch's {}",
+            self.parts.len()
+        );
+        Ok(())
+    }
+
+    fn count(&self, owners: &[usize]) {
+        let n: usize = owners.iter().map(|&q| self.parts[q].terms.y.len()).sum();
+        self.evaluations.fetch_add(n as u64, Ordering::Relaxed);
     }
 }
 
 impl Evaluator for CpuEvaluator<'_> {
     fn dim(&self) -> usize {
-        self.problem.model.dim
+        self.parts[0].problem.model.dim
     }
 
-    fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {
-        let n = self.check(params)?;
+    fn problems(&self) -> usize {
+        self.parts.len()
+    }
+
+    fn samples_of(&self, q: usize) -> usize {
+        self.parts[q].terms.y.len()
+    }
+
+    fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
+        self.check(owners, params)?;
         let p = self.dim();
         let out: Vec<f64> = params
             .par_chunks(p)
-            .map(|flat| {
+            .zip(owners.par_iter())
+            .map(|(flat, &q)| {
+                let part = &self.parts[q];
                 let mut sum = 0.0;
-                self.for_each_value(flat, |k, v| sum += self.terms.term_at(k, v));
-                self.terms.finish_sum(sum)
+                part.for_each_value(flat, |k, v| sum += part.terms.term_at(k, v));
+                part.terms.finish_sum(sum)
             })
             .collect();
-        self.evaluations
-            .fetch_add((n * self.problem.data.len()) as u64, Ordering::Relaxed);
+        self.count(owners);
         Ok(out)
     }
 
-    fn values(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {
-        let n = self.check(params)?;
+    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
+        self.check(owners, params)?;
         let p = self.dim();
-        let k = self.problem.data.len();
-        let mut out = vec![0.0; n * k];
-        out.par_chunks_mut(k)
-            .zip(params.par_chunks(p))
-            .for_each(|(row, flat)| {
-                self.for_each_value(flat, |j, v| row[j] = v);
-            });
-        self.evaluations
-            .fetch_add((n * k) as u64, Ordering::Relaxed);
-        Ok(out)
+        let rows: Vec<Vec<f64>> = params
+            .par_chunks(p)
+            .zip(owners.par_iter())
+            .map(|(flat, &q)| {
+                let part = &self.parts[q];
+                let mut row = vec![0.0; part.terms.y.len()];
+                part.for_each_value(flat, |j, v| row[j] = v);
+                row
+            })
+            .collect();
+        self.count(owners);
+        Ok(rows.concat())
     }
 
-    fn normal_equations(
+    fn normal_equations_of(
         &mut self,
+        owners: &[usize],
         params: &[f64],
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
-        let values = self.values(params)?;
-        Ok(super::normal_equations_from_values(
-            &values,
-            &self.terms,
-            steps,
-            self.problem.model.dim,
+        let p = self.dim();
+        let expanded: Vec<usize> = owners
+            .iter()
+            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
+            .collect();
+        let values = self.values_of(&expanded, params)?;
+        let terms: Vec<&LossTerms> = self.parts.iter().map(|x| &x.terms).collect();
+        Ok(super::normal_equations_of_values(
+            &values, &terms, owners, steps, p,
         ))
     }
 

@@ -6,7 +6,7 @@
 
 use super::wgsl::{compose, validate, Shape};
 use super::{Backend, Evaluator, Problem};
-use crate::engine::loss::{Finish, Term};
+use crate::engine::loss::{Finish, LossTerms, Term};
 use crate::optim::NormalEquations;
 use anyhow::{anyhow, bail, Context, Result};
 use bytemuck::{Pod, Zeroable};
@@ -26,7 +26,7 @@ struct GpuSample {
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct Dims {
     n_candidates: u32,
-    n_samples: u32,
+    n_problems: u32,
     dim: u32,
     groups_x: u32,
 }
@@ -126,6 +126,7 @@ impl GpuBackend {
                 storage(3, true),
                 storage(4, false),
                 storage(5, true),
+                storage(6, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -253,17 +254,40 @@ impl Backend for GpuBackend {
     fn unit_roundoff(&self) -> f64 {
         f32::EPSILON as f64 / 2.0
     }
-    fn prepare<'a>(&'a self, problem: Problem<'a>) -> Result<Box<dyn Evaluator + 'a>> {
-        let terms = problem.loss.terms(problem.data);
-        let pipes = self.pipelines(&problem, terms.term, terms.finish)?;
-        let model = problem.model;
-        // Sort by channel (stable) so the kernel's channel loop is outermost; the original
-        // index travels with each sample for the `values` output.
-        let mut order: Vec<usize> = (0..problem.data.len()).collect();
-        order.sort_by_key(|&k| model.group_of(&problem.data.samples[k]));
-        let samples: Vec<GpuSample> = order
-            .iter()
-            .map(|&k| {
+    fn max_batch_samples(&self) -> usize {
+        (self.max_binding() / std::mem::size_of::<GpuSample>() as u64) as usize
+    }
+    fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
+        super::check_shared(problems)?;
+        let first = problems[0];
+        let model = first.model;
+        let total: usize = problems.iter().map(|p| p.data.len()).sum();
+        anyhow::ensure!(
+            total <= self.max_batch_samples(),
+            "{total} samples in one batch exceed the GPU binding limit of {} (split the problems)",
+            self.max_batch_samples()
+        );
+        let terms: Vec<LossTerms> = problems.iter().map(|p| p.loss.terms(p.data)).collect();
+        let pipes = self.pipelines(&first, terms[0].term, terms[0].finish)?;
+        let groups = model.groups();
+        let mut slots = Vec::with_capacity(model.scalar_count() * groups + (groups + 1) * problems.len());
+        for g in 0..groups {
+            for j in 0..model.scalar_count() {
+                slots.push(model.slot(j, g) as u32);
+            }
+        }
+        let mut samples: Vec<GpuSample> = Vec::with_capacity(total);
+        for (problem, terms) in problems.iter().zip(&terms) {
+            // Sort by channel (stable) so the kernel's channel loop is outermost; the
+            // original index travels with each sample for the `values` output.
+            let group: Vec<usize> = problem.data.samples.iter().map(|s| model.group_of(s)).collect();
+            let mut order: Vec<usize> = (0..problem.data.len()).collect();
+            order.sort_by_key(|&k| group[k]);
+            let base = samples.len() as u32;
+            for g in 0..=groups {
+                slots.push(base + group.iter().filter(|&&x| x < g).count() as u32);
+            }
+            samples.extend(order.iter().map(|&k| {
                 let s = &problem.data.samples[k];
                 let (wi, wo) = (s.wi(), s.wo());
                 GpuSample {
@@ -272,28 +296,11 @@ impl Backend for GpuBackend {
                     ext: [
                         s.value as f32,
                         terms.transform(k, s.value) as f32,
-                        model.group_of(s) as f32,
+                        group[k] as f32,
                         f32::from_bits(k as u32),
                     ],
                 }
-            })
-            .collect();
-        let groups = model.groups();
-        let mut slots = Vec::with_capacity(model.scalar_count() * groups + groups + 1);
-        for g in 0..groups {
-            for j in 0..model.scalar_count() {
-                slots.push(model.slot(j, g) as u32);
-            }
-        }
-        for g in 0..=groups {
-            slots.push(
-                problem
-                    .data
-                    .samples
-                    .iter()
-                    .filter(|s| model.group_of(s) < g)
-                    .count() as u32,
-            );
+            }));
         }
         let lut: Vec<f32> = model
             .nodes()
@@ -321,7 +328,8 @@ impl Backend for GpuBackend {
         self.check_errors()?;
         Ok(Box::new(GpuEvaluator {
             gpu: self,
-            problem,
+            model,
+            terms,
             pipes,
             samples_buf,
             slots_buf,
@@ -336,6 +344,7 @@ impl Backend for GpuBackend {
 /// Buffers that depend on the batch size, grown on demand.
 struct IoBuffers {
     params: wgpu::Buffer,
+    owners: wgpu::Buffer,
     out: wgpu::Buffer,
     staging: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
@@ -345,7 +354,9 @@ struct IoBuffers {
 
 pub struct GpuEvaluator<'a> {
     gpu: &'a GpuBackend,
-    problem: Problem<'a>,
+    model: &'a crate::bsdf::Model,
+    /// Each problem's loss constants (its sample count is `y.len()`).
+    terms: Vec<LossTerms>,
     pipes: Arc<Pipelines>,
     samples_buf: wgpu::Buffer,
     slots_buf: wgpu::Buffer,
@@ -372,6 +383,13 @@ impl GpuEvaluator<'_> {
         let params = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("params"),
             size: pc,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        // Two u32 per candidate, and a candidate has at least one f32 parameter.
+        let owners = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("owners"),
+            size: 2 * pc,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -417,10 +435,15 @@ impl GpuEvaluator<'_> {
                     binding: 5,
                     resource: self.lut_buf.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: owners.as_entire_binding(),
+                },
             ],
         });
         self.io = Some(IoBuffers {
             params,
+            owners,
             out,
             staging,
             bind_group,
@@ -429,18 +452,19 @@ impl GpuEvaluator<'_> {
         });
     }
 
-    /// One submission: upload `host` as the parameter buffer, run `pipeline` over `m`
-    /// candidates, read back `out_len` floats (poisoned with NaN
-    /// beforehand, so anything the kernel fails to write reads back as NaN).
+    /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
+    /// output slot per candidate), run `pipeline` over `m` candidates, read back `out_len`
+    /// floats (poisoned with NaN beforehand, so anything the kernel fails to write reads
+    /// back as NaN).
     fn dispatch(
         &mut self,
         pipeline: &wgpu::ComputePipeline,
         host: &[f32],
+        owners: &[u32],
         m: usize,
         out_len: usize,
     ) -> Result<Vec<f32>> {
-        let p = self.problem.model.dim;
-        let k = self.problem.data.len();
+        let p = self.model.dim;
         let o_bytes = (out_len * 4) as u64;
         self.ensure_io((host.len() * 4) as u64, o_bytes);
         let io = self.io.as_ref().expect("io buffers allocated");
@@ -449,13 +473,14 @@ impl GpuEvaluator<'_> {
         let groups_y = total_groups.div_ceil(groups_x);
         let dims = Dims {
             n_candidates: m as u32,
-            n_samples: k as u32,
+            n_problems: self.terms.len() as u32,
             dim: p as u32,
             groups_x,
         };
         let q = &self.gpu.queue;
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
         q.write_buffer(&io.params, 0, bytemuck::cast_slice(host));
+        q.write_buffer(&io.owners, 0, bytemuck::cast_slice(owners));
         q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![f32::NAN; out_len]));
         let mut enc = self
             .gpu
@@ -497,62 +522,100 @@ impl GpuEvaluator<'_> {
         Ok(data)
     }
 
-    /// Run `pipeline` over the candidates in `params`, `per_candidate` outputs each.
-    fn run(&mut self, params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
-        let p = self.problem.model.dim;
+    /// Run `pipeline` over the candidates in `params` (problem `owners[i]` each): one
+    /// cost per candidate, or (`values_mode`) its problem's K model values. Batches larger
+    /// than a binding go in several submissions.
+    fn run(&mut self, owners: &[usize], params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
+        let p = self.model.dim;
         anyhow::ensure!(
-            p > 0 && params.len().is_multiple_of(p),
-            "parameter batch of {} values is not a multiple of P = {p}",
-            params.len()
+            p > 0 && params.len() == owners.len() * p,
+            "parameter batch of {} values is not {} candidates of P = {p}",
+            params.len(),
+            owners.len()
         );
-        let n = params.len() / p;
-        let k = self.problem.data.len();
-        let per = if values_mode { k } else { 1 };
-        let max = self.gpu.max_binding();
-        let per_cand_bytes = ((p.max(per)) * 4) as u64;
-        let chunk = ((max / per_cand_bytes) as usize)
-            .clamp(1, MAX_GROUPS_X as usize * MAX_GROUPS_X as usize);
-        let mut result = Vec::with_capacity(n * per);
-        for start in (0..n).step_by(chunk) {
-            let m = chunk.min(n - start);
-            let host: Vec<f32> = params[start * p..(start + m) * p]
+        anyhow::ensure!(
+            owners.iter().all(|&q| q < self.terms.len()),
+            "a candidate names a problem outside the batch's {}",
+            self.terms.len()
+        );
+        let n = owners.len();
+        let sizes: Vec<usize> = self.terms.iter().map(|t| t.y.len()).collect();
+        let per = |q: usize| if values_mode { sizes[q] } else { 1 };
+        let max = (self.gpu.max_binding() / 4) as usize;
+        let max_candidates = MAX_GROUPS_X as usize * MAX_GROUPS_X as usize;
+        let mut result = Vec::with_capacity(owners.iter().map(|&q| per(q)).sum());
+        let mut start = 0;
+        while start < n {
+            // The largest run of candidates whose parameters and outputs fit a binding.
+            let (mut end, mut outs) = (start, 0);
+            while end < n
+                && end - start < max_candidates
+                && (end - start + 1) * p.max(2) <= max
+                && outs + per(owners[end]) <= max
+            {
+                outs += per(owners[end]);
+                end += 1;
+            }
+            anyhow::ensure!(end > start, "one candidate's output exceeds a GPU binding");
+            let host: Vec<f32> = params[start * p..end * p]
                 .iter()
                 .map(|&v| v as f32)
                 .collect();
+            let mut ids = Vec::with_capacity(2 * (end - start));
+            let mut row = 0u32;
+            for &q in &owners[start..end] {
+                ids.push(q as u32);
+                ids.push(row);
+                row += per(q) as u32;
+            }
             let pipes = self.pipes.clone();
             let pipeline = if values_mode {
                 &pipes.values
             } else {
                 &pipes.costs
             };
-            let data = self.dispatch(pipeline, &host, m, m * per)?;
+            let data = self.dispatch(pipeline, &host, &ids, end - start, outs)?;
             result.extend(data.iter().map(|&v| v as f64));
+            start = end;
         }
-        self.evaluations += (n * k) as u64;
+        self.evaluations += owners.iter().map(|&q| self.terms[q].y.len() as u64).sum::<u64>();
         Ok(result)
     }
 }
 
 impl Evaluator for GpuEvaluator<'_> {
     fn dim(&self) -> usize {
-        self.problem.model.dim
+        self.model.dim
     }
-    fn costs(&mut self, params: &[f64]) -> Result<Vec<f64>> {
-        self.run(params, false)
+    fn problems(&self) -> usize {
+        self.terms.len()
     }
-    fn values(&mut self, params: &[f64]) -> Result<Vec<f64>> {
-        self.run(params, true)
+    fn samples_of(&self, q: usize) -> usize {
+        self.terms[q].y.len()
     }
-    fn normal_equations(&mut self, params: &[f64], steps: &[f64]) -> Result<Vec<NormalEquations>> {
+    fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> Result<Vec<f64>> {
+        self.run(owners, params, false)
+    }
+    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> Result<Vec<f64>> {
+        self.run(owners, params, true)
+    }
+    fn normal_equations_of(
+        &mut self,
+        owners: &[usize],
+        params: &[f64],
+        steps: &[f64],
+    ) -> Result<Vec<NormalEquations>> {
         // Model values of every candidate in one submission; the f64 reduction to JᵀJ is
-        // done on the host (a device-side reduction is future work, see the README).
-        let values = self.values(params)?;
-        let terms = self.problem.loss.terms(self.problem.data);
-        Ok(super::normal_equations_from_values(
-            &values,
-            &terms,
-            steps,
-            self.problem.model.dim,
+        // done on the host.
+        let p = self.model.dim;
+        let expanded: Vec<usize> = owners
+            .iter()
+            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
+            .collect();
+        let values = self.values_of(&expanded, params)?;
+        let terms: Vec<&LossTerms> = self.terms.iter().collect();
+        Ok(super::normal_equations_of_values(
+            &values, &terms, owners, steps, p,
         ))
     }
 

@@ -2,7 +2,8 @@
 //!
 //! One trait, two implementations: [`cpu::CpuBackend`] (plain Rust, f64, rayon — the
 //! reference) and [`gpu::GpuBackend`] (wgpu compute, f32). Optimizers never see a backend:
-//! they see an [`Evaluator`] prepared for one problem.
+//! they see an [`Evaluator`] prepared for one problem or for a batch of independent
+//! problems that share a model (many fits per dispatch).
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
@@ -21,7 +22,7 @@ pub struct Problem<'a> {
     pub loss: Loss,
 }
 
-/// A backend turns a problem into an evaluator (compiling kernels and uploading data once).
+/// A backend turns problems into an evaluator (compiling kernels and uploading data once).
 pub trait Backend: Send + Sync {
     /// Human-readable name, e.g. `cpu (rayon, 2 threads)` or `gpu (llvmpipe, Vulkan)`.
     fn name(&self) -> String;
@@ -32,48 +33,122 @@ pub trait Backend: Send + Sync {
     fn unit_roundoff(&self) -> f64 {
         f64::EPSILON / 2.0
     }
-    fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>>;
+    /// One evaluator for several independent problems that share one model and one loss
+    /// metric (different data sets, weightings, Monte Carlo replicas): a batch may mix
+    /// candidates of every problem, and is evaluated in one submission.
+    fn prepare_many<'a>(&'a self, problems: &[Problem<'a>])
+        -> anyhow::Result<Box<dyn Evaluator + 'a>>;
+    /// One evaluator for one problem.
+    fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
+        self.prepare_many(&[problem])
+    }
+    /// The most samples (summed over problems) one evaluator may hold; callers with more
+    /// problems split them into several evaluators.
+    fn max_batch_samples(&self) -> usize {
+        usize::MAX
+    }
 }
 
-/// Evaluates batches of physical parameter vectors (N × P, row-major) for one problem.
+/// Check that problems can share one evaluator: same model, same loss metric.
+pub fn check_shared(problems: &[Problem]) -> anyhow::Result<()> {
+    let first = problems
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("no problem to evaluate"))?;
+    for p in &problems[1..] {
+        anyhow::ensure!(
+            std::ptr::eq(p.model, first.model)
+                || (p.model.spec == first.model.spec
+                    && p.model.channels == first.model.channels
+                    && p.model.axes == first.model.axes),
+            "problems batched together must share one model ({} vs {})",
+            first.model.spec,
+            p.model.spec
+        );
+        anyhow::ensure!(
+            p.loss.metric == first.loss.metric,
+            "problems batched together must share one loss metric ({} vs {})",
+            first.loss.metric,
+            p.loss.metric
+        );
+    }
+    Ok(())
+}
+
+/// Evaluates batches of physical parameter vectors (N × P, row-major) for one or more
+/// problems. The plain methods address problem 0; the `_of` methods take, per candidate
+/// (per group for the normal equations), the index of its problem.
 pub trait Evaluator {
     /// P, the length of one parameter vector.
     fn dim(&self) -> usize;
+    /// How many problems the evaluator holds.
+    fn problems(&self) -> usize {
+        1
+    }
+    /// K_q, the sample count of problem q.
+    fn samples_of(&self, q: usize) -> usize;
     /// The loss of each of the N candidates (NaN where the model is not finite; the
     /// optimizers treat NaN as +∞).
-    fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;
-    /// Model values y′ for each candidate and sample (N × K, row-major).
-    fn values(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>>;
+    fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>>;
+    /// Model values y′ of each candidate at each sample of its problem, the candidates'
+    /// rows (K_owner values each) one after the other.
+    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>>;
     /// Levenberg–Marquardt normal equations for N groups of P + 1 candidates: `params`
     /// (N × (P + 1) × P, physical) holds each group's point, then the point moved along
-    /// each parameter by the signed unit-box step in `steps` (N × P). Returns JᵀJ, Jᵀr and
-    /// Σr² of the loss's weighted residuals r_k = √w_k (g(y′_k) − g(y_k)), the Jacobian
-    /// J_kj = (r_k(moved_j) − r_k(point)) / step_j taken in the optimizer's coordinates.
-    fn normal_equations(
+    /// each parameter by the signed unit-box step in `steps` (N × P); `owners` gives each
+    /// group's problem. Returns JᵀJ, Jᵀr and Σr² of the loss's weighted residuals
+    /// r_k = √w_k (g(y′_k) − g(y_k)), the Jacobian J_kj = (r_k(moved_j) − r_k(point)) / step_j
+    /// taken in the optimizer's coordinates.
+    fn normal_equations_of(
         &mut self,
+        owners: &[usize],
         params: &[f64],
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>>;
     /// Model-sample evaluations performed so far (one model at one sample and channel).
     fn evaluations(&self) -> u64;
+
+    /// [`Self::costs_of`] for problem 0.
+    fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let n = params.len() / self.dim().max(1);
+        self.costs_of(&vec![0; n], params)
+    }
+    /// [`Self::values_of`] for problem 0 (N × K, row-major).
+    fn values(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let n = params.len() / self.dim().max(1);
+        self.values_of(&vec![0; n], params)
+    }
+    /// [`Self::normal_equations_of`] for problem 0.
+    fn normal_equations(
+        &mut self,
+        params: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        let n = steps.len() / self.dim().max(1);
+        self.normal_equations_of(&vec![0; n], params, steps)
+    }
 }
 
-/// Normal equations of groups of P + 1 candidates from their model values (N·(P + 1) × K)
-/// and the unit-box steps (N × P), through the loss's weighted residuals.
-pub fn normal_equations_from_values(
+/// Normal equations of groups of P + 1 candidates from their model values (the rows of
+/// each group's P + 1 candidates, K_owner values each) and the unit-box steps (N × P).
+pub fn normal_equations_of_values(
     values: &[f64],
-    terms: &crate::engine::loss::LossTerms,
+    terms: &[&crate::engine::loss::LossTerms],
+    owners: &[usize],
     steps: &[f64],
     p: usize,
 ) -> Vec<crate::optim::NormalEquations> {
-    let k = terms.y.len();
-    values
-        .chunks(k * (p + 1))
+    let mut at = 0;
+    owners
+        .iter()
         .zip(steps.chunks(p))
-        .map(|(vals, h)| {
+        .map(|(&q, h)| {
+            let t = terms[q];
+            let k = t.y.len();
+            let vals = &values[at..at + k * (p + 1)];
+            at += k * (p + 1);
             let rows: Vec<f64> = vals
                 .chunks(k)
-                .flat_map(|row| row.iter().enumerate().map(|(j, &v)| terms.residual(j, v)))
+                .flat_map(|row| row.iter().enumerate().map(|(j, &v)| t.residual(j, v)))
                 .collect();
             crate::optim::NormalEquations::from_residuals(&rows, h, k)
         })

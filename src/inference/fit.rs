@@ -115,11 +115,17 @@ pub struct FitReport {
 
 /// Adapts an evaluator (physical parameters) to the optimizers' unit box.
 /// The optimizers see the free parameters only ([`Constraints`]); priors add residuals.
+/// An evaluator holding several problems is shared by all their restarts: `start_problem`
+/// says which problem each start (restart) belongs to.
 pub struct UnitBox<'m, 'e> {
     pub model: &'m Model,
     pub space: &'m Constraints,
     pub eval: &'m mut (dyn Evaluator + 'e),
-    pub loss_terms: Option<crate::engine::loss::LossTerms>,
+    /// Each problem's loss constants (sum-of-squares losses: residuals need them; empty
+    /// otherwise).
+    pub loss_terms: Vec<crate::engine::loss::LossTerms>,
+    /// The problem of each start; empty when every start belongs to problem 0.
+    pub start_problem: Vec<usize>,
 }
 
 impl UnitBox<'_, '_> {
@@ -129,15 +135,18 @@ impl UnitBox<'_, '_> {
             .flat_map(|u| self.space.from_unit(u))
             .collect()
     }
-}
 
-impl BatchObjective for UnitBox<'_, '_> {
-    fn dim(&self) -> usize {
-        self.space.dim()
+    fn problems_of(&self, owners: &[usize]) -> Vec<usize> {
+        owners
+            .iter()
+            .map(|&s| self.start_problem.get(s).copied().unwrap_or(0))
+            .collect()
     }
-    fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+
+    /// Costs of unit-box points, `problems[i]` the problem of point i.
+    pub fn problem_costs(&mut self, problems: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
         let phys = self.to_physical(points);
-        let mut costs = self.eval.costs(&phys)?;
+        let mut costs = self.eval.costs_of(problems, &phys)?;
         if !self.space.priors.is_empty() {
             // Priors come with the χ² loss only, whose cost is the plain sum of squares.
             for (c, flat) in costs.iter_mut().zip(phys.chunks(self.model.dim)) {
@@ -146,70 +155,302 @@ impl BatchObjective for UnitBox<'_, '_> {
         }
         Ok(costs)
     }
+
+    /// Residual rows (data, then priors) of physical points, `problems[i]` the problem of
+    /// point i; the rows one after the other.
+    fn problem_residuals(&mut self, problems: &[usize], phys: &[f64]) -> anyhow::Result<Vec<Vec<f64>>> {
+        anyhow::ensure!(!self.loss_terms.is_empty(), "residuals need loss terms");
+        let values = self.eval.values_of(problems, phys)?;
+        let mut at = 0;
+        Ok(problems
+            .iter()
+            .zip(phys.chunks(self.model.dim))
+            .map(|(&q, flat)| {
+                let t = &self.loss_terms[q];
+                let k = t.y.len();
+                let row = &values[at..at + k];
+                at += k;
+                row.iter()
+                    .enumerate()
+                    .map(|(j, &v)| t.residual(j, v))
+                    .chain(self.space.prior_residuals(flat))
+                    .collect()
+            })
+            .collect())
+    }
+}
+
+impl BatchObjective for UnitBox<'_, '_> {
+    fn dim(&self) -> usize {
+        self.space.dim()
+    }
+    fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let n = points.len() / self.space.dim().max(1);
+        self.problem_costs(&vec![0; n], points)
+    }
+    fn costs_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let problems = self.problems_of(owners);
+        self.problem_costs(&problems, points)
+    }
 }
 
 impl BatchResiduals for UnitBox<'_, '_> {
     fn residuals(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let n = points.len() / self.space.dim().max(1);
         let phys = self.to_physical(points);
-        let values = self.eval.values(&phys)?;
-        let t = self.loss_terms.as_ref().expect("residuals need loss terms");
-        let k = t.y.len();
-        let mut out = Vec::with_capacity(self.residual_count() * (values.len() / k.max(1)));
-        for (row, flat) in values.chunks(k).zip(phys.chunks(self.model.dim)) {
-            out.extend(row.iter().enumerate().map(|(j, &v)| t.residual(j, v)));
-            out.extend(self.space.prior_residuals(flat));
-        }
-        Ok(out)
+        Ok(self.problem_residuals(&vec![0; n], &phys)?.concat())
     }
     fn residual_count(&self) -> usize {
-        self.loss_terms.as_ref().map(|t| t.y.len()).unwrap_or(0) + self.space.priors.len()
+        self.loss_terms.first().map(|t| t.y.len()).unwrap_or(0) + self.space.priors.len()
     }
     fn normal_equations(
         &mut self,
         points: &[f64],
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
-        if self.space.dim() != self.model.dim || !self.space.priors.is_empty() {
-            // The backend's reduction knows neither fixed parameters nor prior rows.
-            return crate::optim::normal_equations_on_host(self, points, steps);
-        }
-        // The backend reduces them where it evaluates the model (on the GPU: on the device).
-        let unit = crate::optim::difference_points(points, steps, self.model.dim);
+        let n = points.len() / self.space.dim().max(1);
+        let every: Vec<usize> = vec![0; n];
+        self.normal_equations_of(&every, points, steps)
+    }
+    fn normal_equations_of(
+        &mut self,
+        owners: &[usize],
+        points: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        let p = self.space.dim();
+        let problems = self.problems_of(owners);
+        let unit = crate::optim::difference_points(points, steps, p);
         let phys = self.to_physical(&unit);
-        self.eval.normal_equations(&phys, steps)
+        if self.space.dim() == self.model.dim && self.space.priors.is_empty() {
+            // The backend reduces them where it evaluates the model.
+            return self.eval.normal_equations_of(&problems, &phys, steps);
+        }
+        // The backend's reduction knows neither fixed parameters nor prior rows.
+        let expanded: Vec<usize> = problems
+            .iter()
+            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
+            .collect();
+        let rows = self.problem_residuals(&expanded, &phys)?;
+        Ok(rows
+            .chunks(p + 1)
+            .zip(steps.chunks(p))
+            .map(|(group, h)| {
+                let k = group[0].len();
+                crate::optim::NormalEquations::from_residuals(&group.concat(), h, k)
+            })
+            .collect())
+    }
+    fn sum_squares_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let problems = self.problems_of(owners);
+        let phys = self.to_physical(points);
+        Ok(self
+            .problem_residuals(&problems, &phys)?
+            .iter()
+            .map(|r| crate::optim::sanitize(r.iter().map(|v| v * v).sum()))
+            .collect())
+    }
+    fn sum_squares(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let n = points.len() / self.space.dim().max(1);
+        self.sum_squares_of(&vec![0; n], points)
     }
 }
 
-/// Starting points in the unit box: the given initial points, then the best `restarts`
-/// of `restarts × screen` random draws.
+/// Starting points in the unit box for each of `problems` problems, problem-major: the
+/// given initial points, then the best `restarts` of `restarts × screen` random draws
+/// (the same draws for every problem, screened on each problem's own data).
 fn screened_starts(
-    obj: &mut dyn BatchObjective,
-    space: &Constraints,
+    obj: &mut UnitBox,
+    problems: usize,
     opts: &FitOptions,
 ) -> anyhow::Result<Vec<Vec<f64>>> {
-    let mut starts: Vec<Vec<f64>> = opts
+    let initial: Vec<Vec<f64>> = opts
         .initial_points
         .iter()
-        .map(|p| space.to_unit(p))
+        .map(|p| obj.space.to_unit(p))
         .collect();
     let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
+    let mut starts = Vec::with_capacity(problems * (initial.len() + opts.restarts));
     if opts.screen <= 1 {
-        starts.extend(pool);
+        for _ in 0..problems {
+            starts.extend(initial.iter().cloned());
+            starts.extend(pool.iter().cloned());
+        }
         return Ok(starts);
     }
+    // One batch: the whole pool on every problem.
     let flat: Vec<f64> = pool.iter().flatten().copied().collect();
-    let costs = obj.costs(&flat)?;
-    let mut order: Vec<usize> = (0..pool.len()).collect();
-    order.sort_by(|&a, &b| {
-        crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
-    });
-    starts.extend(
-        order
-            .into_iter()
-            .take(opts.restarts)
-            .map(|i| pool[i].clone()),
-    );
+    let points = flat.repeat(problems);
+    let owners: Vec<usize> = (0..problems)
+        .flat_map(|q| std::iter::repeat_n(q, pool.len()))
+        .collect();
+    let costs = obj.problem_costs(&owners, &points)?;
+    for costs in costs.chunks(pool.len()) {
+        let mut order: Vec<usize> = (0..pool.len()).collect();
+        order.sort_by(|&a, &b| {
+            crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
+        });
+        starts.extend(initial.iter().cloned());
+        starts.extend(
+            order
+                .into_iter()
+                .take(opts.restarts)
+                .map(|i| pool[i].clone()),
+        );
+    }
     Ok(starts)
+}
+
+/// The optimum of one problem of [`fit_many`].
+#[derive(Clone, Debug)]
+pub struct Optimum {
+    /// Best physical parameter vector.
+    pub flat: Vec<f64>,
+    /// Its loss.
+    pub loss: f64,
+    /// Restarts whose final loss is within 1% of the best.
+    pub within: usize,
+}
+
+/// What [`fit_many`] did besides the optima.
+#[derive(Clone, Debug, Default)]
+pub struct ManyStats {
+    /// Model-sample evaluations.
+    pub evaluations: u64,
+    /// Evaluators prepared (submissions carry every problem of one evaluator).
+    pub batches: usize,
+}
+
+/// Fit one model to several data sets under one loss metric, all problems × restarts
+/// stepped in lockstep so that each optimizer step is one submission to the backend
+/// (split only where the backend cannot hold all the samples at once). `losses[q]` is
+/// problem q's loss (same metric, any weighting). Returns each problem's optimum.
+pub fn fit_many(
+    model: &Model,
+    datas: &[&Dataset],
+    losses: &[Loss],
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<(Vec<Optimum>, Constraints, ManyStats)> {
+    anyhow::ensure!(!datas.is_empty(), "no data set to fit");
+    anyhow::ensure!(datas.len() == losses.len(), "one loss per data set");
+    let space = Constraints::resolve(model, &opts.constraints, opts.constraints.lenient)?;
+    for (data, loss) in datas.iter().zip(losses) {
+        anyhow::ensure!(
+            model.kind == data.kind,
+            "model {} is a {} model but {} holds {} data",
+            model.spec,
+            model.kind,
+            data.source.display(),
+            data.kind
+        );
+        anyhow::ensure!(
+            space.priors.is_empty() || loss.metric == crate::engine::loss::Metric::Chi2,
+            "--prior needs --loss chi2: a prior is a χ² term, and {} is not in χ²'s units",
+            loss.metric
+        );
+        anyhow::ensure!(
+            data.len() + space.priors.len() > space.dim(),
+            "{}: {} cannot determine the {} parameters of {}",
+            data.source.display(),
+            crate::data::count(data.len(), "sample", "samples"),
+            space.dim(),
+            model.spec
+        );
+        if opts.optimizer == Optimizer::Lm {
+            anyhow::ensure!(
+                loss.is_sum_of_squares(),
+                "--optimizer lm needs a sum-of-squares loss; {} is not one (use compass)",
+                loss.metric
+            );
+        }
+    }
+    anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
+    anyhow::ensure!(
+        opts.initial_points.iter().all(|p| p.len() == model.dim),
+        "an initial point does not have the {} parameters of {}",
+        model.dim,
+        model.spec
+    );
+    // Problems go to the backend in as few evaluators as its sample capacity allows.
+    let cap = backend.max_batch_samples().max(1);
+    let mut chunks: Vec<std::ops::Range<usize>> = Vec::new();
+    let (mut start, mut held) = (0, 0);
+    for (q, d) in datas.iter().enumerate() {
+        if q > start && held + d.len() > cap {
+            chunks.push(start..q);
+            start = q;
+            held = 0;
+        }
+        held += d.len();
+    }
+    chunks.push(start..datas.len());
+    let mut optima = Vec::with_capacity(datas.len());
+    let mut stats = ManyStats::default();
+    for range in chunks {
+        let problems: Vec<Problem> = range
+            .clone()
+            .map(|q| Problem {
+                model,
+                data: datas[q],
+                loss: losses[q],
+            })
+            .collect();
+        let mut eval = backend.prepare_many(&problems)?;
+        let n = problems.len();
+        let per = opts.initial_points.len() + opts.restarts;
+        let results: Vec<RestartResult> = {
+            let terms: Vec<_> = problems
+                .iter()
+                .filter(|p| p.loss.is_sum_of_squares())
+                .map(|p| p.loss.terms(p.data))
+                .collect();
+            let mut obj = UnitBox {
+                model,
+                space: &space,
+                eval: eval.as_mut(),
+                loss_terms: terms,
+                start_problem: (0..n).flat_map(|q| std::iter::repeat_n(q, per)).collect(),
+            };
+            let starts = screened_starts(&mut obj, n, opts)?;
+            match opts.optimizer {
+                Optimizer::Compass => {
+                    compass::minimize(&mut obj, &starts, &opts.compass, progress)?
+                }
+                Optimizer::Lm => {
+                    let finish = obj.loss_terms.clone();
+                    // Forward differences need a step well above √ε of the backend's
+                    // arithmetic (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly
+                    // rounding noise).
+                    let mut lm_opts = opts.lm.clone();
+                    lm_opts.fd_step = lm_opts.fd_step.max(4.0 * backend.unit_roundoff().sqrt());
+                    lm::minimize(
+                        &mut obj,
+                        &starts,
+                        &lm_opts,
+                        &|start, s| finish[start / per].finish_sum(s),
+                        progress,
+                    )?
+                }
+            }
+        };
+        for restarts in results.chunks(per) {
+            let best = restarts
+                .iter()
+                .min_by(|a, b| a.cost.total_cmp(&b.cost))
+                .expect("at least one restart");
+            let tol = best.cost.abs() * 0.01 + 1e-300;
+            optima.push(Optimum {
+                flat: space.from_unit(&best.x),
+                loss: best.cost,
+                within: restarts.iter().filter(|r| r.cost <= best.cost + tol).count(),
+            });
+        }
+        stats.evaluations += eval.evaluations();
+        stats.batches += 1;
+    }
+    Ok((optima, space, stats))
 }
 
 /// What a fit found, before it is dressed as a [`FitReport`].
@@ -259,86 +500,17 @@ pub fn fit_outcome(
     opts: &FitOptions,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<FitOutcome> {
-    anyhow::ensure!(
-        model.kind == data.kind,
-        "model {} is a {} model but {} holds {} data",
-        model.spec,
-        model.kind,
-        data.source.display(),
-        data.kind
-    );
-    let space = Constraints::resolve(model, &opts.constraints, opts.constraints.lenient)?;
-    anyhow::ensure!(
-        space.priors.is_empty() || loss.metric == crate::engine::loss::Metric::Chi2,
-        "--prior needs --loss chi2: a prior is a χ² term, and {} is not in χ²'s units",
-        loss.metric
-    );
-    anyhow::ensure!(
-        data.len() + space.priors.len() > space.dim(),
-        "{}: {} cannot determine the {} parameters of {}",
-        data.source.display(),
-        crate::data::count(data.len(), "sample", "samples"),
-        space.dim(),
-        model.spec
-    );
-    anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
-    anyhow::ensure!(
-        opts.initial_points.iter().all(|p| p.len() == model.dim),
-        "an initial point does not have the {} parameters of {}",
-        model.dim,
-        model.spec
-    );
     let t0 = Instant::now();
-    let problem = Problem { model, data, loss };
-    let mut eval = backend.prepare(problem)?;
-    let results: Vec<RestartResult> = {
-        let terms = loss.is_sum_of_squares().then(|| loss.terms(data));
-        let mut obj = UnitBox {
-            model,
-            space: &space,
-            eval: eval.as_mut(),
-            loss_terms: terms,
-        };
-        let starts = screened_starts(&mut obj, &space, opts)?;
-        match opts.optimizer {
-            Optimizer::Compass => compass::minimize(&mut obj, &starts, &opts.compass, progress)?,
-            Optimizer::Lm => {
-                anyhow::ensure!(
-                    loss.is_sum_of_squares(),
-                    "--optimizer lm needs a sum-of-squares loss; {} is not one (use compass)",
-                    loss.metric
-                );
-                let finish = loss.terms(data);
-                // Forward differences need a step well above √ε of the backend's arithmetic
-                // (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly rounding noise).
-                let mut lm_opts = opts.lm.clone();
-                lm_opts.fd_step = lm_opts.fd_step.max(4.0 * backend.unit_roundoff().sqrt());
-                lm::minimize(
-                    &mut obj,
-                    &starts,
-                    &lm_opts,
-                    &|s| finish.finish_sum(s),
-                    progress,
-                )?
-            }
-        }
-    };
-    let best_r = results
-        .iter()
-        .min_by(|a, b| a.cost.total_cmp(&b.cost))
-        .expect("at least one restart");
-    let tol = best_r.cost.abs() * 0.01 + 1e-300;
-    let within = results
-        .iter()
-        .filter(|r| r.cost <= best_r.cost + tol)
-        .count();
-    let flat = space.from_unit(&best_r.x);
+    let (optima, space, stats) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
+    let best = optima.into_iter().next().expect("one problem, one optimum");
+    let mut eval = backend.prepare(Problem { model, data, loss })?;
+    let flat = best.flat;
     let values = eval.values(&flat)?;
     let chi2 = chi2(data, &values);
     let mut cov = covariance(model, data, loss, eval.as_mut(), &flat, &space)?;
     cov.warnings.extend(space.on_bound_warnings(&flat));
     Ok(FitOutcome {
-        loss: best_r.cost,
+        loss: best.loss,
         chi2_prior: space.prior_chi2(&flat),
         dof: data.len() + space.priors.len() - space.dim(),
         constraints: space,
@@ -346,8 +518,8 @@ pub fn fit_outcome(
         values,
         chi2,
         cov,
-        within,
-        evaluations: eval.evaluations(),
+        within: best.within,
+        evaluations: stats.evaluations + eval.evaluations(),
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

@@ -38,7 +38,8 @@ pub fn minimize(
 ) -> anyhow::Result<Vec<RestartResult>> {
     let p = obj.dim();
     let flat: Vec<f64> = starts.iter().flatten().copied().collect();
-    let c0 = obj.costs(&flat)?;
+    let every: Vec<usize> = (0..starts.len()).collect();
+    let c0 = obj.costs_of(&every, &flat)?;
     let mut res: Vec<RestartResult> = starts
         .iter()
         .zip(c0)
@@ -56,6 +57,7 @@ pub fn minimize(
         let mut batch = Vec::new();
         let mut owner: Vec<(usize, usize)> = Vec::new(); // (restart, first candidate index)
         let mut counts = Vec::new();
+        let mut tags = Vec::new(); // the restart of each candidate
         for (r, st) in res.iter().enumerate() {
             if !active[r] {
                 continue;
@@ -76,6 +78,7 @@ pub fn minimize(
             }
             owner.push((r, start));
             counts.push(n);
+            tags.extend(std::iter::repeat_n(r, n));
         }
         if owner.is_empty() {
             break;
@@ -83,7 +86,7 @@ pub fn minimize(
         let costs = if batch.is_empty() {
             vec![]
         } else {
-            obj.costs(&batch)?
+            obj.costs_of(&tags, &batch)?
         };
         for ((r, start), n) in owner.into_iter().zip(counts) {
             let st = &mut res[r];

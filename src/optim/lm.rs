@@ -39,17 +39,18 @@ struct State {
     evaluations: usize,
 }
 
-/// Minimise Σ r² from every start; costs are reported as `finish(Σ r²)`.
+/// Minimise Σ r² from every start; costs are reported as `finish(start, Σ r²)`.
 pub fn minimize(
     obj: &mut dyn BatchResiduals,
     starts: &[Vec<f64>],
     opts: &LmOptions,
-    finish: &dyn Fn(f64) -> f64,
+    finish: &dyn Fn(usize, f64) -> f64,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<Vec<RestartResult>> {
     let p = obj.dim();
     let flat: Vec<f64> = starts.iter().flatten().copied().collect();
-    let ss0 = obj.sum_squares(&flat)?;
+    let every: Vec<usize> = (0..starts.len()).collect();
+    let ss0 = obj.sum_squares_of(&every, &flat)?;
     let mut st: Vec<State> = starts
         .iter()
         .zip(ss0)
@@ -88,7 +89,7 @@ pub fn minimize(
                 });
             }
         }
-        let normal = obj.normal_equations(&points, &hs)?;
+        let normal = obj.normal_equations_of(&act, &points, &hs)?;
         // Solve each damped system.
         let mut trial = Vec::with_capacity(act.len() * p);
         for (a, &i) in act.iter().enumerate() {
@@ -114,7 +115,7 @@ pub fn minimize(
             }
         }
         // Batch 2: trial points.
-        let tr = obj.sum_squares(&trial)?;
+        let tr = obj.sum_squares_of(&act, &trial)?;
         for (a, &i) in act.iter().enumerate() {
             let s = &mut st[i];
             s.iterations += 1;
@@ -146,8 +147,9 @@ pub fn minimize(
     }
     Ok(st
         .into_iter()
-        .map(|s| RestartResult {
-            cost: finish(s.ss),
+        .enumerate()
+        .map(|(i, s)| RestartResult {
+            cost: finish(i, s.ss),
             x: s.x,
             iterations: s.iterations,
             evaluations: s.evaluations,
@@ -202,7 +204,7 @@ mod tests {
             .collect();
         let mut d = Decay { t, y };
         let starts = super::super::random_starts(3, 6, 3);
-        let out = minimize(&mut d, &starts, &LmOptions::default(), &|s| s, &mut |_| {}).unwrap();
+        let out = minimize(&mut d, &starts, &LmOptions::default(), &|_, s| s, &mut |_| {}).unwrap();
         let best = out.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).unwrap();
         for (a, b) in best.x.iter().zip(truth) {
             assert!((a - b).abs() < 1e-5, "{:?}", best.x);

@@ -2,6 +2,9 @@
 //!
 //! Solver and problem are separate (as in argmin): a solver sees only a
 //! [`BatchObjective`] — costs of a batch of unit-box points — and never a backend.
+//! Each point of a batch is tagged with the start (restart) it belongs to, so that one
+//! objective can hold many independent problems (data sets, Monte Carlo replicas) whose
+//! restarts the solver steps together without knowing it.
 
 pub mod compass;
 pub mod lm;
@@ -14,6 +17,13 @@ pub trait BatchObjective {
     fn dim(&self) -> usize;
     /// Costs of N points (N × P, row-major, each coordinate in [0, 1]). NaN means invalid.
     fn costs(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>>;
+    /// Costs of N points, `owners[i]` the index of the start point i descends from. An
+    /// objective made of several independent problems maps starts to problems; one made
+    /// of a single problem ignores `owners` (the default).
+    fn costs_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let _ = owners;
+        self.costs(points)
+    }
 }
 
 /// A batched sum-of-squares objective: residual vectors r(x) with cost = finish(Σ r²).
@@ -33,6 +43,24 @@ pub trait BatchResiduals: BatchObjective {
         steps: &[f64],
     ) -> anyhow::Result<Vec<NormalEquations>> {
         normal_equations_on_host(self, points, steps)
+    }
+
+    /// [`Self::normal_equations`] of points tagged with their starts (see
+    /// [`BatchObjective::costs_of`]).
+    fn normal_equations_of(
+        &mut self,
+        owners: &[usize],
+        points: &[f64],
+        steps: &[f64],
+    ) -> anyhow::Result<Vec<NormalEquations>> {
+        let _ = owners;
+        self.normal_equations(points, steps)
+    }
+
+    /// [`Self::sum_squares`] of points tagged with their starts.
+    fn sum_squares_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let _ = owners;
+        self.sum_squares(points)
     }
 
     /// Σ r² of N points (+∞ where not finite).
