@@ -111,6 +111,10 @@ pub struct FitReport {
     /// chi2_prior}`. Fixed parameters have a standard uncertainty of 0.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub constraints: Option<Value>,
+    /// `--mc N`: the parameters' distribution over N refitted replicas of the data
+    /// (absent without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monte_carlo: Option<crate::inference::mc::McSummary>,
 }
 
 /// Adapts an evaluator (physical parameters) to the optimizers' unit box.
@@ -602,6 +606,7 @@ fn make_report(
         dof: o.dof,
         n_params: o.constraints.dim(),
         constraints,
+        monte_carlo: None,
     }
 }
 
@@ -665,6 +670,9 @@ impl FitReport {
         }
         for w in &self.warnings {
             s += &format!("  warning: {w}\n");
+        }
+        if let Some(mc) = &self.monte_carlo {
+            s += &mc.summary();
         }
         s
     }
