@@ -6,7 +6,7 @@ use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::engine::{self, loss::Loss};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
-use crate::inference::fit::{fit, FitOptions};
+use crate::inference::fit::{fit, fit_stage, FitOptions};
 use crate::output::files::check_writable_dir;
 use crate::output::report::RunInfo;
 use crate::output::results::{
@@ -252,15 +252,20 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
         let mut app = Appender::open(&csv_path)?;
         let mut progress = Progress::new("sweep", todo.len() as u64, "fits");
         progress.inc(unbuilt);
-        // Fits run on one worker per core (a fit's batches are small, so one fit alone
-        // leaves cores idle); this thread appends every finished fit to results.csv at
-        // once, so an interrupted run loses at most the fits in flight. Each fit is
-        // deterministic on its own, and results.csv is rewritten in canonical order at
-        // the end, so the outcome does not depend on which worker finished first.
+        // A stage is one model (same spec, channels and planes) under one loss metric and
+        // optimizer over every data set and weighting it applies to: its fits step in
+        // lockstep, so each optimizer step is one submission of all their candidates
+        // (many fits per dispatch). Stages run on one worker per core; this thread
+        // appends every finished fit to results.csv at once, so an interrupted run loses
+        // at most the stages in flight. Each fit is deterministic on its own (its starts
+        // do not depend on the stage), and results.csv is rewritten in canonical order at
+        // the end, so the outcome does not depend on the staging or on which worker
+        // finished first.
+        let stages = stages_of(&runnable);
         workers = std::thread::available_parallelism()
             .map(|n| n.get())
             .unwrap_or(1)
-            .clamp(1, runnable.len().max(1));
+            .clamp(1, stages.len().max(1));
         let next = std::sync::atomic::AtomicUsize::new(0);
         let stop = std::sync::atomic::AtomicBool::new(false);
         let backend = backend.as_ref();
@@ -269,27 +274,50 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
             for _ in 0..workers {
                 let tx = tx.clone();
                 let (runnable, next, stop, files) = (&runnable, &next, &stop, &files);
-                let constraints = &constraints;
+                let (stages, constraints) = (&stages, &constraints);
                 scope.spawn(move || loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-                    if i >= runnable.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
+                    let si = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    if si >= stages.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
                         break;
                     }
-                    let (t, model) = &runnable[i];
+                    let stage = &stages[si];
+                    let (t0, model) = &runnable[stage[0]];
                     let opts = FitOptions {
-                        optimizer: t.optimizer,
+                        optimizer: t0.optimizer,
                         restarts: args.restarts,
                         seed: args.seed,
                         constraints: constraints.clone(),
                         ..Default::default()
                     };
-                    let loss = Loss::new(t.loss, t.weights);
-                    let data = &files[t.data].data;
-                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                        fit(model, data, loss, backend, &opts, &mut |_| {})
+                    let datas: Vec<&crate::data::Dataset> = stage
+                        .iter()
+                        .map(|&i| &files[runnable[i].0.data].data)
+                        .collect();
+                    let losses: Vec<Loss> = stage
+                        .iter()
+                        .map(|&i| Loss::new(runnable[i].0.loss, runnable[i].0.weights))
+                        .collect();
+                    let together = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        fit_stage(model, &datas, &losses, backend, &opts, &mut |_| {})
                     }));
-                    if tx.send((i, result)).is_err() {
-                        break;
+                    let results: Vec<_> = match together {
+                        Ok(Ok(reports)) => reports.into_iter().map(|r| Ok(Ok(r))).collect(),
+                        // One bad fit fails the stage: fit each alone, so the failure is
+                        // attributed to its own task and the others still land.
+                        _ => stage
+                            .iter()
+                            .zip(datas.iter().zip(&losses))
+                            .map(|(&i, (data, &loss))| {
+                                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                                    fit(&runnable[i].1, data, loss, backend, &opts, &mut |_| {})
+                                }))
+                            })
+                            .collect(),
+                    };
+                    for (&i, result) in stage.iter().zip(results) {
+                        if tx.send((i, result)).is_err() {
+                            return;
+                        }
                     }
                 });
             }
@@ -384,6 +412,25 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
         crate::output::report::publish(&args.out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
     }
     Ok(())
+}
+
+/// Group tasks into stages (indices into `runnable`, in task order): same model spec,
+/// channels and measurement planes, same loss metric and optimizer.
+fn stages_of(runnable: &[(&Task, Model)]) -> Vec<Vec<usize>> {
+    let mut index: HashMap<String, usize> = HashMap::new();
+    let mut stages: Vec<Vec<usize>> = Vec::new();
+    for (i, (t, m)) in runnable.iter().enumerate() {
+        let key = format!(
+            "{}|{}|{:?}|{}|{}",
+            m.spec, m.channels, m.axes, t.loss, t.optimizer
+        );
+        let s = *index.entry(key).or_insert_with(|| {
+            stages.push(Vec::new());
+            stages.len() - 1
+        });
+        stages[s].push(i);
+    }
+    stages
 }
 
 /// The `merge` command: union the rows of shard directories into `--out`.

@@ -41,9 +41,9 @@ impl Backend for CpuBackend {
                         .map(|s| (s.wi(), s.wo()))
                         .collect(),
                     terms: problem.loss.terms(problem.data),
+                    evaluations: AtomicU64::new(0),
                 })
                 .collect(),
-            evaluations: AtomicU64::new(0),
         }))
     }
 }
@@ -54,11 +54,11 @@ struct Part<'a> {
     /// (ωi, ωo) of every sample.
     directions: Vec<(glam::DVec3, glam::DVec3)>,
     terms: LossTerms,
+    evaluations: AtomicU64,
 }
 
 pub struct CpuEvaluator<'a> {
     parts: Vec<Part<'a>>,
-    evaluations: AtomicU64,
 }
 
 impl Part<'_> {
@@ -98,8 +98,11 @@ impl CpuEvaluator<'_> {
     }
 
     fn count(&self, owners: &[usize]) {
-        let n: usize = owners.iter().map(|&q| self.parts[q].terms.y.len()).sum();
-        self.evaluations.fetch_add(n as u64, Ordering::Relaxed);
+        for &q in owners {
+            let part = &self.parts[q];
+            part.evaluations
+                .fetch_add(part.terms.y.len() as u64, Ordering::Relaxed);
+        }
     }
 }
 
@@ -168,7 +171,7 @@ impl Evaluator for CpuEvaluator<'_> {
         ))
     }
 
-    fn evaluations(&self) -> u64 {
-        self.evaluations.load(Ordering::Relaxed)
+    fn evaluations_of(&self, q: usize) -> u64 {
+        self.parts[q].evaluations.load(Ordering::Relaxed)
     }
 }

@@ -336,7 +336,7 @@ impl Backend for GpuBackend {
             lut_buf,
             dims_buf,
             io: None,
-            evaluations: 0,
+            evaluations: vec![0; problems.len()],
         }))
     }
 }
@@ -363,7 +363,8 @@ pub struct GpuEvaluator<'a> {
     lut_buf: wgpu::Buffer,
     dims_buf: wgpu::Buffer,
     io: Option<IoBuffers>,
-    evaluations: u64,
+    /// Model-sample evaluations per problem.
+    evaluations: Vec<u64>,
 }
 
 impl GpuEvaluator<'_> {
@@ -578,7 +579,9 @@ impl GpuEvaluator<'_> {
             result.extend(data.iter().map(|&v| v as f64));
             start = end;
         }
-        self.evaluations += owners.iter().map(|&q| self.terms[q].y.len() as u64).sum::<u64>();
+        for &q in owners {
+            self.evaluations[q] += sizes[q] as u64;
+        }
         Ok(result)
     }
 }
@@ -619,7 +622,7 @@ impl Evaluator for GpuEvaluator<'_> {
         ))
     }
 
-    fn evaluations(&self) -> u64 {
-        self.evaluations
+    fn evaluations_of(&self, q: usize) -> u64 {
+        self.evaluations[q]
     }
 }

@@ -105,7 +105,11 @@ pub trait Evaluator {
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>>;
     /// Model-sample evaluations performed so far (one model at one sample and channel).
-    fn evaluations(&self) -> u64;
+    fn evaluations(&self) -> u64 {
+        (0..self.problems()).map(|q| self.evaluations_of(q)).sum()
+    }
+    /// Those of them made for problem q.
+    fn evaluations_of(&self, q: usize) -> u64;
 
     /// [`Self::costs_of`] for problem 0.
     fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {

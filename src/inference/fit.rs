@@ -314,6 +314,8 @@ pub struct Optimum {
     pub loss: f64,
     /// Restarts whose final loss is within 1% of the best.
     pub within: usize,
+    /// Model-sample evaluations made for this problem.
+    pub evaluations: u64,
 }
 
 /// What [`fit_many`] did besides the optima.
@@ -439,7 +441,7 @@ pub fn fit_many(
                 }
             }
         };
-        for restarts in results.chunks(per) {
+        for (q, restarts) in results.chunks(per).enumerate() {
             let best = restarts
                 .iter()
                 .min_by(|a, b| a.cost.total_cmp(&b.cost))
@@ -449,6 +451,7 @@ pub fn fit_many(
                 flat: space.from_unit(&best.x),
                 loss: best.cost,
                 within: restarts.iter().filter(|r| r.cost <= best.cost + tol).count(),
+                evaluations: eval.evaluations_of(q),
             });
         }
         stats.evaluations += eval.evaluations();
@@ -505,10 +508,55 @@ pub fn fit_outcome(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<FitOutcome> {
     let t0 = Instant::now();
-    let (optima, space, stats) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
+    let (optima, space, _) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
     let best = optima.into_iter().next().expect("one problem, one optimum");
+    let mut o = conclude(model, data, loss, backend, best, space)?;
+    o.seconds = t0.elapsed().as_secs_f64();
+    Ok(o)
+}
+
+/// Fit one model to several data sets (a sweep's stage: same model and loss metric, any
+/// weightings) in lockstep ([`fit_many`]), then report each fit. A report's `seconds` are
+/// the stage's, shared among its fits by their sample counts; its `evaluations` its own.
+pub fn fit_stage(
+    model: &Model,
+    datas: &[&Dataset],
+    losses: &[Loss],
+    backend: &dyn Backend,
+    opts: &FitOptions,
+    progress: &mut dyn FnMut(usize),
+) -> anyhow::Result<Vec<FitReport>> {
+    let t0 = Instant::now();
+    let (optima, space, _) = fit_many(model, datas, losses, backend, opts, progress)?;
+    let mut outcomes = Vec::with_capacity(datas.len());
+    for ((data, &loss), best) in datas.iter().zip(losses).zip(optima) {
+        outcomes.push(conclude(model, data, loss, backend, best, space.clone())?);
+    }
+    let seconds = t0.elapsed().as_secs_f64();
+    let total: usize = datas.iter().map(|d| d.len()).sum::<usize>().max(1);
+    Ok(outcomes
+        .into_iter()
+        .zip(datas.iter().zip(losses))
+        .map(|(mut o, (data, &loss))| {
+            o.seconds = seconds * data.len() as f64 / total as f64;
+            make_report(model, data, loss, opts, backend, o)
+        })
+        .collect())
+}
+
+/// χ², the covariance and the warnings at a problem's optimum.
+fn conclude(
+    model: &Model,
+    data: &Dataset,
+    loss: Loss,
+    backend: &dyn Backend,
+    best: Optimum,
+    space: Constraints,
+) -> anyhow::Result<FitOutcome> {
+    let t0 = Instant::now();
     let mut eval = backend.prepare(Problem { model, data, loss })?;
     let flat = best.flat;
+    let searched = best.evaluations;
     let values = eval.values(&flat)?;
     let chi2 = chi2(data, &values);
     let mut cov = covariance(model, data, loss, eval.as_mut(), &flat, &space)?;
@@ -523,7 +571,7 @@ pub fn fit_outcome(
         chi2,
         cov,
         within: best.within,
-        evaluations: stats.evaluations + eval.evaluations(),
+        evaluations: searched + eval.evaluations(),
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
