@@ -139,3 +139,103 @@ fn mc_intervals_cover_the_truth_in_95_percent_of_200_data_sets() {
         );
     }
 }
+
+mod cli_mc {
+    use super::common::cli::{assert_clear_error, assert_ok, bsdfit, p, text};
+    use serde_json::Value;
+
+    fn mc_json(dir: &std::path::Path, data: &std::path::Path, extra: &[&str]) -> Value {
+        let json = dir.join(format!("fit{}.json", extra.len()));
+        let mut args = vec![
+            "fit",
+            p(data),
+            "--model",
+            "btdf(tr)+scale",
+            "--backend",
+            "cpu",
+            "--restarts",
+            "4",
+            "--mc",
+            "150",
+            "--json",
+            p(&json),
+        ];
+        args.extend_from_slice(extra);
+        let out = bsdfit(&args);
+        assert_ok(&out, "fit --mc");
+        let stdout = text(&out.stdout);
+        assert!(stdout.contains("Monte Carlo"), "{stdout}");
+        assert!(stdout.contains("95 % shortest interval"), "{stdout}");
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap()
+    }
+
+    fn sd_of(v: &Value, name: &str) -> f64 {
+        v["monte_carlo"]["params"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("{name} in {v}"))["sd"]
+            .as_f64()
+            .unwrap()
+    }
+
+    #[test]
+    fn fit_mc_reports_intervals_and_the_scale_uncertainty_widens_the_scale() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = dir.path().join("tr.csv");
+        let out = bsdfit(&[
+            "synth",
+            "--model",
+            "btdf(tr)+scale",
+            "--params",
+            "alpha=0.2,eta=1.5,scale=0.8",
+            "--geometry",
+            "ptb5",
+            "--noise",
+            "0.02,0.0001",
+            "--out",
+            p(&data),
+        ]);
+        assert_ok(&out, "synth");
+        let plain = mc_json(dir.path(), &data, &[]);
+        let mc = &plain["monte_carlo"];
+        assert_eq!(mc["replicas"], 150);
+        assert_eq!(mc["params"].as_array().unwrap().len(), 3);
+        for p in mc["params"].as_array().unwrap() {
+            let [lo, hi] = [p["interval"][0].as_f64().unwrap(), p["interval"][1].as_f64().unwrap()];
+            let mean = p["mean"].as_f64().unwrap();
+            assert!(lo <= mean && mean <= hi, "{p}");
+            assert!(p["sd"].as_f64().unwrap() > 0.0, "{p}");
+        }
+        let corr = mc["correlation"].as_array().unwrap();
+        assert_eq!(corr.len(), 3);
+        assert!((corr[0][0].as_f64().unwrap() - 1.0).abs() < 1e-12);
+        // A fully correlated 10 % scale uncertainty adds ≈ 10 % of S to S's spread.
+        let scaled = mc_json(dir.path(), &data, &["--mc-scale", "0.1"]);
+        let (s0, s1) = (sd_of(&plain, "scale"), sd_of(&scaled, "scale"));
+        assert!(
+            s1 > s0 && s1 > 0.5 * 0.1 * 0.8,
+            "σ(S) without {s0}, with a 10 % scale uncertainty {s1}"
+        );
+        assert_eq!(scaled["monte_carlo"]["scale_rel"], 0.1);
+    }
+
+    #[test]
+    fn bad_mc_options_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = dir.path().join("l.csv");
+        assert_ok(
+            &bsdfit(&["synth", "--model", "lambert", "--params", "rho=0.5", "--geometry", "inplane10", "--out", p(&data)]),
+            "synth",
+        );
+        let fit = |extra: &[&str]| {
+            let mut a = vec!["fit", p(&data), "--model", "lambert", "--backend", "cpu"];
+            a.extend_from_slice(extra);
+            bsdfit(&a)
+        };
+        assert_clear_error(&fit(&["--mc", "1"]), &["--mc 1", "at least 2"]);
+        assert_clear_error(&fit(&["--mc-scale", "0.02"]), &["--mc-scale needs --mc"]);
+        assert_clear_error(&fit(&["--mc", "10", "--mc-scale", "-1"]), &["--mc-scale"]);
+    }
+}

@@ -63,7 +63,7 @@ pub struct FitArgs {
     pub mc: usize,
     /// With --mc: an instrument's fully correlated relative scale uncertainty (e.g. 0.01):
     /// every value of a replica is multiplied by one draw of N(1, REL²).
-    #[arg(long, default_value_t = 0.0, value_name = "REL")]
+    #[arg(long, default_value_t = 0.0, value_name = "REL", allow_hyphen_values = true)]
     pub mc_scale: f64,
     /// With --mc: random restarts per replica, besides starting from the best fit.
     #[arg(long, default_value_t = 3, value_name = "R")]
