@@ -56,7 +56,7 @@ pub struct McParam {
     pub interval: [f64; 2],
     /// The linearized standard uncertainty of the fit (None where undetermined).
     pub linear_sd: Option<f64>,
-    /// Fraction of replicas whose value lies on a declared bound (within 1e-9 of the
+    /// Fraction of replicas whose value lies on a declared bound (within 1e-6 of the
     /// range).
     pub on_bound: f64,
 }
@@ -209,7 +209,8 @@ pub fn monte_carlo(
         let mean = col.iter().sum::<f64>() / n;
         let sd = (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
         let (lo, hi) = (space.decls[j].lo, space.decls[j].hi);
-        let tol = 1e-9 * (hi - lo).abs().max(1e-300);
+        // f32 backends stop within a few ulps of a bound: 1e-6 of the range counts as on it.
+        let tol = 1e-6 * (hi - lo).abs().max(1e-300);
         let on_bound = col
             .iter()
             .filter(|&&v| (v - lo).abs() <= tol || (hi - v).abs() <= tol)
