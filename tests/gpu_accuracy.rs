@@ -110,3 +110,121 @@ fn cost_sums_keep_small_terms_after_a_large_one() {
         failures.join("\n")
     );
 }
+
+/// Model values of `spec` at `params` on every sample of `data`, by the CPU reference.
+fn cpu_values(model: &Model, data: &Dataset, params: &[f64]) -> Vec<f64> {
+    let problem = Problem {
+        model,
+        data,
+        loss: Loss::new(Metric::Chi2, Weights::Uniform),
+    };
+    CpuBackend::new()
+        .prepare(problem)
+        .unwrap()
+        .values(params)
+        .unwrap()
+}
+
+/// `logf` and `logcosf` in the tails, where a·y ~ 1e-6: a diffuser's transmission scaled
+/// down to S = 5e-6 (values 1e-9 … 4e-5 sr⁻¹) measured with 2 % noise. There
+/// ln(1 + a y) in f32 rounds 1 + a y to a multiple of 2^-23 = 1.2e-7, up to 6 % of a y,
+/// while the residuals g(y′) − g(y) are 2 % of it: the plain form was off by 0.28 to 31×
+/// relative in the cost, and Goldberg's ln(u)·x/(u − 1) still by 0.23 to 12× (lavapipe's
+/// log near 1 is only accurate to ~2^-21 absolute, as Vulkan allows); the atanh series of
+/// `log1p_f32` (shaders/engine/loss.wgsl) keeps the relative accuracy of a y. The cost of
+/// each candidate (the true parameters, then 7 perturbed ones) must agree within
+/// REL = 2e-4 relative: the residuals are ~2 % of g, so the f32 model values' own
+/// relative error (≲ 2e-6) is amplified ~50× in each residual and doubled by the square.
+#[test]
+fn log_losses_keep_their_digits_in_the_tails() {
+    const REL: f64 = 2e-4;
+    let model = Model::parse("btdf(tr)+scale", 1).unwrap();
+    let truth = model
+        .params_from_assignments("scale=5e-6,alpha=0.4,eta=1.5")
+        .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    // Geometry first (values filled in from the model below).
+    let geometry: Vec<(usize, RawRow)> = (0..1000).map(|i| row(i, &mut rng, 1.0, 0.1)).collect();
+    let probe = Dataset::from_rows(
+        Kind::Btdf,
+        "tails",
+        &geometry,
+        "<tails>",
+        &ReadOptions::default(),
+    )
+    .expect("valid geometry");
+    let f = cpu_values(&model, &probe, &truth);
+    let rows: Vec<(usize, RawRow)> = geometry
+        .iter()
+        .zip(&f)
+        .filter(|(_, &v)| v > 1e-9)
+        .map(|((i, r), &v)| {
+            let noise: f64 = rng.random_range(-1.0..1.0);
+            let value = v * (1.0 + 0.02 * noise);
+            (
+                *i,
+                RawRow {
+                    value,
+                    uncertainty: 0.02 * value,
+                    ..r.clone()
+                },
+            )
+        })
+        .collect();
+    assert!(rows.len() > 300, "{} samples in the tails", rows.len());
+    let data = Dataset::from_rows(
+        Kind::Btdf,
+        "tails",
+        &rows,
+        "<tails>",
+        &ReadOptions::default(),
+    )
+    .expect("valid data");
+    let ymax = data.samples.iter().fold(0.0f64, |m, s| m.max(s.value));
+    assert!(
+        ymax < 1e-4,
+        "the data must stay in the log1p regime: max {ymax}"
+    );
+    let mut params = truth.clone();
+    for _ in 0..7 {
+        params.extend(truth.iter().map(|v| v * rng.random_range(0.9..1.1)));
+    }
+    let mut failures = Vec::new();
+    for shape in [Shape::CPU_DEVICE, Shape::GPU_DEVICE] {
+        let g = gpu(shape);
+        for metric in [Metric::Logf, Metric::Logcosf] {
+            for weights in [Weights::Uniform, Weights::Invunc] {
+                let problem = Problem {
+                    model: &model,
+                    data: &data,
+                    loss: Loss::new(metric, weights),
+                };
+                let c = CpuBackend::new()
+                    .prepare(problem)
+                    .unwrap()
+                    .costs(&params)
+                    .unwrap();
+                let gc = g.prepare(problem).unwrap().costs(&params).unwrap();
+                let worst =
+                    c.iter()
+                        .zip(&gc)
+                        .map(|(c, g)| (g - c).abs() / c)
+                        .fold(
+                            0.0f64,
+                            |m, e| if e.is_nan() { f64::INFINITY } else { m.max(e) },
+                        );
+                eprintln!("{shape:?} {metric}/{weights}: worst relative cost error {worst:.2e}");
+                if !(worst <= REL) {
+                    failures.push(format!(
+                        "{shape:?} {metric}/{weights}: {worst:.2e} (cpu {c:?}, gpu {gc:?})"
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "log-loss costs beyond {REL:e} relative:\n{}",
+        failures.join("\n")
+    );
+}
