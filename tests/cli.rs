@@ -433,3 +433,126 @@ fn convert_reads_any_format_and_says_where_it_came_from() {
     ]);
     assert_clear_error(&out, &["--assume-uncertainty", "REL,ABS"]);
 }
+
+/// `bench --sweep` on a tiny data folder (two synthetic Lambertian files, `--models
+/// lambert`, 2 restarts): both backends run the sweep, and the JSON carries the timing
+/// of each, the GPU/CPU ratio and the comparison. Speed is not asserted; agreement is,
+/// since a Lambertian fit is linear and well conditioned.
+#[test]
+fn bench_sweep_times_both_backends_and_compares_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    for (name, rho, seed) in [("a", "0.3:0.5:0.7", "1"), ("b", "0.6:0.4:0.2", "2")] {
+        let out = bsdfit(&[
+            "synth",
+            "--model",
+            "lambert",
+            "--params",
+            &format!("rho={rho}"),
+            "--noise",
+            "0.01,0.0001",
+            "--seed",
+            seed,
+            "--out",
+            p(&data.join(format!("{name}.csv"))),
+        ]);
+        assert_ok(&out, "synth");
+    }
+    let json = dir.path().join("bench.json");
+    let out = bsdfit(&[
+        "bench",
+        "--models",
+        "lambert",
+        "--seconds",
+        "0.02",
+        "--restarts",
+        "4",
+        "--sweep",
+        "--sweep-data",
+        p(&data),
+        "--sweep-restarts",
+        "2",
+        "--json",
+        p(&json),
+    ]);
+    assert_ok(&out, "bench --sweep");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(v["rows"].as_array().is_some_and(|r| !r.is_empty()), "{v}");
+    let s = &v["sweep"];
+    let backends = s["backends"].as_array().expect("sweep.backends");
+    let ids: Vec<&str> = backends
+        .iter()
+        .filter_map(|b| b["backend"].as_str())
+        .collect();
+    assert_eq!(ids, ["cpu", "gpu"], "{s}");
+    for b in backends {
+        // 2 files × (rmse/uniform, rmse/relunc, chi2) = 6 fits per backend
+        assert_eq!(b["fits"], 6, "{b}");
+        assert!(b["wall_seconds"].as_f64().is_some_and(|w| w > 0.0), "{b}");
+        assert!(b["evaluations"].as_u64().is_some_and(|e| e > 0), "{b}");
+        assert!(b["evals_per_s"].as_f64().is_some_and(|e| e > 0.0), "{b}");
+    }
+    assert!(
+        s["gpu_cpu_time_ratio"].as_f64().is_some_and(|r| r > 0.0),
+        "{s}"
+    );
+    let c = &s["comparison"];
+    assert_eq!(c["fits_compared"], 6, "{c}");
+    assert_eq!(c["rankings_identical"], true, "{c}");
+    let loss = c["max_rel_loss_diff"]["value"].as_f64().unwrap();
+    let param = c["max_param_diff_unit_box"]["value"].as_f64().unwrap();
+    assert!(loss <= c["loss_tolerance"].as_f64().unwrap(), "{c}");
+    assert!(param <= c["param_tolerance"].as_f64().unwrap(), "{c}");
+    assert_eq!(c["within_tolerance"], true, "{c}");
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("GPU/CPU sweep time ratio"), "{stdout}");
+}
+
+/// With `--backend cpu` only the CPU sweep is timed, and nothing is compared.
+#[test]
+fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a.csv");
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "lambert",
+        "--params",
+        "rho=0.5",
+        "--noise",
+        "0.01,0.0001",
+        "--out",
+        p(&file),
+    ]);
+    assert_ok(&out, "synth");
+    let json = dir.path().join("bench.json");
+    let out = bsdfit(&[
+        "bench",
+        "--backend",
+        "cpu",
+        "--models",
+        "lambert",
+        "--seconds",
+        "0.02",
+        "--sweep",
+        "--sweep-data",
+        p(&file),
+        "--sweep-restarts",
+        "2",
+        "--json",
+        p(&json),
+    ]);
+    assert_ok(&out, "bench --sweep --backend cpu");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let ids: Vec<&str> = v["sweep"]["backends"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|b| b["backend"].as_str())
+        .collect();
+    assert_eq!(ids, ["cpu"]);
+    assert!(v["sweep"]["gpu_cpu_time_ratio"].is_null() && v["sweep"]["comparison"].is_null());
+}

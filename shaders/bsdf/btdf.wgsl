@@ -57,7 +57,7 @@ fn btdf_transmit(g: BtdfGeom, d: f32, g1i_over_mu: f32, g1o_over_mu: f32) -> f32
     if (!g.valid) {
         return 0.0;
     }
-    return g.im * (-g.om) * (1.0 - fresnel_dielectric(g.im, g.eta)) * d * g1i_over_mu * g1o_over_mu / g.l2;
+    return g.im * (-g.om) * fresnel_transmittance(g.im, g.eta) * d * g1i_over_mu * g1o_over_mu / g.l2;
 }
 
 fn btdf_tr_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {

@@ -7,6 +7,6 @@ fn fa_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
     let alpha = fa_lobe_alpha(o);
     let eta = fa_lobe_eta(o);
     let ks = fa_lobe_ks(o);
-    let transmit = (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta));
+    let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
     return ggx_reflect(ks, alpha, eta, wi, wo) + transmit * base;
 }

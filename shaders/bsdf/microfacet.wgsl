@@ -79,12 +79,15 @@ fn gtr_d_vec(m: vec3<f32>, alpha: f32, gamma: f32) -> f32 {
 
 // Generalized Gaussian (Holzschuch & Pacanowski 2017) with its Smith G1 from the Lambda
 // table. requires: var<storage, read> LUT: array<f32>;  declared by the engine, holding
-// LambdaTable::to_f32() from index 0 when the model has a GG term: LUT[ip * GG_NA + ia],
-// ip <-> ln p uniform on [ln 0.2, ln 5] (GG_NP points), ia <-> x = b/(1+b) uniform on
-// [0, 1] (GG_NA points), b = r_c(p) * beta * tan(theta); value T = Lambda / (J0(p) (a + 1/r_c(p))).
+// LambdaTable::to_f32() from index 0 when the model has a GG term (layout and grid: see
+// LambdaTable in src/bsdf/microfacet.rs): LUT[(ip + 1) * GG_NA_STRIDE + ia + 1] for grid
+// node ip <-> ln p uniform on [ln 0.2, ln 5] (GG_NP points), ia <-> x = b/(1+b) uniform on
+// [0, 1] (GG_NA points), with one ghost row/column stored on each side for the bicubic
+// stencil; b = r_c(p) * beta * tan(theta); value T = Lambda / (J0(p) (a + 1/r_c(p))).
 
-const GG_NP: u32 = 33u;
+const GG_NP: u32 = 65u;
 const GG_NA: u32 = 129u;
+const GG_NA_STRIDE: u32 = 131u;
 const GG_LNP_LO: f32 = -1.6094379124341003;
 const GG_LNP_HI: f32 = 1.6094379124341003;
 
@@ -123,18 +126,30 @@ fn gg_new(beta: f32, p: f32) -> Gg {
     return s;
 }
 
-// Bilinear T(p, x) from the LUT (same arithmetic as LambdaTable::interpolate).
+// Catmull-Rom weights of the 4 nodes around a cell at fraction t (catmull_rom_weights).
+fn gg_cr_weights(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return 0.5 * vec4<f32>(-t3 + 2.0 * t2 - t, 3.0 * t3 - 5.0 * t2 + 2.0, -3.0 * t3 + 4.0 * t2 + t, t3 - t2);
+}
+
+// Bicubic T(p, x) from the LUT (same arithmetic as LambdaTable::interpolate).
 fn gg_table(p: f32, x: f32) -> f32 {
     let fp = clamp((log(p) - GG_LNP_LO) / (GG_LNP_HI - GG_LNP_LO), 0.0, 1.0) * f32(GG_NP - 1u);
     let ip = min(u32(fp), GG_NP - 2u);
-    let u = fp - f32(ip);
+    let wp = gg_cr_weights(fp - f32(ip));
     let fa = clamp(x, 0.0, 1.0) * f32(GG_NA - 1u);
     let ia = min(u32(fa), GG_NA - 2u);
-    let v = fa - f32(ia);
-    let k = ip * GG_NA + ia;
-    let t0 = LUT[k] + (LUT[k + 1u] - LUT[k]) * v;
-    let t1 = LUT[k + GG_NA] + (LUT[k + GG_NA + 1u] - LUT[k + GG_NA]) * v;
-    return t0 + (t1 - t0) * u;
+    let wa = gg_cr_weights(fa - f32(ia));
+    // Grid node (ip - 1, ia - 1) is stored at (ip, ia).
+    var t = 0.0;
+    for (var i = 0u; i < 4u; i = i + 1u) {
+        let k = (ip + i) * GG_NA_STRIDE + ia;
+        let r = wa.x * LUT[k] + wa.y * LUT[k + 1u] + wa.z * LUT[k + 2u] + wa.w * LUT[k + 3u];
+        t = t + wp[i] * r;
+    }
+    // Cubic overshoot where T leaves 0 must not make Lambda negative (G1 > 1).
+    return max(t, 0.0);
 }
 
 // GG D(m) = p / (pi beta^2 Gamma(1/p)) exp(-(tan^2/beta^2)^p) / cos^4.

@@ -116,7 +116,7 @@ fn mg_rough_grain(tau0: f32, beta: f32, eta_g: f32, rho_g: f32, wi: vec3<f32>, w
         return 0.0;
     }
     let eta = max(eta_g, 1.0);
-    let diffuse = (1.0 - fresnel_dielectric(mu_i, eta)) * (1.0 - fresnel_dielectric(mu_o, eta)) * rho_g * INV_PI;
+    let diffuse = fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta) * rho_g * INV_PI;
     let hs = wi + wo;
     let hl2 = dot(hs, hs);
     if (hl2 < 1e-30) {

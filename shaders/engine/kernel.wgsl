@@ -41,6 +41,18 @@ struct Dims {
 @group(0) @binding(6) var<storage, read> owners: array<u32>;
 
 var<workgroup> partial: array<f32, CL * SL>;
+var<workgroup> partial_comp: array<f32, CL * SL>;
+
+// Neumaier's compensated addition (Neumaier 1974, "Rundungsfehleranalyse einiger
+// Verfahren zur Summation endlicher Summen"; Kahan–Babuška): s = acc + x rounded, and the
+// exact rounding error of that addition, (acc − s) + x or (x − s) + acc with the larger
+// operand first, is returned to be added to the running compensation. Without it an f32
+// cost that has absorbed one large term drops every later term below half its ulp
+// (tests/gpu_accuracy.rs). naga emits plain SPIR-V float ops and lavapipe does not
+// reassociate them, so the error term is not optimised away (the same test checks it).
+fn two_sum_err(acc: f32, x: f32, s: f32) -> f32 {
+    return select((x - s) + acc, (acc - s) + x, abs(acc) >= abs(x));
+}
 
 // Resolve candidate c's flat vector into this thread's per-channel scalar views.
 fn load_params(c: u32) {
@@ -74,6 +86,7 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
     let live = c < dims.n_candidates;
     var acc = 0.0;
     var r = 0u;
+    var comp = 0.0;
     if (live) {
         r = ranges(owners[2u * c]);
         load_params(c);
@@ -82,23 +95,37 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
             for (var k = slots[r + ch] + slice(lid); k < end; k = k + SL) {
                 let s = samples[k];
                 let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
-                acc = acc + loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
+                let t = loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
+                let sum = acc + t;
+                comp = comp + two_sum_err(acc, t, sum);
+                acc = sum;
             }
         }
     }
     if (SL > 1u) {
         partial[lid.y * CL + lid.x] = acc;
+        partial_comp[lid.y * CL + lid.x] = comp;
         workgroupBarrier();
         for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
             if (lid.y < stride) {
-                partial[lid.y * CL + lid.x] = partial[lid.y * CL + lid.x] + partial[(lid.y + stride) * CL + lid.x];
+                // Pairwise: the two partial sums added with their rounding error, and both
+                // partial compensations carried along.
+                let a = partial[lid.y * CL + lid.x];
+                let b = partial[(lid.y + stride) * CL + lid.x];
+                let sum = a + b;
+                partial[lid.y * CL + lid.x] = sum;
+                partial_comp[lid.y * CL + lid.x] = partial_comp[lid.y * CL + lid.x]
+                    + partial_comp[(lid.y + stride) * CL + lid.x] + two_sum_err(a, b, sum);
             }
             workgroupBarrier();
         }
         acc = partial[lid.x];
+        comp = partial_comp[lid.x];
     }
     if (live && lid.y == 0u) {
-        out[c] = loss_finish(acc, f32(slots[r + C] - slots[r]));
+        // An overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
+        let total = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
+        out[c] = loss_finish(total, f32(slots[r + C] - slots[r]));
     }
 }
 

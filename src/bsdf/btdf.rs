@@ -29,7 +29,7 @@ use super::microfacet::{
 };
 use super::{Ast, Bsdf, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::fresnel_dielectric;
+use crate::math::fresnel_transmittance;
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -207,7 +207,7 @@ pub fn walter_transmission(
 
 /// |i·m| |o·m| (1 − F(i·m)) D · (G1(i)/|μi|) (G1(o)/|μo|) / ‖i + η o‖².
 pub fn transmit(r: &Refraction, eta: f64, d: f64, g1i_over_mu: f64, g1o_over_mu: f64) -> f64 {
-    r.im * (-r.om) * (1.0 - fresnel_dielectric(r.im, eta)) * d * g1i_over_mu * g1o_over_mu / r.l2
+    r.im * (-r.om) * fresnel_transmittance(r.im, eta) * d * g1i_over_mu * g1o_over_mu / r.l2
 }
 
 // ---------------------------------------------------------------------------------------

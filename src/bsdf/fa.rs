@@ -8,7 +8,7 @@ use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
 use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
-use crate::math::fresnel_dielectric;
+use crate::math::fresnel_transmittance;
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -34,7 +34,7 @@ impl Bsdf for FresnelAggregate {
         }
         let (alpha, eta, ks) = (p[0], p[1], p[2]);
         let transmit =
-            (1.0 - fresnel_dielectric(wi.z, eta)) * (1.0 - fresnel_dielectric(wo.z, eta));
+            fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
         ggx_reflect(ks, alpha, eta, wi, wo) + transmit * children[0]
     }
     fn wgsl(&self) -> WgslFn {

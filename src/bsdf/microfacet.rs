@@ -245,26 +245,53 @@ impl Masking for Gg {
     }
 }
 
-/// Points in ln p of the GG Λ table (p from [`GG_P_LO`] to [`GG_P_HI`], uniform in ln p).
-pub const GG_NP: usize = 33;
-/// Points in x = b/(1+b) of the GG Λ table (x from 0 to 1 inclusive, uniform).
+/// Points in ln p of the GG Λ table (p from [`GG_P_LO`] to [`GG_P_HI`], uniform in ln p),
+/// not counting the ghost row stored on each side.
+pub const GG_NP: usize = 65;
+/// Points in x = b/(1+b) of the GG Λ table (x from 0 to 1 inclusive, uniform), not
+/// counting the ghost column stored on each side.
 pub const GG_NA: usize = 129;
 pub const GG_P_LO: f64 = 0.2;
 pub const GG_P_HI: f64 = 5.0;
 
+/// Catmull–Rom weights of the four nodes around a cell at fraction t ∈ [0, 1] (Catmull &
+/// Rom 1974; Keys 1981, a = −½): the cubic through the two cell nodes whose slopes are
+/// the central differences there. Local, interpolating, O(h³) accurate; the same
+/// polynomial forms are written in `gg_cr_weights` of `shaders/bsdf/microfacet.wgsl`.
+pub fn catmull_rom_weights(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
 /// Tabulated Smith Λ of the generalized Gaussian NDF, computed once in f64.
 ///
-/// Layout: `data[ip * na + ia]`, ip ∈ [0, np), ia ∈ [0, na).
-/// - ip ↔ ln p = ln_p_lo + ip · (ln_p_hi − ln_p_lo)/(np − 1);
-/// - ia ↔ x = ia/(na − 1), with x = b/(1 + b), b = r_c(p) · a, a = β tanθ,
-///   r_c(p) = (1/p)^(1/(2p)) (the characteristic slope of the β = 1 distribution);
-/// - value T̂ = Λ / (J0(p) · (a + 1/r_c(p))), J0(p) = Γ(3/(2p)) / (π Γ(1/p)); T̂ → 1 as
-///   x → 1 (Λ ≈ J0 a − ½ for large a) and T̂ → 0 as x → 0.
+/// Grid: ln p uniform on [ln [`GG_P_LO`], ln [`GG_P_HI`]] ([`GG_NP`] points) and
+/// x = b/(1 + b) uniform on [0, 1] ([`GG_NA`] points), with b = r_c(p) · a, a = β tanθ,
+/// r_c(p) = (1/p)^(1/(2p)) (the characteristic slope of the β = 1 distribution); value
+/// T̂ = Λ / (J0(p) · (a + 1/r_c(p))), J0(p) = Γ(3/(2p)) / (π Γ(1/p)); T̂ → 1 as x → 1
+/// (Λ ≈ J0 a − ½ for large a) and T̂ → 0 as x → 0. Factoring out J0 and scaling a by r_c
+/// remove the p-dependence that interpolation handles badly (J0 spans 0.2 … 25 over the
+/// p range).
 ///
-/// Λ = T̂ · J0 · (a + 1/r_c), bilinear in (ln p, x) ([`LambdaTable::interpolate`], the same
-/// arithmetic as `gg_table` in `shaders/bsdf/microfacet.wgsl`, which reads an f32 copy bound
-/// as `LUT`). Factoring out J0 and scaling a by r_c remove the p-dependence that bilinear
-/// interpolation handles badly (J0 spans 0.2 … 25 over the p range).
+/// Interpolation is bicubic Catmull–Rom ([`LambdaTable::interpolate`], the same
+/// arithmetic as `gg_table` in `shaders/bsdf/microfacet.wgsl`, which reads an f32 copy
+/// bound as `LUT`). It needs one node beyond each side of a cell, so the table stores a
+/// ghost row on each side of the p range (exact values at ln p one step outside: the
+/// integral is defined for every p > 0) and a ghost column on each side of x (x < 0 and
+/// x > 1 have no meaning; the quadratic through the three nearest columns, 3f₀ − 3f₁ + f₂,
+/// keeps the edge cells third-order accurate). Measured against direct integration at
+/// 20,000 random (p, x) points, the relative error of G1 = 1/(1 + Λ), |ΔΛ|/(1 + Λ), is
+/// 4.6e-7 (the bilinear 33 × 129 table this replaces: 9.4e-5; bicubic on it without the
+/// ghost rows: 4.8e-5, its edge cells only second order). 67 × 131 values, 35 kB in f32.
+///
+/// Layout: `data[r * GG_NA_STRIDE + c]`, stored row r = ip + 1 for grid row ip ∈ [−1, GG_NP],
+/// stored column c = ia + 1 for grid column ia ∈ [−1, GG_NA].
 #[derive(Clone, Debug)]
 pub struct LambdaTable {
     pub np: usize,
@@ -274,15 +301,25 @@ pub struct LambdaTable {
     pub data: Vec<f64>,
 }
 
+/// Stored values per row of the GG Λ table: the grid's [`GG_NA`] plus two ghost columns.
+pub const GG_NA_STRIDE: usize = GG_NA + 2;
+/// Stored rows of the GG Λ table: the grid's [`GG_NP`] plus two ghost rows.
+pub const GG_NP_STORED: usize = GG_NP + 2;
+
 impl LambdaTable {
     fn compute() -> LambdaTable {
         let (ln_p_lo, ln_p_hi) = (GG_P_LO.ln(), GG_P_HI.ln());
-        let mut data = Vec::with_capacity(GG_NP * GG_NA);
-        for ip in 0..GG_NP {
-            let p = (ln_p_lo + ip as f64 * (ln_p_hi - ln_p_lo) / (GG_NP - 1) as f64).exp();
-            for ia in 0..GG_NA {
-                data.push(gg_table_value(p, ia as f64 / (GG_NA - 1) as f64));
-            }
+        let step = (ln_p_hi - ln_p_lo) / (GG_NP - 1) as f64;
+        let mut data = Vec::with_capacity(GG_NP_STORED * GG_NA_STRIDE);
+        for r in 0..GG_NP_STORED {
+            let p = (ln_p_lo + (r as f64 - 1.0) * step).exp();
+            let row: Vec<f64> = (0..GG_NA)
+                .map(|ia| gg_table_value(p, ia as f64 / (GG_NA - 1) as f64))
+                .collect();
+            let n = GG_NA - 1;
+            data.push(3.0 * row[0] - 3.0 * row[1] + row[2]);
+            data.extend_from_slice(&row);
+            data.push(3.0 * row[n] - 3.0 * row[n - 1] + row[n - 2]);
         }
         LambdaTable {
             np: GG_NP,
@@ -293,20 +330,25 @@ impl LambdaTable {
         }
     }
 
-    /// Bilinear T̂ at (p, x), clamped to the table's range.
+    /// Bicubic (Catmull–Rom) T̂ at (p, x), clamped to the table's range.
     pub fn interpolate(&self, p: f64, x: f64) -> f64 {
+        let stride = self.na + 2;
         let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
             * (self.np - 1) as f64;
         let ip = (fp as usize).min(self.np - 2);
-        let u = fp - ip as f64;
+        let wp = catmull_rom_weights(fp - ip as f64);
         let fa = x.clamp(0.0, 1.0) * (self.na - 1) as f64;
         let ia = (fa as usize).min(self.na - 2);
-        let v = fa - ia as f64;
-        let k = ip * self.na + ia;
-        let d = &self.data;
-        let t0 = d[k] + (d[k + 1] - d[k]) * v;
-        let t1 = d[k + self.na] + (d[k + self.na + 1] - d[k + self.na]) * v;
-        t0 + (t1 - t0) * u
+        let wa = catmull_rom_weights(fa - ia as f64);
+        // Grid node (ip − 1, ia − 1) is stored at (ip, ia).
+        let mut t = 0.0;
+        for (i, wpi) in wp.iter().enumerate() {
+            let row = &self.data[(ip + i) * stride + ia..(ip + i) * stride + ia + 4];
+            let r = wa[0] * row[0] + wa[1] * row[1] + wa[2] * row[2] + wa[3] * row[3];
+            t += wpi * r;
+        }
+        // Cubic overshoot where T̂ leaves 0 must not make Λ negative (G1 > 1).
+        t.max(0.0)
     }
 
     /// Λ at shape p and a = β tanθ, from the table.
@@ -325,7 +367,7 @@ impl LambdaTable {
     }
 }
 
-/// The GG Λ table, computed on first use (~4k one-dimensional integrals).
+/// The GG Λ table, computed on first use (~8.7k one-dimensional integrals).
 pub fn gg_lambda_table() -> &'static LambdaTable {
     static TABLE: OnceLock<LambdaTable> = OnceLock::new();
     TABLE.get_or_init(LambdaTable::compute)

@@ -40,7 +40,7 @@
 
 use super::microfacet::{cos2_sin2, Distribution, Ggx, MICROFACET_WGSL};
 use super::{ParamDecl, Role, WgslFn};
-use crate::math::fresnel_dielectric;
+use crate::math::{fresnel_dielectric, fresnel_transmittance};
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
 
@@ -201,10 +201,8 @@ pub fn rough_grain(tau0: f64, beta: f64, eta_g: f64, rho_g: f64, wi: DVec3, wo: 
         return 0.0;
     }
     let eta = eta_g.max(1.0);
-    let diffuse = (1.0 - fresnel_dielectric(mu_i, eta))
-        * (1.0 - fresnel_dielectric(mu_o, eta))
-        * rho_g
-        * FRAC_1_PI;
+    let diffuse =
+        fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta) * rho_g * FRAC_1_PI;
     let hs = wi + wo;
     let hl2 = hs.length_squared();
     if hl2 < 1e-30 {

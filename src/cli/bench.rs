@@ -28,6 +28,83 @@ pub struct BenchArgs {
     /// afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also time a whole sweep (`bsdfit sweep` with its defaults, no pictures) once per
+    /// backend, each into its own temporary folder, and compare the two: wall time, fits,
+    /// evaluations, evals/s, the GPU/CPU time ratio, whether the rankings (per data set ×
+    /// loss × weighting, models by best loss) are identical, and the largest loss and
+    /// parameter differences against the stated f32 tolerance. `--models` applies to it.
+    #[arg(long)]
+    pub sweep: bool,
+    /// Data of `--sweep`: files or directories of *.csv (default: the bundled data/, as
+    /// `sweep`).
+    #[arg(long, num_args = 1.., requires = "sweep")]
+    pub sweep_data: Vec<PathBuf>,
+    /// Restarts per fit of `--sweep` (default 8, the sweep's).
+    #[arg(long, default_value_t = 8, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    pub sweep_restarts: usize,
+}
+
+/// `sweep`'s own argument parser, so `bench --sweep` runs the sweep with exactly the
+/// defaults a user's `bsdfit sweep` gets.
+#[derive(clap::Parser)]
+struct SweepCommand {
+    #[command(flatten)]
+    args: super::sweep::SweepArgs,
+}
+
+/// Run the sweep on one backend into a fresh temporary folder; its rows and wall time.
+fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<(Vec<crate::output::results::Row>, f64)> {
+    use clap::Parser;
+    use std::ffi::OsString;
+    let dir = std::env::temp_dir().join(format!(
+        "bsdfit-bench-sweep-{}-{backend}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0)
+    ));
+    std::fs::create_dir_all(&dir).with_context(|| {
+        format!(
+            "--sweep: cannot create the temporary folder {}",
+            dir.display()
+        )
+    })?;
+    let mut argv: Vec<OsString> = vec!["sweep".into()];
+    argv.extend(a.sweep_data.iter().map(|p| p.clone().into_os_string()));
+    for (k, v) in [
+        ("--backend", backend.to_string()),
+        ("--restarts", a.sweep_restarts.to_string()),
+    ] {
+        argv.push(k.into());
+        argv.push(v.into());
+    }
+    argv.push("--out".into());
+    argv.push(dir.clone().into_os_string());
+    argv.push("--no-pictures".into());
+    if let Some(models) = &a.models {
+        argv.push("--models".into());
+        argv.push(models.join(",").into());
+    }
+    let result = (|| {
+        let sweep = SweepCommand::try_parse_from(argv)
+            .map_err(|e| anyhow::anyhow!("--sweep: {e}"))?
+            .args;
+        eprintln!("bench --sweep: sweep on {backend} into {}", dir.display());
+        let t0 = std::time::Instant::now();
+        super::sweep::run_sweep(&sweep).with_context(|| format!("--sweep on {backend}"))?;
+        let wall = t0.elapsed().as_secs_f64();
+        let rows = crate::output::results::read_results(
+            &dir.join(crate::output::results::RESULTS_CSV),
+            false,
+            &mut |m| eprintln!("note: {m}"),
+        )?;
+        Ok((rows, wall))
+    })();
+    if let Err(e) = std::fs::remove_dir_all(&dir) {
+        eprintln!("note: could not remove {}: {e}", dir.display());
+    }
+    result
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
@@ -120,13 +197,112 @@ pub fn run(a: BenchArgs) -> Result<()> {
             r.model, r.backend, r.samples, r.candidates, r.evals_per_s
         );
     }
-    if let Some(s) = median_speedup(&rows) {
+    let median = median_speedup(&rows);
+    if let Some(s) = median {
         println!("median GPU/CPU speed-up over models: {s:.2}x");
     }
+    let sweep = if a.sweep {
+        Some(sweep_bench(&a, &backends)?)
+    } else {
+        None
+    };
     if let Some(path) = &a.json {
-        let text = serde_json::to_string_pretty(&rows)? + "\n";
+        let value = match &sweep {
+            None => serde_json::to_value(&rows)?,
+            Some(s) => serde_json::json!({
+                "rows": rows,
+                "median_speedup": median,
+                "sweep": s,
+            }),
+        };
+        let text = serde_json::to_string_pretty(&value)? + "\n";
         crate::output::files::write_result(path, &text, true)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// `--sweep`: the sweep once per measured backend (CPU first), printed and returned.
+fn sweep_bench(
+    a: &BenchArgs,
+    backends: &[Box<dyn engine::Backend>],
+) -> Result<crate::workflows::bench::SweepBench> {
+    use crate::workflows::bench::{compare_sweeps, SweepBench, SweepTiming};
+    let data = crate::workflows::sweep::expand_data(&a.sweep_data).context("--sweep-data")?;
+    let mut timings = Vec::new();
+    let mut results = Vec::new();
+    for b in backends {
+        let (rows, wall) = timed_sweep(a, b.id())?;
+        timings.push(SweepTiming::new(b.id(), wall, &rows));
+        results.push((b.id(), rows));
+    }
+    println!();
+    println!(
+        "{:<8} {:>10} {:>6} {:>14} {:>12}",
+        "sweep", "wall (s)", "fits", "evaluations", "evals/s"
+    );
+    for t in &timings {
+        println!(
+            "{:<8} {:>10.2} {:>6} {:>14} {:>12.3e}",
+            t.backend, t.wall_seconds, t.fits, t.evaluations, t.evals_per_s
+        );
+    }
+    let find = |id: &str| timings.iter().find(|t| t.backend == id);
+    let ratio = match (find("cpu"), find("gpu")) {
+        (Some(c), Some(g)) => Some(g.wall_seconds / c.wall_seconds.max(1e-9)),
+        _ => None,
+    };
+    let rows_of = |id: &str| results.iter().find(|(b, _)| *b == id).map(|(_, r)| r);
+    let comparison = match (rows_of("cpu"), rows_of("gpu")) {
+        (Some(c), Some(g)) => Some(compare_sweeps(c, g)),
+        _ => None,
+    };
+    if let Some(r) = ratio {
+        println!("GPU/CPU sweep time ratio: {r:.3}");
+    }
+    if let Some(c) = &comparison {
+        println!(
+            "rankings (data set × loss × weighting, models by best loss): {}",
+            if c.rankings_identical {
+                "identical".to_string()
+            } else {
+                format!("{} group(s) differ", c.ranking_differences.len())
+            }
+        );
+        for d in &c.ranking_differences {
+            println!(
+                "  {} {}/{}: cpu {} | gpu {}",
+                d.data,
+                d.loss,
+                d.weights,
+                d.cpu.join(" < "),
+                d.gpu.join(" < ")
+            );
+        }
+        println!(
+            "largest relative best-loss difference: {:.2e} ({}), tolerance {:.0e}",
+            c.max_rel_loss_diff.value, c.max_rel_loss_diff.at, c.loss_tolerance
+        );
+        println!(
+            "largest parameter difference (unit box): {:.2e} ({}), tolerance {:.0e}",
+            c.max_param_diff_unit_box.value, c.max_param_diff_unit_box.at, c.param_tolerance
+        );
+        println!(
+            "{} of {} fits compared; {}",
+            c.fits_compared,
+            timings.first().map_or(0, |t| t.fits),
+            if c.within_tolerance {
+                "within the f32 tolerance"
+            } else {
+                "NOT within the f32 tolerance"
+            }
+        );
+    }
+    Ok(SweepBench {
+        data: data.iter().map(|p| p.display().to_string()).collect(),
+        restarts: a.sweep_restarts,
+        backends: timings,
+        gpu_cpu_time_ratio: ratio,
+        comparison,
+    })
 }

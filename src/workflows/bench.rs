@@ -1,13 +1,16 @@
 //! Throughput of the backends: model-sample evaluations per second (one eval = one model
 //! at one sample and channel, the loss term and the reduction included), CPU and GPU in
-//! the same run, at the batch sizes a sweep uses (restarts × (2P + 1) candidates).
+//! the same run, at the batch sizes a sweep uses (restarts × (2P + 1) candidates); and for
+//! `bench --sweep`, the timing of whole sweeps and the comparison of their results.
 
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::engine::{Backend, Problem};
+use crate::output::results::Row;
 use crate::workflows::synth::{geometry, synthesize, Noise};
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize)]
@@ -110,4 +113,232 @@ pub fn median_speedup(rows: &[BenchRow]) -> Option<f64> {
     } else {
         0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
     })
+}
+
+// ---------------------------------------------------------------------------------------
+// `bench --sweep`: the sweep timed once per backend, and the two backends' results compared
+
+/// Stated agreement expected between the f64 CPU and f32 GPU sweeps. Best losses: 1e-3
+/// relative (the costs themselves agree to ~1e-6 with the compensated sums; the rest is
+/// where each optimizer stops: LM on the GPU differentiates with unit-box steps of ≈ 1e-3
+/// instead of 1e-6). Parameters: 1e-2 of their search box (unit-box coordinates, so a
+/// log-scaled roughness is compared relatively), the resolution those steps give.
+pub const SWEEP_LOSS_TOL: f64 = 1e-3;
+pub const SWEEP_PARAM_TOL: f64 = 1e-2;
+
+/// One backend's sweep, timed end to end (fits and results files; no pictures).
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepTiming {
+    pub backend: String,
+    pub wall_seconds: f64,
+    pub fits: usize,
+    pub evaluations: u64,
+    pub evals_per_s: f64,
+}
+
+impl SweepTiming {
+    pub fn new(backend: &str, wall_seconds: f64, rows: &[Row]) -> SweepTiming {
+        let evaluations: u64 = rows.iter().map(|r| r.evaluations).sum();
+        SweepTiming {
+            backend: backend.to_string(),
+            wall_seconds,
+            fits: rows.len(),
+            evaluations,
+            evals_per_s: evaluations as f64 / wall_seconds.max(1e-9),
+        }
+    }
+}
+
+/// A (data set, loss, weighting) whose model order differs between the backends.
+#[derive(Clone, Debug, Serialize)]
+pub struct RankingDifference {
+    pub data: String,
+    pub loss: String,
+    pub weights: String,
+    pub cpu: Vec<String>,
+    pub gpu: Vec<String>,
+}
+
+/// Where a largest difference occurred.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DiffAt {
+    pub value: f64,
+    /// `data · model · loss/weights [· parameter]`
+    pub at: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepComparison {
+    /// Fits present in both sweeps (same data, model, loss, weights, optimizer).
+    pub fits_compared: usize,
+    /// Per data set × loss × weighting, models ordered by best loss: identical orders?
+    pub rankings_identical: bool,
+    pub ranking_differences: Vec<RankingDifference>,
+    /// Largest |gpu − cpu| / max(|cpu|, |gpu|) of the best losses (∞ if one is not finite).
+    pub max_rel_loss_diff: DiffAt,
+    /// Largest difference of a fitted parameter in its unit-box coordinate.
+    pub max_param_diff_unit_box: DiffAt,
+    pub loss_tolerance: f64,
+    pub param_tolerance: f64,
+    pub within_tolerance: bool,
+}
+
+type FitId = (String, String, String, String, String);
+
+fn fit_id(r: &Row) -> FitId {
+    (
+        r.data.clone(),
+        r.model.clone(),
+        r.loss.clone(),
+        r.weights.clone(),
+        r.optimizer.clone(),
+    )
+}
+
+/// The models of each (data, loss, weights) group, ordered by best loss (NaN last, then
+/// by name, so that the order is total).
+fn rankings(rows: &[Row]) -> BTreeMap<(String, String, String), Vec<String>> {
+    let mut groups: BTreeMap<(String, String, String), Vec<(f64, String)>> = BTreeMap::new();
+    for r in rows {
+        groups
+            .entry((r.data.clone(), r.loss.clone(), r.weights.clone()))
+            .or_default()
+            .push((r.best_loss, r.model.clone()));
+    }
+    groups
+        .into_iter()
+        .map(|(k, mut v)| {
+            v.sort_by(|a, b| {
+                let key = |x: f64| if x.is_nan() { f64::INFINITY } else { x };
+                key(a.0).total_cmp(&key(b.0)).then_with(|| a.1.cmp(&b.1))
+            });
+            (k, v.into_iter().map(|(_, m)| m).collect())
+        })
+        .collect()
+}
+
+fn rel_diff(c: f64, g: f64) -> f64 {
+    if c == g {
+        return 0.0;
+    }
+    if !(c.is_finite() && g.is_finite()) {
+        return f64::INFINITY;
+    }
+    (g - c).abs() / c.abs().max(g.abs())
+}
+
+/// Unit-box coordinates of a results row's parameters: (name, coordinate) per fitted
+/// value, in the JSON's order (`rho[1]` for an array entry).
+fn unit_params(r: &Row) -> Vec<(String, f64)> {
+    let Ok(model) = Model::parse(&r.model, 1) else {
+        return Vec::new();
+    };
+    let decls: BTreeMap<String, crate::bsdf::ParamDecl> = model
+        .flat_names()
+        .into_iter()
+        .zip(model.flat_decls())
+        .map(|(n, d)| (n.split(['[', '@']).next().unwrap_or("").to_string(), d))
+        .collect();
+    let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&r.params)
+    else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (name, v) in map {
+        let Some(d) = decls.get(&name) else { continue };
+        match v {
+            serde_json::Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    if let Some(x) = x.as_f64() {
+                        out.push((format!("{name}[{i}]"), d.to_unit(x)));
+                    }
+                }
+            }
+            v => {
+                if let Some(x) = v.as_f64() {
+                    out.push((name, d.to_unit(x)));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Compare a CPU and a GPU sweep of the same tasks.
+pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
+    let gpu_by: BTreeMap<FitId, &Row> = gpu.iter().map(|r| (fit_id(r), r)).collect();
+    let mut compared = 0;
+    let mut loss = DiffAt::default();
+    let mut param = DiffAt::default();
+    for c in cpu {
+        let Some(g) = gpu_by.get(&fit_id(c)) else {
+            continue;
+        };
+        compared += 1;
+        let where_ = format!("{} · {} · {}/{}", c.data, c.model, c.loss, c.weights);
+        let d = rel_diff(c.best_loss, g.best_loss);
+        if d > loss.value || (d.is_nan() && !loss.value.is_nan()) {
+            loss = DiffAt {
+                value: d,
+                at: where_.clone(),
+            };
+        }
+        for ((name, uc), (_, ug)) in unit_params(c).into_iter().zip(unit_params(g)) {
+            let d = (ug - uc).abs();
+            if d > param.value {
+                param = DiffAt {
+                    value: d,
+                    at: format!("{where_} · {name}"),
+                };
+            }
+        }
+    }
+    let (rc, rg) = (rankings(cpu), rankings(gpu));
+    let mut diffs = Vec::new();
+    for (k, order) in &rc {
+        let other = rg.get(k).cloned().unwrap_or_default();
+        if &other != order {
+            diffs.push(RankingDifference {
+                data: k.0.clone(),
+                loss: k.1.clone(),
+                weights: k.2.clone(),
+                cpu: order.clone(),
+                gpu: other,
+            });
+        }
+    }
+    for (k, order) in &rg {
+        if !rc.contains_key(k) {
+            diffs.push(RankingDifference {
+                data: k.0.clone(),
+                loss: k.1.clone(),
+                weights: k.2.clone(),
+                cpu: Vec::new(),
+                gpu: order.clone(),
+            });
+        }
+    }
+    let within = loss.value <= SWEEP_LOSS_TOL && param.value <= SWEEP_PARAM_TOL;
+    SweepComparison {
+        fits_compared: compared,
+        rankings_identical: diffs.is_empty(),
+        ranking_differences: diffs,
+        max_rel_loss_diff: loss,
+        max_param_diff_unit_box: param,
+        loss_tolerance: SWEEP_LOSS_TOL,
+        param_tolerance: SWEEP_PARAM_TOL,
+        within_tolerance: within,
+    }
+}
+
+/// The `sweep` section of `bench --json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepBench {
+    pub data: Vec<String>,
+    pub restarts: usize,
+    pub backends: Vec<SweepTiming>,
+    /// GPU wall time ÷ CPU wall time (null unless both ran).
+    pub gpu_cpu_time_ratio: Option<f64>,
+    /// Null unless both backends ran.
+    pub comparison: Option<SweepComparison>,
 }
