@@ -79,12 +79,20 @@ fn coverage(case: &Case, sets: u64, replicas: usize) -> (usize, usize, Vec<McSum
             &mut |_| {},
         )
         .unwrap();
-        assert_eq!(s.converged, replicas, "{}: every replica refitted", case.spec);
+        assert_eq!(
+            s.converged, replicas,
+            "{}: every replica refitted",
+            case.spec
+        );
         let names = model.flat_names();
         for p in &s.params {
             let j = names.iter().position(|n| *n == p.name).unwrap();
             let [lo, hi] = p.interval;
-            assert!(lo.is_finite() && hi.is_finite() && lo <= hi, "{}: {p:?}", case.spec);
+            assert!(
+                lo.is_finite() && hi.is_finite() && lo <= hi,
+                "{}: {p:?}",
+                case.spec
+            );
             checked += 1;
             if lo <= truth[j] && truth[j] <= hi {
                 covered += 1;
@@ -104,11 +112,7 @@ fn mc_intervals_cover_the_truth_reduced() {
         // 16 data sets: binomial σ of the rate ≈ 5.5 % per parameter; the band is 3σ
         // below. Intervals too wide to fail are caught by the σ check on the linear model
         // and by the long test's two-sided band.
-        assert!(
-            rate >= 0.78,
-            "{}: coverage {covered}/{checked}",
-            case.spec
-        );
+        assert!(rate >= 0.78, "{}: coverage {covered}/{checked}", case.spec);
         if case.spec == "lambert" {
             // A linear model: the replicas' σ is the linearized σ (80 replicas: the
             // sample σ has a relative spread of 1/√(2·79) ≈ 8 %, so 30 % is ~4σ).
@@ -203,7 +207,10 @@ mod cli_mc {
         assert_eq!(mc["replicas"], 150);
         assert_eq!(mc["params"].as_array().unwrap().len(), 3);
         for p in mc["params"].as_array().unwrap() {
-            let [lo, hi] = [p["interval"][0].as_f64().unwrap(), p["interval"][1].as_f64().unwrap()];
+            let [lo, hi] = [
+                p["interval"][0].as_f64().unwrap(),
+                p["interval"][1].as_f64().unwrap(),
+            ];
             let mean = p["mean"].as_f64().unwrap();
             assert!(lo <= mean && mean <= hi, "{p}");
             assert!(p["sd"].as_f64().unwrap() > 0.0, "{p}");
@@ -226,7 +233,17 @@ mod cli_mc {
         let dir = tempfile::tempdir().unwrap();
         let data = dir.path().join("l.csv");
         assert_ok(
-            &bsdfit(&["synth", "--model", "lambert", "--params", "rho=0.5", "--geometry", "inplane10", "--out", p(&data)]),
+            &bsdfit(&[
+                "synth",
+                "--model",
+                "lambert",
+                "--params",
+                "rho=0.5",
+                "--geometry",
+                "inplane10",
+                "--out",
+                p(&data),
+            ]),
             "synth",
         );
         let fit = |extra: &[&str]| {

@@ -63,7 +63,12 @@ pub struct FitArgs {
     pub mc: usize,
     /// With --mc: an instrument's fully correlated relative scale uncertainty (e.g. 0.01):
     /// every value of a replica is multiplied by one draw of N(1, REL²).
-    #[arg(long, default_value_t = 0.0, value_name = "REL", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "REL",
+        allow_hyphen_values = true
+    )]
     pub mc_scale: f64,
     /// With --mc: random restarts per replica, besides starting from the best fit.
     #[arg(long, default_value_t = 3, value_name = "R")]
@@ -118,7 +123,10 @@ pub fn run(a: FitArgs) -> Result<()> {
         a.mc > 0 || a.mc_scale == 0.0,
         "--mc-scale needs --mc N (the number of replicas)"
     );
-    anyhow::ensure!(!(a.mc > 0 && a.per_axis), "--mc and --per-axis cannot be combined");
+    anyhow::ensure!(
+        !(a.mc > 0 && a.per_axis),
+        "--mc and --per-axis cannot be combined"
+    );
     let data = a.data_args.read(&a.data)?;
     let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
     let model = Model::for_data(&a.model, &data).context("--model")?;

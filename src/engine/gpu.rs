@@ -270,7 +270,8 @@ impl Backend for GpuBackend {
         let terms: Vec<LossTerms> = problems.iter().map(|p| p.loss.terms(p.data)).collect();
         let pipes = self.pipelines(&first, terms[0].term, terms[0].finish)?;
         let groups = model.groups();
-        let mut slots = Vec::with_capacity(model.scalar_count() * groups + (groups + 1) * problems.len());
+        let mut slots =
+            Vec::with_capacity(model.scalar_count() * groups + (groups + 1) * problems.len());
         for g in 0..groups {
             for j in 0..model.scalar_count() {
                 slots.push(model.slot(j, g) as u32);
@@ -280,7 +281,12 @@ impl Backend for GpuBackend {
         for (problem, terms) in problems.iter().zip(&terms) {
             // Sort by channel (stable) so the kernel's channel loop is outermost; the
             // original index travels with each sample for the `values` output.
-            let group: Vec<usize> = problem.data.samples.iter().map(|s| model.group_of(s)).collect();
+            let group: Vec<usize> = problem
+                .data
+                .samples
+                .iter()
+                .map(|s| model.group_of(s))
+                .collect();
             let mut order: Vec<usize> = (0..problem.data.len()).collect();
             order.sort_by_key(|&k| group[k]);
             let base = samples.len() as u32;

@@ -36,8 +36,10 @@ pub trait Backend: Send + Sync {
     /// One evaluator for several independent problems that share one model and one loss
     /// metric (different data sets, weightings, Monte Carlo replicas): a batch may mix
     /// candidates of every problem, and is evaluated in one submission.
-    fn prepare_many<'a>(&'a self, problems: &[Problem<'a>])
-        -> anyhow::Result<Box<dyn Evaluator + 'a>>;
+    fn prepare_many<'a>(
+        &'a self,
+        problems: &[Problem<'a>],
+    ) -> anyhow::Result<Box<dyn Evaluator + 'a>>;
     /// One evaluator for one problem.
     fn prepare<'a>(&'a self, problem: Problem<'a>) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
         self.prepare_many(&[problem])

@@ -148,7 +148,11 @@ impl UnitBox<'_, '_> {
     }
 
     /// Costs of unit-box points, `problems[i]` the problem of point i.
-    pub fn problem_costs(&mut self, problems: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
+    pub fn problem_costs(
+        &mut self,
+        problems: &[usize],
+        points: &[f64],
+    ) -> anyhow::Result<Vec<f64>> {
         let phys = self.to_physical(points);
         let mut costs = self.eval.costs_of(problems, &phys)?;
         if !self.space.priors.is_empty() {
@@ -162,7 +166,11 @@ impl UnitBox<'_, '_> {
 
     /// Residual rows (data, then priors) of physical points, `problems[i]` the problem of
     /// point i; the rows one after the other.
-    fn problem_residuals(&mut self, problems: &[usize], phys: &[f64]) -> anyhow::Result<Vec<Vec<f64>>> {
+    fn problem_residuals(
+        &mut self,
+        problems: &[usize],
+        phys: &[f64],
+    ) -> anyhow::Result<Vec<Vec<f64>>> {
         anyhow::ensure!(!self.loss_terms.is_empty(), "residuals need loss terms");
         let values = self.eval.values_of(problems, phys)?;
         let mut at = 0;
@@ -450,7 +458,10 @@ pub fn fit_many(
             optima.push(Optimum {
                 flat: space.from_unit(&best.x),
                 loss: best.cost,
-                within: restarts.iter().filter(|r| r.cost <= best.cost + tol).count(),
+                within: restarts
+                    .iter()
+                    .filter(|r| r.cost <= best.cost + tol)
+                    .count(),
                 evaluations: eval.evaluations_of(q),
             });
         }

@@ -204,7 +204,14 @@ mod tests {
             .collect();
         let mut d = Decay { t, y };
         let starts = super::super::random_starts(3, 6, 3);
-        let out = minimize(&mut d, &starts, &LmOptions::default(), &|_, s| s, &mut |_| {}).unwrap();
+        let out = minimize(
+            &mut d,
+            &starts,
+            &LmOptions::default(),
+            &|_, s| s,
+            &mut |_| {},
+        )
+        .unwrap();
         let best = out.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).unwrap();
         for (a, b) in best.x.iter().zip(truth) {
             assert!((a - b).abs() < 1e-5, "{:?}", best.x);
