@@ -41,6 +41,16 @@ pub struct DiagnoseArgs {
     /// Most effects to add.
     #[arg(long, default_value_t = 4)]
     pub max_steps: usize,
+    /// Replicates of the parametric bootstrap that calibrates the p-value of an extension
+    /// whose null is irregular (a new parameter's null value on a bound of its range, e.g.
+    /// σ = 0 or k_s = 0, or new parameters the null does not identify, e.g. the lobe's α
+    /// when k_s = 0), where the F test's reference distribution does not hold. Run only
+    /// where the verdict depends on it; 0 keeps the nominal F test everywhere.
+    #[arg(long, default_value_t = 99)]
+    pub bootstrap: usize,
+    /// Random restarts per bootstrap refit, besides the carried-over optima.
+    #[arg(long, default_value_t = 2)]
+    pub bootstrap_restarts: usize,
     #[command(flatten)]
     pub backend: BackendArgs,
     /// Write the diagnosis (docs/output.md) as JSON here (checked before the fits start; if the
@@ -113,6 +123,11 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         max_steps: a.max_steps,
         parallel: a.parallel,
         backtrack: !a.no_backtrack,
+        bootstrap: crate::inference::bootstrap::BootstrapOptions {
+            replicates: a.bootstrap,
+            restarts: a.bootstrap_restarts,
+            seed: a.seed,
+        },
         constraints,
         ..Default::default()
     };

@@ -42,6 +42,10 @@ pub struct FitOptions {
     /// Extra starting points (physical parameter vectors), tried before the random ones;
     /// e.g. a smaller model's optimum carried into its extension.
     pub initial_points: Vec<Vec<f64>>,
+    /// One more starting point per problem of [`fit_many`] (physical), tried after
+    /// `initial_points`: empty, or one per data set (e.g. each bootstrap replicate's own
+    /// null optimum carried into the extension, so a nested extension can only improve).
+    pub problem_points: Vec<Vec<f64>>,
     pub compass: compass::CompassOptions,
     pub lm: lm::LmOptions,
     /// `--fix`, `--bounds`, `--prior` (resolved against each model fitted).
@@ -56,6 +60,7 @@ impl Default for FitOptions {
             seed: 1,
             screen: 8,
             initial_points: vec![],
+            problem_points: vec![],
             compass: Default::default(),
             lm: Default::default(),
             constraints: Default::default(),
@@ -273,7 +278,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
 /// (the same draws for every problem, screened on each problem's own data).
 fn screened_starts(
     obj: &mut UnitBox,
-    problems: usize,
+    problems: std::ops::Range<usize>,
     opts: &FitOptions,
 ) -> anyhow::Result<Vec<Vec<f64>>> {
     let initial: Vec<Vec<f64>> = opts
@@ -281,11 +286,17 @@ fn screened_starts(
         .iter()
         .map(|p| obj.space.to_unit(p))
         .collect();
+    // Problem q's own start, if any, after the shared ones.
+    let own =
+        |q: usize| -> Option<Vec<f64>> { opts.problem_points.get(q).map(|p| obj.space.to_unit(p)) };
+    let owns: Vec<Option<Vec<f64>>> = problems.clone().map(own).collect();
+    let problems = problems.len();
     let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
     let mut starts = Vec::with_capacity(problems * (initial.len() + opts.restarts));
     if opts.screen <= 1 {
-        for _ in 0..problems {
+        for own in &owns {
             starts.extend(initial.iter().cloned());
+            starts.extend(own.iter().cloned());
             starts.extend(pool.iter().cloned());
         }
         return Ok(starts);
@@ -297,12 +308,13 @@ fn screened_starts(
         .flat_map(|q| std::iter::repeat_n(q, pool.len()))
         .collect();
     let costs = obj.problem_costs(&owners, &points)?;
-    for costs in costs.chunks(pool.len()) {
+    for (costs, own) in costs.chunks(pool.len()).zip(&owns) {
         let mut order: Vec<usize> = (0..pool.len()).collect();
         order.sort_by(|&a, &b| {
             crate::optim::sanitize(costs[a]).total_cmp(&crate::optim::sanitize(costs[b]))
         });
         starts.extend(initial.iter().cloned());
+        starts.extend(own.iter().cloned());
         starts.extend(
             order
                 .into_iter()
@@ -382,10 +394,19 @@ pub fn fit_many(
     }
     anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
     anyhow::ensure!(
-        opts.initial_points.iter().all(|p| p.len() == model.dim),
+        opts.initial_points
+            .iter()
+            .chain(&opts.problem_points)
+            .all(|p| p.len() == model.dim),
         "an initial point does not have the {} parameters of {}",
         model.dim,
         model.spec
+    );
+    anyhow::ensure!(
+        opts.problem_points.is_empty() || opts.problem_points.len() == datas.len(),
+        "{} per-problem starting points for {} data sets",
+        opts.problem_points.len(),
+        datas.len()
     );
     // Problems go to the backend in as few evaluators as its sample capacity allows.
     let cap = backend.max_batch_samples().max(1);
@@ -413,7 +434,9 @@ pub fn fit_many(
             .collect();
         let mut eval = backend.prepare_many(&problems)?;
         let n = problems.len();
-        let per = opts.initial_points.len() + opts.restarts;
+        let per = opts.initial_points.len()
+            + usize::from(!opts.problem_points.is_empty())
+            + opts.restarts;
         let results: Vec<RestartResult> = {
             let terms: Vec<_> = problems
                 .iter()
@@ -427,7 +450,7 @@ pub fn fit_many(
                 loss_terms: terms,
                 start_problem: (0..n).flat_map(|q| std::iter::repeat_n(q, per)).collect(),
             };
-            let starts = screened_starts(&mut obj, n, opts)?;
+            let starts = screened_starts(&mut obj, range.clone(), opts)?;
             match opts.optimizer {
                 Optimizer::Compass => {
                     compass::minimize(&mut obj, &starts, &opts.compass, progress)?

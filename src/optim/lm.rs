@@ -30,6 +30,46 @@ impl Default for LmOptions {
     }
 }
 
+/// The damped Gauss–Newton step −A⁻¹g restricted to the box: a parameter on a bound of
+/// the unit box whose step would leave it is held there and the system solved for the
+/// others (an active set, as in projected Levenberg–Marquardt methods, e.g. Kanzow, Yamashita
+/// & Fukushima 2004). Clamping the full step instead gives the free parameters a step
+/// computed for a move the bound forbids; it is then rejected, λ grows, and a fit whose
+/// optimum lies on a bound (σ = 0, k_s = 0) crawls there in many rejected iterations.
+fn bounded_step(a: &DMatrix<f64>, g: &DVector<f64>, x: &[f64]) -> DVector<f64> {
+    let p = x.len();
+    let mut held = vec![false; p];
+    loop {
+        let free: Vec<usize> = (0..p).filter(|&j| !held[j]).collect();
+        let mut delta = DVector::zeros(p);
+        if !free.is_empty() {
+            let sub = DMatrix::from_fn(free.len(), free.len(), |r, c| a[(free[r], free[c])]);
+            let rhs = DVector::from_fn(free.len(), |r, _| -g[free[r]]);
+            let d = match sub.clone().cholesky() {
+                Some(ch) => ch.solve(&rhs),
+                None => sub
+                    .lu()
+                    .solve(&rhs)
+                    .unwrap_or_else(|| DVector::zeros(free.len())),
+            };
+            for (r, &j) in free.iter().enumerate() {
+                delta[j] = d[r];
+            }
+        }
+        let mut changed = false;
+        for &j in &free {
+            let leaves = (x[j] <= 0.0 && delta[j] < 0.0) || (x[j] >= 1.0 && delta[j] > 0.0);
+            if leaves {
+                held[j] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            return delta;
+        }
+    }
+}
+
 struct State {
     x: Vec<f64>,
     ss: f64,
@@ -102,13 +142,7 @@ pub fn minimize(
             for j in 0..p {
                 a_mat[(j, j)] += s.lambda * jtj[(j, j)].max(1e-9 * dmax);
             }
-            let delta = match a_mat.clone().cholesky() {
-                Some(ch) => ch.solve(&(-&g)),
-                None => a_mat
-                    .lu()
-                    .solve(&(-&g))
-                    .unwrap_or_else(|| DVector::zeros(p)),
-            };
+            let delta = bounded_step(&a_mat, &g, &s.x);
             for j in 0..p {
                 let v = s.x[j] + if delta[j].is_finite() { delta[j] } else { 0.0 };
                 trial.push(v.clamp(0.0, 1.0));

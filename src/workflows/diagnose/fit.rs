@@ -1,11 +1,13 @@
 //! Fitting a model for the diagnosis: a multi-start χ² fit and its statistics, and the
 //! fits of a round's candidates.
 
-use super::{embed, Candidate, DiagnoseOptions};
+use super::score::{PTest, SETTLED};
+use super::{embed, Candidate, DiagnoseOptions, Scored};
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::normalised_residuals;
 use crate::engine::Backend;
+use crate::inference::bootstrap::{self, BootstrapOptions};
 use crate::inference::covariance::Covariance;
 use crate::inference::fit::{fit_outcome, FitOptions, Optimizer};
 use crate::inference::stats::consistency_p;
@@ -43,6 +45,24 @@ impl FitResult {
     }
 }
 
+/// The fit options of every fit of a diagnosis.
+fn fit_options(opts: &DiagnoseOptions) -> FitOptions {
+    // SMAPE is not a sum of squares: LM cannot fit it, compass can.
+    let optimizer = if opts.optimizer == Optimizer::Lm && !opts.loss.is_sum_of_squares() {
+        Optimizer::Compass
+    } else {
+        opts.optimizer
+    };
+    FitOptions {
+        optimizer,
+        restarts: opts.restarts.max(1),
+        seed: opts.seed,
+        screen: opts.screen,
+        constraints: opts.constraints.clone(),
+        ..Default::default()
+    }
+}
+
 /// Multi-start fit of `model` with extra starting points `seeds` (physical parameters).
 pub fn fit_model(
     model: &Model,
@@ -51,20 +71,9 @@ pub fn fit_model(
     opts: &DiagnoseOptions,
     seeds: &[Vec<f64>],
 ) -> Result<FitResult> {
-    // SMAPE is not a sum of squares: LM cannot fit it, compass can.
-    let optimizer = if opts.optimizer == Optimizer::Lm && !opts.loss.is_sum_of_squares() {
-        Optimizer::Compass
-    } else {
-        opts.optimizer
-    };
     let fit_opts = FitOptions {
-        optimizer,
-        restarts: opts.restarts.max(1),
-        seed: opts.seed,
-        screen: opts.screen,
         initial_points: seeds.to_vec(),
-        constraints: opts.constraints.clone(),
-        ..Default::default()
+        ..fit_options(opts)
     };
     let o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
     let chi2 = o.chi2 + o.chi2_prior;
@@ -111,5 +120,126 @@ pub(super) fn fit_all(
         })
     } else {
         cands.iter().map(one).collect()
+    }
+}
+
+/// The bootstrap-calibrated p-value of extending the fit `current` to the fit `ext` on
+/// `data` (both fitted by [`fit_model`] with `opts`), whether or not its null is irregular:
+/// what [`calibrate_round`] does for one candidate.
+pub fn bootstrap_p(
+    current: &FitResult,
+    ext: &FitResult,
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+) -> Result<bootstrap::Calibrated> {
+    let boot = round_bootstrap(opts);
+    let nulls = bootstrap::refit_null(
+        &current.model,
+        &current.flat,
+        &current.values,
+        data,
+        backend,
+        &fit_options(opts),
+        &boot,
+    )?;
+    bootstrap::calibrate(
+        &ext.model,
+        &ext.flat,
+        &|null_flat| embed(&current.model, null_flat, &ext.model),
+        &nulls,
+        ext.dof,
+        backend,
+        &fit_options(opts),
+        &boot,
+    )
+}
+
+/// The bootstrap's options in a diagnosis (its seed tied to the diagnosis's).
+fn round_bootstrap(opts: &DiagnoseOptions) -> BootstrapOptions {
+    BootstrapOptions {
+        seed: opts.bootstrap.seed ^ opts.seed.rotate_left(17),
+        ..opts.bootstrap.clone()
+    }
+}
+
+/// Calibrate by the parametric bootstrap the p-value of every candidate whose null is
+/// irregular and whose verdict depends on it ([`Scored::needs_calibration`]); the others
+/// keep the nominal F test and say why. The null is refitted to the replicates once per
+/// round, shared by the candidates.
+pub(super) fn calibrate_round(
+    scored: &mut [Scored],
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    current: &FitResult,
+    log: &mut dyn FnMut(String),
+) {
+    let boot = round_bootstrap(opts);
+    let mut nulls = None;
+    for s in scored.iter_mut().filter(|s| s.irregular.is_some()) {
+        if !s.needs_calibration() {
+            let why = if s.delta_bic_scaled >= 0.0 {
+                "the BIC does not fall, so the candidate fails whatever its p-value".to_string()
+            } else {
+                format!(
+                    "the nominal p is below {SETTLED:.0e} of the level: the calibrated one would have to be a million times larger to change the verdict"
+                )
+            };
+            s.p_test = PTest::FNominal(why);
+            continue;
+        }
+        if boot.replicates == 0 {
+            s.p_test = PTest::FNominal("--bootstrap 0".into());
+            continue;
+        }
+        let fit = s.fit.as_ref().expect("needs_calibration implies a fit");
+        if nulls.is_none() {
+            log(format!(
+                "    bootstrap: refitting {} to {} replicates drawn from its fit",
+                current.model.spec, boot.replicates
+            ));
+            nulls = Some(bootstrap::refit_null(
+                &current.model,
+                &current.flat,
+                &current.values,
+                data,
+                backend,
+                &fit_options(opts),
+                &boot,
+            ));
+        }
+        let result = match nulls.as_ref().expect("set above") {
+            Ok(n) => bootstrap::calibrate(
+                &fit.model,
+                &fit.flat,
+                &|null_flat| embed(&current.model, null_flat, &fit.model),
+                n,
+                fit.dof,
+                backend,
+                &fit_options(opts),
+                &boot,
+            ),
+            Err(e) => Err(anyhow::anyhow!("{e:#}")),
+        };
+        match result {
+            Ok(c) => {
+                log(format!(
+                    "    bootstrap of {}: p = {:.2e} ({}; {:.1} s)",
+                    s.candidate.spec,
+                    c.p,
+                    c.describe(),
+                    c.seconds
+                ));
+                s.calibrated(c);
+            }
+            Err(e) => {
+                log(format!(
+                    "    bootstrap of {} failed ({e:#}): keeping the nominal F test",
+                    s.candidate.spec
+                ));
+                s.p_test = PTest::FNominal(format!("the bootstrap failed: {e:#}"));
+            }
+        }
     }
 }

@@ -51,11 +51,11 @@ mod testdata;
 
 pub use effects::Effect;
 pub use extensions::{embed, extensions, render_spec, Candidate};
-pub use fit::{fit_model, FitResult};
+pub use fit::{bootstrap_p, fit_model, FitResult};
 pub use path::diagnose;
 pub use regions::{describe_regions, region_stats, RegionStat};
 pub use report::{residual_panel, staircase_panel, write_report};
-pub use score::Scored;
+pub use score::{irregular_null, PTest, Scored};
 
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;
@@ -85,6 +85,9 @@ pub struct DiagnoseOptions {
     /// Fit a round's candidates concurrently (one thread each) on the shared backend;
     /// otherwise one after the other, each fit batching all its restarts.
     pub parallel: bool,
+    /// The parametric bootstrap that calibrates the p-values of extensions whose null is
+    /// irregular (`--bootstrap`, `--bootstrap-restarts`); 0 replicates: the nominal F test.
+    pub bootstrap: crate::inference::bootstrap::BootstrapOptions,
     /// `--fix`, `--bounds`, `--prior`, applied to every model of the path that has the
     /// parameter named (a fixed value stays fixed in every extension).
     pub constraints: crate::inference::constraints::ConstraintSpec,
@@ -103,6 +106,7 @@ impl Default for DiagnoseOptions {
             stop_when_consistent: true,
             backtrack: true,
             parallel: false,
+            bootstrap: Default::default(),
             constraints: Default::default(),
         }
     }

@@ -1,7 +1,7 @@
 //! The path search: adopt the best significant candidate of each round, continue greedily,
 //! and revisit the steps of a path that ends inconsistent ([`diagnose`]).
 
-use super::fit::fit_all;
+use super::fit::{calibrate_round, fit_all};
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
 use super::{
@@ -106,7 +106,7 @@ fn adopt_step(
     let effect = best.candidate.effect;
     let test = match (best.f, best.p) {
         (Some(f), Some(p)) => format!(
-            "{} over {}: Δχ² = {:.1} for {} more parameter(s), F({}, {}) = {f:.1}, {}, ΔBIC = {:.1}",
+            "{} over {}: Δχ² = {:.1} for {} more parameter(s), F({}, {}) = {f:.1}, {} ({}), ΔBIC = {:.1}",
             fit.model.spec,
             current.model.spec,
             best.delta_chi2,
@@ -114,6 +114,7 @@ fn adopt_step(
             best.dp,
             fit.dof,
             format_p(p),
+            best.p_test.describe(),
             best.delta_bic
         ),
         _ => format!(
@@ -227,18 +228,19 @@ fn extend_path(
         let fits = fit_all(&cands, data, backend, opts, &current);
         let m = cands.len();
         let flagged = flagged_regions(data, &current.z);
-        let scored: Vec<Scored> = cands
+        let mut scored: Vec<Scored> = cands
             .into_iter()
             .zip(fits)
             .map(|(c, f)| score(data, &current, &flagged, c, f, m, opts.alpha))
             .collect();
+        calibrate_round(&mut scored, data, backend, opts, &current, log);
         log(format!(
-            "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:>10} {:>7} {:>6}  verdict",
-            "model", "effect", "χ²_red", "ΔP", "F", "p", "ΔBIC", "flagged", "s"
+            "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10} {:>7} {:>6}  verdict",
+            "model", "effect", "χ²_red", "ΔP", "F", "p", "test", "ΔBIC", "flagged", "s"
         ));
         for s in &scored {
             log(format!(
-                "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:>10.1} {:>7} {:>6.1}  {}",
+                "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10.1} {:>7} {:>6.1}  {}",
                 s.candidate.spec,
                 s.candidate.effect.name(),
                 s.fit
@@ -248,6 +250,7 @@ fn extend_path(
                 s.dp,
                 s.f.map(|f| format!("{f:.1}")).unwrap_or("-".into()),
                 s.p.map(|p| format!("{p:.1e}")).unwrap_or("-".into()),
+                s.p_test.label(),
                 s.delta_bic,
                 s.removal_flagged
                     .map(|r| format!("{:.0}%", 100.0 * r))

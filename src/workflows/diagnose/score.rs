@@ -1,12 +1,64 @@
-//! Comparing a fitted candidate with the current model: the F test (nested), the BIC, the
-//! identifiability of the new parameters, and the consistency test of a fit.
+//! Comparing a fitted candidate with the current model: the F test (nested) or its
+//! bootstrap calibration where the null is irregular, the BIC, the identifiability of the
+//! new parameters, and the consistency test of a fit.
 
 use super::regions::RegionStat;
 use super::{Candidate, FitResult};
 use crate::bsdf::Model;
 use crate::data::Dataset;
+use crate::inference::bootstrap::Calibrated;
 use crate::inference::stats::{self, f_test, format_p};
 use anyhow::Result;
+use serde_json::{json, Value};
+
+/// Which test gave a candidate's p-value.
+#[derive(Clone, Debug)]
+pub enum PTest {
+    /// Not nested: no p-value (the BIC decides).
+    None,
+    /// The F test, its reference distribution valid (the null is an interior point where
+    /// every new parameter is identified).
+    F,
+    /// The parametric bootstrap (the null is irregular: [`Scored::irregular`]).
+    Bootstrap(Calibrated),
+    /// The nominal F test although the null is irregular, and why the bootstrap was not run
+    /// (the verdict did not depend on it, or `--bootstrap 0`).
+    FNominal(String),
+}
+
+impl PTest {
+    /// A short name for tables: `F`, `bootstrap`, `bootstrap tail`, `F nominal`.
+    pub fn label(&self) -> &'static str {
+        match self {
+            PTest::None => "-",
+            PTest::F => "F",
+            PTest::Bootstrap(c) => match c.source {
+                crate::inference::bootstrap::PSource::Tail => "boot tail",
+                _ => "bootstrap",
+            },
+            PTest::FNominal(_) => "F nominal",
+        }
+    }
+    /// The sentence the report gives.
+    pub fn describe(&self) -> String {
+        match self {
+            PTest::None => "no p-value (not nested)".into(),
+            PTest::F => {
+                "F test (regular null: every new parameter identified, inside its range)".into()
+            }
+            PTest::Bootstrap(c) => c.describe(),
+            PTest::FNominal(why) => format!("nominal F test, not calibrated: {why}"),
+        }
+    }
+    pub fn to_json(&self) -> Value {
+        match self {
+            PTest::None => Value::Null,
+            PTest::F => json!({"test": "F"}),
+            PTest::Bootstrap(c) => json!({"test": "bootstrap", "bootstrap": c}),
+            PTest::FNominal(why) => json!({"test": "F_nominal", "why": why}),
+        }
+    }
+}
 
 /// A fitted candidate and its comparison with the current model.
 #[derive(Clone, Debug)]
@@ -16,15 +68,27 @@ pub struct Scored {
     /// Extra parameters over the current model.
     pub dp: i64,
     pub delta_chi2: f64,
-    /// F statistic and its p-value (nested candidates).
+    /// F statistic and the p-value (nested candidates): the F test's, or the bootstrap's
+    /// where the null is irregular ([`PTest`]).
     pub f: Option<f64>,
     pub p: Option<f64>,
+    /// The F test's nominal p-value.
+    pub p_nominal: Option<f64>,
+    pub p_test: PTest,
+    /// Why the F test's reference distribution does not hold at this null (a new
+    /// parameter's null value on a bound of its range, or new parameters the null does not
+    /// identify); None for a regular null.
+    pub irregular: Option<String>,
+    /// The Bonferroni-corrected level α/m the p-value is held against.
+    pub level: f64,
     /// BIC(candidate) − BIC(current), χ² taken as is.
     pub delta_bic: f64,
     /// The same with both χ² divided by max(1, χ²_red of the candidate).
     pub delta_bic_scaled: f64,
     pub significant: bool,
     pub identifiable: bool,
+    /// Why not, when not identifiable.
+    pub identifiable_why: String,
     /// New parameters that ended on a bound of their range (a step that needs them there
     /// is not adopted: the optimum lies outside what the model can express).
     pub on_bound: Vec<String>,
@@ -46,7 +110,7 @@ impl Scored {
 }
 
 /// The flat names of a candidate's parameters that the current model lacks.
-fn new_param_indices(old: &Model, new: &Model) -> Vec<usize> {
+pub(super) fn new_param_indices(old: &Model, new: &Model) -> Vec<usize> {
     let old_names: Vec<String> = old.flat_names();
     let names = new.flat_names();
     let is_old = |n: &str| {
@@ -55,6 +119,36 @@ fn new_param_indices(old: &Model, new: &Model) -> Vec<usize> {
         })
     };
     (0..names.len()).filter(|&j| !is_old(&names[j])).collect()
+}
+
+/// Why the F test does not hold for extending `old` to `new` (module doc of
+/// [`crate::inference::bootstrap`]): new parameters whose null value lies on a bound of
+/// their range, and new parameters without a null value (they vanish from the model at the
+/// null, so it does not identify them). None when every new parameter's null value is
+/// inside its range.
+pub fn irregular_null(old: &Model, new: &Model) -> Option<String> {
+    let names = new.flat_names();
+    let decls = new.flat_decls();
+    let (mut bound, mut unidentified) = (Vec::new(), Vec::new());
+    for j in new_param_indices(old, new) {
+        let d = &decls[j];
+        match d.neutral {
+            Some(v) if v <= d.lo || v >= d.hi => bound.push(format!("{} = {v}", names[j])),
+            Some(_) => {}
+            None => unidentified.push(names[j].clone()),
+        }
+    }
+    let mut why = Vec::new();
+    if !bound.is_empty() {
+        why.push(format!("null on a bound ({})", bound.join(", ")));
+    }
+    if !unidentified.is_empty() {
+        why.push(format!(
+            "{} not identified at the null",
+            unidentified.join(", ")
+        ));
+    }
+    (!why.is_empty()).then(|| why.join("; "))
 }
 
 /// New parameters within 1e-6 of an edge of their unit box.
@@ -167,6 +261,7 @@ pub(super) fn score(
     alpha: f64,
 ) -> Scored {
     let k = data.len();
+    let level = alpha / m.max(1) as f64;
     let fit = match fit {
         Ok(f) => f,
         Err(e) => {
@@ -177,10 +272,15 @@ pub(super) fn score(
                 delta_chi2: 0.0,
                 f: None,
                 p: None,
+                p_nominal: None,
+                p_test: PTest::None,
+                irregular: None,
+                level,
                 delta_bic: f64::INFINITY,
                 delta_bic_scaled: f64::INFINITY,
                 significant: false,
                 identifiable: false,
+                identifiable_why: String::new(),
                 on_bound: vec![],
                 removal: vec![],
                 removal_flagged: None,
@@ -194,58 +294,112 @@ pub(super) fn score(
     let s = fit.chi2_red.max(1.0);
     let delta_bic = stats::delta_bic(current.chi2, fit.chi2, dp, k, 1.0);
     let delta_bic_scaled = stats::delta_bic(current.chi2, fit.chi2, dp, k, s);
-    let (f, p) = if candidate.nested && dp > 0 {
+    let nested = candidate.nested && dp > 0;
+    let (f, p) = if nested {
         let (fstat, p) = f_test(delta_chi2, dp as usize, fit.chi2, fit.dof);
         (Some(fstat), Some(p))
     } else {
         (None, None)
     };
-    let level = alpha / m.max(1) as f64;
-    let significant = match p {
-        Some(p) => p < level && delta_bic_scaled < 0.0,
-        None => delta_bic_scaled < -10.0,
+    let irregular = nested
+        .then(|| irregular_null(&current.model, &fit.model))
+        .flatten();
+    let p_test = match (nested, &irregular) {
+        (false, _) => PTest::None,
+        (true, None) => PTest::F,
+        // Replaced by the bootstrap where the verdict depends on it (path.rs).
+        (true, Some(_)) => PTest::FNominal("the bootstrap was not run".into()),
     };
     let (identifiable, why) = new_params_determined(&current.model, &fit);
     let on_bound = new_params_on_bound(&current.model, &fit);
     let (removal, removal_flagged, removal_outside) = removal(flagged, current, &fit);
-    let verdict = if !significant {
-        match p {
-            Some(p) => format!(
-                "not significant ({}, need < {level:.1e}; scaled ΔBIC {delta_bic_scaled:+.1})",
-                format_p(p)
-            ),
-            None => {
-                format!("not significant (swap: scaled ΔBIC {delta_bic_scaled:+.1}, need < −10)")
-            }
-        }
-    } else if !identifiable {
-        format!("significant but not identifiable: {why}")
-    } else if !on_bound.is_empty() {
-        format!(
-            "significant but a new parameter ends on a bound: {}",
-            on_bound.join(", ")
-        )
-    } else {
-        "significant".into()
-    };
-    Scored {
+    let mut scored = Scored {
         candidate,
         fit: Some(fit),
         dp,
         delta_chi2,
         f,
         p,
+        p_nominal: p,
+        p_test,
+        irregular,
+        level,
         delta_bic,
         delta_bic_scaled,
-        significant,
+        significant: false,
         identifiable,
+        identifiable_why: why,
         on_bound,
         removal,
         removal_flagged,
         removal_outside,
-        verdict,
+        verdict: String::new(),
+    };
+    scored.judge();
+    scored
+}
+
+impl Scored {
+    /// Whether the nested test's verdict can depend on calibrating its p-value: the BIC
+    /// gate must pass (otherwise the candidate fails whatever p is), and the nominal p must
+    /// not be so far below the level that the calibrated one would have to be
+    /// [`SETTLED`]⁻¹ times larger to change the verdict.
+    pub fn needs_calibration(&self) -> bool {
+        self.irregular.is_some()
+            && self.fit.is_some()
+            && self.delta_bic_scaled < 0.0
+            && self.p_nominal.is_some_and(|p| p >= SETTLED * self.level)
+    }
+
+    /// Replace the p-value by a calibrated one and judge again.
+    pub fn calibrated(&mut self, c: Calibrated) {
+        self.p = Some(c.p);
+        self.p_test = PTest::Bootstrap(c);
+        self.judge();
+    }
+
+    /// Significance and the verdict from the current p-value.
+    fn judge(&mut self) {
+        let level = self.level;
+        self.significant = match self.p {
+            Some(p) => p < level && self.delta_bic_scaled < 0.0,
+            None => self.delta_bic_scaled < -10.0,
+        };
+        let test = match &self.p_test {
+            PTest::None | PTest::F => String::new(),
+            t => format!(" [{}]", t.label()),
+        };
+        self.verdict = if !self.significant {
+            match self.p {
+                Some(p) => format!(
+                    "not significant ({}{test}, need < {level:.1e}; scaled ΔBIC {:+.1})",
+                    format_p(p),
+                    self.delta_bic_scaled
+                ),
+                None => format!(
+                    "not significant (swap: scaled ΔBIC {:+.1}, need < −10)",
+                    self.delta_bic_scaled
+                ),
+            }
+        } else if !self.identifiable {
+            format!(
+                "significant but not identifiable: {}",
+                self.identifiable_why
+            )
+        } else if !self.on_bound.is_empty() {
+            format!(
+                "significant but a new parameter ends on a bound: {}",
+                self.on_bound.join(", ")
+            )
+        } else {
+            "significant".into()
+        };
     }
 }
+
+/// A nominal p-value this far below the level (times the level) settles the verdict
+/// without the bootstrap ([`Scored::needs_calibration`]).
+pub const SETTLED: f64 = 1e-6;
 
 /// The consistency test of a fit: P(χ²_{K−P} ≥ χ²) ≥ α, and its verdict in words.
 pub(super) fn consistency(fit: &FitResult, alpha: f64) -> (bool, String) {
