@@ -4,8 +4,8 @@
 //! `lambert on eon vmf`. The lobe's parameters are named `lobe.*`, the base's `base.*`.
 //! Twin: `shaders/bsdf/fa.wgsl`.
 
-use super::ggx::{ggx_reflect, ALPHA, ETA, KS};
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::ggx::{ggx_reflect, GgxLobe, ALPHA, ETA, KS};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_transmittance;
@@ -36,6 +36,21 @@ impl Bsdf for FresnelAggregate {
         let transmit =
             fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
         ggx_reflect(ks, alpha, eta, wi, wo) + transmit * children[0]
+    }
+    /// The lobe's F and kernel and the two Fresnel transmittances once per direction;
+    /// per channel only k_s and the base's value differ.
+    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, base: &[f64], out: &mut [f64]) {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let (alpha, eta) = (p.get(0, 0), p.get(0, 1));
+        let transmit =
+            fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
+        let lobe = GgxLobe::at(alpha, eta, wi, wo);
+        for (i, (o, &b)) in out.iter_mut().zip(base).enumerate() {
+            *o = lobe.scaled(p.get(i, 2)) + transmit * b;
+        }
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {

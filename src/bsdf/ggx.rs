@@ -5,18 +5,51 @@
 //! Twin: `shaders/bsdf/ggx.wgsl`.
 
 use super::microfacet::{self, reflection};
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, half_vector};
 use glam::DVec3;
 
 /// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
 pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
+    GgxLobe::at(alpha, eta, wi, wo).scaled(ks)
+}
+
+/// The parts of [`ggx_reflect`] that do not depend on k_s: evaluated once per direction
+/// for every channel (k_s is the lobe's only rgb parameter).
+#[derive(Clone, Copy, Debug)]
+pub struct GgxLobe {
+    /// F(ωi·h; η), and the microfacet kernel D G1 G1 / (4 μi μo); both 0 below the surface.
+    fresnel: f64,
+    kernel: f64,
+    above: bool,
+}
+
+impl GgxLobe {
+    pub fn at(alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> GgxLobe {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return GgxLobe {
+                fresnel: 0.0,
+                kernel: 0.0,
+                above: false,
+            };
+        }
+        let h = half_vector(wi, wo);
+        GgxLobe {
+            fresnel: fresnel_dielectric(wi.dot(h), eta),
+            kernel: reflection(&microfacet::Ggx { alpha }, wi, wo, h),
+            above: true,
+        }
     }
-    let h = half_vector(wi, wo);
-    ks * fresnel_dielectric(wi.dot(h), eta) * reflection(&microfacet::Ggx { alpha }, wi, wo, h)
+    /// k_s · F · kernel, in that order (what a per-channel evaluation computes).
+    #[inline]
+    pub fn scaled(&self, ks: f64) -> f64 {
+        if self.above {
+            ks * self.fresnel * self.kernel
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Parameters of a GGX lobe (also the `lobe.*` parameters of `fa`).
@@ -38,6 +71,12 @@ impl Bsdf for Ggx {
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
         ggx_reflect(p[0], p[1], p[2], wi, wo)
+    }
+    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, _: &[f64], out: &mut [f64]) {
+        let lobe = GgxLobe::at(p.get(0, 1), p.get(0, 2), wi, wo);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = lobe.scaled(p.get(i, 0));
+        }
     }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))

@@ -69,6 +69,78 @@ impl WgslFn {
     }
 }
 
+/// Most children a node may have ([`Node::eval`] and the default
+/// [`Bsdf::eval_channels`] gather them on the stack).
+pub const MAX_CHILDREN: usize = 4;
+
+/// The parameters of the channels evaluated together at one direction
+/// ([`Bsdf::eval_channels`]): channel i reads the scalar view of its group (its channel,
+/// and its plane under `+peraxis`), restricted to one node's parameters.
+///
+/// The views of one call differ only in their rgb parameters: the channels of one call
+/// lie on one plane, so every shared (and per-plane) parameter has one value for all of
+/// them, and a node may read those from channel 0.
+#[derive(Clone, Copy, Debug)]
+pub struct Channels<'a> {
+    /// Every group's scalar view, one after the other, `stride` values each.
+    scalars: &'a [f64],
+    stride: usize,
+    /// The group of each channel evaluated (several channels may name the same group:
+    /// repeated measurements).
+    groups: &'a [u32],
+    /// This node's first parameter in a view, and its parameter count.
+    offset: usize,
+    nparams: usize,
+}
+
+impl<'a> Channels<'a> {
+    /// The channels `groups` of the views `scalars` (`stride` = [`Model::scalar_count`]
+    /// values per group, [`Model::views_into`]), at the root of the tree.
+    pub fn new(scalars: &'a [f64], stride: usize, groups: &'a [u32]) -> Channels<'a> {
+        Channels {
+            scalars,
+            stride,
+            groups,
+            offset: 0,
+            nparams: stride,
+        }
+    }
+    /// Number of channels evaluated.
+    pub fn len(&self) -> usize {
+        self.groups.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.groups.is_empty()
+    }
+    /// The node's parameters for channel i (what [`Bsdf::eval`] takes as `p`).
+    #[inline]
+    pub fn view(&self, i: usize) -> &'a [f64] {
+        let at = self.groups[i] as usize * self.stride + self.offset;
+        &self.scalars[at..at + self.nparams]
+    }
+    /// Parameter j of the node for channel i.
+    #[inline]
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        debug_assert!(j < self.nparams);
+        self.scalars[self.groups[i] as usize * self.stride + self.offset + j]
+    }
+    /// The whole scalar view of channel i (what [`Node::eval`] takes).
+    #[inline]
+    fn full_view(&self, i: usize) -> &'a [f64] {
+        let at = self.groups[i] as usize * self.stride;
+        &self.scalars[at..at + self.stride]
+    }
+    /// The same channels, restricted to a node's parameters.
+    #[inline]
+    fn node(&self, offset: usize, nparams: usize) -> Channels<'a> {
+        Channels {
+            offset,
+            nparams,
+            ..*self
+        }
+    }
+}
+
 /// One node of a model tree: a BSDF or a combinator of its children.
 pub trait Bsdf: Send + Sync + fmt::Debug {
     /// The node's registry entry: its declared name, kind and role.
@@ -90,6 +162,26 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     /// Evaluate with this node's parameters `p` (already resolved for one channel) and the
     /// values of its children, in `child_roles` order.
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64;
+    /// [`Self::eval`] for several channels at one direction (n = `out.len()` =
+    /// `p.len()`): `children[k * n + i]` is child k's value for channel i, and `out[i]`
+    /// receives channel i's value. The channels share every non-rgb parameter
+    /// ([`Channels`]), so a node overrides this to compute once what depends only on
+    /// them and on the directions (half vector, D, G, Fresnel factors), as BBM evaluates
+    /// the RGB channels of a direction in one call. An override must give exactly what
+    /// `eval` gives per channel (same operations in the same order; `tests/channels.rs`
+    /// compares them bit for bit for every catalogue model). The default calls `eval`
+    /// per channel.
+    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, children: &[f64], out: &mut [f64]) {
+        let n = out.len();
+        let nc = children.len().checked_div(n).unwrap_or(0);
+        let mut child = [0.0f64; MAX_CHILDREN];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (k, c) in child[..nc].iter_mut().enumerate() {
+                *c = children[k * n + i];
+            }
+            *o = self.eval(p.view(i), wi, wo, &child[..nc]);
+        }
+    }
     /// Whether f(i, o) = f(o, i) holds (tests check it where claimed).
     fn reciprocal(&self) -> bool {
         true
@@ -110,6 +202,9 @@ pub struct Node {
     pub offset: usize,
     /// Number of this node's own parameters (set by [`Model::compile`]).
     pub nparams: usize,
+    /// No rgb parameter in the subtree (set by [`Model::compile`]): every channel of one
+    /// [`Node::eval_channels`] call then has the same value, computed once.
+    pub uniform: bool,
 }
 
 impl Node {
@@ -119,6 +214,7 @@ impl Node {
             children: vec![],
             offset: 0,
             nparams: 0,
+            uniform: false,
         }
     }
     pub fn with(bsdf: impl Bsdf + 'static, children: Vec<Node>) -> Node {
@@ -127,11 +223,12 @@ impl Node {
             children,
             offset: 0,
             nparams: 0,
+            uniform: false,
         }
     }
     /// Evaluate the subtree on the scalar view `s`.
     pub fn eval(&self, s: &[f64], wi: DVec3, wo: DVec3) -> f64 {
-        let mut child = [0.0f64; 4];
+        let mut child = [0.0f64; MAX_CHILDREN];
         for (k, c) in self.children.iter().enumerate() {
             child[k] = c.eval(s, wi, wo);
         }
@@ -141,6 +238,33 @@ impl Node {
             wo,
             &child[..self.children.len()],
         )
+    }
+    /// Evaluate the subtree for the channels `p` at one direction into `out` (one value
+    /// per channel), equal to [`Node::eval`] per channel bit for bit. `scratch` holds the
+    /// children's values: at least [`Model::scratch_len`] of `out.len()` values.
+    pub fn eval_channels(
+        &self,
+        p: Channels,
+        wi: DVec3,
+        wo: DVec3,
+        out: &mut [f64],
+        scratch: &mut [f64],
+    ) {
+        let n = out.len();
+        if n == 0 {
+            return;
+        }
+        if self.uniform {
+            // Only shared parameters below: channel 0's value is every channel's.
+            out.fill(self.eval(p.full_view(0), wi, wo));
+            return;
+        }
+        let (mine, rest) = scratch.split_at_mut(self.children.len() * n);
+        for (c, slot) in self.children.iter().zip(mine.chunks_exact_mut(n)) {
+            c.eval_channels(p, wi, wo, slot, rest);
+        }
+        self.bsdf
+            .eval_channels(p.node(self.offset, self.nparams), wi, wo, mine, out);
     }
     fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
         f(self);
@@ -281,6 +405,8 @@ impl Model {
                 };
                 lay(child, &pre, below, l);
             }
+            node.uniform = node.children.iter().all(|c| c.uniform)
+                && l.params[node.offset..].iter().all(|p| !p.decl.rgb);
         }
         let mut layout = Layout {
             params: &mut params,
@@ -350,6 +476,47 @@ impl Model {
     pub fn scalars_into(&self, flat: &[f64], g: usize, out: &mut Vec<f64>) {
         out.clear();
         out.extend((0..self.params.len()).map(|j| flat[self.slot(j, g)]));
+    }
+
+    /// The flat index of every group's scalars, group after group
+    /// (`slots[g * scalar_count() + j] = slot(j, g)`): [`Self::views_into`] from a table.
+    pub fn slot_table(&self) -> Vec<usize> {
+        (0..self.groups())
+            .flat_map(|g| (0..self.params.len()).map(move |j| self.slot(j, g)))
+            .collect()
+    }
+
+    /// Resolve the flat vector into the scalar views of every group, one after the other
+    /// (what [`Channels::new`] takes), with `slots` from [`Self::slot_table`].
+    pub fn views_into(flat: &[f64], slots: &[usize], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(slots.iter().map(|&i| flat[i]));
+    }
+
+    /// Scratch values [`Node::eval_channels`] needs for n channels: one per node and
+    /// channel (the children's values at every level).
+    pub fn scratch_len(&self, n: usize) -> usize {
+        self.nodes().len() * n
+    }
+
+    /// Evaluate the model for the groups `groups` at one geometry into `out` (one value
+    /// per group), from the views of [`Self::views_into`]; equal to [`Self::eval`] per
+    /// group bit for bit. The groups must lie on one plane (the channels of one
+    /// direction). Allocates its scratch: the CPU backend keeps one per thread instead.
+    pub fn eval_channels(
+        &self,
+        views: &[f64],
+        groups: &[u32],
+        wi: DVec3,
+        wo: DVec3,
+        out: &mut [f64],
+    ) {
+        debug_assert!(groups
+            .iter()
+            .all(|&g| g as usize / self.channels == groups[0] as usize / self.channels));
+        let mut scratch = vec![0.0; self.scratch_len(out.len())];
+        let p = Channels::new(views, self.scalar_count(), groups);
+        self.root.eval_channels(p, wi, wo, out, &mut scratch);
     }
 
     /// Evaluate the model for one flat parameter vector at one geometry and group (the

@@ -5,7 +5,7 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/peraxis.wgsl`.
 
-use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -39,6 +39,9 @@ impl Bsdf for PerAxis {
     }
     fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, children: &[f64]) -> f64 {
         children[0]
+    }
+    fn eval_channels(&self, _: Channels, _: DVec3, _: DVec3, children: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(children);
     }
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters

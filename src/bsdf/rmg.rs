@@ -20,9 +20,10 @@
 //! Twins: `shaders/bsdf/micrograin.wgsl` + `shaders/bsdf/rmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{
-    layer, layer_wgsl, rough_grain, weight, BETA_LO, ETA_G, MICROGRAIN_BASES, RHO_G, TAU0,
+    layer, layer_wgsl, rough_grain, weight, RoughGrain, BETA_LO, ETA_G, MICROGRAIN_BASES,
+    RHO_G, TAU0,
 };
-use super::{Bsdf, Entry, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -66,6 +67,19 @@ impl Bsdf for RoughMicrograin {
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
         rmg_layer(p[0], p[1], p[2], p[3], wi, wo, children[0])
+    }
+    /// The weight and the grain's specular term and transmittances once per direction.
+    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, base: &[f64], out: &mut [f64]) {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            out.fill(0.0);
+            return;
+        }
+        let (tau0, beta, eta_g) = (p.get(0, 0), p.get(0, 1), p.get(0, 3));
+        let w = weight(tau0, beta, wi.z, wo.z);
+        let grain = RoughGrain::at(tau0, beta, eta_g, wi, wo);
+        for (i, (o, &b)) in out.iter_mut().zip(base).enumerate() {
+            *o = layer(w, grain.value(p.get(i, 2)), b);
+        }
     }
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("rmg", include_str!("../../shaders/bsdf/rmg.wgsl"))
