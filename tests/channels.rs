@@ -108,23 +108,32 @@ fn channels_together_equal_channels_one_by_one_bit_for_bit() {
                     model.scalars_into(&flat, g, &mut v);
                     assert_eq!(&views[g * stride..(g + 1) * stride], &v[..], "{spec}");
                 }
-                for (wi, wo) in directions(kind, &mut rng, 40) {
-                    for plane in 0..planes {
-                        let c = channels as u32;
-                        let base = plane as u32 * c;
-                        let all: Vec<u32> = (base..base + c).collect();
-                        // Repeated and out-of-order channels, as a data file may list them.
-                        let mixed = vec![base + c - 1, base, base + c - 1];
-                        for groups in [&all, &mixed] {
-                            let mut out = vec![f64::NAN; groups.len()];
-                            model.eval_channels(&views, groups, wi, wo, &mut out);
-                            for (&g, &got) in groups.iter().zip(&out) {
+                let dirs = directions(kind, &mut rng, 40);
+                for plane in 0..planes {
+                    let c = channels as u32;
+                    let base = plane as u32 * c;
+                    let all: Vec<u32> = (base..base + c).collect();
+                    // Repeated and out-of-order channels, as a data file may list them.
+                    let mixed = vec![base + c - 1, base, base + c - 1];
+                    for groups in [&all, &mixed] {
+                        // All directions in one block, and one direction per call.
+                        let n = groups.len();
+                        let mut block = vec![f64::NAN; dirs.len() * n];
+                        model.eval_channels(&views, groups, &dirs, &mut block);
+                        for (d, &(wi, wo)) in dirs.iter().enumerate() {
+                            let mut single = vec![f64::NAN; n];
+                            model.eval_channels(&views, groups, &[(wi, wo)], &mut single);
+                            for (i, &g) in groups.iter().enumerate() {
                                 let want = model.eval(&flat, g as usize, wi, wo);
-                                assert!(
-                                    same(got, want),
-                                    "{spec} ({channels} ch) group {g} at wi {wi} wo {wo}: \
-                                     together {got:e}, one by one {want:e}; params {flat:?}"
-                                );
+                                for (how, got) in
+                                    [("block", block[d * n + i]), ("single", single[i])]
+                                {
+                                    assert!(
+                                        same(got, want),
+                                        "{spec} ({channels} ch) group {g} at wi {wi} wo {wo} ({how}): \
+                                         together {got:e}, one by one {want:e}; params {flat:?}"
+                                    );
+                                }
                                 compared += 1;
                             }
                         }

@@ -10,7 +10,7 @@
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
 //! Twin: `shaders/eon.wgsl`.
 
-use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -104,15 +104,16 @@ impl Bsdf for Eon {
             None => 0.0,
         }
     }
-    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, _: &[f64], out: &mut [f64]) {
-        match EonAt::new(p.get(0, 1), wi, wo) {
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let r = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| match EonAt::new(r, wi, wo) {
             Some(at) => {
                 for (i, o) in out.iter_mut().enumerate() {
                     *o = at.value(p.get(i, 0));
                 }
             }
             None => out.fill(0.0),
-        }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("eon", include_str!("../../shaders/bsdf/eon.wgsl"))

@@ -37,7 +37,7 @@
 
 use super::falloff;
 use super::microfacet::{single_wgsl, Distribution, Ggx};
-use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, half_vector};
 use glam::DVec3;
@@ -172,26 +172,28 @@ impl Bsdf for Mrm {
         };
         children[0] + children[1] * lobe
     }
-    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, children: &[f64], out: &mut [f64]) {
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
         let alpha = p.get(0, 1);
-        let parts = match self.fresnel {
-            Fresnel::Dielectric => {
-                let eta = p.get(0, 2);
-                mrm_parts(alpha, |c| fresnel_dielectric(c, eta), wi, wo)
-            }
-            Fresnel::F82Tint => {
-                let (f0, f82) = (p.get(0, 2), p.get(0, 3));
-                mrm_parts(alpha, |c| fresnel_f82(c, f0, f82), wi, wo)
-            }
-        };
-        let (inner, efficiency) = children.split_at(out.len());
-        for (i, o) in out.iter_mut().enumerate() {
-            let lobe = match parts {
-                Some((f, k)) => p.get(i, 0) * f * k,
-                None => 0.0,
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            let parts = match self.fresnel {
+                Fresnel::Dielectric => {
+                    let eta = p.get(0, 2);
+                    mrm_parts(alpha, |c| fresnel_dielectric(c, eta), wi, wo)
+                }
+                Fresnel::F82Tint => {
+                    let (f0, f82) = (p.get(0, 2), p.get(0, 3));
+                    mrm_parts(alpha, |c| fresnel_f82(c, f0, f82), wi, wo)
+                }
             };
-            *o = inner[i] + efficiency[i] * lobe;
-        }
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = match parts {
+                    Some((f, k)) => p.get(i, 0) * f * k,
+                    None => 0.0,
+                };
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         let source = include_str!("../../shaders/bsdf/mrm.wgsl");

@@ -7,7 +7,7 @@
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
 //! Twin: `shaders/on.wgsl`.
 
-use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
@@ -50,15 +50,18 @@ impl Bsdf for OrenNayar {
         }
         p[0] * FRAC_1_PI * shape(p[1], wi, wo)
     }
-    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, _: &[f64], out: &mut [f64]) {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            out.fill(0.0);
-            return;
-        }
-        let t = shape(p.get(0, 1), wi, wo);
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = p.get(i, 0) * FRAC_1_PI * t;
-        }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let sigma = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            if wi.z <= 0.0 || wo.z <= 0.0 {
+                out.fill(0.0);
+                return;
+            }
+            let t = shape(sigma, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = p.get(i, 0) * FRAC_1_PI * t;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("on", include_str!("../../shaders/bsdf/on.wgsl"))

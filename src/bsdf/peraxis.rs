@@ -5,7 +5,7 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/peraxis.wgsl`.
 
-use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -40,8 +40,10 @@ impl Bsdf for PerAxis {
     fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, children: &[f64]) -> f64 {
         children[0]
     }
-    fn eval_channels(&self, _: Channels, _: DVec3, _: DVec3, children: &[f64], out: &mut [f64]) {
-        out.copy_from_slice(children);
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        each_direction(dirs, p.len(), out, |d, _, _, out| {
+            out.copy_from_slice(children.at(0, d))
+        });
     }
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters

@@ -6,10 +6,9 @@
 //! Twin: `shaders/bsdf/retro.wgsl`.
 
 use super::falloff;
-use super::microfacet::{reflection, single_wgsl, Ggx};
-use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::microfacet::{single_wgsl, Ggx};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use crate::math::half_vector;
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -30,8 +29,9 @@ fn retro_kernel(alpha: f64, wi: DVec3, wo: DVec3) -> Option<f64> {
         return None;
     }
     let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
-    let h = half_vector(wi, wo_back);
-    Some(reflection(&Ggx { alpha }, wi, wo_back, h))
+    // The kernel takes the unnormalised half vector (both directions are above, so the
+    // sum is not 0).
+    Some(Ggx { alpha }.reflection(wi, wo_back, wi + wo_back))
 }
 
 impl Bsdf for Retro {
@@ -51,16 +51,19 @@ impl Bsdf for Retro {
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
         children[0] + children[1] * retro_lobe(p[0], p[1], wi, wo)
     }
-    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, children: &[f64], out: &mut [f64]) {
-        let kernel = retro_kernel(p.get(0, 1), wi, wo);
-        let (inner, efficiency) = children.split_at(out.len());
-        for (i, o) in out.iter_mut().enumerate() {
-            let lobe = match kernel {
-                Some(k) => p.get(i, 0) * k,
-                None => 0.0,
-            };
-            *o = inner[i] + efficiency[i] * lobe;
-        }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        let alpha = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            let kernel = retro_kernel(alpha, wi, wo);
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = match kernel {
+                    Some(k) => p.get(i, 0) * k,
+                    None => 0.0,
+                };
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("retro", include_str!("../../shaders/bsdf/retro.wgsl"))

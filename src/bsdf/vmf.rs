@@ -52,7 +52,7 @@
 //!
 //! Twin: `shaders/vmf.wgsl`.
 
-use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -381,11 +381,14 @@ impl Bsdf for Vmf {
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
         f_vmf(p[0], p[1], wi, wo)
     }
-    fn eval_channels(&self, p: Channels, wi: DVec3, wo: DVec3, _: &[f64], out: &mut [f64]) {
-        let at = VmfAt::new(p.get(0, 1), wi, wo);
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = at.value(p.get(i, 0));
-        }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let r = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            let at = VmfAt::new(r, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = at.value(p.get(i, 0));
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))

@@ -29,9 +29,8 @@
 //! section for the measured figures before and after this design.
 
 use super::{Backend, Evaluator, Problem};
-use crate::bsdf::{Channels, Model};
+use crate::bsdf::{Channels, Dir, Model};
 use crate::engine::loss::{LossTerms, Term, EPS};
-use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -69,26 +68,33 @@ impl Backend for CpuBackend {
     }
 }
 
-/// The samples of one problem sharing one direction and plane: rows `start..start + len`
-/// of the problem's direction-ordered rows.
-#[derive(Clone, Copy, Debug)]
-struct Direction {
-    wi: DVec3,
-    wo: DVec3,
+/// Most directions evaluated in one call of the model tree: enough to pay each node's
+/// dynamic dispatch and setup once for many directions, few enough that a block's values
+/// (directions × channels × nodes) stay in the L1 cache.
+const BLOCK: usize = 32;
+
+/// Consecutive directions of one problem with the same channels (the same groups in
+/// the same order, `n` of them), evaluated in one call: directions `dirs` of the
+/// problem, rows `start..start + n · dirs.len()` (each direction's n rows in turn).
+#[derive(Clone, Debug)]
+struct Block {
+    dirs: std::ops::Range<usize>,
     start: usize,
-    len: usize,
+    n: usize,
 }
 
 /// One problem of a batch, with what its evaluations reuse.
 struct Part<'a> {
     problem: Problem<'a>,
-    directions: Vec<Direction>,
+    /// (ωi, ωo) of each direction, in direction order.
+    dirs: Vec<Dir>,
+    blocks: Vec<Block>,
     /// Per row (samples in direction order): the sample it is, and its scalar-view group.
     sample: Vec<usize>,
     group: Vec<u32>,
     /// The loss constants in row order.
     rows: LossTerms,
-    /// The most rows of one direction.
+    /// The most rows of one block.
     widest: usize,
     evaluations: AtomicU64,
 }
@@ -100,7 +106,7 @@ impl<'a> Part<'a> {
         let model = problem.model;
         let samples = &problem.data.samples;
         let mut index: HashMap<([u64; 6], usize), usize> = HashMap::new();
-        let mut first: Vec<(DVec3, DVec3)> = Vec::new();
+        let mut first: Vec<Dir> = Vec::new();
         let mut direction_of = Vec::with_capacity(samples.len());
         let mut group = Vec::with_capacity(samples.len());
         for s in samples {
@@ -125,38 +131,49 @@ impl<'a> Part<'a> {
         for d in 0..first.len() {
             count[d + 1] += count[d];
         }
-        let directions: Vec<Direction> = first
-            .iter()
-            .enumerate()
-            .map(|(d, &(wi, wo))| Direction {
-                wi,
-                wo,
-                start: count[d],
-                len: count[d + 1] - count[d],
-            })
-            .collect();
         let mut order = vec![0usize; samples.len()];
-        let mut next = count;
+        let mut next = count.clone();
         for (k, &d) in direction_of.iter().enumerate() {
             order[next[d]] = k;
             next[d] += 1;
         }
+        let group: Vec<u32> = order.iter().map(|&k| group[k]).collect();
+        // Blocks: runs of consecutive directions whose rows name the same groups.
+        let rows_of = |d: usize| count[d]..count[d + 1];
+        let mut blocks: Vec<Block> = Vec::new();
+        for d in 0..first.len() {
+            let rows = rows_of(d);
+            let extend = blocks.last().is_some_and(|b| {
+                b.dirs.len() < BLOCK
+                    && b.n == rows.len()
+                    && group[b.start..b.start + b.n] == group[rows.clone()]
+            });
+            match blocks.last_mut() {
+                Some(b) if extend => b.dirs.end = d + 1,
+                _ => blocks.push(Block {
+                    dirs: d..d + 1,
+                    start: rows.start,
+                    n: rows.len(),
+                }),
+            }
+        }
         let terms = problem.loss.terms(problem.data);
         Part {
             problem,
-            widest: directions.iter().map(|d| d.len).max().unwrap_or(0),
-            directions,
-            group: order.iter().map(|&k| group[k]).collect(),
+            widest: blocks.iter().map(|b| b.n * b.dirs.len()).max().unwrap_or(0),
+            dirs: first,
+            blocks,
+            group,
             rows: terms.reordered(&order),
             sample: order,
             evaluations: AtomicU64::new(0),
         }
     }
 
-    /// Calls `f(first row, values)` with the model values of every direction's rows for
-    /// one candidate (`scratch.views` already holds its scalar views).
+    /// Calls `f(first row, values)` with the model values of every block's rows for one
+    /// candidate (`scratch.views` already holds its scalar views).
     #[inline]
-    fn for_each_direction(&self, scratch: &mut Scratch, mut f: impl FnMut(usize, &[f64])) {
+    fn for_each_block(&self, scratch: &mut Scratch, mut f: impl FnMut(usize, &[f64])) {
         let model = self.problem.model;
         let stride = model.scalar_count();
         let Scratch {
@@ -164,12 +181,13 @@ impl<'a> Part<'a> {
             out,
             children,
         } = scratch;
-        for d in &self.directions {
-            let rows = d.start..d.start + d.len;
-            let p = Channels::new(views, stride, &self.group[rows]);
-            let out = &mut out[..d.len];
-            model.root.eval_channels(p, d.wi, d.wo, out, children);
-            f(d.start, out);
+        for b in &self.blocks {
+            let p = Channels::new(views, stride, &self.group[b.start..b.start + b.n]);
+            let out = &mut out[..b.n * b.dirs.len()];
+            model
+                .root
+                .eval_channels(p, &self.dirs[b.dirs.clone()], out, children);
+            f(b.start, out);
         }
     }
 
@@ -179,7 +197,7 @@ impl<'a> Part<'a> {
         let mut sum = 0.0;
         // One loop per term shape, so that the row loop has no branch on it.
         match t.term {
-            Term::Square => self.for_each_direction(scratch, |start, values| {
+            Term::Square => self.for_each_block(scratch, |start, values| {
                 let r = start..start + values.len();
                 for (((&v, &a), &gy), &w) in values
                     .iter()
@@ -191,7 +209,7 @@ impl<'a> Part<'a> {
                     sum += w * d * d;
                 }
             }),
-            Term::LogSquare => self.for_each_direction(scratch, |start, values| {
+            Term::LogSquare => self.for_each_block(scratch, |start, values| {
                 let r = start..start + values.len();
                 for (((&v, &a), &gy), &w) in values
                     .iter()
@@ -203,7 +221,7 @@ impl<'a> Part<'a> {
                     sum += w * d * d;
                 }
             }),
-            Term::AbsRatio => self.for_each_direction(scratch, |start, values| {
+            Term::AbsRatio => self.for_each_block(scratch, |start, values| {
                 let r = start..start + values.len();
                 for ((&v, &y), &w) in values.iter().zip(&t.y[r.clone()]).zip(&t.w[r]) {
                     sum += w * (v - y).abs() / (v.abs() + y.abs() + EPS);
@@ -218,7 +236,7 @@ impl<'a> Part<'a> {
 struct Scratch {
     /// The scalar views of every group ([`Model::views_into`]).
     views: Vec<f64>,
-    /// The values of one direction's rows, and its nodes' children's values.
+    /// The values of one block's rows, and its nodes' children's values.
     out: Vec<f64>,
     children: Vec<f64>,
 }
@@ -227,7 +245,7 @@ pub struct CpuEvaluator<'a> {
     parts: Vec<Part<'a>>,
     /// The flat index of every group's scalars ([`Model::slot_table`]).
     slots: Vec<usize>,
-    /// The most rows of one direction over the parts, and the scratch it needs.
+    /// The most rows of one block over the parts, and the scratch it needs.
     widest: usize,
     scratch_len: usize,
 }
@@ -311,7 +329,7 @@ impl Evaluator for CpuEvaluator<'_> {
         self.check(owners, params)?;
         let rows = self.map_candidates(owners, params, |part, scratch| {
             let mut row = vec![0.0; part.sample.len()];
-            part.for_each_direction(scratch, |start, values| {
+            part.for_each_block(scratch, |start, values| {
                 for (&k, &v) in part.sample[start..start + values.len()].iter().zip(values) {
                     row[k] = v;
                 }
@@ -345,7 +363,7 @@ impl Evaluator for CpuEvaluator<'_> {
         let residuals = self.map_candidates(&expanded, params, |part, scratch| {
             let t = &part.rows;
             let mut row = Vec::with_capacity(part.sample.len());
-            part.for_each_direction(scratch, |start, values| {
+            part.for_each_block(scratch, |start, values| {
                 row.extend(
                     values
                         .iter()
