@@ -556,3 +556,61 @@ fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
     assert_eq!(ids, ["cpu"]);
     assert!(v["sweep"]["gpu_cpu_time_ratio"].is_null() && v["sweep"]["comparison"].is_null());
 }
+
+/// `bench --data FILE` measures on the file: the rows name it and count its samples,
+/// and the CPU rows carry the thread count and a positive rate; a model of the other
+/// kind is a clear error naming the option, before anything is measured.
+#[test]
+fn bench_measures_on_a_data_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("fa.csv");
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "fa(lambert)",
+        "--geometry",
+        "offplane",
+        "--out",
+        p(&file),
+    ]);
+    assert_ok(&out, "synth");
+    let json = dir.path().join("bench.json");
+    let out = bsdfit(&[
+        "bench",
+        "--backend",
+        "cpu",
+        "--models",
+        "fa(lambert);lambert",
+        "--data",
+        p(&file),
+        "--restarts",
+        "2",
+        "--seconds",
+        "0.02",
+        "--json",
+        p(&json),
+    ]);
+    assert_ok(&out, "bench --data");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{v}");
+    // offplane: 36 directions, 3 channels each.
+    for r in rows {
+        assert_eq!(r["data"].as_str(), Some(p(&file)), "{r}");
+        assert_eq!(r["samples"], 108, "{r}");
+        assert_eq!(r["backend"], "cpu", "{r}");
+        assert!(r["threads"].as_u64().is_some_and(|t| t >= 1), "{r}");
+        assert!(r["evals_per_s"].as_f64().is_some_and(|e| e > 0.0), "{r}");
+    }
+    let out = bsdfit(&[
+        "bench",
+        "--backend",
+        "cpu",
+        "--models",
+        "btdf(tr)",
+        "--data",
+        p(&file),
+    ]);
+    assert_clear_error(&out, &["--models", "btdf(tr)", "brdf"]);
+}

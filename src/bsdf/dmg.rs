@@ -14,7 +14,7 @@
 //! `shaders/bsdf/dmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{layer, layer_wgsl, weight, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0};
-use super::{Bsdf, Entry, Node, ParamDecl, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -46,6 +46,20 @@ impl Bsdf for DiffuseMicrograin {
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
         dmg_layer(p[0], p[1], p[2], wi, wo, children[0])
+    }
+    /// The visibility weight once per direction (τ0 and β are shared).
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
+        let (tau0, beta) = (p.get(0, 0), p.get(0, 1));
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            if wi.z <= 0.0 || wo.z <= 0.0 {
+                out.fill(0.0);
+                return;
+            }
+            let w = weight(tau0, beta, wi.z, wo.z);
+            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+                *o = layer(w, p.get(i, 2) * FRAC_1_PI, b);
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("dmg", include_str!("../../shaders/bsdf/dmg.wgsl"))

@@ -10,7 +10,7 @@
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
 //! Twin: `shaders/eon.wgsl`.
 
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -44,6 +44,50 @@ pub fn f_fon(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
 #[derive(Debug, Clone, Copy)]
 pub struct Eon;
 
+/// What EON depends on besides ρ, at one direction pair: A_F and 1 + r s/t of the
+/// single-scattering FON lobe, Ē_F and the three (1 − E) factors of f_ms (the directional
+/// albedos are the costly part, so channels share them).
+struct EonAt {
+    af: f64,
+    fon: f64,
+    e_avg: f64,
+    one_minus_eo: f64,
+    one_minus_ei: f64,
+    one_minus_eavg: f64,
+}
+
+impl EonAt {
+    /// None below the surface (f = 0).
+    fn new(r: f64, wi: DVec3, wo: DVec3) -> Option<EonAt> {
+        let (mu_i, mu_o) = (wi.z, wo.z);
+        if mu_i <= 0.0 || mu_o <= 0.0 {
+            return None;
+        }
+        let s = wi.dot(wo) - mu_i * mu_o;
+        let s_over_t = if s > 0.0 { s / mu_i.max(mu_o) } else { s };
+        let af = 1.0 / (1.0 + C1_FON * r);
+        let e_avg = af * (1.0 + C2_FON * r);
+        Some(EonAt {
+            af,
+            fon: 1.0 + r * s_over_t,
+            e_avg,
+            one_minus_eo: (1.0 - e_fon_exact(mu_o, r)).max(EPS),
+            one_minus_ei: (1.0 - e_fon_exact(mu_i, r)).max(EPS),
+            one_minus_eavg: (1.0 - e_avg).max(EPS),
+        })
+    }
+
+    /// f_ss + f_ms for albedo ρ: the operations of [`f_fon`] and of paper Eq. 11–13, in
+    /// their order.
+    fn value(&self, rho: f64) -> f64 {
+        let f_ss = rho * FRAC_1_PI * self.af * self.fon;
+        let rho_ms = rho * rho * self.e_avg / (1.0 - rho * (1.0 - self.e_avg));
+        let f_ms =
+            rho_ms * FRAC_1_PI * self.one_minus_eo * self.one_minus_ei / self.one_minus_eavg;
+        f_ss + f_ms
+    }
+}
+
 impl Bsdf for Eon {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -55,21 +99,21 @@ impl Bsdf for Eon {
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        let (mu_i, mu_o) = (wi.z, wo.z);
-        if mu_i <= 0.0 || mu_o <= 0.0 {
-            return 0.0;
+        match EonAt::new(p[1], wi, wo) {
+            Some(at) => at.value(p[0]),
+            None => 0.0,
         }
-        let (rho, r) = (p[0], p[1]);
-        let f_ss = f_fon(rho, r, wi, wo);
-        let af = 1.0 / (1.0 + C1_FON * r);
-        let e_avg = af * (1.0 + C2_FON * r);
-        let rho_ms = rho * rho * e_avg / (1.0 - rho * (1.0 - e_avg));
-        let f_ms = rho_ms
-            * FRAC_1_PI
-            * (1.0 - e_fon_exact(mu_o, r)).max(EPS)
-            * (1.0 - e_fon_exact(mu_i, r)).max(EPS)
-            / (1.0 - e_avg).max(EPS);
-        f_ss + f_ms
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let r = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| match EonAt::new(r, wi, wo) {
+            Some(at) => {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = at.value(p.get(i, 0));
+                }
+            }
+            None => out.fill(0.0),
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("eon", include_str!("../../shaders/bsdf/eon.wgsl"))

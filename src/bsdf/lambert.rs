@@ -1,6 +1,6 @@
 //! Lambertian reflection: f = ρ/π. Twin: `shaders/lambert.wgsl`.
 
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -20,6 +20,17 @@ impl Bsdf for Lambert {
             return 0.0;
         }
         p[0] * FRAC_1_PI
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            if wi.z <= 0.0 || wo.z <= 0.0 {
+                out.fill(0.0);
+                return;
+            }
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = p.get(i, 0) * FRAC_1_PI;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("lambert", include_str!("../../shaders/bsdf/lambert.wgsl"))

@@ -196,26 +196,61 @@ pub fn g1_over_mu(tau0: f64, beta: f64, mu: f64) -> f64 {
 /// reference shader, the specular term takes F at the half-vector angle and the diffuse
 /// term the Fresnel transmittances at μi and μo.
 pub fn rough_grain(tau0: f64, beta: f64, eta_g: f64, rho_g: f64, wi: DVec3, wo: DVec3) -> f64 {
-    let (mu_i, mu_o) = (wi.z, wo.z);
-    if mu_i <= 0.0 || mu_o <= 0.0 {
-        return 0.0;
+    RoughGrain::at(tau0, beta, eta_g, wi, wo).value(rho_g)
+}
+
+/// [`rough_grain`] at one direction pair without ρ_g: the specular term and the product
+/// of the two Fresnel transmittances, shared by every channel (ρ_g is the only rgb
+/// parameter of the grain).
+#[derive(Clone, Copy, Debug)]
+pub struct RoughGrain {
+    /// The product of the Fresnel transmittances at μi and μo; 0 below the surface.
+    transmit: f64,
+    /// The specular term; None where it is not added (below the surface, or ωi = −ωo).
+    spec: Option<f64>,
+}
+
+impl RoughGrain {
+    pub fn at(tau0: f64, beta: f64, eta_g: f64, wi: DVec3, wo: DVec3) -> RoughGrain {
+        let (mu_i, mu_o) = (wi.z, wo.z);
+        if mu_i <= 0.0 || mu_o <= 0.0 {
+            return RoughGrain {
+                transmit: 0.0,
+                spec: None,
+            };
+        }
+        let eta = eta_g.max(1.0);
+        let transmit = fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta);
+        let hs = wi + wo;
+        let hl2 = hs.length_squared();
+        if hl2 < 1e-30 {
+            return RoughGrain {
+                transmit,
+                spec: None,
+            };
+        }
+        let h = hs / hl2.sqrt();
+        let cd = wi.dot(h).clamp(0.0, 1.0);
+        let spec = fresnel_dielectric(cd, eta)
+            * ndf(tau0, beta, h)
+            * g1_over_mu(tau0, beta, mu_i)
+            * g1_over_mu(tau0, beta, mu_o)
+            * 0.25;
+        RoughGrain {
+            transmit,
+            spec: Some(spec),
+        }
     }
-    let eta = eta_g.max(1.0);
-    let diffuse =
-        fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta) * rho_g * FRAC_1_PI;
-    let hs = wi + wo;
-    let hl2 = hs.length_squared();
-    if hl2 < 1e-30 {
-        return diffuse;
+
+    /// The grain's value for albedo ρ_g: spec + transmittances · ρ_g/π.
+    #[inline]
+    pub fn value(&self, rho_g: f64) -> f64 {
+        let diffuse = self.transmit * rho_g * FRAC_1_PI;
+        match self.spec {
+            Some(spec) => spec + diffuse,
+            None => diffuse,
+        }
     }
-    let h = hs / hl2.sqrt();
-    let cd = wi.dot(h).clamp(0.0, 1.0);
-    let spec = fresnel_dielectric(cd, eta)
-        * ndf(tau0, beta, h)
-        * g1_over_mu(tau0, beta, mu_i)
-        * g1_over_mu(tau0, beta, mu_o)
-        * 0.25;
-    spec + diffuse
 }
 
 /// The layer: f = w·f_grain + (1 − w)·f_B.

@@ -69,6 +69,146 @@ impl WgslFn {
     }
 }
 
+/// Most children a node may have ([`Node::eval`] and the default
+/// [`Bsdf::eval_channels`] gather them on the stack).
+pub const MAX_CHILDREN: usize = 4;
+
+/// The parameters of the channels evaluated together ([`Bsdf::eval_channels`]): channel
+/// i reads the scalar view of its group (its channel, and its plane under `+peraxis`),
+/// restricted to one node's parameters. Every direction of one call has the same
+/// channels.
+///
+/// The views of one call differ only in their rgb parameters: the channels of one call
+/// lie on one plane, so every shared (and per-plane) parameter has one value for all of
+/// them, and a node may read those from channel 0.
+#[derive(Clone, Copy, Debug)]
+pub struct Channels<'a> {
+    /// Every group's scalar view, one after the other, `stride` values each.
+    scalars: &'a [f64],
+    stride: usize,
+    /// The group of each channel evaluated (several channels may name the same group:
+    /// repeated measurements).
+    groups: &'a [u32],
+    /// This node's first parameter in a view, and its parameter count.
+    offset: usize,
+    nparams: usize,
+}
+
+impl<'a> Channels<'a> {
+    /// The channels `groups` of the views `scalars` (`stride` = [`Model::scalar_count`]
+    /// values per group, [`Model::views_into`]), at the root of the tree.
+    pub fn new(scalars: &'a [f64], stride: usize, groups: &'a [u32]) -> Channels<'a> {
+        Channels {
+            scalars,
+            stride,
+            groups,
+            offset: 0,
+            nparams: stride,
+        }
+    }
+    /// Number of channels evaluated.
+    pub fn len(&self) -> usize {
+        self.groups.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.groups.is_empty()
+    }
+    /// The node's parameters for channel i (what [`Bsdf::eval`] takes as `p`).
+    #[inline]
+    pub fn view(&self, i: usize) -> &'a [f64] {
+        let at = self.groups[i] as usize * self.stride + self.offset;
+        &self.scalars[at..at + self.nparams]
+    }
+    /// Parameter j of the node for channel i.
+    #[inline]
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        debug_assert!(j < self.nparams);
+        self.scalars[self.groups[i] as usize * self.stride + self.offset + j]
+    }
+    /// The whole scalar view of channel i (what [`Node::eval`] takes).
+    #[inline]
+    fn full_view(&self, i: usize) -> &'a [f64] {
+        let at = self.groups[i] as usize * self.stride;
+        &self.scalars[at..at + self.stride]
+    }
+    /// The same channels, restricted to a node's parameters.
+    #[inline]
+    fn node(&self, offset: usize, nparams: usize) -> Channels<'a> {
+        Channels {
+            offset,
+            nparams,
+            ..*self
+        }
+    }
+}
+
+/// A direction pair (ωi, ωo).
+pub type Dir = (DVec3, DVec3);
+
+/// The children's values for a block of m directions × n channels
+/// ([`Bsdf::eval_channels`]): child k at direction d, channel i is
+/// `values[(k · m + d) · n + i]`.
+#[derive(Clone, Copy, Debug)]
+pub struct Children<'a> {
+    values: &'a [f64],
+    m: usize,
+    n: usize,
+}
+
+impl<'a> Children<'a> {
+    pub fn new(values: &'a [f64], m: usize, n: usize) -> Children<'a> {
+        Children { values, m, n }
+    }
+    /// Child k's values at direction d, one per channel.
+    #[inline]
+    pub fn at(&self, k: usize, d: usize) -> &'a [f64] {
+        let at = (k * self.m + d) * self.n;
+        &self.values[at..at + self.n]
+    }
+}
+
+/// Calls `f(d, ωi, ωo, out_d)` for every direction d of a block, `out_d` its n values
+/// in `out` (direction-major): the loop of an [`Bsdf::eval_channels`] override, inlined
+/// into it so that the per-direction body is not a call.
+#[inline]
+pub fn each_direction(
+    dirs: &[Dir],
+    n: usize,
+    out: &mut [f64],
+    mut f: impl FnMut(usize, DVec3, DVec3, &mut [f64]),
+) {
+    if n == 0 {
+        return;
+    }
+    for (d, (&(wi, wo), o)) in dirs.iter().zip(out.chunks_exact_mut(n)).enumerate() {
+        f(d, wi, wo, o);
+    }
+}
+
+/// A one-entry cache of a function of one f64, keyed on its bits: in a block of
+/// directions consecutive ones often share θi (a goniometer scans θo at a fixed θi) or
+/// θo (several φo at one θo), so a factor of μi or μo alone (a Fresnel transmittance) is
+/// computed once per run. Exact: the same argument gives the same value.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Memo {
+    last: Option<(u64, f64)>,
+}
+
+impl Memo {
+    /// f(x), from the cache when x is the previous argument.
+    #[inline]
+    pub fn get(&mut self, x: f64, f: impl FnOnce(f64) -> f64) -> f64 {
+        match self.last {
+            Some((key, value)) if key == x.to_bits() => value,
+            _ => {
+                let value = f(x);
+                self.last = Some((x.to_bits(), value));
+                value
+            }
+        }
+    }
+}
+
 /// One node of a model tree: a BSDF or a combinator of its children.
 pub trait Bsdf: Send + Sync + fmt::Debug {
     /// The node's registry entry: its declared name, kind and role.
@@ -90,6 +230,30 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     /// Evaluate with this node's parameters `p` (already resolved for one channel) and the
     /// values of its children, in `child_roles` order.
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64;
+    /// [`Self::eval`] for n channels (`p`, n = `p.len()`) at a block of directions
+    /// `dirs` that all have these channels: `out[d · n + i]` receives direction d,
+    /// channel i, and `children` holds the children's values the same way. The channels
+    /// share every non-rgb parameter ([`Channels`]), so a node overrides this to compute
+    /// once per direction what depends only on them and on the directions (half vector,
+    /// D, G, Fresnel factors), as BBM evaluates the RGB channels of a direction in one
+    /// call; one call per block of directions also pays the dynamic dispatch once for
+    /// all of them. An override ([`each_direction`] is its loop) must give exactly what
+    /// `eval` gives per channel (same operations in the same order; `tests/channels.rs`
+    /// compares them bit for bit for every model the registry derives). The default
+    /// calls `eval` per direction and channel.
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        let n = p.len();
+        let nc = children.values.len().checked_div(out.len()).unwrap_or(0);
+        let mut child = [0.0f64; MAX_CHILDREN];
+        each_direction(dirs, n, out, |d, wi, wo, out| {
+            for (i, o) in out.iter_mut().enumerate() {
+                for (k, c) in child[..nc].iter_mut().enumerate() {
+                    *c = children.at(k, d)[i];
+                }
+                *o = self.eval(p.view(i), wi, wo, &child[..nc]);
+            }
+        });
+    }
     /// Whether f(i, o) = f(o, i) holds (tests check it where claimed).
     fn reciprocal(&self) -> bool {
         true
@@ -110,6 +274,9 @@ pub struct Node {
     pub offset: usize,
     /// Number of this node's own parameters (set by [`Model::compile`]).
     pub nparams: usize,
+    /// No rgb parameter in the subtree (set by [`Model::compile`]): every channel of one
+    /// [`Node::eval_channels`] call then has the same value, computed once.
+    pub uniform: bool,
 }
 
 impl Node {
@@ -119,6 +286,7 @@ impl Node {
             children: vec![],
             offset: 0,
             nparams: 0,
+            uniform: false,
         }
     }
     pub fn with(bsdf: impl Bsdf + 'static, children: Vec<Node>) -> Node {
@@ -127,11 +295,12 @@ impl Node {
             children,
             offset: 0,
             nparams: 0,
+            uniform: false,
         }
     }
     /// Evaluate the subtree on the scalar view `s`.
     pub fn eval(&self, s: &[f64], wi: DVec3, wo: DVec3) -> f64 {
-        let mut child = [0.0f64; 4];
+        let mut child = [0.0f64; MAX_CHILDREN];
         for (k, c) in self.children.iter().enumerate() {
             child[k] = c.eval(s, wi, wo);
         }
@@ -141,6 +310,33 @@ impl Node {
             wo,
             &child[..self.children.len()],
         )
+    }
+    /// Evaluate the subtree for the channels `p` at the directions `dirs` into `out`
+    /// (`out[d · n + i]`, n = `p.len()`), equal to [`Node::eval`] per direction and
+    /// channel bit for bit. `scratch` holds the children's values: at least
+    /// [`Model::scratch_len`] of `out.len()` values.
+    pub fn eval_channels(&self, p: Channels, dirs: &[Dir], out: &mut [f64], scratch: &mut [f64]) {
+        let (n, m) = (p.len(), dirs.len());
+        debug_assert_eq!(out.len(), n * m);
+        if n == 0 || m == 0 {
+            return;
+        }
+        if self.uniform {
+            // Only shared parameters below: channel 0's value is every channel's.
+            let view = p.full_view(0);
+            each_direction(dirs, n, out, |_, wi, wo, out| {
+                out.fill(self.eval(view, wi, wo))
+            });
+            return;
+        }
+        let block = n * m;
+        let (mine, rest) = scratch.split_at_mut(self.children.len() * block);
+        for (k, c) in self.children.iter().enumerate() {
+            c.eval_channels(p, dirs, &mut mine[k * block..(k + 1) * block], rest);
+        }
+        let children = Children::new(mine, m, n);
+        self.bsdf
+            .eval_channels(p.node(self.offset, self.nparams), dirs, children, out);
     }
     fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
         f(self);
@@ -281,6 +477,8 @@ impl Model {
                 };
                 lay(child, &pre, below, l);
             }
+            node.uniform = node.children.iter().all(|c| c.uniform)
+                && l.params[node.offset..].iter().all(|p| !p.decl.rgb);
         }
         let mut layout = Layout {
             params: &mut params,
@@ -350,6 +548,42 @@ impl Model {
     pub fn scalars_into(&self, flat: &[f64], g: usize, out: &mut Vec<f64>) {
         out.clear();
         out.extend((0..self.params.len()).map(|j| flat[self.slot(j, g)]));
+    }
+
+    /// The flat index of every group's scalars, group after group
+    /// (`slots[g * scalar_count() + j] = slot(j, g)`): [`Self::views_into`] from a table.
+    pub fn slot_table(&self) -> Vec<usize> {
+        (0..self.groups())
+            .flat_map(|g| (0..self.params.len()).map(move |j| self.slot(j, g)))
+            .collect()
+    }
+
+    /// Resolve the flat vector into the scalar views of every group, one after the other
+    /// (what [`Channels::new`] takes), with `slots` from [`Self::slot_table`].
+    pub fn views_into(flat: &[f64], slots: &[usize], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(slots.iter().map(|&i| flat[i]));
+    }
+
+    /// Scratch values [`Node::eval_channels`] needs for a block of `values` outputs
+    /// (directions × channels): one per node and output (the children's values at
+    /// every level).
+    pub fn scratch_len(&self, values: usize) -> usize {
+        self.nodes().len() * values
+    }
+
+    /// Evaluate the model for the groups `groups` at the directions `dirs` into `out`
+    /// (`out[d · groups.len() + i]`) from the views of [`Self::views_into`]; equal to
+    /// [`Self::eval`] per direction and group bit for bit. The groups must lie on one
+    /// plane (the channels of a direction). Allocates its scratch: the CPU backend keeps
+    /// one per thread instead.
+    pub fn eval_channels(&self, views: &[f64], groups: &[u32], dirs: &[Dir], out: &mut [f64]) {
+        debug_assert!(groups
+            .iter()
+            .all(|&g| g as usize / self.channels == groups[0] as usize / self.channels));
+        let mut scratch = vec![0.0; self.scratch_len(out.len())];
+        let p = Channels::new(views, self.scalar_count(), groups);
+        self.root.eval_channels(p, dirs, out, &mut scratch);
     }
 
     /// Evaluate the model for one flat parameter vector at one geometry and group (the

@@ -37,7 +37,7 @@
 
 use super::falloff;
 use super::microfacet::{single_wgsl, Distribution, Ggx};
-use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, half_vector};
 use glam::DVec3;
@@ -90,12 +90,26 @@ pub fn mrm_lobe(
     wi: DVec3,
     wo: DVec3,
 ) -> f64 {
+    match mrm_parts(alpha, fresnel, wi, wo) {
+        Some((f, k)) => kr * f * k,
+        None => 0.0,
+    }
+}
+
+/// The Fresnel factor and the kernel of [`mrm_lobe`] (None below the surface, where the
+/// lobe is 0): what the channels of one direction share; k_r is the only rgb parameter.
+fn mrm_parts(
+    alpha: f64,
+    fresnel: impl Fn(f64) -> f64,
+    wi: DVec3,
+    wo: DVec3,
+) -> Option<(f64, f64)> {
     if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
+        return None;
     }
     let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
     let b = half_vector(wi, wo_back);
-    kr * fresnel(wi.dot(b)) * kernel(alpha, wi, wo_back, b)
+    Some((fresnel(wi.dot(b)), kernel(alpha, wi, wo_back, b)))
 }
 
 /// The lobe's scale (the paper's colour multiplier ρ): the lobe vanishes at k_r = 0.
@@ -157,6 +171,29 @@ impl Bsdf for Mrm {
             Fresnel::F82Tint => mrm_lobe(p[0], p[1], |c| fresnel_f82(c, p[2], p[3]), wi, wo),
         };
         children[0] + children[1] * lobe
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        let alpha = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            let parts = match self.fresnel {
+                Fresnel::Dielectric => {
+                    let eta = p.get(0, 2);
+                    mrm_parts(alpha, |c| fresnel_dielectric(c, eta), wi, wo)
+                }
+                Fresnel::F82Tint => {
+                    let (f0, f82) = (p.get(0, 2), p.get(0, 3));
+                    mrm_parts(alpha, |c| fresnel_f82(c, f0, f82), wi, wo)
+                }
+            };
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = match parts {
+                    Some((f, k)) => p.get(i, 0) * f * k,
+                    None => 0.0,
+                };
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         let source = include_str!("../../shaders/bsdf/mrm.wgsl");

@@ -7,13 +7,24 @@
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
 //! Twin: `shaders/on.wgsl`.
 
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
 
 #[derive(Debug, Clone, Copy)]
 pub struct OrenNayar;
+
+/// A + B · max(0, cos Δφ) sin α tan β, the factor of ρ/π that depends on σ and the
+/// directions only (ωi and ωo above the surface).
+fn shape(sigma: f64, wi: DVec3, wo: DVec3) -> f64 {
+    let (mu_i, mu_o) = (wi.z, wo.z);
+    let s2 = sigma * sigma;
+    let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
+    let b = 0.45 * s2 / (s2 + 0.09);
+    let s = wi.dot(wo) - mu_i * mu_o;
+    a + b * s.max(0.0) / mu_i.max(mu_o)
+}
 
 impl Bsdf for OrenNayar {
     fn entry(&self) -> &'static Entry {
@@ -37,12 +48,20 @@ impl Bsdf for OrenNayar {
         if mu_i <= 0.0 || mu_o <= 0.0 {
             return 0.0;
         }
-        let (rho, sigma) = (p[0], p[1]);
-        let s2 = sigma * sigma;
-        let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
-        let b = 0.45 * s2 / (s2 + 0.09);
-        let s = wi.dot(wo) - mu_i * mu_o;
-        rho * FRAC_1_PI * (a + b * s.max(0.0) / mu_i.max(mu_o))
+        p[0] * FRAC_1_PI * shape(p[1], wi, wo)
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let sigma = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            if wi.z <= 0.0 || wo.z <= 0.0 {
+                out.fill(0.0);
+                return;
+            }
+            let t = shape(sigma, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = p.get(i, 0) * FRAC_1_PI * t;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("on", include_str!("../../shaders/bsdf/on.wgsl"))

@@ -5,7 +5,7 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/peraxis.wgsl`.
 
-use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -39,6 +39,11 @@ impl Bsdf for PerAxis {
     }
     fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, children: &[f64]) -> f64 {
         children[0]
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        each_direction(dirs, p.len(), out, |d, _, _, out| {
+            out.copy_from_slice(children.at(0, d))
+        });
     }
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters

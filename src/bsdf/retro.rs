@@ -6,10 +6,9 @@
 //! Twin: `shaders/bsdf/retro.wgsl`.
 
 use super::falloff;
-use super::microfacet::{reflection, single_wgsl, Ggx};
-use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::microfacet::{single_wgsl, Ggx};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use crate::math::half_vector;
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -17,12 +16,22 @@ pub struct Retro;
 
 /// The back-vector retro lobe alone.
 pub fn retro_lobe(kr: f64, alpha: f64, wi: DVec3, wo: DVec3) -> f64 {
+    match retro_kernel(alpha, wi, wo) {
+        Some(kernel) => kr * kernel,
+        None => 0.0,
+    }
+}
+
+/// The lobe without its scale k_r (None below the surface, where the lobe is 0): what
+/// the channels of one direction share.
+fn retro_kernel(alpha: f64, wi: DVec3, wo: DVec3) -> Option<f64> {
     if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
+        return None;
     }
     let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
-    let h = half_vector(wi, wo_back);
-    kr * reflection(&Ggx { alpha }, wi, wo_back, h)
+    // The kernel takes the unnormalised half vector (both directions are above, so the
+    // sum is not 0).
+    Some(Ggx { alpha }.reflection(wi, wo_back, wi + wo_back))
 }
 
 impl Bsdf for Retro {
@@ -41,6 +50,20 @@ impl Bsdf for Retro {
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
         children[0] + children[1] * retro_lobe(p[0], p[1], wi, wo)
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+        let alpha = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            let kernel = retro_kernel(alpha, wi, wo);
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = match kernel {
+                    Some(k) => p.get(i, 0) * k,
+                    None => 0.0,
+                };
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("retro", include_str!("../../shaders/bsdf/retro.wgsl"))

@@ -52,7 +52,7 @@
 //!
 //! Twin: `shaders/vmf.wgsl`.
 
-use super::{Bsdf, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -259,65 +259,110 @@ fn order3(r: f64, g: &Geometry) -> f64 {
     order_k(c0, c1, g)
 }
 
-/// Fitted residual f_m for scattering orders ≥ 4 (1/sr; added as is, outside the 1/π).
-fn residual(rho: f64, r: f64, prod: f64) -> f64 {
-    let cc = (1.0 - rho).max(0.0).sqrt();
-    let ck = (1.0 - 0.5441615108674713 * cc - 0.45302863761693374 * (1.0 - rho))
-        / (1.0 + 1.4293127703064865 * cc);
-    let erf_cc = 1.0 - erfc(cc);
-    let ca = rho / (1.0075 + 1.16942 * cc).powf(((0.0225272 + (r - 0.264641) * r) * erf_cc).atan());
-    (0.384016
-        * (ca - 0.341969)
-        * ca
-        * ck
-        * (-0.0578978 / (0.287663 + prod) + (r.tanh() - 0.0898863).abs()))
-    .max(0.0)
+/// The parts of the fitted residual ([`residual`]) that do not depend on ρ:
+/// q = 0.0225272 + (r − 0.264641) r and t = −0.0578978/(0.287663 + μiμo) + |tanh r − 0.0898863|.
+#[derive(Clone, Copy, Debug)]
+struct ResidualAt {
+    q: f64,
+    t: f64,
+}
+
+impl ResidualAt {
+    fn new(r: f64, prod: f64) -> ResidualAt {
+        ResidualAt {
+            q: 0.0225272 + (r - 0.264641) * r,
+            t: -0.0578978 / (0.287663 + prod) + (r.tanh() - 0.0898863).abs(),
+        }
+    }
+
+    /// Fitted residual f_m for scattering orders ≥ 4 (1/sr; added as is, outside the 1/π).
+    fn residual(&self, rho: f64) -> f64 {
+        let cc = (1.0 - rho).max(0.0).sqrt();
+        let ck = (1.0 - 0.5441615108674713 * cc - 0.45302863761693374 * (1.0 - rho))
+            / (1.0 + 1.4293127703064865 * cc);
+        let erf_cc = 1.0 - erfc(cc);
+        let ca = rho / (1.0075 + 1.16942 * cc).powf((self.q * erf_cc).atan());
+        (0.384016 * (ca - 0.341969) * ca * ck * self.t).max(0.0)
+    }
+}
+
+/// What VMF depends on besides ρ at one direction pair: the three scattering orders'
+/// shapes (the cross sections and their polynomial fits, the costly part) and the
+/// ρ-independent parts of the residual.
+#[derive(Clone, Copy, Debug)]
+enum VmfAt {
+    /// Below the surface: 0.
+    Below,
+    /// r ≤ 0: exact Lambert.
+    Lambert,
+    Rough {
+        orders: [f64; 3],
+        residual: ResidualAt,
+    },
+}
+
+impl VmfAt {
+    fn new(r: f64, wi: DVec3, wo: DVec3) -> VmfAt {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return VmfAt::Below;
+        }
+        // r ≤ 0 (and NaN) is exact Lambert, as published.
+        let r = if r > 0.0 {
+            r.min(1.0)
+        } else {
+            return VmfAt::Lambert;
+        };
+        let (ui, uo) = (wi.z.clamp(MU_MIN, 1.0), wo.z.clamp(MU_MIN, 1.0));
+
+        // Cross sections.
+        let m = slope(r);
+        let a = if m >= M_SWITCH {
+            moments(2.0 / (m * m))
+        } else {
+            [0.0; L_MAX + 1]
+        };
+        let (s_i, s_o, s_mo) = (sigma(ui, m, &a), sigma(uo, m, &a), sigma(-uo, m, &a));
+        let den = (uo * s_i + ui * s_mo).max(1e-300);
+
+        // cos φ, φ the azimuth between wi and wo; either direction on the normal: its terms vanish.
+        let nn = (wi.x * wi.x + wi.y * wi.y) * (wo.x * wo.x + wo.y * wo.y);
+        let cphi = if nn > 1e-300 {
+            ((wi.x * wo.x + wi.y * wo.y) / nn.sqrt()).clamp(-1.0, 1.0)
+        } else {
+            1.0
+        };
+        let g = Geometry {
+            ui,
+            uo,
+            prod: ui * uo,
+            sum: ui + uo,
+            sin2: (1.0 - ui * ui).max(0.0) * (1.0 - uo * uo).max(0.0),
+            cphi,
+            c2phi: 2.0 * cphi * cphi - 1.0,
+        };
+        VmfAt::Rough {
+            orders: [order1(r, &g, s_i * s_o, den), order2(r, &g), order3(r, &g)],
+            residual: ResidualAt::new(r, g.prod),
+        }
+    }
+
+    /// f for facet albedo ρ.
+    fn value(&self, rho: f64) -> f64 {
+        match self {
+            VmfAt::Below => 0.0,
+            VmfAt::Lambert => rho * FRAC_1_PI,
+            VmfAt::Rough { orders, residual } => {
+                let orders =
+                    rho * orders[0] + rho * rho * orders[1] + rho * rho * rho * orders[2];
+                FRAC_1_PI * orders + residual.residual(rho)
+            }
+        }
+    }
 }
 
 /// The VMF diffuse BRDF (1/sr) for one channel: facet albedo `rho`, roughness `r` ∈ [0, 1].
 pub fn f_vmf(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
-    }
-    // r ≤ 0 (and NaN) is exact Lambert, as published.
-    let r = if r > 0.0 {
-        r.min(1.0)
-    } else {
-        return rho * FRAC_1_PI;
-    };
-    let (ui, uo) = (wi.z.clamp(MU_MIN, 1.0), wo.z.clamp(MU_MIN, 1.0));
-
-    // Cross sections.
-    let m = slope(r);
-    let a = if m >= M_SWITCH {
-        moments(2.0 / (m * m))
-    } else {
-        [0.0; L_MAX + 1]
-    };
-    let (s_i, s_o, s_mo) = (sigma(ui, m, &a), sigma(uo, m, &a), sigma(-uo, m, &a));
-    let den = (uo * s_i + ui * s_mo).max(1e-300);
-
-    // cos φ, φ the azimuth between wi and wo; either direction on the normal: its terms vanish.
-    let nn = (wi.x * wi.x + wi.y * wi.y) * (wo.x * wo.x + wo.y * wo.y);
-    let cphi = if nn > 1e-300 {
-        ((wi.x * wo.x + wi.y * wo.y) / nn.sqrt()).clamp(-1.0, 1.0)
-    } else {
-        1.0
-    };
-    let g = Geometry {
-        ui,
-        uo,
-        prod: ui * uo,
-        sum: ui + uo,
-        sin2: (1.0 - ui * ui).max(0.0) * (1.0 - uo * uo).max(0.0),
-        cphi,
-        c2phi: 2.0 * cphi * cphi - 1.0,
-    };
-
-    let orders = rho * order1(r, &g, s_i * s_o, den)
-        + rho * rho * order2(r, &g)
-        + rho * rho * rho * order3(r, &g);
-    FRAC_1_PI * orders + residual(rho, r, g.prod)
+    VmfAt::new(r, wi, wo).value(rho)
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -335,6 +380,15 @@ impl Bsdf for Vmf {
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
         f_vmf(p[0], p[1], wi, wo)
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let r = p.get(0, 1);
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            let at = VmfAt::new(r, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = at.value(p.get(i, 0));
+            }
+        });
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))

@@ -12,9 +12,17 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct BenchArgs {
-    /// Models to measure (default: the whole catalogue, BRDF and BTDF).
+    /// Models to measure (default: the whole catalogue, BRDF and BTDF; with --data, the
+    /// catalogue of the data's kind).
     #[arg(long, value_delimiter = ';')]
     pub models: Option<Vec<String>>,
+    /// Measure on this data file (any format `fit` reads) instead of the built-in
+    /// synthetic sets (816 BRDF samples in 3 channels, 195 BTDF samples).
+    #[arg(long, value_name = "FILE")]
+    pub data: Option<PathBuf>,
+    /// Reading options of --data.
+    #[command(flatten)]
+    pub data_args: super::DataArgs,
     /// Restarts per batch; a batch holds restarts × (2P + 1) candidates (one compass poll).
     #[arg(long, default_value_t = 256, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
@@ -117,6 +125,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
         "--seconds must be in (0, 3600], got {}",
         a.seconds
     );
+    let file = match &a.data {
+        Some(path) => Some(a.data_args.read(path).context("--data")?),
+        None => None,
+    };
     let specs: Vec<(Kind, String)> = match &a.models {
         Some(list) => list
             .iter()
@@ -127,15 +139,27 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 ))
             })
             .collect::<Result<_>>()?,
-        None => bsdf::catalogue(Kind::Brdf)
+        None => [Kind::Brdf, Kind::Btdf]
             .into_iter()
-            .map(|s| (Kind::Brdf, s))
-            .chain(
-                bsdf::catalogue(Kind::Btdf)
-                    .into_iter()
-                    .map(|s| (Kind::Btdf, s)),
-            )
+            .filter(|&k| file.as_ref().is_none_or(|d| d.kind == k))
+            .flat_map(|k| bsdf::catalogue(k).into_iter().map(move |s| (k, s)))
             .collect(),
+    };
+    if let Some(d) = &file {
+        if let Some((kind, spec)) = specs.iter().find(|(k, _)| *k != d.kind) {
+            anyhow::bail!(
+                "--models: {spec} is a {kind} model but --data {} holds {} data",
+                d.source.display(),
+                d.kind
+            );
+        }
+    }
+    // The data of each model: the file, or the built-in synthetic set of its kind.
+    let data_for = |spec: &str, kind: Kind| -> Result<std::borrow::Cow<crate::data::Dataset>> {
+        Ok(match &file {
+            Some(d) => std::borrow::Cow::Borrowed(d),
+            None => std::borrow::Cow::Owned(bench_dataset(spec, kind)?),
+        })
     };
     let mut backends: Vec<Box<dyn engine::Backend>> = Vec::new();
     if a.backend.backend != BackendChoice::Gpu {
@@ -152,8 +176,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
     }
     // Every batch must fit in memory: checked for all models before measuring any.
     for (kind, spec) in &specs {
-        if let Ok(data) = bench_dataset(spec, *kind) {
-            if let Ok(m) = bsdf::Model::parse(spec, data.channel_count()) {
+        if let Ok(data) = data_for(spec, *kind) {
+            if let Ok(m) = bsdf::Model::for_data(spec, &data) {
                 let cands = a.restarts as u64 * (2 * m.dim as u64 + 1);
                 batch_memory(
                     "--restarts",
@@ -179,7 +203,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
     for (kind, spec) in &specs {
         for b in &backends {
             progress.set_message(format!("{spec} on {}", b.id()));
-            match measure(spec, *kind, b.as_ref(), a.restarts, a.seconds) {
+            let row = data_for(spec, *kind)
+                .and_then(|data| measure(spec, &data, b.as_ref(), a.restarts, a.seconds));
+            match row {
                 Ok(r) => rows.push(r),
                 Err(e) => progress.println(format!("skipping {spec} on {}: {e:#}", b.id())),
             }
@@ -187,14 +213,24 @@ pub fn run(a: BenchArgs) -> Result<()> {
         }
     }
     progress.finish();
+    if let Some(d) = &file {
+        println!("data: {} ({} samples)", d.source.display(), d.len());
+    }
     println!(
-        "{:<24} {:>8} {:>8} {:>10} {:>14}",
-        "model", "backend", "samples", "candidates", "evals/s"
+        "{:<24} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12}",
+        "model", "backend", "samples", "candidates", "evals/s", "per thread", "per CPU-s"
     );
+    let sci = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3e}"));
     for r in &rows {
         println!(
-            "{:<24} {:>8} {:>8} {:>10} {:>14.3e}",
-            r.model, r.backend, r.samples, r.candidates, r.evals_per_s
+            "{:<24} {:>8} {:>8} {:>10} {:>12.3e} {:>12} {:>12}",
+            r.model,
+            r.backend,
+            r.samples,
+            r.candidates,
+            r.evals_per_s,
+            sci(r.threads.map(|t| r.evals_per_s / t.max(1) as f64)),
+            sci(r.evals_per_cpu_s)
         );
     }
     let median = median_speedup(&rows);

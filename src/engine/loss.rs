@@ -182,6 +182,10 @@ pub struct LossTerms {
     pub a: Vec<f64>,
     /// Measured values.
     pub y: Vec<f64>,
+    /// g(y_k), the transformed measurement ([`LossTerms::transform`]), computed once.
+    pub gy: Vec<f64>,
+    /// √w_k, the factor of the weighted residual, computed once.
+    pub sqrt_w: Vec<f64>,
 }
 
 impl Loss {
@@ -225,34 +229,76 @@ impl Loss {
             w.push(uw * geo);
             a.push(inner);
         }
-        LossTerms {
-            term: self.metric.term(),
-            finish: self.metric.finish(),
+        LossTerms::new(
+            self.metric.term(),
+            self.metric.finish(),
             w,
             a,
-            y: data.samples.iter().map(|s| s.value).collect(),
-        }
+            data.samples.iter().map(|s| s.value).collect(),
+        )
     }
 }
 
 impl LossTerms {
+    /// The terms of weights `w`, inner factors `a` and measurements `y` (one per sample),
+    /// with g(y) and √w precomputed.
+    pub fn new(term: Term, finish: Finish, w: Vec<f64>, a: Vec<f64>, y: Vec<f64>) -> LossTerms {
+        let gy = y
+            .iter()
+            .zip(&a)
+            .map(|(&y, &a)| Self::g(term, a, y))
+            .collect();
+        let sqrt_w = w.iter().map(|w| w.sqrt()).collect();
+        LossTerms {
+            term,
+            finish,
+            w,
+            a,
+            y,
+            gy,
+            sqrt_w,
+        }
+    }
+
+    /// The same terms with the samples in the order `order` (sample `order[r]` becomes
+    /// sample r): the CPU evaluator's direction order.
+    pub fn reordered(&self, order: &[usize]) -> LossTerms {
+        let pick = |v: &[f64]| order.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+        LossTerms {
+            term: self.term,
+            finish: self.finish,
+            w: pick(&self.w),
+            a: pick(&self.a),
+            y: pick(&self.y),
+            gy: pick(&self.gy),
+            sqrt_w: pick(&self.sqrt_w),
+        }
+    }
+
+    #[inline]
+    fn g(term: Term, a: f64, v: f64) -> f64 {
+        match term {
+            Term::LogSquare => (a * v).ln_1p(),
+            _ => a * v,
+        }
+    }
+
     /// g(v) of the term shape, for sample k.
     #[inline]
     pub fn transform(&self, k: usize, v: f64) -> f64 {
-        match self.term {
-            Term::LogSquare => (self.a[k] * v).ln_1p(),
-            _ => self.a[k] * v,
-        }
+        Self::g(self.term, self.a[k], v)
     }
 
     /// The per-sample term for model value `yp` at sample k.
     #[inline]
     pub fn term_at(&self, k: usize, yp: f64) -> f64 {
-        let y = self.y[k];
         match self.term {
-            Term::AbsRatio => self.w[k] * (yp - y).abs() / (yp.abs() + y.abs() + EPS),
+            Term::AbsRatio => {
+                let y = self.y[k];
+                self.w[k] * (yp - y).abs() / (yp.abs() + y.abs() + EPS)
+            }
             Term::Square | Term::LogSquare => {
-                let d = self.transform(k, yp) - self.transform(k, y);
+                let d = self.transform(k, yp) - self.gy[k];
                 self.w[k] * d * d
             }
         }
@@ -261,7 +307,7 @@ impl LossTerms {
     /// Weighted residual r_k with Σ r_k² = the sum the loss finishes (sum-of-squares losses).
     #[inline]
     pub fn residual(&self, k: usize, yp: f64) -> f64 {
-        self.w[k].sqrt() * (self.transform(k, yp) - self.transform(k, self.y[k]))
+        self.sqrt_w[k] * (self.transform(k, yp) - self.gy[k])
     }
 
     pub fn finish_sum(&self, sum: f64) -> f64 {

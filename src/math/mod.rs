@@ -28,9 +28,13 @@ pub fn fresnel_dielectric(cos_i: f64, eta: f64) -> f64 {
         return 1.0; // total internal reflection (only possible for eta < 1)
     }
     let g = g2.sqrt();
-    let a = (g - c) / (g + c);
-    let b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-    (0.5 * a * a * (1.0 + b * b)).clamp(0.0, 1.0)
+    // ½ a² (1 + b²) with a = (g − c)/(g + c), b = n/d, n = c(g + c) − 1, d = c(g − c) + 1,
+    // over one common denominator: one division instead of two (the CPU backend evaluates
+    // this once per sample direction; d ≥ 1 − c² > 0 and g + c > 0 past the test above).
+    let (gm, gp) = (g - c, g + c);
+    let n = c * gp - 1.0;
+    let d = c * gm + 1.0;
+    (0.5 * gm * gm * (d * d + n * n) / (gp * gp * (d * d))).clamp(0.0, 1.0)
 }
 
 /// 1 − [`fresnel_dielectric`], the unpolarised transmittance, without the cancellation of
@@ -46,9 +50,12 @@ pub fn fresnel_transmittance(cos_i: f64, eta: f64) -> f64 {
         return 0.0; // total internal reflection (only possible for eta < 1)
     }
     let g = g2.sqrt();
-    let e2c = eta * eta * c;
-    (2.0 * c * g * (1.0 / ((c + g) * (c + g)) + eta * eta / ((e2c + g) * (e2c + g))))
-        .clamp(0.0, 1.0)
+    let e2 = eta * eta;
+    // 2cg (1/s² + η²/p²), s = c + g, p = η²c + g, over one common denominator (one
+    // division instead of two; still a sum of positive terms).
+    let s2 = (c + g) * (c + g);
+    let p2 = (e2 * c + g) * (e2 * c + g);
+    (2.0 * c * g * (p2 + e2 * s2) / (s2 * p2)).clamp(0.0, 1.0)
 }
 
 /// Reflection half vector of two directions (unnormalised input allowed).
@@ -58,7 +65,8 @@ pub fn half_vector(wi: DVec3, wo: DVec3) -> DVec3 {
     if len < 1e-12 {
         DVec3::Z
     } else {
-        h / len
+        // One division and three products rather than three divisions (≤ 1 ulp apart).
+        h * (1.0 / len)
     }
 }
 

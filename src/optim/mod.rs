@@ -128,10 +128,18 @@ impl NormalEquations {
                 jrow[j] = (rows[(j + 1) * k + m] - r0[m]) / steps[j];
                 jtr[j] += jrow[j] * r0[m];
             }
+            // The upper triangle only; JᵀJ is symmetric (x·y = y·x exactly in IEEE
+            // arithmetic, so the mirrored sums are the same numbers).
             for a in 0..p {
-                for b in 0..p {
-                    jtj[a * p + b] += jrow[a] * jrow[b];
+                let ja = jrow[a];
+                for (t, &jb) in jtj[a * p + a..(a + 1) * p].iter_mut().zip(&jrow[a..]) {
+                    *t += ja * jb;
                 }
+            }
+        }
+        for a in 0..p {
+            for b in 0..a {
+                jtj[a * p + b] = jtj[b * p + a];
             }
         }
         NormalEquations {

@@ -17,9 +17,31 @@ use std::time::Instant;
 pub struct BenchRow {
     pub model: String,
     pub backend: String,
+    /// The data measured on: `synthetic GEOMETRY` or the file given with `--data`.
+    pub data: String,
     pub samples: usize,
     pub candidates: usize,
     pub evals_per_s: f64,
+    /// Worker threads of the CPU backend (null for the GPU): `evals_per_s / threads` is
+    /// the per-thread rate on an otherwise idle machine.
+    pub threads: Option<usize>,
+    /// Evaluations per second of the process's CPU time (all threads, from
+    /// `/proc/self/stat`; null elsewhere and for the GPU): the rate of one busy thread,
+    /// which other jobs sharing the cores do not lower as they lower `evals_per_s`.
+    pub evals_per_cpu_s: Option<f64>,
+}
+
+/// CPU time (user + system, all threads) this process has used, in seconds, where
+/// `/proc/self/stat` exists (Linux): fields 14 and 15, in clock ticks of 1/100 s (the
+/// USER_HZ Linux exposes on every architecture).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count from after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i)?.parse::<u64>().ok();
+    // `rest` starts at field 3, so fields 14 and 15 are its 11th and 12th.
+    Some((ticks(11)? + ticks(12)?) as f64 / 100.0)
 }
 
 /// A dataset of the model's kind for benchmarking: the paper's BRDF geometry with three
@@ -41,21 +63,29 @@ pub fn bench_dataset(model_spec: &str, kind: Kind) -> anyhow::Result<Dataset> {
             abs: 1e-4,
         },
         1,
-        "bench",
+        &format!("synthetic {geo}"),
     )
     .map_err(anyhow::Error::msg)
 }
 
-/// Measure one model on one backend: repeat the batch until `min_seconds` have passed.
+/// Measure one model on one backend over `data` (a [`bench_dataset`] or a user's file):
+/// repeat the batch until `min_seconds` have passed.
 pub fn measure(
     model_spec: &str,
-    kind: Kind,
+    data: &Dataset,
     backend: &dyn Backend,
     restarts: usize,
     min_seconds: f64,
 ) -> anyhow::Result<BenchRow> {
-    let data = bench_dataset(model_spec, kind)?;
-    let model = Model::parse(model_spec, data.channel_count())?;
+    let model = Model::for_data(model_spec, data)?;
+    anyhow::ensure!(
+        model.kind == data.kind,
+        "{} is a {} model but the data are {}",
+        model.spec,
+        model.kind,
+        data.kind
+    );
+    let kind = data.kind;
     let candidates = restarts * (2 * model.dim + 1);
     let metric = if kind == Kind::Brdf {
         Metric::Rmse
@@ -64,7 +94,7 @@ pub fn measure(
     };
     let problem = Problem {
         model: &model,
-        data: &data,
+        data,
         loss: Loss::new(metric, Weights::Uniform),
     };
     let mut eval = backend.prepare(problem)?;
@@ -72,6 +102,7 @@ pub fn measure(
     let params: Vec<f64> = starts.iter().flat_map(|u| model.from_unit(u)).collect();
     eval.costs(&params)?; // warm-up: pipeline creation, first allocation
     let t0 = Instant::now();
+    let cpu0 = process_cpu_seconds();
     let mut reps = 0u64;
     while reps == 0 || t0.elapsed().as_secs_f64() < min_seconds {
         let c = eval.costs(&params)?;
@@ -83,12 +114,22 @@ pub fn measure(
         reps += 1;
     }
     let secs = t0.elapsed().as_secs_f64();
+    let evals = reps as f64 * candidates as f64 * data.len() as f64;
+    let is_cpu = backend.id() == "cpu";
+    let cpu_secs = match (cpu0, process_cpu_seconds()) {
+        // At least 10 ticks, so that the tick's rounding stays below 10 %.
+        (Some(a), Some(b)) if is_cpu && b - a >= 0.1 => Some(b - a),
+        _ => None,
+    };
     Ok(BenchRow {
         model: model_spec.to_string(),
         backend: backend.id().to_string(),
+        data: data.source.display().to_string(),
         samples: data.len(),
         candidates,
-        evals_per_s: (reps as f64 * candidates as f64 * data.len() as f64) / secs,
+        evals_per_s: evals / secs,
+        threads: is_cpu.then(rayon::current_num_threads),
+        evals_per_cpu_s: cpu_secs.map(|c| evals / c),
     })
 }
 
