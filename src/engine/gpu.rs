@@ -4,7 +4,7 @@
 //! and cached; the dataset is uploaded once per problem; parameter and output buffers are
 //! reused across optimizer iterations and grown only when a larger batch arrives.
 
-use super::wgsl::{compose, validate, Shape};
+use super::wgsl::{compose, normal_entries, validate, Shape};
 use super::{Backend, Evaluator, Problem};
 use crate::engine::loss::{Finish, LossTerms, Term};
 use crate::optim::NormalEquations;
@@ -29,11 +29,16 @@ struct Dims {
     n_problems: u32,
     dim: u32,
     groups_x: u32,
+    n_groups: u32,
+    normal_groups_x: u32,
+    pad: [u32; 2],
 }
 
 struct Pipelines {
     costs: wgpu::ComputePipeline,
     values: wgpu::ComputePipeline,
+    /// LM's normal equations from the values of groups of P + 1 candidates.
+    normal: wgpu::ComputePipeline,
 }
 
 pub struct GpuBackend {
@@ -48,6 +53,8 @@ pub struct GpuBackend {
     /// Errors wgpu reports asynchronously; checked after each submission so they become
     /// `Err` values instead of the default handler's panic.
     errors: Arc<Mutex<Vec<String>>>,
+    /// Largest buffer allocated for one binding (bytes), at most the device's limits.
+    chunk_bytes: u64,
 }
 
 /// Largest buffer the engine allocates for one binding (bytes).
@@ -127,6 +134,7 @@ impl GpuBackend {
                 storage(4, false),
                 storage(5, true),
                 storage(6, true),
+                storage(7, false),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -149,7 +157,15 @@ impl GpuBackend {
             pipeline_layout,
             pipelines: Mutex::default(),
             errors,
+            chunk_bytes: MAX_CHUNK_BYTES,
         })
+    }
+
+    /// Lower the largest binding the engine allocates (tests of the paths that split a
+    /// batch over several submissions, or reduce normal equations on the host).
+    pub fn with_max_binding(mut self, bytes: u64) -> Self {
+        self.chunk_bytes = bytes.clamp(256, MAX_CHUNK_BYTES);
+        self
     }
 
     /// Override the workgroup shape (benchmarks and tests of both code paths).
@@ -211,6 +227,7 @@ impl GpuBackend {
         let p = Arc::new(Pipelines {
             costs: make("costs"),
             values: make("values"),
+            normal: make("normal"),
         });
         self.check_errors()?;
         cache.insert(key, p.clone());
@@ -240,7 +257,7 @@ impl GpuBackend {
         self.limits
             .max_storage_buffer_binding_size
             .min(self.limits.max_buffer_size)
-            .min(MAX_CHUNK_BYTES)
+            .min(self.chunk_bytes)
     }
 }
 
@@ -343,6 +360,7 @@ impl Backend for GpuBackend {
             dims_buf,
             io: None,
             evaluations: vec![0; problems.len()],
+            read_back: 0,
         }))
     }
 }
@@ -352,10 +370,13 @@ struct IoBuffers {
     params: wgpu::Buffer,
     owners: wgpu::Buffer,
     out: wgpu::Buffer,
+    /// The `normal` pass's output (NE numbers per group of P + 1 candidates).
+    normal: wgpu::Buffer,
     staging: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     params_cap: u64,
     out_cap: u64,
+    normal_cap: u64,
 }
 
 pub struct GpuEvaluator<'a> {
@@ -371,20 +392,38 @@ pub struct GpuEvaluator<'a> {
     io: Option<IoBuffers>,
     /// Model-sample evaluations per problem.
     evaluations: Vec<u64>,
+    /// Bytes copied back from the device so far.
+    read_back: u64,
+}
+
+/// What one submission reads back.
+#[derive(Clone, Copy)]
+enum Output {
+    /// `out`: one cost or K model values per candidate.
+    Out,
+    /// `normal`: the normal equations of `groups` groups of P + 1 candidates.
+    Normal { groups: usize },
 }
 
 impl GpuEvaluator<'_> {
-    fn ensure_io(&mut self, params_bytes: u64, out_bytes: u64) {
-        let fits = self
-            .io
-            .as_ref()
-            .is_some_and(|io| io.params_cap >= params_bytes && io.out_cap >= out_bytes);
+    fn ensure_io(&mut self, params_bytes: u64, out_bytes: u64, normal_bytes: u64) {
+        // wgpu binds no empty buffer: the `normal` output exists (4 bytes) in every pass.
+        let normal_bytes = normal_bytes.max(4);
+        let fits = self.io.as_ref().is_some_and(|io| {
+            io.params_cap >= params_bytes
+                && io.out_cap >= out_bytes
+                && io.normal_cap >= normal_bytes
+        });
         if fits {
             return;
         }
-        let (pc, oc) = match &self.io {
-            Some(io) => (io.params_cap.max(params_bytes), io.out_cap.max(out_bytes)),
-            None => (params_bytes, out_bytes),
+        let (pc, oc, nc) = match &self.io {
+            Some(io) => (
+                io.params_cap.max(params_bytes),
+                io.out_cap.max(out_bytes),
+                io.normal_cap.max(normal_bytes),
+            ),
+            None => (params_bytes, out_bytes, normal_bytes),
         };
         let dev = &self.gpu.device;
         let params = dev.create_buffer(&wgpu::BufferDescriptor {
@@ -408,61 +447,59 @@ impl GpuEvaluator<'_> {
                 | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let normal = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("normal"),
+            size: nc,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let staging = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("staging"),
-            size: oc,
+            size: oc.max(nc),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }
+        }
         let bind_group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bsdfit kernel"),
             layout: &self.gpu.layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.dims_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.samples_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: self.slots_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: out.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: self.lut_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: owners.as_entire_binding(),
-                },
+                entry(0, &self.dims_buf),
+                entry(1, &self.samples_buf),
+                entry(2, &self.slots_buf),
+                entry(3, &params),
+                entry(4, &out),
+                entry(5, &self.lut_buf),
+                entry(6, &owners),
+                entry(7, &normal),
             ],
         });
         self.io = Some(IoBuffers {
             params,
             owners,
             out,
+            normal,
             staging,
             bind_group,
             params_cap: pc,
             out_cap: oc,
+            normal_cap: nc,
         });
     }
 
     /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
-    /// output slot per candidate), run `pipeline` over `m` candidates, read back `out_len`
-    /// floats (poisoned with NaN beforehand, so anything the kernel fails to write reads
-    /// back as NaN).
+    /// output slot per candidate), run `pipeline` over `m` candidates writing `out_len`
+    /// floats of `out` (poisoned with NaN beforehand, so anything the kernel fails to
+    /// write reads as NaN). `Output::Out` reads `out` back; `Output::Normal` runs the
+    /// `normal` pass on those values (in the same submission) and reads back only its NE
+    /// numbers per group, poisoned likewise.
     fn dispatch(
         &mut self,
         pipeline: &wgpu::ComputePipeline,
@@ -470,25 +507,44 @@ impl GpuEvaluator<'_> {
         owners: &[u32],
         m: usize,
         out_len: usize,
+        output: Output,
     ) -> Result<Vec<f32>> {
         let p = self.model.dim;
         let o_bytes = (out_len * 4) as u64;
-        self.ensure_io((host.len() * 4) as u64, o_bytes);
+        let (groups, normal_len) = match output {
+            Output::Out => (0, 0),
+            Output::Normal { groups } => (groups, groups * normal_entries(p)),
+        };
+        let n_bytes = (normal_len * 4) as u64;
+        self.ensure_io((host.len() * 4) as u64, o_bytes, n_bytes);
         let io = self.io.as_ref().expect("io buffers allocated");
-        let total_groups = (m as u32).div_ceil(self.gpu.shape.lanes);
-        let groups_x = total_groups.min(MAX_GROUPS_X);
-        let groups_y = total_groups.div_ceil(groups_x);
+        let grid = |total: u32| {
+            let x = total.clamp(1, MAX_GROUPS_X);
+            (x, total.div_ceil(x))
+        };
+        let (groups_x, groups_y) = grid((m as u32).div_ceil(self.gpu.shape.lanes));
+        let (normal_x, normal_y) = grid(groups as u32);
         let dims = Dims {
             n_candidates: m as u32,
             n_problems: self.terms.len() as u32,
             dim: p as u32,
             groups_x,
+            n_groups: groups as u32,
+            normal_groups_x: normal_x,
+            pad: [0; 2],
         };
         let q = &self.gpu.queue;
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
         q.write_buffer(&io.params, 0, bytemuck::cast_slice(host));
         q.write_buffer(&io.owners, 0, bytemuck::cast_slice(owners));
         q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![f32::NAN; out_len]));
+        if normal_len > 0 {
+            q.write_buffer(
+                &io.normal,
+                0,
+                bytemuck::cast_slice(&vec![f32::NAN; normal_len]),
+            );
+        }
         let mut enc = self
             .gpu
             .device
@@ -503,10 +559,21 @@ impl GpuEvaluator<'_> {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &io.bind_group, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
+            if normal_len > 0 {
+                // wgpu orders the two dispatches (the second reads what the first wrote
+                // to `out`) with a barrier between them.
+                pass.set_pipeline(&self.pipes.normal);
+                pass.dispatch_workgroups(normal_x, normal_y, 1);
+            }
         }
-        enc.copy_buffer_to_buffer(&io.out, 0, &io.staging, 0, o_bytes);
+        let (source, bytes) = if normal_len > 0 {
+            (&io.normal, n_bytes)
+        } else {
+            (&io.out, o_bytes)
+        };
+        enc.copy_buffer_to_buffer(source, 0, &io.staging, 0, bytes);
         q.submit(Some(enc.finish()));
-        let slice = io.staging.slice(0..o_bytes);
+        let slice = io.staging.slice(0..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             tx.send(r).ok();
@@ -525,18 +592,16 @@ impl GpuEvaluator<'_> {
             bytemuck::cast_slice::<u8, f32>(&view).to_vec()
         };
         io.staging.unmap();
+        self.read_back += bytes;
         self.gpu.check_errors()?;
         Ok(data)
     }
 
-    /// Run `pipeline` over the candidates in `params` (problem `owners[i]` each): one
-    /// cost per candidate, or (`values_mode`) its problem's K model values. Batches larger
-    /// than a binding go in several submissions.
-    fn run(&mut self, owners: &[usize], params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
+    fn check_batch(&self, owners: &[usize], params: &[f64], per_owner: usize) -> Result<()> {
         let p = self.model.dim;
         anyhow::ensure!(
-            p > 0 && params.len() == owners.len() * p,
-            "parameter batch of {} values is not {} candidates of P = {p}",
+            p > 0 && params.len() == owners.len() * per_owner * p,
+            "parameter batch of {} values is not {} × {per_owner} candidates of P = {p}",
             params.len(),
             owners.len()
         );
@@ -545,6 +610,15 @@ impl GpuEvaluator<'_> {
             "a candidate names a problem outside the batch's {}",
             self.terms.len()
         );
+        Ok(())
+    }
+
+    /// Run `pipeline` over the candidates in `params` (problem `owners[i]` each): one
+    /// cost per candidate, or (`values_mode`) its problem's K model values. Batches larger
+    /// than a binding go in several submissions.
+    fn run(&mut self, owners: &[usize], params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
+        self.check_batch(owners, params, 1)?;
+        let p = self.model.dim;
         let n = owners.len();
         let sizes: Vec<usize> = self.terms.iter().map(|t| t.y.len()).collect();
         let per = |q: usize| if values_mode { sizes[q] } else { 1 };
@@ -568,20 +642,14 @@ impl GpuEvaluator<'_> {
                 .iter()
                 .map(|&v| v as f32)
                 .collect();
-            let mut ids = Vec::with_capacity(2 * (end - start));
-            let mut row = 0u32;
-            for &q in &owners[start..end] {
-                ids.push(q as u32);
-                ids.push(row);
-                row += per(q) as u32;
-            }
+            let ids = self.output_rows(&owners[start..end], |q| per(q));
             let pipes = self.pipes.clone();
             let pipeline = if values_mode {
                 &pipes.values
             } else {
                 &pipes.costs
             };
-            let data = self.dispatch(pipeline, &host, &ids, end - start, outs)?;
+            let data = self.dispatch(pipeline, &host, &ids, end - start, outs, Output::Out)?;
             result.extend(data.iter().map(|&v| v as f64));
             start = end;
         }
@@ -589,6 +657,125 @@ impl GpuEvaluator<'_> {
             self.evaluations[q] += sizes[q] as u64;
         }
         Ok(result)
+    }
+
+    /// The `owners` buffer of a run of candidates: per candidate its problem and where its
+    /// `per(problem)` outputs start, one after the other.
+    fn output_rows(&self, owners: &[usize], per: impl Fn(usize) -> usize) -> Vec<u32> {
+        let mut ids = Vec::with_capacity(2 * owners.len());
+        let mut row = 0u32;
+        for &q in owners {
+            ids.push(q as u32);
+            ids.push(row);
+            row += per(q) as u32;
+        }
+        ids
+    }
+
+    /// LM's normal equations of groups of P + 1 candidates, reduced on the device: each
+    /// submission evaluates the model values of whole groups into `out` and the `normal`
+    /// pass (shaders/engine/normal.wgsl) reduces each group to P(P + 1)/2 + P + 1 f32
+    /// sums, the only numbers read back. Here they become f64 and are divided by the
+    /// steps. A group whose (P + 1) × K values exceed one binding falls back to reading
+    /// the values back and reducing on the host (`normal_equations_of_values`).
+    fn normal_run(
+        &mut self,
+        owners: &[usize],
+        params: &[f64],
+        steps: &[f64],
+    ) -> Result<Vec<NormalEquations>> {
+        self.check_batch(owners, params, self.model.dim + 1)?;
+        let p = self.model.dim;
+        anyhow::ensure!(
+            steps.len() == owners.len() * p,
+            "{} steps for {} groups of P = {p}",
+            steps.len(),
+            owners.len()
+        );
+        let ne = normal_entries(p);
+        let sizes: Vec<usize> = self.terms.iter().map(|t| t.y.len()).collect();
+        let max = (self.gpu.max_binding() / 4) as usize;
+        let fits = |q: usize| ne <= max && (p + 1) * p.max(2) <= max && (p + 1) * sizes[q] <= max;
+        if !owners.iter().all(|&q| fits(q)) {
+            let expanded: Vec<usize> = owners
+                .iter()
+                .flat_map(|&q| std::iter::repeat_n(q, p + 1))
+                .collect();
+            let values = self.run(&expanded, params, true)?;
+            let terms: Vec<&LossTerms> = self.terms.iter().collect();
+            return Ok(super::normal_equations_of_values(
+                &values, &terms, owners, steps, p,
+            ));
+        }
+        let max_groups = (MAX_GROUPS_X as usize * MAX_GROUPS_X as usize) / (p + 1);
+        let n = owners.len();
+        let mut result = Vec::with_capacity(n);
+        let mut start = 0;
+        while start < n {
+            // The largest run of whole groups whose parameters, values and sums each fit a
+            // binding (a group's values must be on the device together).
+            let (mut end, mut outs) = (start, 0);
+            while end < n
+                && end - start < max_groups
+                && (end - start + 1) * (p + 1) * p.max(2) <= max
+                && (end - start + 1) * ne <= max
+                && outs + (p + 1) * sizes[owners[end]] <= max
+            {
+                outs += (p + 1) * sizes[owners[end]];
+                end += 1;
+            }
+            anyhow::ensure!(end > start, "one group's values exceed a GPU binding");
+            let groups = end - start;
+            let host: Vec<f32> = params[start * (p + 1) * p..end * (p + 1) * p]
+                .iter()
+                .map(|&v| v as f32)
+                .collect();
+            let expanded: Vec<usize> = owners[start..end]
+                .iter()
+                .flat_map(|&q| std::iter::repeat_n(q, p + 1))
+                .collect();
+            let ids = self.output_rows(&expanded, |q| sizes[q]);
+            let pipes = self.pipes.clone();
+            let data = self.dispatch(
+                &pipes.values,
+                &host,
+                &ids,
+                groups * (p + 1),
+                outs,
+                Output::Normal { groups },
+            )?;
+            for (sums, h) in data.chunks(ne).zip(steps[start * p..end * p].chunks(p)) {
+                result.push(normal_from_sums(sums, h));
+            }
+            start = end;
+        }
+        for &q in owners {
+            self.evaluations[q] += ((p + 1) * sizes[q]) as u64;
+        }
+        Ok(result)
+    }
+}
+
+/// JᵀJ, Jᵀr and Σr² of one group from the `normal` pass's sums (normal.wgsl): the upper
+/// triangle of Σ d_a d_b, then Σ d_j r, then Σ r², with d_j = h_j J_j. The division by the
+/// unit-box steps is done here, in f64, exactly as the host's forward differences divide.
+fn normal_from_sums(sums: &[f32], h: &[f64]) -> NormalEquations {
+    let p = h.len();
+    let mut jtj = vec![0.0; p * p];
+    let mut e = 0;
+    for a in 0..p {
+        for b in a..p {
+            let v = sums[e] as f64 / (h[a] * h[b]);
+            jtj[a * p + b] = v;
+            jtj[b * p + a] = v;
+            e += 1;
+        }
+    }
+    let jtr = (0..p).map(|j| sums[e + j] as f64 / h[j]).collect();
+    NormalEquations {
+        jtj,
+        jtr,
+        ss: crate::optim::sanitize(sums[e + p] as f64),
     }
 }
 
@@ -614,21 +801,13 @@ impl Evaluator for GpuEvaluator<'_> {
         params: &[f64],
         steps: &[f64],
     ) -> Result<Vec<NormalEquations>> {
-        // Model values of every candidate in one submission; the f64 reduction to JᵀJ is
-        // done on the host.
-        let p = self.model.dim;
-        let expanded: Vec<usize> = owners
-            .iter()
-            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
-            .collect();
-        let values = self.values_of(&expanded, params)?;
-        let terms: Vec<&LossTerms> = self.terms.iter().collect();
-        Ok(super::normal_equations_of_values(
-            &values, &terms, owners, steps, p,
-        ))
+        self.normal_run(owners, params, steps)
     }
 
     fn evaluations_of(&self, q: usize) -> u64 {
         self.evaluations[q]
+    }
+    fn read_back_bytes(&self) -> u64 {
+        self.read_back
     }
 }
