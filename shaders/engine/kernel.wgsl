@@ -1,7 +1,8 @@
 // Batched evaluation kernels. A workgroup is CL candidate lanes × SL sample slices:
 // thread (lane, slice) evaluates candidate `lane` on samples slice, slice + SL, …, then
 // the SL partial sums of each candidate are reduced in workgroup memory to one cost — no
-// per-sample read-back. `values` writes y′ per sample instead (LM, diagnostics).
+// per-sample read-back. `values` writes y′ per sample instead (LM, diagnostics); LM's
+// normal equations are then reduced from them on the device (normal.wgsl).
 //
 // Why this shape: neighbouring threads (x = lane) hold different candidates but read the
 // same sample at the same time, so sample loads are broadcasts and only the parameters
@@ -22,6 +23,11 @@ struct Dims {
     n_problems: u32,
     dim: u32,
     groups_x: u32,
+    // The `normal` pass (normal.wgsl): groups of dim + 1 candidates, workgroups per row.
+    n_groups: u32,
+    normal_groups_x: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> dims: Dims;
@@ -39,6 +45,8 @@ struct Dims {
 // owners[2c] = the problem of candidate c; owners[2c + 1] = where its row of model values
 // starts in `out` (values entry point only).
 @group(0) @binding(6) var<storage, read> owners: array<u32>;
+// The `normal` pass's output: NE numbers per group of dim + 1 candidates (normal.wgsl).
+@group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
 
 var<workgroup> partial: array<f32, CL * SL>;
 var<workgroup> partial_comp: array<f32, CL * SL>;

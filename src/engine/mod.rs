@@ -112,6 +112,11 @@ pub trait Evaluator {
     }
     /// Those of them made for problem q.
     fn evaluations_of(&self, q: usize) -> u64;
+    /// Bytes read back from a device so far (0 for host backends): what a batch costs in
+    /// transfers, e.g. LM's normal equations, whose sums alone come back from the GPU.
+    fn read_back_bytes(&self) -> u64 {
+        0
+    }
 
     /// [`Self::costs_of`] for problem 0.
     fn costs(&mut self, params: &[f64]) -> anyhow::Result<Vec<f64>> {

@@ -8,6 +8,7 @@ use crate::engine::loss::{Finish, Term};
 pub const COMMON: &str = include_str!("../../shaders/bsdf/common.wgsl");
 pub const LOSS: &str = include_str!("../../shaders/engine/loss.wgsl");
 pub const KERNEL: &str = include_str!("../../shaders/engine/kernel.wgsl");
+pub const NORMAL: &str = include_str!("../../shaders/engine/normal.wgsl");
 
 /// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -119,19 +120,36 @@ pub fn all_accessors() -> &'static str {
     })
 }
 
+/// How many numbers the `normal` pass (shaders/engine/normal.wgsl) writes per group of
+/// P + 1 candidates: the upper triangle of JᵀJ, Jᵀr and Σr².
+pub fn normal_entries(p: usize) -> usize {
+    p * (p + 1) / 2 + p + 1
+}
+
+/// Threads along the entries of one `normal` workgroup: enough for every entry, in
+/// multiples of 8 (a SIMD width of CPU devices), at most the shape's lanes, so that a
+/// workgroup of lanes × slices threads stays within WebGPU's 256 invocations.
+pub fn normal_lanes(p: usize, shape: Shape) -> u32 {
+    (normal_entries(p).next_multiple_of(8) as u32).min(shape.lanes)
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
     // C counts scalar-view groups: channels, times planes under `+peraxis`.
     let c = model.groups();
+    let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         c,
         shape.lanes,
         shape.slices,
         term_code(term),
         finish_code(finish),
+        p * (p + 1) / 2,
+        normal_entries(p),
+        normal_lanes(p, shape),
         (s * c).max(1)
     );
     src += COMMON;
@@ -152,6 +170,8 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     src += LOSS;
     src += "\n";
     src += KERNEL;
+    src += "\n";
+    src += NORMAL;
     src
 }
 
