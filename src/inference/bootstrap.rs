@@ -210,6 +210,22 @@ fn replicate_options(base: &FitOptions, boot: &BootstrapOptions) -> FitOptions {
     }
 }
 
+/// χ² fits of `model` to every data set, in lockstep.
+fn refit(
+    model: &Model,
+    datas: &[Dataset],
+    backend: &dyn Backend,
+    opts: &FitOptions,
+) -> anyhow::Result<(
+    Vec<crate::inference::fit::Optimum>,
+    crate::inference::fit::ManyStats,
+)> {
+    let refs: Vec<&Dataset> = datas.iter().collect();
+    let losses = vec![chi2(); refs.len()];
+    let (optima, _, stats) = fit_many(model, &refs, &losses, backend, opts, &mut |_| {})?;
+    Ok((optima, stats))
+}
+
 /// Draw the replicates from the null fit (`null_flat`, its model values `null_values`) and
 /// refit the null to each, all in lockstep.
 pub fn refit_null(
@@ -233,20 +249,12 @@ pub fn refit_null(
         boot.replicates,
         boot.seed,
     ));
-    let refs: Vec<&Dataset> = replicates.iter().collect();
     let opts = FitOptions {
         initial_points: vec![null_flat.to_vec()],
         problem_points: vec![],
         ..replicate_options(base, boot)
     };
-    let (optima, _, stats) = fit_many(
-        null,
-        &refs,
-        &vec![chi2(); refs.len()],
-        backend,
-        &opts,
-        &mut |_| {},
-    )?;
+    let (optima, stats) = refit(null, &replicates, backend, &opts)?;
     Ok(NullRefits {
         replicates,
         flat: optima.iter().map(|o| o.flat.clone()).collect(),
@@ -273,20 +281,12 @@ pub fn calibrate(
     boot: &BootstrapOptions,
 ) -> anyhow::Result<Calibrated> {
     let t0 = Instant::now();
-    let refs: Vec<&Dataset> = nulls.replicates.iter().collect();
     let opts = FitOptions {
         initial_points: vec![ext_flat.to_vec()],
         problem_points: nulls.flat.iter().map(|f| embed(f)).collect(),
         ..replicate_options(base, boot)
     };
-    let (optima, _, stats) = fit_many(
-        ext,
-        &refs,
-        &vec![chi2(); refs.len()],
-        backend,
-        &opts,
-        &mut |_| {},
-    )?;
+    let (optima, stats) = refit(ext, &nulls.replicates, backend, &opts)?;
     anyhow::ensure!(
         optima[0].loss.is_finite() && nulls.chi2[0].is_finite(),
         "refitting {} or its null to the measured data ended non-finite",

@@ -134,24 +134,47 @@ pub fn bootstrap_p(
     opts: &DiagnoseOptions,
 ) -> Result<bootstrap::Calibrated> {
     let boot = round_bootstrap(opts);
-    let nulls = bootstrap::refit_null(
+    let nulls = refit_current(current, data, backend, opts, &boot)?;
+    calibrate_one(current, ext, &nulls, backend, opts, &boot)
+}
+
+/// The current model refitted to the measured data and the replicates drawn from its fit.
+fn refit_current(
+    current: &FitResult,
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    boot: &BootstrapOptions,
+) -> Result<bootstrap::NullRefits> {
+    bootstrap::refit_null(
         &current.model,
         &current.flat,
         &current.values,
         data,
         backend,
         &fit_options(opts),
-        &boot,
-    )?;
+        boot,
+    )
+}
+
+/// One candidate's calibrated p-value against the current model's refits.
+fn calibrate_one(
+    current: &FitResult,
+    ext: &FitResult,
+    nulls: &bootstrap::NullRefits,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    boot: &BootstrapOptions,
+) -> Result<bootstrap::Calibrated> {
     bootstrap::calibrate(
         &ext.model,
         &ext.flat,
         &|null_flat| embed(&current.model, null_flat, &ext.model),
-        &nulls,
+        nulls,
         ext.dof,
         backend,
         &fit_options(opts),
-        &boot,
+        boot,
     )
 }
 
@@ -199,27 +222,10 @@ pub(super) fn calibrate_round(
                 "    bootstrap: refitting {} to {} replicates drawn from its fit",
                 current.model.spec, boot.replicates
             ));
-            nulls = Some(bootstrap::refit_null(
-                &current.model,
-                &current.flat,
-                &current.values,
-                data,
-                backend,
-                &fit_options(opts),
-                &boot,
-            ));
+            nulls = Some(refit_current(current, data, backend, opts, &boot));
         }
         let result = match nulls.as_ref().expect("set above") {
-            Ok(n) => bootstrap::calibrate(
-                &fit.model,
-                &fit.flat,
-                &|null_flat| embed(&current.model, null_flat, &fit.model),
-                n,
-                fit.dof,
-                backend,
-                &fit_options(opts),
-                &boot,
-            ),
+            Ok(n) => calibrate_one(current, fit, n, backend, opts, &boot),
             Err(e) => Err(anyhow::anyhow!("{e:#}")),
         };
         match result {
