@@ -354,8 +354,7 @@ fn non_finite_values_follow_the_host_rule() {
                 }
             };
             let mut spoiled_columns = 0;
-            for g in 0..n {
-                let ne = &dev[g];
+            for (g, ne) in dev.iter().enumerate() {
                 if has_nan(g, 0) {
                     if !(ne.jtj.iter().chain(&ne.jtr).all(|v| v.is_nan()) && ne.ss == f64::INFINITY)
                     {

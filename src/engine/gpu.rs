@@ -666,7 +666,7 @@ impl GpuEvaluator<'_> {
                 .iter()
                 .map(|&v| v as f32)
                 .collect();
-            let ids = self.output_rows(&owners[start..end], |q| per(q));
+            let ids = self.output_rows(&owners[start..end], per);
             let pipes = self.pipes.clone();
             let pipeline = if values_mode {
                 &pipes.values
