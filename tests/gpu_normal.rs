@@ -212,8 +212,8 @@ fn edge_points(p: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
     points
 }
 
-/// rmg(eon) (P = 10 on RGB data: 66 sums per group, more than one workgroup's lanes on
-/// either shape, so the entry blocks loop) at the edges of its box and inside it, on
+/// rmg(eon) (P = 10 on RGB data: 66 sums per group, added up in several blocks by the CPU
+/// devices' form of the pass) at the edges of its box and inside it, on
 /// bundled data, with LM's own step and signs, for the losses LM fits BRDFs with. The
 /// device reduction was once removed for NaN Jacobian columns at rmg(eon) points; these
 /// are the points to keep checking.
@@ -227,8 +227,8 @@ fn rmg_eon_edge_points_match_the_host_reduction() {
             let model = Model::parse("rmg(eon)", data.channel_count()).unwrap();
             let p = model.dim;
             assert!(
-                normal_entries(p) > 64,
-                "rmg(eon) should need two entry blocks"
+                normal_entries(p) > 16,
+                "rmg(eon) should need several entry blocks"
             );
             let mut rng = ChaCha8Rng::seed_from_u64(7);
             let points = edge_points(p, &mut rng);
@@ -354,7 +354,7 @@ fn non_finite_values_follow_the_host_rule() {
                 }
             };
             let mut spoiled_columns = 0;
-            for (g, ne) in dev.iter().enumerate().take(n) {
+            for (g, ne) in dev.iter().enumerate() {
                 if has_nan(g, 0) {
                     if !(ne.jtj.iter().chain(&ne.jtr).all(|v| v.is_nan()) && ne.ss == f64::INFINITY)
                     {

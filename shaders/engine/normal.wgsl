@@ -4,22 +4,29 @@
 // parameter), and each workgroup reduces one group to NE = PD(PD + 1)/2 + PD + 1 numbers
 // in `normal_out`, so the host reads back those instead of (PD + 1) × K values.
 //
-// With d_j = √w (g(y′_j) − g(y′_0)) (y′_0 the point's value, y′_j the one moved along
-// parameter j) and r = √w (g(y′_0) − g(y)), entry e of a group is
-//   e < NJJ:            Σ d_a d_b over the samples, a ≤ b (upper triangle, row-major),
-//   NJJ ≤ e < NJJ + PD: Σ d_j r,
-//   e = NE − 1:         Σ r².
+// Per sample, the group's PD + 1 residual factors are x_0 = r = √w (g(y′_0) − g(y)) and
+// x_{j+1} = d_j = √w (g(y′_j) − g(y′_0)) (y′_0 the point's value, y′_j the one moved along
+// parameter j). The sums written, per group, are
+//   the upper triangle of Σ d_a d_b (a ≤ b, row-major), then Σ d_j r, then Σ r².
 // The host divides by the unit-box steps in f64 (JᵀJ_ab = Σ d_a d_b / (h_a h_b), Jᵀr_j =
 // Σ d_j r / h_j), which is the forward-difference Jacobian J_kj = (r_k(moved_j) − r_k) / h_j
 // of src/engine/mod.rs. Dividing on the host keeps h (≈ 1e-3) out of f32: products of
-// d's overflow f32 only where Σr² would too. A NaN or ±∞ model value propagates as it
-// does in the host's f64 arithmetic (NaN − x, ∞ − ∞, 0 · ∞ are NaN; ∞ − x is ∞): a NaN
-// value at sample k of candidate j makes row and column j of JᵀJ and Jᵀr_j NaN, one at
-// the point makes everything NaN.
+// d's overflow f32 only where the moved point's Σr² would too. A NaN or ±∞ model value
+// propagates as it does in the host's f64 arithmetic (NaN − x, ∞ − ∞, 0 · ∞ are NaN;
+// ∞ − x is ∞): a NaN value at a sample of candidate j makes row and column j of JᵀJ and
+// Jᵀr_j NaN, one at the point makes everything NaN.
 //
-// Thread (lane, slice) computes entries lane, lane + EL, … over samples slice, slice + SL,
-// … with Neumaier-compensated sums, then the SL partial sums are reduced pairwise in
-// workgroup memory exactly as the costs kernel does (kernel.wgsl).
+// Two forms of the same sums; the host picks one per device (src/engine/gpu.rs).
+//
+// `normal` (GPUs): thread (lane, slice) owns row a = lane of the (PD + 1)² Gram matrix Σ x_a x_b and
+// walks samples slice, slice + SL, … in a loop whose counter is the same in every lane:
+// it forms every x_b of the sample (loads at the same address in every lane: broadcasts,
+// no gathers — the shape the costs kernel relies on, kernel.wgsl) and its own x_a, and
+// adds x_a x_b to PD + 1 Neumaier-compensated sums. Row 0 gives Σ r d_j and Σ r², row
+// a ≥ 1 gives Σ d_{a−1} d_b for b ≥ a − 1; the lower triangle is computed and dropped,
+// which keeps the loop free of lane-dependent bounds. Lanes beyond PD loop over further
+// rows (NB blocks, one unless PD ≥ EL). At the end the SL partial sums of each entry are
+// reduced pairwise in workgroup memory exactly as the costs kernel does.
 
 var<workgroup> npartial: array<f32, EL * SL>;
 var<workgroup> npartial_comp: array<f32, EL * SL>;
@@ -43,36 +50,29 @@ fn residual_g_diff(y1: f32, y0: f32, a: f32) -> f32 {
     return a * (y1 - y0);
 }
 
-// The first (u) and second (v) factor of entry e: 0 means r, j ≥ 1 means d_{j−1}.
-fn entry_factors(e: u32) -> vec2<u32> {
-    if (e < NJJ) {
-        var a = 0u;
-        var rest = e;
-        while (rest >= PD - a) {
-            rest = rest - (PD - a);
-            a = a + 1u;
-        }
-        return vec2<u32>(a + 1u, a + rest + 1u);
+// Where Σ x_a x_b goes in a group's NE outputs, or NE when it is not one of them (the
+// lower triangle, and rows past PD).
+fn normal_slot(a: u32, b: u32) -> u32 {
+    if (a == 0u) {
+        // Σ r², then Σ d_j r after the triangle.
+        return select(NJJ + b - 1u, NE - 1u, b == 0u);
     }
-    if (e < NJJ + PD) {
-        return vec2<u32>(e - NJJ + 1u, 0u);
+    if (a > PD || b < a) {
+        return NE;
     }
-    return vec2<u32>(0u, 0u);
-}
-
-// Group g of the batch: the workgroup's flat index.
-fn normal_group(wg: vec3<u32>) -> u32 {
-    return wg.x + wg.y * dims.normal_groups_x;
+    // (a − 1, b − 1) in the row-major upper triangle of a PD × PD matrix.
+    let i = a - 1u;
+    return i * PD - (i * (i - 1u)) / 2u + (b - a);
 }
 
 @compute @workgroup_size(EL, SL)
 fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let g = normal_group(wg);
+    // Group g of the batch (the same for every thread of the workgroup).
+    let g = wg.x + wg.y * dims.normal_groups_x;
     let live = g < dims.n_groups;
     var row0 = 0u;
     var first = 0u;
     var end = 0u;
-    var kq = 0u;
     if (live) {
         // The group's candidates are consecutive: its point is candidate g (PD + 1), whose
         // owner entry gives the problem and where its row of values starts; the moved
@@ -82,61 +82,148 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
         row0 = owners[2u * c0 + 1u];
         first = slots[r];
         end = slots[r + C];
-        kq = end - first;
     }
-    // The entry blocks are the same for every thread (NE and EL are constants), so the
-    // barriers of the reduction below stay in uniform control flow.
-    for (var e0 = 0u; e0 < NE; e0 = e0 + EL) {
-        let e = e0 + lid.x;
-        var acc = 0.0;
-        var comp = 0.0;
-        if (live && e < NE) {
-            let f = entry_factors(e);
-            let row_u = row0 + f.x * kq;
-            let row_v = row0 + f.y * kq;
-            for (var k = first + slice(lid); k < end; k = k + SL) {
-                let s = samples[k];
-                let o = bitcast<u32>(s.ext.w);
-                let rw = sqrt(s.wi.w);
-                let y0 = out[row0 + o];
-                var u = rw * (residual_g(y0, s.wo.w) - s.ext.y);
-                var v = u;
-                if (f.x > 0u) {
-                    u = rw * residual_g_diff(out[row_u + o], y0, s.wo.w);
+    let kq = end - first;
+    for (var block = 0u; block < NB; block = block + 1u) {
+        let a = block * EL + lid.x;
+        // Lanes past the last row repeat row 0; nothing of theirs is written.
+        let own = select(0u, a, a <= PD);
+        var acc: array<f32, PD + 1u>;
+        var comp: array<f32, PD + 1u>;
+        for (var k = first + slice(lid); k < end; k = k + SL) {
+            let s = samples[k];
+            let o = bitcast<u32>(s.ext.w);
+            let rw = sqrt(s.wi.w);
+            let y0 = out[row0 + o];
+            let r = rw * (residual_g(y0, s.wo.w) - s.ext.y);
+            var xa = r;
+            if (own > 0u) {
+                xa = rw * residual_g_diff(out[row0 + own * kq + o], y0, s.wo.w);
+            }
+            for (var b = 0u; b <= PD; b = b + 1u) {
+                var xb = r;
+                if (b > 0u) {
+                    xb = rw * residual_g_diff(out[row0 + b * kq + o], y0, s.wo.w);
                 }
-                if (f.y > 0u) {
-                    v = rw * residual_g_diff(out[row_v + o], y0, s.wo.w);
-                }
-                let t = u * v;
-                let sum = acc + t;
-                comp = comp + two_sum_err(acc, t, sum);
-                acc = sum;
+                let t = xa * xb;
+                let sum = acc[b] + t;
+                comp[b] = comp[b] + two_sum_err(acc[b], t, sum);
+                acc[b] = sum;
             }
         }
-        if (SL > 1u) {
-            npartial[lid.y * EL + lid.x] = acc;
-            npartial_comp[lid.y * EL + lid.x] = comp;
-            workgroupBarrier();
-            for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
-                if (lid.y < stride) {
-                    let a = npartial[lid.y * EL + lid.x];
-                    let b = npartial[(lid.y + stride) * EL + lid.x];
-                    let sum = a + b;
-                    npartial[lid.y * EL + lid.x] = sum;
-                    npartial_comp[lid.y * EL + lid.x] = npartial_comp[lid.y * EL + lid.x]
-                        + npartial_comp[(lid.y + stride) * EL + lid.x] + two_sum_err(a, b, sum);
+        for (var b = 0u; b <= PD; b = b + 1u) {
+            var total = acc[b];
+            var total_comp = comp[b];
+            if (SL > 1u) {
+                let me = lid.y * EL + lid.x;
+                npartial[me] = total;
+                npartial_comp[me] = total_comp;
+                workgroupBarrier();
+                for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
+                    if (lid.y < stride) {
+                        let x = npartial[me];
+                        let y = npartial[me + stride * EL];
+                        let sum = x + y;
+                        npartial[me] = sum;
+                        npartial_comp[me] = npartial_comp[me] + npartial_comp[me + stride * EL]
+                            + two_sum_err(x, y, sum);
+                    }
+                    workgroupBarrier();
                 }
+                total = npartial[lid.x];
+                total_comp = npartial_comp[lid.x];
+                // The next entry overwrites the partial sums: every thread must have read
+                // its result first.
                 workgroupBarrier();
             }
-            acc = npartial[lid.x];
-            comp = npartial_comp[lid.x];
-            // The next block overwrites the partial sums: every thread must have read its
-            // result first.
-            workgroupBarrier();
+            let slot = normal_slot(a, b);
+            if (live && lid.y == 0u && slot < NE) {
+                // As for costs: an overflowed or NaN sum stays what it is.
+                normal_out[g * NE + slot] =
+                    select(total, total + total_comp, abs(total) <= 3.4028235e38);
+            }
         }
-        if (live && e < NE && lid.y == 0u) {
-            // As for costs: an overflowed or NaN sum stays what it is.
-            normal_out[g * NE + e] = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
+    }
+}
+
+// `normal_by_samples` (CPU devices, lavapipe, SL = 1): a workgroup's lanes are SIMD lanes
+// there, and each load from a storage buffer costs about as much as a model evaluation's
+// arithmetic, so the row-per-lane form, which loads every factor again in every SIMD chunk
+// of rows, took three times the `values` pass. Here lane i walks samples i, i + CL, …,
+// loads and forms the sample's PD + 1 factors once, and adds all NE products to private
+// compensated sums; the CL partial sums of each entry are then added up in workgroup
+// memory, NBLK entries at a time (measured on a 2-core lavapipe: rmg(eon), 16 groups of
+// 383 samples, 4–5 ms for the pass, against 25–40 ms for the row-per-lane form).
+const NBLK: u32 = 16u;
+var<workgroup> nblock: array<f32, CL * NBLK>;
+var<workgroup> nblock_comp: array<f32, CL * NBLK>;
+
+@compute @workgroup_size(CL)
+fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let g = wg.x + wg.y * dims.normal_groups_x;
+    let live = g < dims.n_groups;
+    var row0 = 0u;
+    var first = 0u;
+    var end = 0u;
+    if (live) {
+        let c0 = g * (PD + 1u);
+        let r = ranges(owners[2u * c0]);
+        row0 = owners[2u * c0 + 1u];
+        first = slots[r];
+        end = slots[r + C];
+    }
+    let kq = end - first;
+    var acc: array<f32, NE>;
+    var comp: array<f32, NE>;
+    var x: array<f32, PD + 1u>;
+    for (var k = first + lid.x; k < end; k = k + CL) {
+        let s = samples[k];
+        let o = bitcast<u32>(s.ext.w);
+        let rw = sqrt(s.wi.w);
+        let y0 = out[row0 + o];
+        x[0] = rw * (residual_g(y0, s.wo.w) - s.ext.y);
+        for (var j = 1u; j <= PD; j = j + 1u) {
+            x[j] = rw * residual_g_diff(out[row0 + j * kq + o], y0, s.wo.w);
         }
+        var e = 0u;
+        for (var a = 1u; a <= PD; a = a + 1u) {
+            for (var b = a; b <= PD; b = b + 1u) {
+                let t = x[a] * x[b];
+                let sum = acc[e] + t;
+                comp[e] = comp[e] + two_sum_err(acc[e], t, sum);
+                acc[e] = sum;
+                e = e + 1u;
+            }
+        }
+        for (var j = 0u; j <= PD; j = j + 1u) {
+            // Σ d_j r, then Σ r² (j = PD + 1 − 1 wraps to the factor r itself).
+            let t = x[(j + 1u) % (PD + 1u)] * x[0];
+            let sum = acc[e] + t;
+            comp[e] = comp[e] + two_sum_err(acc[e], t, sum);
+            acc[e] = sum;
+            e = e + 1u;
+        }
+    }
+    for (var b0 = 0u; b0 < NE; b0 = b0 + NBLK) {
+        for (var i = 0u; i < NBLK; i = i + 1u) {
+            if (b0 + i < NE) {
+                nblock[i * CL + lid.x] = acc[b0 + i];
+                nblock_comp[i * CL + lid.x] = comp[b0 + i];
+            }
+        }
+        workgroupBarrier();
+        let e = b0 + lid.x;
+        if (live && lid.x < NBLK && e < NE) {
+            var total = 0.0;
+            var total_comp = 0.0;
+            for (var l = 0u; l < CL; l = l + 1u) {
+                let v = nblock[lid.x * CL + l];
+                let sum = total + v;
+                total_comp = total_comp + nblock_comp[lid.x * CL + l] + two_sum_err(total, v, sum);
+                total = sum;
+            }
+            normal_out[g * NE + e] = select(total, total + total_comp, abs(total) <= 3.4028235e38);
+        }
+        workgroupBarrier();
     }
 }

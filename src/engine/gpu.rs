@@ -10,7 +10,9 @@
 //! P forward-difference neighbours), whose model values stay in the `out` buffer, then the
 //! `normal` pass (shaders/engine/normal.wgsl), one workgroup per group, which forms the
 //! upper triangle of Σ d_a d_b, then Σ d_j r and Σ r² (d_j = h_j J_j, the residual
-//! differences; compensated f32 sums). Only those P(P + 1)/2 + P + 1 floats per group come
+//! differences; compensated f32 sums): on GPUs a thread per row of that Gram matrix and
+//! sample slice; on CPU devices (lavapipe), where loads are dear, a thread per sample
+//! slice holding every sum, added up across threads at the end. Only those P(P + 1)/2 + P + 1 floats per group come
 //! back, instead of (P + 1) × K model values; the host converts them to f64 and divides
 //! by the unit-box steps, which keeps h out of f32's range. NaN and ±∞ model values
 //! propagate as in the host's f64 reduction (`engine::normal_equations_of_values`, the
@@ -242,7 +244,12 @@ impl GpuBackend {
         let p = Arc::new(Pipelines {
             costs: make("costs"),
             values: make("values"),
-            normal: make("normal"),
+            // The one-slice shape is the CPU devices' (see normal.wgsl for why).
+            normal: make(if self.shape.slices == 1 {
+                "normal_by_samples"
+            } else {
+                "normal"
+            }),
         });
         self.check_errors()?;
         cache.insert(key, p.clone());

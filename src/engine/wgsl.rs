@@ -126,11 +126,12 @@ pub fn normal_entries(p: usize) -> usize {
     p * (p + 1) / 2 + p + 1
 }
 
-/// Threads along the entries of one `normal` workgroup: enough for every entry, in
-/// multiples of 8 (a SIMD width of CPU devices), at most the shape's lanes, so that a
-/// workgroup of lanes × slices threads stays within WebGPU's 256 invocations.
+/// Threads along the rows of one `normal` workgroup (one row of the (P + 1)² Gram matrix
+/// of the residual factors each): enough for every row, in multiples of 8 (a SIMD width
+/// of CPU devices), at most the shape's lanes, so that a workgroup of lanes × slices
+/// threads stays within WebGPU's 256 invocations.
 pub fn normal_lanes(p: usize, shape: Shape) -> u32 {
-    (normal_entries(p).next_multiple_of(8) as u32).min(shape.lanes)
+    ((p + 1).next_multiple_of(8) as u32).min(shape.lanes)
 }
 
 /// The full module for a model and a loss shape.
@@ -140,7 +141,7 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     let c = model.groups();
     let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         c,
         shape.lanes,
@@ -150,6 +151,7 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
         p * (p + 1) / 2,
         normal_entries(p),
         normal_lanes(p, shape),
+        (p + 1).div_ceil(normal_lanes(p, shape) as usize),
         (s * c).max(1)
     );
     src += COMMON;
