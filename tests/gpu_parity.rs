@@ -425,7 +425,11 @@ fn lm_normal_equations_match_the_cpu_reference() {
         (Kind::Btdf, "btdf(tr)+scale", 1, Metric::Logcosf),
         (Kind::Btdf, "btdf(gg)+scale", 1, Metric::Logf),
     ];
-    for shape in [Shape::CPU_DEVICE, Shape::GPU_DEVICE] {
+    for shape in [
+        Shape::CPU_DEVICE,
+        Shape::CPU_DEVICE_TILED,
+        Shape::GPU_DEVICE,
+    ] {
         let gpu_shaped = GpuBackend::new().expect("GPU adapter").with_shape(shape);
         for (kind, spec, channels, metric) in cases {
             let data = random_dataset(kind, channels, 150, 31);

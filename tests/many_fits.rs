@@ -13,6 +13,7 @@ mod common;
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::wgsl::Shape;
 use bsdfit::engine::{Backend, Problem};
 use bsdfit::inference::fit::{fit_many, fit_outcome, FitOptions, Optimizer};
 use common::synth_geometry;
@@ -66,8 +67,12 @@ fn check_mixed_batch(backend: &dyn Backend, rel_value: f64, rel_cost: f64) {
             loss,
         })
         .collect();
-    // Candidates interleaved over the problems, in no particular order.
-    let owners = [2usize, 0, 1, 1, 2, 0, 0, 2];
+    // Candidates interleaved over the problems, in no particular order; then runs of one
+    // problem long enough to fill a SIMD group of lanes (a subgroup tile of lavapipe's
+    // 8 lanes sees one problem), and a tail that leaves lanes idle.
+    let owners = [
+        2usize, 0, 1, 1, 2, 0, 0, 2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 2, 2, 2,
+    ];
     let params: Vec<f64> = (0..owners.len())
         .flat_map(|i| {
             let u: Vec<f64> = (0..model.dim)
@@ -113,8 +118,16 @@ fn a_mixed_batch_gives_each_candidate_its_own_problem_cpu() {
 
 #[test]
 fn a_mixed_batch_gives_each_candidate_its_own_problem_gpu() {
-    let gpu = GpuBackend::new().expect("a Vulkan adapter (lavapipe in CI)");
-    check_mixed_batch(&gpu, 2e-3, 1e-3);
+    for shape in [
+        Shape::CPU_DEVICE,
+        Shape::CPU_DEVICE_TILED,
+        Shape::GPU_DEVICE,
+    ] {
+        let gpu = GpuBackend::new()
+            .expect("a Vulkan adapter (lavapipe in CI)")
+            .with_shape(shape);
+        check_mixed_batch(&gpu, 2e-3, 1e-3);
+    }
 }
 
 #[test]

@@ -88,49 +88,73 @@ fn candidate(wg: vec3<u32>, lid: vec3<u32>) -> u32 {
     return (wg.x + wg.y * dims.groups_x) * CL + lid.x;
 }
 
-@compute @workgroup_size(CL, SL)
-fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let c = candidate(wg, lid);
-    let live = c < dims.n_candidates;
+// Σ of candidate c's loss terms over its problem's samples (from `ranges` r), this
+// thread's slice of them: (sum, Neumaier compensation).
+fn plain_costs(c: u32, r: u32, slice: u32) -> vec2<f32> {
     var acc = 0.0;
-    var r = 0u;
     var comp = 0.0;
-    if (live) {
-        r = ranges(owners[2u * c]);
-        load_params(c);
-        for (var ch = 0u; ch < C; ch = ch + 1u) {
-            let end = slots[r + ch + 1u];
-            for (var k = slots[r + ch] + slice(lid); k < end; k = k + SL) {
-                let s = samples[k];
-                let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
-                let t = loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
-                let sum = acc + t;
-                comp = comp + two_sum_err(acc, t, sum);
-                acc = sum;
-            }
+    for (var ch = 0u; ch < C; ch = ch + 1u) {
+        let end = slots[r + ch + 1u];
+        for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
+            let s = samples[k];
+            let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+            let t = loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
+            let sum = acc + t;
+            comp = comp + two_sum_err(acc, t, sum);
+            acc = sum;
         }
     }
+    return vec2<f32>(acc, comp);
+}
+
+// Candidate c's model value at each sample of its problem (this thread's slice), written
+// to its row of `out` in the samples' original order.
+fn plain_values(c: u32, r: u32, row: u32, slice: u32) {
+    for (var ch = 0u; ch < C; ch = ch + 1u) {
+        let end = slots[r + ch + 1u];
+        for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
+            let s = samples[k];
+            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+        }
+    }
+}
+
+// The entry points take an `Invocation` and call `candidate_costs` / `candidate_values`,
+// both from lanes_plain.wgsl, or from lanes_subgroup.wgsl where the device has subgroups
+// and the shape asks for sample tiles (see there): compose() includes one of the two.
+
+@compute @workgroup_size(CL, SL)
+fn costs(inv: Invocation) {
+    let c = candidate(inv.wg, inv.lid);
+    let live = c < dims.n_candidates;
+    // A lane past the last candidate shadows it, so that every lane of a SIMD group takes
+    // part in whatever the group does together; it writes nothing.
+    let cc = min(c, dims.n_candidates - 1u);
+    let r = ranges(owners[2u * cc]);
+    var sums = candidate_costs(inv, cc, live);
+    var acc = sums.x;
+    var comp = sums.y;
     if (SL > 1u) {
-        partial[lid.y * CL + lid.x] = acc;
-        partial_comp[lid.y * CL + lid.x] = comp;
+        partial[inv.lid.y * CL + inv.lid.x] = acc;
+        partial_comp[inv.lid.y * CL + inv.lid.x] = comp;
         workgroupBarrier();
         for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
-            if (lid.y < stride) {
+            if (inv.lid.y < stride) {
                 // Pairwise: the two partial sums added with their rounding error, and both
                 // partial compensations carried along.
-                let a = partial[lid.y * CL + lid.x];
-                let b = partial[(lid.y + stride) * CL + lid.x];
+                let a = partial[inv.lid.y * CL + inv.lid.x];
+                let b = partial[(inv.lid.y + stride) * CL + inv.lid.x];
                 let sum = a + b;
-                partial[lid.y * CL + lid.x] = sum;
-                partial_comp[lid.y * CL + lid.x] = partial_comp[lid.y * CL + lid.x]
-                    + partial_comp[(lid.y + stride) * CL + lid.x] + two_sum_err(a, b, sum);
+                partial[inv.lid.y * CL + inv.lid.x] = sum;
+                partial_comp[inv.lid.y * CL + inv.lid.x] = partial_comp[inv.lid.y * CL + inv.lid.x]
+                    + partial_comp[(inv.lid.y + stride) * CL + inv.lid.x] + two_sum_err(a, b, sum);
             }
             workgroupBarrier();
         }
-        acc = partial[lid.x];
-        comp = partial_comp[lid.x];
+        acc = partial[inv.lid.x];
+        comp = partial_comp[inv.lid.x];
     }
-    if (live && lid.y == 0u) {
+    if (live && inv.lid.y == 0u) {
         // An overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
         let total = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
         out[c] = loss_finish(total, f32(slots[r + C] - slots[r]));
@@ -138,19 +162,7 @@ fn costs(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid
 }
 
 @compute @workgroup_size(CL, SL)
-fn values(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let c = candidate(wg, lid);
-    if (c >= dims.n_candidates) {
-        return;
-    }
-    let r = ranges(owners[2u * c]);
-    let row = owners[2u * c + 1u];
-    load_params(c);
-    for (var ch = 0u; ch < C; ch = ch + 1u) {
-        let end = slots[r + ch + 1u];
-        for (var k = slots[r + ch] + slice(lid); k < end; k = k + SL) {
-            let s = samples[k];
-            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
-        }
-    }
+fn values(inv: Invocation) {
+    let c = candidate(inv.wg, inv.lid);
+    candidate_values(inv, min(c, dims.n_candidates - 1u), c < dims.n_candidates);
 }

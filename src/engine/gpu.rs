@@ -108,10 +108,12 @@ impl GpuBackend {
         let alimits = adapter.limits();
         // Ask for everything the adapter offers: buffer sizes are chunked from these.
         let limits = alimits;
+        // Subgroups: the sample tiles of SIMD CPU devices (shaders/engine/lanes_subgroup.wgsl).
+        let features = adapter.features() & wgpu::Features::SUBGROUP;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("bsdfit"),
-                required_features: wgpu::Features::empty(),
+                required_features: features,
                 required_limits: limits.clone(),
                 ..Default::default()
             })
@@ -160,7 +162,11 @@ impl GpuBackend {
             immediate_size: 0,
         });
         let shape = if info.device_type == wgpu::DeviceType::Cpu {
-            Shape::CPU_DEVICE
+            if features.contains(wgpu::Features::SUBGROUP) {
+                Shape::CPU_DEVICE_TILED
+            } else {
+                Shape::CPU_DEVICE
+            }
         } else {
             Shape::GPU_DEVICE
         };
@@ -185,10 +191,22 @@ impl GpuBackend {
         self
     }
 
-    /// Override the workgroup shape (benchmarks and tests of both code paths).
-    pub fn with_shape(mut self, shape: Shape) -> Self {
+    /// Override the workgroup shape (benchmarks and tests of every code path). Subgroup
+    /// tiles are dropped on a device without subgroups.
+    pub fn with_shape(mut self, mut shape: Shape) -> Self {
+        shape.subgroup_tiles &= self.has_subgroups();
         self.shape = shape;
         self
+    }
+
+    /// Whether the device was opened with subgroup operations.
+    pub fn has_subgroups(&self) -> bool {
+        self.device.features().contains(wgpu::Features::SUBGROUP)
+    }
+
+    /// The workgroup shape in use.
+    pub fn shape(&self) -> Shape {
+        self.shape
     }
 
     pub fn adapter_name(&self) -> String {

@@ -9,24 +9,39 @@ pub const COMMON: &str = include_str!("../../shaders/bsdf/common.wgsl");
 pub const LOSS: &str = include_str!("../../shaders/engine/loss.wgsl");
 pub const KERNEL: &str = include_str!("../../shaders/engine/kernel.wgsl");
 pub const NORMAL: &str = include_str!("../../shaders/engine/normal.wgsl");
+pub const LANES_PLAIN: &str = include_str!("../../shaders/engine/lanes_plain.wgsl");
+pub const LANES_SUBGROUP: &str = include_str!("../../shaders/engine/lanes_subgroup.wgsl");
 
-/// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl).
+/// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl),
+/// and whether a subgroup loads samples once per tile and passes them round
+/// (shaders/engine/lanes_subgroup.wgsl; needs the device's subgroup feature).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Shape {
     pub lanes: u32,
     pub slices: u32,
+    pub subgroup_tiles: bool,
 }
 
 impl Shape {
-    /// SIMD CPU devices (lavapipe): one thread walks all samples of its candidate.
+    /// SIMD CPU devices (lavapipe) without subgroups: one thread walks all samples of its
+    /// candidate, loading each.
     pub const CPU_DEVICE: Shape = Shape {
         lanes: 64,
         slices: 1,
+        subgroup_tiles: false,
+    };
+    /// SIMD CPU devices with subgroups (lavapipe has them): as `CPU_DEVICE`, with the
+    /// samples loaded once per subgroup tile.
+    pub const CPU_DEVICE_TILED: Shape = Shape {
+        lanes: 64,
+        slices: 1,
+        subgroup_tiles: true,
     };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
         slices: 8,
+        subgroup_tiles: false,
     };
 }
 
@@ -173,6 +188,12 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     src += "\n";
     src += KERNEL;
     src += "\n";
+    src += if shape.subgroup_tiles {
+        LANES_SUBGROUP
+    } else {
+        LANES_PLAIN
+    };
+    src += "\n";
     src += NORMAL;
     src
 }
@@ -182,7 +203,8 @@ pub fn validate(source: &str) -> Result<naga::Module, String> {
     let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
     let mut v = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
+        // Subgroup operations appear only in modules for devices that have them.
+        naga::valid::Capabilities::SUBGROUP,
     );
     v.validate(&module).map_err(|e| e.emit_to_string(source))?;
     Ok(module)
