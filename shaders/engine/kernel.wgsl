@@ -1,16 +1,12 @@
-// Batched evaluation kernels. A workgroup is CL candidate lanes × SL sample slices:
-// thread (lane, slice) evaluates candidate `lane` on samples slice, slice + SL, …, then
-// the SL partial sums of each candidate are reduced in workgroup memory to one cost — no
-// per-sample read-back. `values` writes y′ per sample instead (LM, diagnostics); LM's
-// normal equations are then reduced from them on the device (normal.wgsl).
+// Batched evaluation kernels: every candidate (a parameter vector of some problem) over
+// every sample of its problem, reduced on the device to one cost per candidate — no
+// per-sample read-back — or, for `values`, y′ per sample (LM, diagnostics; LM's normal
+// equations are then reduced from them on the device, normal.wgsl). How threads map to
+// candidates and samples is in lanes_plain.wgsl (GPUs) and lanes_subgroup.wgsl (SIMD CPU
+// devices); this file holds what both share.
 //
-// Why this shape: neighbouring threads (x = lane) hold different candidates but read the
-// same sample at the same time, so sample loads are broadcasts and only the parameters
-// differ per thread. On a SIMD CPU device (lavapipe) SL = 1: each thread walks all
-// samples with a loop counter the compiler sees as uniform, the fastest form there; on a
-// GPU SL > 1 keeps enough threads in flight when candidates are few.
 // Samples arrive sorted by channel and the channel loop is outermost, so a thread's
-// parameter reads P[ch * S + j] use the same offsets in every thread.
+// parameter reads P[at + ch * S + j] use the same offsets in every thread.
 
 struct Sample {
     wi: vec4<f32>,   // xyz: incident direction; w: loss weight
@@ -26,7 +22,8 @@ struct Dims {
     // The `normal` pass (normal.wgsl): groups of dim + 1 candidates, workgroups per row.
     n_groups: u32,
     normal_groups_x: u32,
-    pad0: u32,
+    // 2, a count the compiler cannot see (`loops_completed`).
+    probe_trips: u32,
     pad1: u32,
 }
 
@@ -48,8 +45,6 @@ struct Dims {
 // The `normal` pass's output: NE numbers per group of dim + 1 candidates (normal.wgsl).
 @group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
 
-var<workgroup> partial: array<f32, CL * SL>;
-var<workgroup> partial_comp: array<f32, CL * SL>;
 
 // Neumaier's compensated addition (Neumaier 1974, "Rundungsfehleranalyse einiger
 // Verfahren zur Summation endlicher Summen"; Kahan–Babuška): s = acc + x rounded, and the
@@ -62,11 +57,12 @@ fn two_sum_err(acc: f32, x: f32, s: f32) -> f32 {
     return select((x - s) + acc, (acc - s) + x, abs(acc) >= abs(x));
 }
 
-// Resolve candidate c's flat vector into this thread's per-channel scalar views.
-fn load_params(c: u32) {
+// Resolve candidate c's flat vector into per-channel scalar views at P[at..at + S·C]
+// (a thread holding several candidates keeps each at its own `at`).
+fn load_params(c: u32, at: u32) {
     let base = c * dims.dim;
     for (var j = 0u; j < S * C; j = j + 1u) {
-        P[j] = params[base + slots[j]];
+        P[at + j] = params[base + slots[j]];
     }
 }
 
@@ -84,20 +80,21 @@ fn ranges(q: u32) -> u32 {
     return S * C + q * (C + 1u);
 }
 
-fn candidate(wg: vec3<u32>, lid: vec3<u32>) -> u32 {
-    return (wg.x + wg.y * dims.groups_x) * CL + lid.x;
+// The first candidate of a workgroup (CL threads of CPT candidates each).
+fn first_candidate(wg: vec3<u32>) -> u32 {
+    return (wg.x + wg.y * dims.groups_x) * CL * CPT;
 }
 
-// Σ of candidate c's loss terms over its problem's samples (from `ranges` r), this
-// thread's slice of them: (sum, Neumaier compensation).
-fn plain_costs(c: u32, r: u32, slice: u32) -> vec2<f32> {
+// Σ of the loss terms of the candidate whose views start at P[at] over the samples of
+// its problem (from `ranges` r), this thread's slice of them: (sum, Neumaier compensation).
+fn plain_costs(at: u32, r: u32, slice: u32) -> vec2<f32> {
     var acc = 0.0;
     var comp = 0.0;
     for (var ch = 0u; ch < C; ch = ch + 1u) {
         let end = slots[r + ch + 1u];
         for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
             let s = samples[k];
-            let yp = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+            let yp = eval_model(s.wi.xyz, s.wo.xyz, at + ch * S);
             let t = loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
             let sum = acc + t;
             comp = comp + two_sum_err(acc, t, sum);
@@ -107,62 +104,46 @@ fn plain_costs(c: u32, r: u32, slice: u32) -> vec2<f32> {
     return vec2<f32>(acc, comp);
 }
 
-// Candidate c's model value at each sample of its problem (this thread's slice), written
-// to its row of `out` in the samples' original order.
-fn plain_values(c: u32, r: u32, row: u32, slice: u32) {
+// The model values of the candidate whose views start at P[at] at each sample of its
+// problem (this thread's slice), written to its row of `out` in the samples' original
+// order.
+fn plain_values(at: u32, r: u32, row: u32, slice: u32) {
     for (var ch = 0u; ch < C; ch = ch + 1u) {
         let end = slots[r + ch + 1u];
         for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
             let s = samples[k];
-            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, ch * S);
+            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, at + ch * S);
         }
     }
 }
 
-// The entry points take an `Invocation` and call `candidate_costs` / `candidate_values`,
-// both from lanes_plain.wgsl, or from lanes_subgroup.wgsl where the device has subgroups
-// and the shape asks for sample tiles (see there): compose() includes one of the two.
-
-@compute @workgroup_size(CL, SL)
-fn costs(inv: Invocation) {
-    let c = candidate(inv.wg, inv.lid);
-    let live = c < dims.n_candidates;
-    // A lane past the last candidate shadows it, so that every lane of a SIMD group takes
-    // part in whatever the group does together; it writes nothing.
-    let cc = min(c, dims.n_candidates - 1u);
-    let r = ranges(owners[2u * cc]);
-    var sums = candidate_costs(inv, cc, live);
-    var acc = sums.x;
-    var comp = sums.y;
-    if (SL > 1u) {
-        partial[inv.lid.y * CL + inv.lid.x] = acc;
-        partial_comp[inv.lid.y * CL + inv.lid.x] = comp;
-        workgroupBarrier();
-        for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
-            if (inv.lid.y < stride) {
-                // Pairwise: the two partial sums added with their rounding error, and both
-                // partial compensations carried along.
-                let a = partial[inv.lid.y * CL + inv.lid.x];
-                let b = partial[(inv.lid.y + stride) * CL + inv.lid.x];
-                let sum = a + b;
-                partial[inv.lid.y * CL + inv.lid.x] = sum;
-                partial_comp[inv.lid.y * CL + inv.lid.x] = partial_comp[inv.lid.y * CL + inv.lid.x]
-                    + partial_comp[(inv.lid.y + stride) * CL + inv.lid.x] + two_sum_err(a, b, sum);
-            }
-            workgroupBarrier();
-        }
-        acc = partial[inv.lid.x];
-        comp = partial_comp[inv.lid.x];
+// Whether every loop of this invocation ran to its end. llvmpipe (Mesa's lavapipe) ends
+// every loop of a shader invocation once all its loops together have run 65,535
+// iterations (LP_MAX_TGSI_LOOP_ITERATIONS, "shared between every loop"), silently: a
+// thread walking more samples than that (fewer for models with loops of their own, such
+// as micrograin's series) would return a partial sum as if complete. After the limit,
+// every loop stops after one iteration, so a loop of two that the compiler cannot
+// unroll (its count comes from the host) tells: it ran twice only if the limit was not
+// reached. On every other device it always runs twice.
+fn loops_completed() -> bool {
+    var trips = 0u;
+    for (var i = 0u; i < dims.probe_trips; i = i + 1u) {
+        trips = trips + 1u;
     }
-    if (live && inv.lid.y == 0u) {
-        // An overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
-        let total = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
-        out[c] = loss_finish(total, f32(slots[r + C] - slots[r]));
-    }
+    return trips == dims.probe_trips;
 }
 
-@compute @workgroup_size(CL, SL)
-fn values(inv: Invocation) {
-    let c = candidate(inv.wg, inv.lid);
-    candidate_values(inv, min(c, dims.n_candidates - 1u), c < dims.n_candidates);
+// What an invocation whose loops were cut short writes instead of its result: a NaN with
+// a payload the host looks for (src/engine/gpu.rs, LOOPS_CUT_SHORT), to fail loudly.
+const LOOPS_CUT_SHORT: u32 = 0x7fa11ed5u;
+
+// A candidate's cost from its compensated sum over the samples of `ranges` r. An
+// overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
+fn finish_cost(acc: f32, comp: f32, r: u32) -> f32 {
+    let total = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
+    return loss_finish(total, f32(slots[r + C] - slots[r]));
 }
+
+// The entry points, `costs` and `values`, are in lanes_plain.wgsl (a candidate per thread,
+// its samples in SL slices) or lanes_subgroup.wgsl (SIMD CPU devices with subgroups:
+// CPT candidates per thread, samples in subgroup tiles); compose() includes one of them.

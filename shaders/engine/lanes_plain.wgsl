@@ -1,25 +1,71 @@
-// How a thread walks its candidate's samples, plain form: every thread loads each sample
-// it evaluates. On a GPU neighbouring threads read the same sample at once, which the
-// hardware serves as one broadcast load. (lanes_subgroup.wgsl is the form for SIMD CPU
-// devices.)
+// How threads map to work, plain form (GPUs, and CPU devices without subgroups): a
+// workgroup is CL candidate lanes × SL sample slices; thread (lane, slice) evaluates
+// candidate `lane` on samples slice, slice + SL, …, then the SL partial sums of each
+// candidate are reduced in workgroup memory to one cost. Neighbouring threads hold
+// different candidates and read the same sample at once, which a GPU serves as one
+// broadcast load; SL > 1 keeps enough threads in flight when candidates are few.
 
 struct Invocation {
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_id) lid: vec3<u32>,
 }
 
-fn candidate_costs(inv: Invocation, c: u32, live: bool) -> vec2<f32> {
-    if (!live) {
-        return vec2<f32>(0.0, 0.0);
+var<workgroup> partial: array<f32, CL * SL>;
+var<workgroup> partial_comp: array<f32, CL * SL>;
+
+@compute @workgroup_size(CL, SL)
+fn costs(inv: Invocation) {
+    let c = first_candidate(inv.wg) + inv.lid.x;
+    let live = c < dims.n_candidates;
+    var acc = 0.0;
+    var comp = 0.0;
+    var r = 0u;
+    if (live) {
+        r = ranges(owners[2u * c]);
+        load_params(c, 0u);
+        let sums = plain_costs(0u, r, slice(inv.lid));
+        acc = sums.x;
+        comp = sums.y;
     }
-    load_params(c);
-    return plain_costs(c, ranges(owners[2u * c]), slice(inv.lid));
+    if (SL > 1u) {
+        let me = inv.lid.y * CL + inv.lid.x;
+        partial[me] = acc;
+        partial_comp[me] = comp;
+        workgroupBarrier();
+        for (var stride = SL / 2u; stride > 0u; stride = stride / 2u) {
+            if (inv.lid.y < stride) {
+                // Pairwise: the two partial sums added with their rounding error, and both
+                // partial compensations carried along.
+                let other = me + stride * CL;
+                let a = partial[me];
+                let b = partial[other];
+                let sum = a + b;
+                partial[me] = sum;
+                partial_comp[me] = partial_comp[me] + partial_comp[other] + two_sum_err(a, b, sum);
+            }
+            workgroupBarrier();
+        }
+        acc = partial[inv.lid.x];
+        comp = partial_comp[inv.lid.x];
+    }
+    if (live && inv.lid.y == 0u) {
+        out[c] = finish_cost(acc, comp, r);
+    }
+    // Any slice's loops cut short spoils the candidate's sum.
+    if (live && !loops_completed()) {
+        out[c] = bitcast<f32>(LOOPS_CUT_SHORT);
+    }
 }
 
-fn candidate_values(inv: Invocation, c: u32, live: bool) {
-    if (!live) {
+@compute @workgroup_size(CL, SL)
+fn values(inv: Invocation) {
+    let c = first_candidate(inv.wg) + inv.lid.x;
+    if (c >= dims.n_candidates) {
         return;
     }
-    load_params(c);
-    plain_values(c, ranges(owners[2u * c]), owners[2u * c + 1u], slice(inv.lid));
+    load_params(c, 0u);
+    plain_values(0u, ranges(owners[2u * c]), owners[2u * c + 1u], slice(inv.lid));
+    if (!loops_completed()) {
+        out[owners[2u * c + 1u]] = bitcast<f32>(LOOPS_CUT_SHORT);
+    }
 }

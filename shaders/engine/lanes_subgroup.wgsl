@@ -1,17 +1,24 @@
-// How a thread walks its candidate's samples on a SIMD CPU device (lavapipe), with
-// subgroups: in sample tiles. Such a device runs a subgroup as the lanes of one SIMD
-// register and, for a storage-buffer load, loads lane by lane, with a bounds check each,
-// even when every lane reads the same address (Mesa 22's llvmpipe): loading each sample
-// in every thread made the kernel's rate the same ≈ 2e7 evaluations/s for every model.
-// Here lane l of a subgroup loads sample k0 + l of a tile of as many samples as lanes,
-// once, and the subgroup then passes the tile's samples round with subgroupShuffle, a
-// register permutation: a lambert poll went from 2.5e7 to 1.6e8 evaluations/s and ggx
-// from 2.4e7 to 1.1e8 on lavapipe (2-core AMD EPYC).
+// How threads map to work on a SIMD CPU device with subgroups (lavapipe): CPT candidates
+// per thread, samples in subgroup tiles.
 //
-// Every lane of the subgroup must walk the same samples, so the tiles are used where all
-// its lanes' candidates belong to one problem (one fit); a subgroup straddling two
-// problems of a batch walks them the plain way. Lanes past the last candidate take part
-// (shadowing it) and their results are dropped by the caller.
+// Why: such a device runs a subgroup as the lanes of one SIMD register and, for a
+// storage-buffer load, loads lane by lane with a bounds check each, even when every lane
+// reads the same address (Mesa 22's llvmpipe). Loading each sample in every thread made
+// the kernel's rate the same ≈ 2e7 evaluations/s for every model on a 2-core AMD EPYC,
+// lambert and ggx alike: loads, not the model, bounded it. So lane l of a subgroup loads
+// sample k0 + l of a tile of as many samples as lanes, once, and the subgroup passes the
+// tile's samples round with subgroupShuffle (a register permutation); and each thread
+// evaluates every sample it has in registers for CPT candidates, so one load serves
+// lanes × CPT candidates. Measured there (lambert, ggx evals/s): 2.5e7, 2.4e7 loading
+// every sample in every thread; 1.7e8, 1.1e8 with tiles; with the loads out of the loop
+// altogether (wrong results, a bound) 6.7–8.8e8, 2.3e8.
+//
+// Thread x of a workgroup holds candidates first + m·CL + x, m < CPT, so a subgroup's
+// lanes hold consecutive candidates. Every lane of a subgroup must walk the same samples,
+// so the tiles are used where all its lanes' candidates belong to one problem (one fit);
+// a subgroup straddling problems of a batch walks each candidate's samples the plain way.
+// Slots past the last candidate shadow it (every lane must take part in the shuffles)
+// and write nothing.
 
 struct Invocation {
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -20,66 +27,123 @@ struct Invocation {
     @builtin(subgroup_size) lanes: u32,
 }
 
-// The problem of this subgroup's candidates, or u32 max where they are not all the same.
-fn subgroup_problem(c: u32) -> u32 {
-    let q = owners[2u * c];
-    let first = subgroupBroadcastFirst(q);
-    return select(0xffffffffu, first, subgroupAll(q == first));
+// This thread's CPT candidates, their parameters loaded at P[m·S·C]; returns the problem
+// all of them and the rest of the subgroup share, or u32 max where they do not.
+fn load_candidates(inv: Invocation, c: ptr<function, array<u32, CPT>>) -> u32 {
+    let first = first_candidate(inv.wg) + inv.lid.x;
+    let q0 = subgroupBroadcastFirst(owners[2u * min(first, dims.n_candidates - 1u)]);
+    var same = true;
+    for (var m = 0u; m < CPT; m = m + 1u) {
+        let cm = min(first + m * CL, dims.n_candidates - 1u);
+        (*c)[m] = cm;
+        load_params(cm, m * S * C);
+        same = same && owners[2u * cm] == q0;
+    }
+    return select(0xffffffffu, q0, subgroupAll(same));
 }
 
-fn candidate_costs(inv: Invocation, c: u32, live: bool) -> vec2<f32> {
-    load_params(c);
-    let q = subgroup_problem(c);
+fn is_live(inv: Invocation, m: u32) -> bool {
+    return first_candidate(inv.wg) + m * CL + inv.lid.x < dims.n_candidates;
+}
+
+@compute @workgroup_size(CL, 1)
+fn costs(inv: Invocation) {
+    var c: array<u32, CPT>;
+    let q = load_candidates(inv, &c);
+    var acc: array<f32, CPT>;
+    var comp: array<f32, CPT>;
     if (q == 0xffffffffu) {
-        return plain_costs(c, ranges(owners[2u * c]), slice(inv.lid));
-    }
-    let r = ranges(q);
-    var acc = 0.0;
-    var comp = 0.0;
-    for (var ch = 0u; ch < C; ch = ch + 1u) {
-        let end = slots[r + ch + 1u];
-        for (var k0 = slots[r + ch]; k0 < end; k0 = k0 + inv.lanes) {
-            let mine = samples[min(k0 + inv.lane, end - 1u)];
-            let n = min(end - k0, inv.lanes);
-            for (var j = 0u; j < n; j = j + 1u) {
-                let wi = subgroupShuffle(mine.wi, j);
-                let wo = subgroupShuffle(mine.wo, j);
-                let e = subgroupShuffle(mine.ext.xy, j);
-                let yp = eval_model(wi.xyz, wo.xyz, ch * S);
-                let t = loss_term(yp, e.x, e.y, wi.w, wo.w);
-                let sum = acc + t;
-                comp = comp + two_sum_err(acc, t, sum);
-                acc = sum;
+        for (var m = 0u; m < CPT; m = m + 1u) {
+            let sums = plain_costs(m * S * C, ranges(owners[2u * c[m]]), 0u);
+            acc[m] = sums.x;
+            comp[m] = sums.y;
+        }
+    } else {
+        let r = ranges(q);
+        for (var ch = 0u; ch < C; ch = ch + 1u) {
+            let end = slots[r + ch + 1u];
+            for (var k0 = slots[r + ch]; k0 < end; k0 = k0 + inv.lanes) {
+                // Only the fields the loss needs: each loaded component costs a
+                // lane-by-lane loop.
+                let mine = min(k0 + inv.lane, end - 1u);
+                let my_wi = samples[mine].wi;
+                let my_wo = samples[mine].wo;
+                let my_e = samples[mine].ext.xy;
+                let n = min(end - k0, inv.lanes);
+                for (var j = 0u; j < n; j = j + 1u) {
+                    let wi = subgroupShuffle(my_wi, j);
+                    let wo = subgroupShuffle(my_wo, j);
+                    let e = subgroupShuffle(my_e, j);
+                    for (var m = 0u; m < CPT; m = m + 1u) {
+                        let yp = eval_model(wi.xyz, wo.xyz, m * S * C + ch * S);
+                        let t = loss_term(yp, e.x, e.y, wi.w, wo.w);
+                        let sum = acc[m] + t;
+                        comp[m] = comp[m] + two_sum_err(acc[m], t, sum);
+                        acc[m] = sum;
+                    }
+                }
             }
         }
     }
-    return vec2<f32>(acc, comp);
+    let completed = loops_completed();
+    for (var m = 0u; m < CPT; m = m + 1u) {
+        if (is_live(inv, m)) {
+            out[c[m]] = select(
+                bitcast<f32>(LOOPS_CUT_SHORT),
+                finish_cost(acc[m], comp[m], ranges(owners[2u * c[m]])),
+                completed
+            );
+        }
+    }
 }
 
-fn candidate_values(inv: Invocation, c: u32, live: bool) {
-    load_params(c);
-    let q = subgroup_problem(c);
-    let row = owners[2u * c + 1u];
+@compute @workgroup_size(CL, 1)
+fn values(inv: Invocation) {
+    var c: array<u32, CPT>;
+    let q = load_candidates(inv, &c);
+    var row: array<u32, CPT>;
+    for (var m = 0u; m < CPT; m = m + 1u) {
+        row[m] = owners[2u * c[m] + 1u];
+    }
     if (q == 0xffffffffu) {
-        if (live) {
-            plain_values(c, ranges(owners[2u * c]), row, slice(inv.lid));
+        for (var m = 0u; m < CPT; m = m + 1u) {
+            if (is_live(inv, m)) {
+                plain_values(m * S * C, ranges(owners[2u * c[m]]), row[m], 0u);
+            }
         }
+        mark_cut_short(inv, row);
         return;
     }
     let r = ranges(q);
     for (var ch = 0u; ch < C; ch = ch + 1u) {
         let end = slots[r + ch + 1u];
         for (var k0 = slots[r + ch]; k0 < end; k0 = k0 + inv.lanes) {
-            let mine = samples[min(k0 + inv.lane, end - 1u)];
+            let mine = min(k0 + inv.lane, end - 1u);
+            let my_wi = samples[mine].wi;
+            let my_wo = samples[mine].wo;
+            let my_o = bitcast<u32>(samples[mine].ext.w);
             let n = min(end - k0, inv.lanes);
             for (var j = 0u; j < n; j = j + 1u) {
-                let wi = subgroupShuffle(mine.wi, j);
-                let wo = subgroupShuffle(mine.wo, j);
-                let o = subgroupShuffle(bitcast<u32>(mine.ext.w), j);
-                let v = eval_model(wi.xyz, wo.xyz, ch * S);
-                if (live) {
-                    out[row + o] = v;
+                let wi = subgroupShuffle(my_wi, j);
+                let wo = subgroupShuffle(my_wo, j);
+                let o = subgroupShuffle(my_o, j);
+                for (var m = 0u; m < CPT; m = m + 1u) {
+                    // A slot past the last candidate shadows it and stores the very same
+                    // value to the same place: no branch on liveness inside the tile.
+                    out[row[m] + o] = eval_model(wi.xyz, wo.xyz, m * S * C + ch * S);
                 }
+            }
+        }
+    }
+    mark_cut_short(inv, row);
+}
+
+// Where this thread's loops were cut short, the first value of each of its rows says so.
+fn mark_cut_short(inv: Invocation, row: array<u32, CPT>) {
+    if (!loops_completed()) {
+        for (var m = 0u; m < CPT; m = m + 1u) {
+            if (is_live(inv, m)) {
+                out[row[m]] = bitcast<f32>(LOOPS_CUT_SHORT);
             }
         }
     }

@@ -149,16 +149,22 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
 // `normal_by_samples` (CPU devices, lavapipe, SL = 1): a workgroup's lanes are SIMD lanes
 // there, and each load from a storage buffer costs about as much as a model evaluation's
 // arithmetic, so the row-per-lane form, which loads every factor again in every SIMD chunk
-// of rows, took three times the `values` pass. Here lane i walks samples i, i + CL, …,
+// of rows, took three times the `values` pass. Here lane i walks samples i, i + NSL, …,
 // loads and forms the sample's PD + 1 factors once, and adds all NE products to private
-// compensated sums; the CL partial sums of each entry are then added up in workgroup
+// compensated sums; the NSL partial sums of each entry are then added up in workgroup
 // memory, NBLK entries at a time (measured on a 2-core lavapipe: rmg(eon), 16 groups of
 // 383 samples, 4–5 ms for the pass, against 25–40 ms for the row-per-lane form).
 const NBLK: u32 = 16u;
-var<workgroup> nblock: array<f32, CL * NBLK>;
-var<workgroup> nblock_comp: array<f32, CL * NBLK>;
+// Threads of a `normal_by_samples` workgroup: its own constant, since the evaluation
+// kernel's lane count CL depends on its shape (8 under subgroup tiles, below NBLK).
+const NSL: u32 = 64u;
+var<workgroup> nblock: array<f32, NSL * NBLK>;
+var<workgroup> nblock_comp: array<f32, NSL * NBLK>;
+// Set by a thread whose loops were cut short (kernel.wgsl, `loops_completed`); zero at
+// the start (wgpu zero-initialises workgroup memory).
+var<workgroup> ncut_short: atomic<u32>;
 
-@compute @workgroup_size(CL)
+@compute @workgroup_size(NSL)
 fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
     let g = wg.x + wg.y * dims.normal_groups_x;
     let live = g < dims.n_groups;
@@ -176,7 +182,7 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
     var acc: array<f32, NE>;
     var comp: array<f32, NE>;
     var x: array<f32, PD + 1u>;
-    for (var k = first + lid.x; k < end; k = k + CL) {
+    for (var k = first + lid.x; k < end; k = k + NSL) {
         let s = samples[k];
         let o = bitcast<u32>(s.ext.w);
         let rw = sqrt(s.wi.w);
@@ -204,11 +210,14 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
             e = e + 1u;
         }
     }
+    if (!loops_completed()) {
+        atomicStore(&ncut_short, 1u);
+    }
     for (var b0 = 0u; b0 < NE; b0 = b0 + NBLK) {
         for (var i = 0u; i < NBLK; i = i + 1u) {
             if (b0 + i < NE) {
-                nblock[i * CL + lid.x] = acc[b0 + i];
-                nblock_comp[i * CL + lid.x] = comp[b0 + i];
+                nblock[i * NSL + lid.x] = acc[b0 + i];
+                nblock_comp[i * NSL + lid.x] = comp[b0 + i];
             }
         }
         workgroupBarrier();
@@ -216,14 +225,17 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
         if (live && lid.x < NBLK && e < NE) {
             var total = 0.0;
             var total_comp = 0.0;
-            for (var l = 0u; l < CL; l = l + 1u) {
-                let v = nblock[lid.x * CL + l];
+            for (var l = 0u; l < NSL; l = l + 1u) {
+                let v = nblock[lid.x * NSL + l];
                 let sum = total + v;
-                total_comp = total_comp + nblock_comp[lid.x * CL + l] + two_sum_err(total, v, sum);
+                total_comp = total_comp + nblock_comp[lid.x * NSL + l] + two_sum_err(total, v, sum);
                 total = sum;
             }
             normal_out[g * NE + e] = select(total, total + total_comp, abs(total) <= 3.4028235e38);
         }
         workgroupBarrier();
+    }
+    if (live && lid.x == 0u && atomicLoad(&ncut_short) != 0u) {
+        normal_out[g * NE] = bitcast<f32>(LOOPS_CUT_SHORT);
     }
 }

@@ -48,7 +48,9 @@ struct Dims {
     groups_x: u32,
     n_groups: u32,
     normal_groups_x: u32,
-    pad: [u32; 2],
+    /// Always 2: the trip count of kernel.wgsl's `loops_completed` probe.
+    probe_trips: u32,
+    pad: u32,
 }
 
 struct Pipelines {
@@ -73,6 +75,10 @@ pub struct GpuBackend {
     /// Largest buffer allocated for one binding (bytes), at most the device's limits.
     chunk_bytes: u64,
 }
+
+/// The bits of the NaN that an invocation whose loops were cut short writes instead of
+/// its result (`LOOPS_CUT_SHORT` in shaders/engine/kernel.wgsl).
+const LOOPS_CUT_SHORT: u32 = 0x7fa1_1ed5;
 
 /// Largest buffer the engine allocates for one binding (bytes).
 const MAX_CHUNK_BYTES: u64 = 64 << 20;
@@ -564,7 +570,8 @@ impl GpuEvaluator<'_> {
             let x = total.clamp(1, MAX_GROUPS_X);
             (x, total.div_ceil(x))
         };
-        let (groups_x, groups_y) = grid((m as u32).div_ceil(self.gpu.shape.lanes));
+        let (groups_x, groups_y) =
+            grid((m as u32).div_ceil(self.gpu.shape.candidates_per_workgroup()));
         let (normal_x, normal_y) = grid(groups as u32);
         let dims = Dims {
             n_candidates: m as u32,
@@ -573,7 +580,8 @@ impl GpuEvaluator<'_> {
             groups_x,
             n_groups: groups as u32,
             normal_groups_x: normal_x,
-            pad: [0; 2],
+            probe_trips: 2,
+            pad: 0,
         };
         let q = &self.gpu.queue;
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
@@ -636,6 +644,16 @@ impl GpuEvaluator<'_> {
         io.staging.unmap();
         self.read_back += bytes;
         self.gpu.check_errors()?;
+        if data.iter().any(|v| v.to_bits() == LOOPS_CUT_SHORT) {
+            bail!(
+                "{} cut this evaluation short: it ends every loop of a shader invocation after \
+                 65,535 iterations in all, and evaluating `{}` on the largest data set of this \
+                 batch ({} samples) takes more in one thread; use --backend cpu (or fewer samples)",
+                self.gpu.adapter_name(),
+                self.model.spec,
+                self.terms.iter().map(|t| t.y.len()).max().unwrap_or(0)
+            );
+        }
         Ok(data)
     }
 

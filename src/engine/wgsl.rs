@@ -12,13 +12,15 @@ pub const NORMAL: &str = include_str!("../../shaders/engine/normal.wgsl");
 pub const LANES_PLAIN: &str = include_str!("../../shaders/engine/lanes_plain.wgsl");
 pub const LANES_SUBGROUP: &str = include_str!("../../shaders/engine/lanes_subgroup.wgsl");
 
-/// Workgroup shape: `lanes` candidates × `slices` sample slices (see shaders/kernel.wgsl),
-/// and whether a subgroup loads samples once per tile and passes them round
-/// (shaders/engine/lanes_subgroup.wgsl; needs the device's subgroup feature).
+/// How threads map to work (shaders/engine/lanes_*.wgsl): workgroups of `lanes`
+/// candidate lanes × `slices` sample slices, `per_thread` candidates per thread, and
+/// whether a subgroup loads samples once per tile and passes them round
+/// (lanes_subgroup.wgsl; needs the device's subgroup feature).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Shape {
     pub lanes: u32,
     pub slices: u32,
+    pub per_thread: u32,
     pub subgroup_tiles: bool,
 }
 
@@ -28,21 +30,33 @@ impl Shape {
     pub const CPU_DEVICE: Shape = Shape {
         lanes: 64,
         slices: 1,
+        per_thread: 1,
         subgroup_tiles: false,
     };
-    /// SIMD CPU devices with subgroups (lavapipe has them): as `CPU_DEVICE`, with the
-    /// samples loaded once per subgroup tile.
+    /// SIMD CPU devices with subgroups (lavapipe has them): samples loaded once per
+    /// subgroup tile. One candidate per thread: more run faster (4: ggx 1.1e8 → 2.1e8
+    /// evals/s on lavapipe) but multiply the loop iterations of a thread, and llvmpipe
+    /// ends every loop of an invocation after 65,535 iterations in all
+    /// (shaders/engine/kernel.wgsl, `loops_completed`), so they would cap the samples a
+    /// fit may have on lavapipe at a quarter.
     pub const CPU_DEVICE_TILED: Shape = Shape {
         lanes: 64,
         slices: 1,
+        per_thread: 1,
         subgroup_tiles: true,
     };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
         slices: 8,
+        per_thread: 1,
         subgroup_tiles: false,
     };
+
+    /// Candidates per workgroup.
+    pub fn candidates_per_workgroup(&self) -> u32 {
+        self.lanes * self.per_thread
+    }
 }
 
 fn term_code(t: Term) -> u32 {
@@ -156,18 +170,19 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     let c = model.groups();
     let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst CPT: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         c,
         shape.lanes,
         shape.slices,
+        shape.per_thread,
         term_code(term),
         finish_code(finish),
         p * (p + 1) / 2,
         normal_entries(p),
         normal_lanes(p, shape),
         (p + 1).div_ceil(normal_lanes(p, shape) as usize),
-        (s * c).max(1)
+        (s * c * shape.per_thread as usize).max(1)
     );
     src += COMMON;
     src += all_accessors();
