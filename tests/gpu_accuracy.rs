@@ -96,6 +96,7 @@ fn cost_sums_keep_small_terms_after_a_large_one() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let g = gpu(shape).prepare(problem).unwrap().costs(&params).unwrap();
         for (n, (c, g)) in cpu.iter().zip(&g).enumerate() {
@@ -198,6 +199,7 @@ fn log_losses_keep_their_digits_in_the_tails() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let g = gpu(shape);
         for metric in [Metric::Logf, Metric::Logcosf] {

@@ -224,6 +224,7 @@ fn rmg_eon_edge_points_match_the_host_reduction() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let backend = gpu(shape);
         for file in ["red-brick.csv", "w80-g40-full.csv", "black-velvet.csv"] {
@@ -275,6 +276,7 @@ fn btdf_edge_points_match_the_host_reduction() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let backend = gpu(shape);
         for (file, spec) in [
@@ -321,6 +323,7 @@ fn non_finite_values_follow_the_host_rule() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let backend = gpu(shape);
         for spec in ["lambert", "rmg(eon)"] {

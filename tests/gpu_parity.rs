@@ -429,6 +429,7 @@ fn lm_normal_equations_match_the_cpu_reference() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let gpu_shaped = GpuBackend::new().expect("GPU adapter").with_shape(shape);
         for (kind, spec, channels, metric) in cases {

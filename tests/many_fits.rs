@@ -122,6 +122,7 @@ fn a_mixed_batch_gives_each_candidate_its_own_problem_gpu() {
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
     ] {
         let gpu = GpuBackend::new()
             .expect("a Vulkan adapter (lavapipe in CI)")

@@ -27,6 +27,7 @@ fn every_generated_module_validates() {
                         Shape::CPU_DEVICE,
                         Shape::CPU_DEVICE_TILED,
                         Shape::GPU_DEVICE,
+                        Shape::LONG_DATA,
                     ] {
                         if let Err(e) = validate(&compose(&model, term, finish, shape)) {
                             failures.push(format!(

@@ -80,6 +80,11 @@ pub struct GpuBackend {
 /// its result (`LOOPS_CUT_SHORT` in shaders/engine/kernel.wgsl).
 const LOOPS_CUT_SHORT: u32 = 0x7fa1_1ed5;
 
+/// A CPU device ended the kernel's loops early (see `LOOPS_CUT_SHORT`).
+#[derive(Debug, thiserror::Error)]
+#[error("the device cut the kernel's loops short")]
+struct LoopsCutShort;
+
 /// Largest buffer the engine allocates for one binding (bytes).
 const MAX_CHUNK_BYTES: u64 = 64 << 20;
 /// Workgroups per dispatch dimension (WebGPU's guaranteed minimum of the limit).
@@ -235,15 +240,21 @@ impl GpuBackend {
         bail!("GPU error: {msg}")
     }
 
-    fn pipelines(&self, problem: &Problem, term: Term, finish: Finish) -> Result<Arc<Pipelines>> {
+    fn pipelines(
+        &self,
+        model: &crate::bsdf::Model,
+        term: Term,
+        finish: Finish,
+        shape: Shape,
+    ) -> Result<Arc<Pipelines>> {
         let key = format!(
             "{}|{}|{}|{:?}|{:?}|{:?}",
-            problem.model.spec,
-            problem.model.channels,
-            problem.model.axes.len(),
+            model.spec,
+            model.channels,
+            model.axes.len(),
             term,
             finish,
-            self.shape
+            shape
         );
         let mut cache = self
             .pipelines
@@ -252,8 +263,8 @@ impl GpuBackend {
         if let Some(p) = cache.get(&key) {
             return Ok(p.clone());
         }
-        let source = compose(problem.model, term, finish, self.shape);
-        let module = self.module(&problem.model.spec, source)?;
+        let source = compose(model, term, finish, shape);
+        let module = self.module(&model.spec, source)?;
         let make = |entry: &str| {
             self.device
                 .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -269,7 +280,7 @@ impl GpuBackend {
             costs: make("costs"),
             values: make("values"),
             // The one-slice shape is the CPU devices' (see normal.wgsl for why).
-            normal: make(if self.shape.slices == 1 {
+            normal: make(if shape.slices == 1 {
                 "normal_by_samples"
             } else {
                 "normal"
@@ -333,7 +344,8 @@ impl Backend for GpuBackend {
             self.max_batch_samples()
         );
         let terms: Vec<LossTerms> = problems.iter().map(|p| p.loss.terms(p.data)).collect();
-        let pipes = self.pipelines(&first, terms[0].term, terms[0].finish)?;
+        let shape = self.shape;
+        let pipes = self.pipelines(model, terms[0].term, terms[0].finish, shape)?;
         let groups = model.groups();
         let mut slots =
             Vec::with_capacity(model.scalar_count() * groups + (groups + 1) * problems.len());
@@ -402,6 +414,7 @@ impl Backend for GpuBackend {
             model,
             terms,
             pipes,
+            shape,
             samples_buf,
             slots_buf,
             lut_buf,
@@ -433,6 +446,9 @@ pub struct GpuEvaluator<'a> {
     /// Each problem's loss constants (its sample count is `y.len()`).
     terms: Vec<LossTerms>,
     pipes: Arc<Pipelines>,
+    /// The shape `pipes` were compiled for: the backend's, until a CPU device cuts its
+    /// loops short (`LOOPS_CUT_SHORT`), then `Shape::LONG_DATA`.
+    shape: Shape,
     samples_buf: wgpu::Buffer,
     slots_buf: wgpu::Buffer,
     lut_buf: wgpu::Buffer,
@@ -548,7 +564,54 @@ impl GpuEvaluator<'_> {
     /// write reads as NaN). `Output::Out` reads `out` back; `Output::Normal` runs the
     /// `normal` pass on those values (in the same submission) and reads back only its NE
     /// numbers per group, poisoned likewise.
+    /// [`Self::dispatch_once`] with the `pipeline` of the evaluator's shape (`values` or
+    /// `costs`), moved to `Shape::LONG_DATA` and run again where a CPU device cut its
+    /// loops short; an error naming the cause where that shape is cut short too.
     fn dispatch(
+        &mut self,
+        values: bool,
+        host: &[f32],
+        owners: &[u32],
+        m: usize,
+        out_len: usize,
+        output: Output,
+    ) -> Result<Vec<f32>> {
+        loop {
+            let pipes = self.pipes.clone();
+            let pipeline = if values { &pipes.values } else { &pipes.costs };
+            match self.dispatch_once(pipeline, host, owners, m, out_len, output) {
+                Err(e) if e.is::<LoopsCutShort>() => {
+                    if self.shape == Shape::LONG_DATA {
+                        bail!(
+                            "{} cut this evaluation short: it ends every loop of a shader \
+                             invocation after 65,535 iterations in all, and evaluating `{}` on \
+                             the largest data set of this batch ({} samples) takes more than \
+                             that even split over {} threads per candidate; use --backend cpu \
+                             (or fewer samples)",
+                            self.gpu.adapter_name(),
+                            self.model.spec,
+                            self.terms.iter().map(|t| t.y.len()).max().unwrap_or(0),
+                            Shape::LONG_DATA.slices
+                        );
+                    }
+                    self.shape = Shape::LONG_DATA;
+                    let t = &self.terms[0];
+                    self.pipes = self
+                        .gpu
+                        .pipelines(self.model, t.term, t.finish, self.shape)?;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
+    /// output slot per candidate), run `pipeline` over `m` candidates writing `out_len`
+    /// floats of `out` (poisoned beforehand with the `LOOPS_CUT_SHORT` NaN, so anything
+    /// the kernel fails to write reads as loops cut short). `Output::Out` reads `out`
+    /// back; `Output::Normal` runs the `normal` pass on those values (in the same
+    /// submission) and reads back only its NE numbers per group, poisoned likewise.
+    fn dispatch_once(
         &mut self,
         pipeline: &wgpu::ComputePipeline,
         host: &[f32],
@@ -570,8 +633,7 @@ impl GpuEvaluator<'_> {
             let x = total.clamp(1, MAX_GROUPS_X);
             (x, total.div_ceil(x))
         };
-        let (groups_x, groups_y) =
-            grid((m as u32).div_ceil(self.gpu.shape.candidates_per_workgroup()));
+        let (groups_x, groups_y) = grid((m as u32).div_ceil(self.shape.candidates_per_workgroup()));
         let (normal_x, normal_y) = grid(groups as u32);
         let dims = Dims {
             n_candidates: m as u32,
@@ -587,12 +649,13 @@ impl GpuEvaluator<'_> {
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
         q.write_buffer(&io.params, 0, bytemuck::cast_slice(host));
         q.write_buffer(&io.owners, 0, bytemuck::cast_slice(owners));
-        q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![f32::NAN; out_len]));
+        let poison = f32::from_bits(LOOPS_CUT_SHORT);
+        q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![poison; out_len]));
         if normal_len > 0 {
             q.write_buffer(
                 &io.normal,
                 0,
-                bytemuck::cast_slice(&vec![f32::NAN; normal_len]),
+                bytemuck::cast_slice(&vec![poison; normal_len]),
             );
         }
         let mut enc = self
@@ -645,14 +708,7 @@ impl GpuEvaluator<'_> {
         self.read_back += bytes;
         self.gpu.check_errors()?;
         if data.iter().any(|v| v.to_bits() == LOOPS_CUT_SHORT) {
-            bail!(
-                "{} cut this evaluation short: it ends every loop of a shader invocation after \
-                 65,535 iterations in all, and evaluating `{}` on the largest data set of this \
-                 batch ({} samples) takes more in one thread; use --backend cpu (or fewer samples)",
-                self.gpu.adapter_name(),
-                self.model.spec,
-                self.terms.iter().map(|t| t.y.len()).max().unwrap_or(0)
-            );
+            return Err(LoopsCutShort.into());
         }
         Ok(data)
     }
@@ -703,13 +759,7 @@ impl GpuEvaluator<'_> {
                 .map(|&v| v as f32)
                 .collect();
             let ids = self.output_rows(&owners[start..end], per);
-            let pipes = self.pipes.clone();
-            let pipeline = if values_mode {
-                &pipes.values
-            } else {
-                &pipes.costs
-            };
-            let data = self.dispatch(pipeline, &host, &ids, end - start, outs, Output::Out)?;
+            let data = self.dispatch(values_mode, &host, &ids, end - start, outs, Output::Out)?;
             result.extend(data.iter().map(|&v| v as f64));
             start = end;
         }
@@ -795,9 +845,8 @@ impl GpuEvaluator<'_> {
                 .flat_map(|&q| std::iter::repeat_n(q, p + 1))
                 .collect();
             let ids = self.output_rows(&expanded, |q| sizes[q]);
-            let pipes = self.pipes.clone();
             let data = self.dispatch(
-                &pipes.values,
+                true,
                 &host,
                 &ids,
                 groups * (p + 1),

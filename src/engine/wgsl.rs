@@ -45,6 +45,15 @@ impl Shape {
         per_thread: 1,
         subgroup_tiles: true,
     };
+    /// Where a CPU device cut a one-slice kernel's loops short (a data set too large for
+    /// one thread per candidate; llvmpipe's loop limit, kernel.wgsl `loops_completed`):
+    /// 8 candidates × 32 sample slices, reduced in workgroup memory.
+    pub const LONG_DATA: Shape = Shape {
+        lanes: 8,
+        slices: 32,
+        per_thread: 1,
+        subgroup_tiles: false,
+    };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
