@@ -35,10 +35,9 @@ impl Shape {
     };
     /// SIMD CPU devices with subgroups (lavapipe has them): samples loaded once per
     /// subgroup tile. One candidate per thread: more run faster (4: ggx 1.1e8 → 2.1e8
-    /// evals/s on lavapipe) but multiply the loop iterations of a thread, and llvmpipe
-    /// ends every loop of an invocation after 65,535 iterations in all
-    /// (shaders/engine/kernel.wgsl, `loops_completed`), so they would cap the samples a
-    /// fit may have on lavapipe at a quarter.
+    /// evals/s on lavapipe, 16: 2.9e8) but lavapipe then takes 13× longer to compile the
+    /// pipelines (the parity test of every model: 11 s → 142 s), and they multiply the
+    /// loop iterations of a thread, which llvmpipe caps (kernel.wgsl, `loops_completed`).
     pub const CPU_DEVICE_TILED: Shape = Shape {
         lanes: 64,
         slices: 1,
