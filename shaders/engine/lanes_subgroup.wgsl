@@ -7,9 +7,9 @@
 // the kernel's rate the same ≈ 2e7 evaluations/s for every model on a 2-core AMD EPYC,
 // lambert and ggx alike: loads, not the model, bounded it. So lane l of a subgroup loads
 // sample k0 + l of a tile of as many samples as lanes, once, and the subgroup passes the
-// tile's samples round with subgroupShuffle (a register permutation); and each thread
-// evaluates every sample it has in registers for CPT candidates, so one load serves
-// lanes × CPT candidates. Measured there (lambert, ggx evals/s): 2.5e7, 2.4e7 loading
+// tile's samples round with subgroupShuffle (a register permutation); each thread may
+// evaluate every sample it has in registers for CPT candidates, so that one load serves
+// lanes × CPT candidates (the engine uses CPT = 1: see Shape::CPU_DEVICE_TILED). Measured there (lambert, ggx evals/s): 2.5e7, 2.4e7 loading
 // every sample in every thread; 1.7e8, 1.1e8 with tiles; with the loads out of the loop
 // altogether (wrong results, a bound) 6.7–8.8e8, 2.3e8.
 //

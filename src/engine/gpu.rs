@@ -559,7 +559,8 @@ impl GpuEvaluator<'_> {
     }
 
     /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
-    /// output slot per candidate), run `pipeline` over `m` candidates writing `out_len`
+    /// output slot per candidate), run the `values` (else `costs`) pipeline of the
+    /// evaluator's shape over `m` candidates writing `out_len`
     /// floats of `out` (poisoned with NaN beforehand, so anything the kernel fails to
     /// write reads as NaN). `Output::Out` reads `out` back; `Output::Normal` runs the
     /// `normal` pass on those values (in the same submission) and reads back only its NE
@@ -577,9 +578,7 @@ impl GpuEvaluator<'_> {
         output: Output,
     ) -> Result<Vec<f32>> {
         loop {
-            let pipes = self.pipes.clone();
-            let pipeline = if values { &pipes.values } else { &pipes.costs };
-            match self.dispatch_once(pipeline, host, owners, m, out_len, output) {
+            match self.dispatch_once(values, host, owners, m, out_len, output) {
                 Err(e) if e.is::<LoopsCutShort>() => {
                     if self.shape == Shape::LONG_DATA {
                         bail!(
@@ -606,14 +605,15 @@ impl GpuEvaluator<'_> {
     }
 
     /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
-    /// output slot per candidate), run `pipeline` over `m` candidates writing `out_len`
+    /// output slot per candidate), run the `values` (else `costs`) pipeline of the
+    /// evaluator's shape over `m` candidates writing `out_len`
     /// floats of `out` (poisoned beforehand with the `LOOPS_CUT_SHORT` NaN, so anything
     /// the kernel fails to write reads as loops cut short). `Output::Out` reads `out`
     /// back; `Output::Normal` runs the `normal` pass on those values (in the same
     /// submission) and reads back only its NE numbers per group, poisoned likewise.
     fn dispatch_once(
         &mut self,
-        pipeline: &wgpu::ComputePipeline,
+        values: bool,
         host: &[f32],
         owners: &[u32],
         m: usize,
@@ -669,7 +669,11 @@ impl GpuEvaluator<'_> {
                 label: Some("evaluate"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(pipeline);
+            pass.set_pipeline(if values {
+                &self.pipes.values
+            } else {
+                &self.pipes.costs
+            });
             pass.set_bind_group(0, &io.bind_group, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
             if normal_len > 0 {
