@@ -460,6 +460,19 @@ pub struct GpuEvaluator<'a> {
     read_back: u64,
 }
 
+/// One submission: the `values` (else `costs`) pipeline over `m` candidates whose
+/// parameters are `host` and whose (problem, first output slot) pairs are `owners`,
+/// writing `out_len` floats of `out`, and what is read back.
+#[derive(Clone, Copy)]
+struct Submission<'s> {
+    values: bool,
+    host: &'s [f32],
+    owners: &'s [u32],
+    m: usize,
+    out_len: usize,
+    output: Output,
+}
+
 /// What one submission reads back.
 #[derive(Clone, Copy)]
 enum Output {
@@ -558,27 +571,12 @@ impl GpuEvaluator<'_> {
         });
     }
 
-    /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
-    /// output slot per candidate), run the `values` (else `costs`) pipeline of the
-    /// evaluator's shape over `m` candidates writing `out_len`
-    /// floats of `out` (poisoned with NaN beforehand, so anything the kernel fails to
-    /// write reads as NaN). `Output::Out` reads `out` back; `Output::Normal` runs the
-    /// `normal` pass on those values (in the same submission) and reads back only its NE
-    /// numbers per group, poisoned likewise.
-    /// [`Self::dispatch_once`] with the `pipeline` of the evaluator's shape (`values` or
-    /// `costs`), moved to `Shape::LONG_DATA` and run again where a CPU device cut its
-    /// loops short; an error naming the cause where that shape is cut short too.
-    fn dispatch(
-        &mut self,
-        values: bool,
-        host: &[f32],
-        owners: &[u32],
-        m: usize,
-        out_len: usize,
-        output: Output,
-    ) -> Result<Vec<f32>> {
+    /// [`Self::dispatch_once`], moved to `Shape::LONG_DATA` and run again where a CPU
+    /// device cut its loops short; an error naming the cause where that shape is cut
+    /// short too.
+    fn dispatch(&mut self, job: &Submission) -> Result<Vec<f32>> {
         loop {
-            match self.dispatch_once(values, host, owners, m, out_len, output) {
+            match self.dispatch_once(job) {
                 Err(e) if e.is::<LoopsCutShort>() => {
                     if self.shape == Shape::LONG_DATA {
                         bail!(
@@ -604,22 +602,20 @@ impl GpuEvaluator<'_> {
         }
     }
 
-    /// One submission: upload `host` as the parameter buffer and `owners` (problem, first
-    /// output slot per candidate), run the `values` (else `costs`) pipeline of the
-    /// evaluator's shape over `m` candidates writing `out_len`
-    /// floats of `out` (poisoned beforehand with the `LOOPS_CUT_SHORT` NaN, so anything
-    /// the kernel fails to write reads as loops cut short). `Output::Out` reads `out`
-    /// back; `Output::Normal` runs the `normal` pass on those values (in the same
-    /// submission) and reads back only its NE numbers per group, poisoned likewise.
-    fn dispatch_once(
-        &mut self,
-        values: bool,
-        host: &[f32],
-        owners: &[u32],
-        m: usize,
-        out_len: usize,
-        output: Output,
-    ) -> Result<Vec<f32>> {
+    /// Run one submission with the evaluator's shape: upload the parameters and owners,
+    /// poison `out` with the `LOOPS_CUT_SHORT` NaN (so anything the kernel fails to write
+    /// reads as loops cut short), evaluate, and read back `out` (`Output::Out`) or, after
+    /// the `normal` pass over those values in the same submission, only its NE numbers
+    /// per group, poisoned likewise (`Output::Normal`).
+    fn dispatch_once(&mut self, job: &Submission) -> Result<Vec<f32>> {
+        let Submission {
+            values,
+            host,
+            owners,
+            m,
+            out_len,
+            output,
+        } = *job;
         let p = self.model.dim;
         let o_bytes = (out_len * 4) as u64;
         let (groups, normal_len) = match output {
@@ -763,7 +759,14 @@ impl GpuEvaluator<'_> {
                 .map(|&v| v as f32)
                 .collect();
             let ids = self.output_rows(&owners[start..end], per);
-            let data = self.dispatch(values_mode, &host, &ids, end - start, outs, Output::Out)?;
+            let data = self.dispatch(&Submission {
+                values: values_mode,
+                host: &host,
+                owners: &ids,
+                m: end - start,
+                out_len: outs,
+                output: Output::Out,
+            })?;
             result.extend(data.iter().map(|&v| v as f64));
             start = end;
         }
@@ -849,14 +852,14 @@ impl GpuEvaluator<'_> {
                 .flat_map(|&q| std::iter::repeat_n(q, p + 1))
                 .collect();
             let ids = self.output_rows(&expanded, |q| sizes[q]);
-            let data = self.dispatch(
-                true,
-                &host,
-                &ids,
-                groups * (p + 1),
-                outs,
-                Output::Normal { groups },
-            )?;
+            let data = self.dispatch(&Submission {
+                values: true,
+                host: &host,
+                owners: &ids,
+                m: groups * (p + 1),
+                out_len: outs,
+                output: Output::Normal { groups },
+            })?;
             for (sums, h) in data.chunks(ne).zip(steps[start * p..end * p].chunks(p)) {
                 result.push(normal_from_sums(sums, h));
             }
