@@ -47,6 +47,7 @@ fn gpu(shape: Shape) -> GpuBackend {
             panic!("no GPU adapter: {e}. These tests need Vulkan (CI installs mesa-vulkan-drivers for lavapipe).")
         })
         .with_shape(shape)
+        .with_device_normal(true)
 }
 
 fn bundled(name: &str) -> Dataset {

@@ -431,7 +431,12 @@ fn lm_normal_equations_match_the_cpu_reference() {
         Shape::GPU_DEVICE,
         Shape::LONG_DATA,
     ] {
-        let gpu_shaped = GpuBackend::new().expect("GPU adapter").with_shape(shape);
+        // The device's reduction (CPU devices default to the host's, checked against it
+        // in tests/gpu_normal.rs).
+        let gpu_shaped = GpuBackend::new()
+            .expect("GPU adapter")
+            .with_shape(shape)
+            .with_device_normal(true);
         for (kind, spec, channels, metric) in cases {
             let data = random_dataset(kind, channels, 150, 31);
             let model = Model::parse(spec, channels).unwrap();
