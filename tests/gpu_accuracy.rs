@@ -92,12 +92,7 @@ fn cost_sums_keep_small_terms_after_a_large_one() {
         .unwrap();
     let bound_rel = 4.0 * (f32::EPSILON as f64 / 2.0) * (N as f64).sqrt();
     let mut failures = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let g = gpu(shape).prepare(problem).unwrap().costs(&params).unwrap();
         for (n, (c, g)) in cpu.iter().zip(&g).enumerate() {
             let rel = (g - c).abs() / c;
@@ -195,12 +190,7 @@ fn log_losses_keep_their_digits_in_the_tails() {
         params.extend(truth.iter().map(|v| v * rng.random_range(0.9..1.1)));
     }
     let mut failures = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let g = gpu(shape);
         for metric in [Metric::Logf, Metric::Logcosf] {
             for weights in [Weights::Uniform, Weights::Invunc] {

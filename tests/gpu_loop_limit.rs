@@ -76,12 +76,7 @@ fn check(spec: &str, n: usize, may_fail: bool) -> Vec<String> {
     let mut cpu = reference.prepare(problem).unwrap();
     let (ref_costs, ref_values) = (cpu.costs(&params).unwrap(), cpu.values(&params).unwrap());
     let mut outcomes = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let gpu = GpuBackend::new()
             .expect("a Vulkan adapter (lavapipe in CI)")
             .with_shape(shape);

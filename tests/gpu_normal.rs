@@ -221,12 +221,7 @@ fn edge_points(p: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
 #[test]
 fn rmg_eon_edge_points_match_the_host_reduction() {
     let mut failures = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let backend = gpu(shape);
         for file in ["red-brick.csv", "w80-g40-full.csv", "black-velvet.csv"] {
             let data = bundled(file);
@@ -273,12 +268,7 @@ fn rmg_eon_edge_points_match_the_host_reduction() {
 #[test]
 fn btdf_edge_points_match_the_host_reduction() {
     let mut failures = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let backend = gpu(shape);
         for (file, spec) in [
             ("diffuser-a.csv", "btdf(tr)+scale"),
@@ -320,12 +310,7 @@ fn non_finite_values_follow_the_host_rule() {
     let data = bundled("red-brick.csv");
     let k = data.len();
     let mut failures = Vec::new();
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let backend = gpu(shape);
         for spec in ["lambert", "rmg(eon)"] {
             let model = Model::parse(spec, data.channel_count()).unwrap();

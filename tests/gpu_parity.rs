@@ -425,12 +425,7 @@ fn lm_normal_equations_match_the_cpu_reference() {
         (Kind::Btdf, "btdf(tr)+scale", 1, Metric::Logcosf),
         (Kind::Btdf, "btdf(gg)+scale", 1, Metric::Logf),
     ];
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         // The device's reduction (CPU devices default to the host's, checked against it
         // in tests/gpu_normal.rs).
         let gpu_shaped = GpuBackend::new()

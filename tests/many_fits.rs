@@ -118,12 +118,7 @@ fn a_mixed_batch_gives_each_candidate_its_own_problem_cpu() {
 
 #[test]
 fn a_mixed_batch_gives_each_candidate_its_own_problem_gpu() {
-    for shape in [
-        Shape::CPU_DEVICE,
-        Shape::CPU_DEVICE_TILED,
-        Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
-    ] {
+    for shape in Shape::ALL {
         let gpu = GpuBackend::new()
             .expect("a Vulkan adapter (lavapipe in CI)")
             .with_shape(shape);

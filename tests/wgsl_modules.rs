@@ -23,12 +23,7 @@ fn every_generated_module_validates() {
             };
             for term in [Term::AbsRatio, Term::Square, Term::LogSquare] {
                 for finish in [Finish::Mean, Finish::SqrtMean, Finish::Sum] {
-                    for shape in [
-                        Shape::CPU_DEVICE,
-                        Shape::CPU_DEVICE_TILED,
-                        Shape::GPU_DEVICE,
-                        Shape::LONG_DATA,
-                    ] {
+                    for shape in Shape::ALL {
                         if let Err(e) = validate(&compose(&model, term, finish, shape)) {
                             failures.push(format!(
                                 "{spec} ({channels} ch, {term:?}, {finish:?}, {shape:?}):\n{e}"

@@ -61,6 +61,15 @@ impl Shape {
         subgroup_tiles: false,
     };
 
+    /// Every shape the engine uses (tests run each code path on any device; subgroup
+    /// tiles fall back to the plain walk where the device has no subgroups).
+    pub const ALL: [Shape; 4] = [
+        Shape::CPU_DEVICE,
+        Shape::CPU_DEVICE_TILED,
+        Shape::GPU_DEVICE,
+        Shape::LONG_DATA,
+    ];
+
     /// Candidates per workgroup.
     pub fn candidates_per_workgroup(&self) -> u32 {
         self.lanes * self.per_thread
