@@ -127,3 +127,29 @@ fn a_model_with_a_loop_of_its_own_on_many_samples() {
     let outcomes = check("rmg(lambert)", 150_000, true);
     assert_eq!(outcomes.len(), 4);
 }
+
+#[test]
+fn the_backend_remembers_which_data_sets_need_the_sliced_kernel() {
+    let data = large_dataset(70_000);
+    let model = Model::parse("lambert", 1).unwrap();
+    let loss = Loss::new(Metric::Chi2, Weights::Uniform);
+    let problem = Problem {
+        model: &model,
+        data: &data,
+        loss,
+    };
+    let params = [0.1, 0.2, 0.3];
+    let gpu = GpuBackend::new().expect("a Vulkan adapter (lavapipe in CI)");
+    let lavapipe = gpu.adapter_name().contains("llvmpipe");
+    let mut first = gpu.prepare(problem).unwrap();
+    let c1 = first.costs(&params).unwrap();
+    let mut second = gpu.prepare(problem).unwrap();
+    let c2 = second.costs(&params).unwrap();
+    assert_eq!(c1, c2, "the same kernel gives the same costs");
+    // Three costs of 4 bytes per submission: the first evaluator on lavapipe read back a
+    // cut-short submission and then its rerun, the second starts with the sliced kernel.
+    let per_submission = 4 * params.len() as u64;
+    assert_eq!(second.read_back_bytes(), per_submission);
+    let expected_first = if lavapipe { 2 } else { 1 } * per_submission;
+    assert_eq!(first.read_back_bytes(), expected_first);
+}

@@ -68,6 +68,10 @@ pub struct GpuBackend {
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: Mutex<HashMap<String, Arc<Pipelines>>>,
+    /// Per model spec, the fewest samples (of a batch's largest problem) with which the
+    /// backend's shape had its loops cut short: later evaluators with at least as many
+    /// start in `Shape::LONG_DATA` instead of paying a cut-short submission each.
+    long_data_from: Mutex<HashMap<String, usize>>,
     shape: Shape,
     /// Errors wgpu reports asynchronously; checked after each submission so they become
     /// `Err` values instead of the default handler's panic.
@@ -197,6 +201,7 @@ impl GpuBackend {
             layout,
             pipeline_layout,
             pipelines: Mutex::default(),
+            long_data_from: Mutex::default(),
             errors,
             chunk_bytes: MAX_CHUNK_BYTES,
             device_normal,
@@ -360,7 +365,17 @@ impl Backend for GpuBackend {
             self.max_batch_samples()
         );
         let terms: Vec<LossTerms> = problems.iter().map(|p| p.loss.terms(p.data)).collect();
-        let shape = self.shape;
+        let largest = problems.iter().map(|p| p.data.len()).max().unwrap_or(0);
+        let cut_short_before = self
+            .long_data_from
+            .lock()
+            .map(|m| m.get(&model.spec).is_some_and(|&k| largest >= k))
+            .unwrap_or(false);
+        let shape = if cut_short_before {
+            Shape::LONG_DATA
+        } else {
+            self.shape
+        };
         let pipes = self.pipelines(model, terms[0].term, terms[0].finish, shape)?;
         let groups = model.groups();
         let mut slots =
@@ -608,6 +623,11 @@ impl GpuEvaluator<'_> {
                         );
                     }
                     self.shape = Shape::LONG_DATA;
+                    let largest = self.terms.iter().map(|t| t.y.len()).max().unwrap_or(0);
+                    if let Ok(mut m) = self.gpu.long_data_from.lock() {
+                        let k = m.entry(self.model.spec.clone()).or_insert(largest);
+                        *k = (*k).min(largest);
+                    }
                     let t = &self.terms[0];
                     self.pipes = self
                         .gpu
