@@ -5,13 +5,26 @@
 // candidates and samples is in lanes_plain.wgsl (GPUs) and lanes_subgroup.wgsl (SIMD CPU
 // devices); this file holds what both share.
 //
-// Samples arrive sorted by channel and the channel loop is outermost, so a thread's
-// parameter reads P[at + ch * S + j] use the same offsets in every thread.
+// Channels together: samples arrive as records, one per direction (and plane), holding
+// the measurements of up to CB channels there. A thread evaluates all of a record's
+// channels at once (the generated `eval_record`, unrolled), so what does not depend on
+// the per-channel parameters is computed once per direction where the compiler can see it
+// is shared: it can wherever every parameter index is a constant (FIXED_BASE, one plane
+// and at most CB channels: RGB and monochrome data).
 
-struct Sample {
-    wi: vec4<f32>,   // xyz: incident direction; w: loss weight
-    wo: vec4<f32>,   // xyz: outgoing direction; w: inner factor a
-    ext: vec4<f32>,  // x: y, y: g(y), z: channel, w: original sample index (bits of a u32)
+// Record r, texel t of the records texture (RPR records of TPR texels per row): texel 0
+// holds ωi (xyz) and the record's first scalar-view group (w, bits of a u32), texel 1 ωo
+// and the loss's inner factor a, then each texel two channel slots (v, w): the
+// measurement as the loss compares it (y for SMAPE, g(y) otherwise) and the loss weight
+// (w < 0: no sample in this slot); the generated `record_obs` reads those.
+fn record_texel(r: u32, t: u32) -> vec4<f32> {
+    return textureLoad(records, vec2<u32>((r % RPR) * TPR + t, r / RPR), 0);
+}
+
+// Channel slot i of record r.
+fn record_slot(r: u32, i: u32) -> vec2<f32> {
+    let t = record_texel(r, 2u + i / 2u);
+    return select(t.zw, t.xy, i % 2u == 0u);
 }
 
 struct Dims {
@@ -28,13 +41,13 @@ struct Dims {
 }
 
 @group(0) @binding(0) var<uniform> dims: Dims;
-@group(0) @binding(1) var<storage, read> samples: array<Sample>;
-// slots[g * S + j]: index in a candidate's flat vector of scalar j for group g (a channel,
-// or a (plane, channel) pair under `+peraxis`; C counts the groups);
-// then per problem q (several independent fits share a dispatch, their samples one after
-// the other): slots[S * C + q * (C + 1) + g] = first sample of group g of problem q, and
-// slots[S * C + q * (C + 1) + C] = one past its last sample.
-@group(0) @binding(2) var<storage, read> slots: array<u32>;
+@group(0) @binding(1) var records: texture_2d<f32>;
+// Per problem q (several independent fits share a dispatch, their records one after the
+// other): tables[3q] = its first record, tables[3q + 1] = one past its last,
+// tables[3q + 2] = its number of samples K_q. Then, from index_base(), CB entries per
+// record: the original index of each channel slot's sample within its problem, or
+// NO_SAMPLE.
+@group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
 // Lookup table of models that need one (GG's Smith Λ); a single zero otherwise.
@@ -45,6 +58,11 @@ struct Dims {
 // The `normal` pass's output: NE numbers per group of dim + 1 candidates (normal.wgsl).
 @group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
 
+const NO_SAMPLE: u32 = 0xffffffffu;
+
+fn index_base() -> u32 {
+    return 3u * dims.n_problems;
+}
 
 // Neumaier's compensated addition (Neumaier 1974, "Rundungsfehleranalyse einiger
 // Verfahren zur Summation endlicher Summen"; Kahan–Babuška): s = acc + x rounded, and the
@@ -57,16 +75,7 @@ fn two_sum_err(acc: f32, x: f32, s: f32) -> f32 {
     return select((x - s) + acc, (acc - s) + x, abs(acc) >= abs(x));
 }
 
-// Resolve candidate c's flat vector into per-channel scalar views at P[at..at + S·C]
-// (a thread holding several candidates keeps each at its own `at`).
-fn load_params(c: u32, at: u32) {
-    let base = c * dims.dim;
-    for (var j = 0u; j < S * C; j = j + 1u) {
-        P[at + j] = params[base + slots[j]];
-    }
-}
-
-// The thread's sample slice; a constant 0 when SL = 1, so the sample index is a plain
+// The thread's sample slice; a constant 0 when SL = 1, so the record index is a plain
 // uniform loop counter the compiler can see (broadcast loads on SIMD CPU devices).
 fn slice(lid: vec3<u32>) -> u32 {
     if (SL == 1u) {
@@ -75,45 +84,47 @@ fn slice(lid: vec3<u32>) -> u32 {
     return lid.y;
 }
 
-// Where problem q's sample ranges start in `slots`.
-fn ranges(q: u32) -> u32 {
-    return S * C + q * (C + 1u);
+// Where the views of a record's first group start in a candidate's views: a constant 0
+// under FIXED_BASE.
+fn record_base(wi_w: f32) -> u32 {
+    return select(bitcast<u32>(wi_w) * S, 0u, FIXED_BASE);
 }
 
-// The first candidate of a workgroup (CL threads of CPT candidates each).
+// The compensated sum s (sum, Neumaier compensation) plus the loss term of a channel
+// slot o whose model value is yp, a the record's inner factor; an empty slot (w < 0)
+// adds nothing, whatever yp is.
+fn add_term(s: vec2<f32>, yp: f32, o: vec2<f32>, a: f32) -> vec2<f32> {
+    let t = select(loss_term(yp, o.x, o.y, a), 0.0, o.y < 0.0);
+    let sum = s.x + t;
+    return vec2<f32>(sum, s.y + two_sum_err(s.x, t, sum));
+}
+
+// The first candidate of a workgroup (CL threads of a candidate each).
 fn first_candidate(wg: vec3<u32>) -> u32 {
-    return (wg.x + wg.y * dims.groups_x) * CL * CPT;
+    return (wg.x + wg.y * dims.groups_x) * CL;
 }
 
-// Σ of the loss terms of the candidate whose views start at P[at] over the samples of
-// its problem (from `ranges` r), this thread's slice of them: (sum, Neumaier compensation).
-fn plain_costs(at: u32, r: u32, slice: u32) -> vec2<f32> {
-    var acc = 0.0;
-    var comp = 0.0;
-    for (var ch = 0u; ch < C; ch = ch + 1u) {
-        let end = slots[r + ch + 1u];
-        for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
-            let s = samples[k];
-            let yp = eval_model(s.wi.xyz, s.wo.xyz, at + ch * S);
-            let t = loss_term(yp, s.ext.x, s.ext.y, s.wi.w, s.wo.w);
-            let sum = acc + t;
-            comp = comp + two_sum_err(acc, t, sum);
-            acc = sum;
-        }
+// Σ of the loss terms of the thread's candidate (its views in P) over the records of
+// problem q, this thread's slice of them: (sum, Neumaier compensation).
+fn plain_costs(q: u32, slice: u32) -> vec2<f32> {
+    var acc = vec2<f32>(0.0, 0.0);
+    let end = tables[3u * q + 1u];
+    for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
+        let wi = record_texel(k, 0u);
+        let wo = record_texel(k, 1u);
+        acc = record_costs(acc, eval_record(wi.xyz, wo.xyz, record_base(wi.w)), record_obs(k), wo.w);
     }
-    return vec2<f32>(acc, comp);
+    return acc;
 }
 
-// The model values of the candidate whose views start at P[at] at each sample of its
-// problem (this thread's slice), written to its row of `out` in the samples' original
-// order.
-fn plain_values(at: u32, r: u32, row: u32, slice: u32) {
-    for (var ch = 0u; ch < C; ch = ch + 1u) {
-        let end = slots[r + ch + 1u];
-        for (var k = slots[r + ch] + slice; k < end; k = k + SL) {
-            let s = samples[k];
-            out[row + bitcast<u32>(s.ext.w)] = eval_model(s.wi.xyz, s.wo.xyz, at + ch * S);
-        }
+// The model values of the thread's candidate at each sample of problem q (this thread's
+// slice of its records), written to its row of `out` in the samples' original order.
+fn plain_values(q: u32, row: u32, slice: u32) {
+    let end = tables[3u * q + 1u];
+    for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
+        let wi = record_texel(k, 0u);
+        let y = eval_record(wi.xyz, record_texel(k, 1u).xyz, record_base(wi.w));
+        store_values(row, y, record_index(k));
     }
 }
 
@@ -137,13 +148,13 @@ fn loops_completed() -> bool {
 // a payload the host looks for (src/engine/gpu.rs, LOOPS_CUT_SHORT), to fail loudly.
 const LOOPS_CUT_SHORT: u32 = 0x7fa11ed5u;
 
-// A candidate's cost from its compensated sum over the samples of `ranges` r. An
+// A candidate's cost from its compensated sum over the samples of problem q. An
 // overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
-fn finish_cost(acc: f32, comp: f32, r: u32) -> f32 {
-    let total = select(acc, acc + comp, abs(acc) <= 3.4028235e38);
-    return loss_finish(total, f32(slots[r + C] - slots[r]));
+fn finish_cost(acc: vec2<f32>, q: u32) -> f32 {
+    let total = select(acc.x, acc.x + acc.y, abs(acc.x) <= 3.4028235e38);
+    return loss_finish(total, f32(tables[3u * q + 2u]));
 }
 
 // The entry points, `costs` and `values`, are in lanes_plain.wgsl (a candidate per thread,
 // its samples in SL slices) or lanes_subgroup.wgsl (SIMD CPU devices with subgroups:
-// CPT candidates per thread, samples in subgroup tiles); compose() includes one of them.
+// records in subgroup tiles); compose() includes one of them.

@@ -1,9 +1,9 @@
 // How threads map to work, plain form (GPUs, and CPU devices without subgroups): a
-// workgroup is CL candidate lanes × SL sample slices; thread (lane, slice) evaluates
-// candidate `lane` on samples slice, slice + SL, …, then the SL partial sums of each
-// candidate are reduced in workgroup memory to one cost. Neighbouring threads hold
-// different candidates and read the same sample at once, which a GPU serves as one
-// broadcast load; SL > 1 keeps enough threads in flight when candidates are few.
+// workgroup is CL candidate lanes × SL slices; thread (lane, slice) evaluates candidate
+// `lane` on records slice, slice + SL, …, then the SL partial sums of each candidate are
+// reduced in workgroup memory to one cost. Neighbouring threads hold different
+// candidates and read the same record at once, which a GPU serves as one broadcast load;
+// SL > 1 keeps enough threads in flight when candidates are few.
 
 struct Invocation {
     @builtin(workgroup_id) wg: vec3<u32>,
@@ -19,11 +19,11 @@ fn costs(inv: Invocation) {
     let live = c < dims.n_candidates;
     var acc = 0.0;
     var comp = 0.0;
-    var r = 0u;
+    var q = 0u;
     if (live) {
-        r = ranges(owners[2u * c]);
-        load_params(c, 0u);
-        let sums = plain_costs(0u, r, slice(inv.lid));
+        q = owners[2u * c];
+        load_params(c);
+        let sums = plain_costs(q, slice(inv.lid));
         acc = sums.x;
         comp = sums.y;
     }
@@ -49,7 +49,7 @@ fn costs(inv: Invocation) {
         comp = partial_comp[inv.lid.x];
     }
     if (live && inv.lid.y == 0u) {
-        out[c] = finish_cost(acc, comp, r);
+        out[c] = finish_cost(vec2<f32>(acc, comp), q);
     }
     // Any slice's loops cut short spoils the candidate's sum.
     if (live && !loops_completed()) {
@@ -63,8 +63,8 @@ fn values(inv: Invocation) {
     if (c >= dims.n_candidates) {
         return;
     }
-    load_params(c, 0u);
-    plain_values(0u, ranges(owners[2u * c]), owners[2u * c + 1u], slice(inv.lid));
+    load_params(c);
+    plain_values(owners[2u * c], owners[2u * c + 1u], slice(inv.lid));
     if (!loops_completed()) {
         out[owners[2u * c + 1u]] = bitcast<f32>(LOOPS_CUT_SHORT);
     }

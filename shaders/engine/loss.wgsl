@@ -25,16 +25,17 @@ fn log1p_f32(x: f32) -> f32 {
     return log(1.0 + x);
 }
 
-// `gy` is the measured value already transformed by the term's g (computed in f64).
-fn loss_term(yp: f32, y: f32, gy: f32, w: f32, a: f32) -> f32 {
+// `v` is the measured value as the term compares it: y for SMAPE, otherwise already
+// transformed by the term's g (g(y), computed in f64).
+fn loss_term(yp: f32, v: f32, w: f32, a: f32) -> f32 {
     if (TERM == 0u) {
-        return w * abs(yp - y) / (abs(yp) + abs(y) + LOSS_EPS);
+        return w * abs(yp - v) / (abs(yp) + abs(v) + LOSS_EPS);
     }
     if (TERM == 2u) {
-        let d = log1p_f32(a * yp) - gy;
+        let d = log1p_f32(a * yp) - v;
         return w * d * d;
     }
-    let d = a * yp - gy;
+    let d = a * yp - v;
     return w * d * d;
 }
 

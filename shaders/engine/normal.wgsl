@@ -19,7 +19,7 @@
 // Two forms of the same sums; the host picks one per device (src/engine/gpu.rs).
 //
 // `normal` (GPUs): thread (lane, slice) owns row a = lane of the (PD + 1)² Gram matrix Σ x_a x_b and
-// walks samples slice, slice + SL, … in a loop whose counter is the same in every lane:
+// walks channel slots slice, slice + SL, … (CB per record, the empty ones skipped) in a loop whose counter is the same in every lane:
 // it forms every x_b of the sample (loads at the same address in every lane: broadcasts,
 // no gathers — the shape the costs kernel relies on, kernel.wgsl) and its own x_a, and
 // adds x_a x_b to PD + 1 Neumaier-compensated sums. Row 0 gives Σ r d_j and Σ r², row
@@ -38,6 +38,11 @@ fn residual_g(v: f32, a: f32) -> f32 {
         return log1p_f32(a * v);
     }
     return a * v;
+}
+
+// g(y) of a record's measurement v (records hold y itself for SMAPE, g(y) otherwise).
+fn measured_g(v: f32, a: f32) -> f32 {
+    return select(v, a * v, TERM == 0u);
 }
 
 // g(y1) − g(y0). For g(v) = a v this is a (y1 − y0): the difference of two f32 values
@@ -73,17 +78,19 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
     var row0 = 0u;
     var first = 0u;
     var end = 0u;
+    var kq = 0u;
     if (live) {
         // The group's candidates are consecutive: its point is candidate g (PD + 1), whose
         // owner entry gives the problem and where its row of values starts; the moved
         // candidates' rows follow, K_q values apart.
         let c0 = g * (PD + 1u);
-        let r = ranges(owners[2u * c0]);
+        let q = owners[2u * c0];
         row0 = owners[2u * c0 + 1u];
-        first = slots[r];
-        end = slots[r + C];
+        // The problem's channel slots, CB per record (some hold no sample).
+        first = tables[3u * q] * CB;
+        end = tables[3u * q + 1u] * CB;
+        kq = tables[3u * q + 2u];
     }
-    let kq = end - first;
     for (var block = 0u; block < NB; block = block + 1u) {
         let a = block * EL + lid.x;
         // Lanes past the last row repeat row 0; nothing of theirs is written.
@@ -91,19 +98,23 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
         var acc: array<f32, PD + 1u>;
         var comp: array<f32, PD + 1u>;
         for (var k = first + slice(lid); k < end; k = k + SL) {
-            let s = samples[k];
-            let o = bitcast<u32>(s.ext.w);
-            let rw = sqrt(s.wi.w);
+            let o = tables[index_base() + k];
+            if (o == NO_SAMPLE) {
+                continue;
+            }
+            let s = record_slot(k / CB, k % CB);
+            let a = record_texel(k / CB, 1u).w;
+            let rw = sqrt(s.y);
             let y0 = out[row0 + o];
-            let r = rw * (residual_g(y0, s.wo.w) - s.ext.y);
+            let r = rw * (residual_g(y0, a) - measured_g(s.x, a));
             var xa = r;
             if (own > 0u) {
-                xa = rw * residual_g_diff(out[row0 + own * kq + o], y0, s.wo.w);
+                xa = rw * residual_g_diff(out[row0 + own * kq + o], y0, a);
             }
             for (var b = 0u; b <= PD; b = b + 1u) {
                 var xb = r;
                 if (b > 0u) {
-                    xb = rw * residual_g_diff(out[row0 + b * kq + o], y0, s.wo.w);
+                    xb = rw * residual_g_diff(out[row0 + b * kq + o], y0, a);
                 }
                 let t = xa * xb;
                 let sum = acc[b] + t;
@@ -149,7 +160,7 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
 // `normal_by_samples` (CPU devices, lavapipe, SL = 1): a workgroup's lanes are SIMD lanes
 // there, and each load from a storage buffer costs about as much as a model evaluation's
 // arithmetic, so the row-per-lane form, which loads every factor again in every SIMD chunk
-// of rows, took three times the `values` pass. Here lane i walks samples i, i + NSL, …,
+// of rows, took three times the `values` pass. Here lane i walks channel slots i, i + NSL, …,
 // loads and forms the sample's PD + 1 factors once, and adds all NE products to private
 // compensated sums; the NSL partial sums of each entry are then added up in workgroup
 // memory, NBLK entries at a time (measured on a 2-core lavapipe: rmg(eon), 16 groups of
@@ -171,25 +182,31 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
     var row0 = 0u;
     var first = 0u;
     var end = 0u;
+    var kq = 0u;
     if (live) {
         let c0 = g * (PD + 1u);
-        let r = ranges(owners[2u * c0]);
+        let q = owners[2u * c0];
         row0 = owners[2u * c0 + 1u];
-        first = slots[r];
-        end = slots[r + C];
+        // The problem's channel slots, CB per record (some hold no sample).
+        first = tables[3u * q] * CB;
+        end = tables[3u * q + 1u] * CB;
+        kq = tables[3u * q + 2u];
     }
-    let kq = end - first;
     var acc: array<f32, NE>;
     var comp: array<f32, NE>;
     var x: array<f32, PD + 1u>;
     for (var k = first + lid.x; k < end; k = k + NSL) {
-        let s = samples[k];
-        let o = bitcast<u32>(s.ext.w);
-        let rw = sqrt(s.wi.w);
+        let o = tables[index_base() + k];
+        if (o == NO_SAMPLE) {
+            continue;
+        }
+        let s = record_slot(k / CB, k % CB);
+        let a = record_texel(k / CB, 1u).w;
+        let rw = sqrt(s.y);
         let y0 = out[row0 + o];
-        x[0] = rw * (residual_g(y0, s.wo.w) - s.ext.y);
+        x[0] = rw * (residual_g(y0, a) - measured_g(s.x, a));
         for (var j = 1u; j <= PD; j = j + 1u) {
-            x[j] = rw * residual_g_diff(out[row0 + j * kq + o], y0, s.wo.w);
+            x[j] = rw * residual_g_diff(out[row0 + j * kq + o], y0, a);
         }
         var e = 0u;
         for (var a = 1u; a <= PD; a = a + 1u) {

@@ -21,8 +21,9 @@
 //! between groups, never inside one (a group's values must be on the device together);
 //! a group whose values alone exceed a binding is reduced on the host from its values.
 
-use super::wgsl::{compose, normal_entries, validate, Shape};
+use super::wgsl::{self, compose, normal_entries, validate, Shape};
 use super::{Backend, Evaluator, Problem};
+use crate::bsdf::Model;
 use crate::engine::loss::{Finish, LossTerms, Term};
 use crate::optim::NormalEquations;
 use anyhow::{anyhow, bail, Context, Result};
@@ -31,12 +32,99 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct GpuSample {
-    wi: [f32; 4],
-    wo: [f32; 4],
-    ext: [f32; 4],
+/// How samples become the kernels' records (`Record` in shaders/engine/kernel.wgsl):
+/// one per direction, plane, inner factor a and block of up to CB channels, holding ωi,
+/// the first scalar-view group, ωo, a, and per channel slot (v, w): v = y for SMAPE and
+/// g(y) otherwise, w the loss weight, −1 where the slot has no sample. Beside them, per
+/// slot, the sample's index in its problem or `NO_SAMPLE`.
+struct RecordLayout {
+    /// CB: channel slots per record.
+    slots: usize,
+}
+
+const NO_SAMPLE: u32 = u32::MAX;
+
+impl RecordLayout {
+    fn of(model: &Model) -> RecordLayout {
+        RecordLayout {
+            slots: wgsl::record_channels(model),
+        }
+    }
+
+    /// f32 per record: ωi and ωo (a texel each), then two channel slots per texel.
+    fn floats(&self) -> usize {
+        4 * wgsl::record_texels(self.slots)
+    }
+
+    /// The records as an RGBA32F texture of `wgsl::RECORDS_PER_ROW` records per row (fewer
+    /// where there are fewer), padded to whole rows: (width, height) in texels.
+    fn texture_size(&self, records: usize) -> (u32, u32) {
+        let texels = wgsl::record_texels(self.slots);
+        let width = records.clamp(1, wgsl::RECORDS_PER_ROW) * texels;
+        let height = records.div_ceil(wgsl::RECORDS_PER_ROW).max(1);
+        (width as u32, height as u32)
+    }
+
+    /// Append the records of one data set: a record per (ωi, ωo bit for bit, plane, a,
+    /// channel block) in the order of their first sample, and another wherever a
+    /// channel is measured again at the same direction (each repeat its own record, as
+    /// each is its own term of the loss).
+    fn write(
+        &self,
+        model: &Model,
+        data: &crate::data::Dataset,
+        terms: &LossTerms,
+        records: &mut Vec<f32>,
+        index: &mut Vec<u32>,
+    ) {
+        let cb = self.slots;
+        let first = records.len() / self.floats();
+        let index_start = index.len();
+        let mut at: HashMap<([u64; 7], usize, usize), usize> = HashMap::new();
+        for (k, s) in data.samples.iter().enumerate() {
+            let (wi, wo) = (s.wi(), s.wo());
+            let g = model.group_of(s);
+            let (plane, ch) = (g / model.channels, g % model.channels);
+            let g0 = plane * model.channels + (ch / cb) * cb;
+            let a = terms.a[k];
+            let key = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, a].map(f64::to_bits);
+            let mut repeat = 0;
+            let rec = loop {
+                let r = *at.entry((key, g0, repeat)).or_insert_with(|| {
+                    let r = records.len() / self.floats();
+                    records.extend_from_slice(&[
+                        wi.x as f32,
+                        wi.y as f32,
+                        wi.z as f32,
+                        f32::from_bits(g0 as u32),
+                        wo.x as f32,
+                        wo.y as f32,
+                        wo.z as f32,
+                        a as f32,
+                    ]);
+                    let slots = records.len();
+                    records.resize(slots + self.floats() - 8, 0.0);
+                    for slot in 0..cb {
+                        records[slots + 2 * slot + 1] = -1.0;
+                    }
+                    index.extend(std::iter::repeat_n(NO_SAMPLE, cb));
+                    r
+                });
+                if index[index_start + (r - first) * cb + ch % cb] == NO_SAMPLE {
+                    break r;
+                }
+                repeat += 1;
+            };
+            let slot = ch % cb;
+            index[index_start + (rec - first) * cb + slot] = k as u32;
+            let v = match terms.term {
+                Term::AbsRatio => s.value,
+                Term::Square | Term::LogSquare => terms.transform(k, s.value),
+            };
+            let o = rec * self.floats() + 8 + 2 * slot;
+            records[o..o + 2].copy_from_slice(&[v as f32, terms.w[k] as f32]);
+        }
+    }
 }
 
 #[repr(C)]
@@ -168,7 +256,20 @@ impl GpuBackend {
                     },
                     count: None,
                 },
-                storage(1, true),
+                // The sample records: a texture, since llvmpipe (Mesa 22) loads from a
+                // storage buffer lane by lane through memory at ≈ 15 cycles a scalar
+                // (measured with perf: the kernel's bound on lavapipe), while it fetches
+                // texels as vectors (src/engine/gpu.rs, RecordLayout).
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
                 storage(2, true),
                 storage(3, true),
                 storage(4, false),
@@ -263,7 +364,7 @@ impl GpuBackend {
 
     fn pipelines(
         &self,
-        model: &crate::bsdf::Model,
+        model: &Model,
         term: Term,
         finish: Finish,
         shape: Shape,
@@ -352,7 +453,9 @@ impl Backend for GpuBackend {
         f32::EPSILON as f64 / 2.0
     }
     fn max_batch_samples(&self) -> usize {
-        (self.max_binding() / std::mem::size_of::<GpuSample>() as u64) as usize
+        // A sample takes at most a record of its own; the tables an index per slot.
+        let rows = self.limits.max_texture_dimension_2d as usize;
+        (rows * wgsl::RECORDS_PER_ROW).min((self.max_binding() / 4) as usize / wgsl::MAX_RECORD_CHANNELS)
     }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;
@@ -377,45 +480,30 @@ impl Backend for GpuBackend {
             self.shape
         };
         let pipes = self.pipelines(model, terms[0].term, terms[0].finish, shape)?;
-        let groups = model.groups();
-        let mut slots =
-            Vec::with_capacity(model.scalar_count() * groups + (groups + 1) * problems.len());
-        for g in 0..groups {
-            for j in 0..model.scalar_count() {
-                slots.push(model.slot(j, g) as u32);
-            }
-        }
-        let mut samples: Vec<GpuSample> = Vec::with_capacity(total);
+        let layout = RecordLayout::of(model);
+        let mut records: Vec<f32> = Vec::new();
+        let mut ranges: Vec<u32> = Vec::with_capacity(3 * problems.len());
+        let mut index: Vec<u32> = Vec::new();
         for (problem, terms) in problems.iter().zip(&terms) {
-            // Sort by channel (stable) so the kernel's channel loop is outermost; the
-            // original index travels with each sample for the `values` output.
-            let group: Vec<usize> = problem
-                .data
-                .samples
-                .iter()
-                .map(|s| model.group_of(s))
-                .collect();
-            let mut order: Vec<usize> = (0..problem.data.len()).collect();
-            order.sort_by_key(|&k| group[k]);
-            let base = samples.len() as u32;
-            for g in 0..=groups {
-                slots.push(base + group.iter().filter(|&&x| x < g).count() as u32);
-            }
-            samples.extend(order.iter().map(|&k| {
-                let s = &problem.data.samples[k];
-                let (wi, wo) = (s.wi(), s.wo());
-                GpuSample {
-                    wi: [wi.x as f32, wi.y as f32, wi.z as f32, terms.w[k] as f32],
-                    wo: [wo.x as f32, wo.y as f32, wo.z as f32, terms.a[k] as f32],
-                    ext: [
-                        s.value as f32,
-                        terms.transform(k, s.value) as f32,
-                        group[k] as f32,
-                        f32::from_bits(k as u32),
-                    ],
-                }
-            }));
+            let first = (records.len() / layout.floats()) as u32;
+            layout.write(model, problem.data, terms, &mut records, &mut index);
+            ranges.extend([
+                first,
+                (records.len() / layout.floats()) as u32,
+                problem.data.len() as u32,
+            ]);
         }
+        let n_records = records.len() / layout.floats();
+        let (width, height) = layout.texture_size(n_records);
+        anyhow::ensure!(
+            height <= self.limits.max_texture_dimension_2d,
+            "the {total} samples of this batch take {n_records} GPU records, more than a \
+             texture of {} rows holds (split the problems)",
+            self.limits.max_texture_dimension_2d
+        );
+        records.resize((width * height * 4) as usize, 0.0);
+        let mut tables = ranges;
+        tables.extend(index);
         let lut: Vec<f32> = model
             .nodes()
             .iter()
@@ -430,8 +518,27 @@ impl Backend for GpuBackend {
                 })
         };
         let storage = wgpu::BufferUsages::STORAGE;
-        let samples_buf = init("samples", bytemuck::cast_slice(&samples), storage);
-        let slots_buf = init("slots", bytemuck::cast_slice(&slots), storage);
+        let records_tex = self.device.create_texture_with_data(
+            &self.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("records"),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&records),
+        );
+        let records_view = records_tex.create_view(&Default::default());
+        let tables_buf = init("tables", bytemuck::cast_slice(&tables), storage);
         let lut_buf = init("lut", bytemuck::cast_slice(&lut), storage);
         let dims_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("dims"),
@@ -446,8 +553,8 @@ impl Backend for GpuBackend {
             terms,
             pipes,
             shape,
-            samples_buf,
-            slots_buf,
+            records_view,
+            tables_buf,
             lut_buf,
             dims_buf,
             io: None,
@@ -480,8 +587,8 @@ pub struct GpuEvaluator<'a> {
     /// The shape `pipes` were compiled for: the backend's, until a CPU device cuts its
     /// loops short (`LOOPS_CUT_SHORT`), then `Shape::LONG_DATA`.
     shape: Shape,
-    samples_buf: wgpu::Buffer,
-    slots_buf: wgpu::Buffer,
+    records_view: wgpu::TextureView,
+    tables_buf: wgpu::Buffer,
     lut_buf: wgpu::Buffer,
     dims_buf: wgpu::Buffer,
     io: Option<IoBuffers>,
@@ -580,8 +687,11 @@ impl GpuEvaluator<'_> {
             layout: &self.gpu.layout,
             entries: &[
                 entry(0, &self.dims_buf),
-                entry(1, &self.samples_buf),
-                entry(2, &self.slots_buf),
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&self.records_view),
+                },
+                entry(2, &self.tables_buf),
                 entry(3, &params),
                 entry(4, &out),
                 entry(5, &self.lut_buf),

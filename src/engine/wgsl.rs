@@ -13,14 +13,13 @@ pub const LANES_PLAIN: &str = include_str!("../../shaders/engine/lanes_plain.wgs
 pub const LANES_SUBGROUP: &str = include_str!("../../shaders/engine/lanes_subgroup.wgsl");
 
 /// How threads map to work (shaders/engine/lanes_*.wgsl): workgroups of `lanes`
-/// candidate lanes × `slices` sample slices, `per_thread` candidates per thread, and
-/// whether a subgroup loads samples once per tile and passes them round
-/// (lanes_subgroup.wgsl; needs the device's subgroup feature).
+/// candidate lanes × `slices` record slices, and whether a subgroup loads records once
+/// per tile and passes them round (lanes_subgroup.wgsl; needs the device's subgroup
+/// feature).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Shape {
     pub lanes: u32,
     pub slices: u32,
-    pub per_thread: u32,
     pub subgroup_tiles: bool,
 }
 
@@ -30,18 +29,13 @@ impl Shape {
     pub const CPU_DEVICE: Shape = Shape {
         lanes: 64,
         slices: 1,
-        per_thread: 1,
         subgroup_tiles: false,
     };
-    /// SIMD CPU devices with subgroups (lavapipe has them): samples loaded once per
-    /// subgroup tile. One candidate per thread: more run faster (4: ggx 1.1e8 → 2.1e8
-    /// evals/s on lavapipe, 16: 2.9e8) but lavapipe then takes 13× longer to compile the
-    /// pipelines (the parity test of every model: 11 s → 142 s), and they multiply the
-    /// loop iterations of a thread, which llvmpipe caps (kernel.wgsl, `loops_completed`).
+    /// SIMD CPU devices with subgroups (lavapipe has them): records loaded once per
+    /// subgroup tile.
     pub const CPU_DEVICE_TILED: Shape = Shape {
         lanes: 64,
         slices: 1,
-        per_thread: 1,
         subgroup_tiles: true,
     };
     /// Where a CPU device cut a one-slice kernel's loops short (a data set too large for
@@ -50,14 +44,12 @@ impl Shape {
     pub const LONG_DATA: Shape = Shape {
         lanes: 8,
         slices: 32,
-        per_thread: 1,
         subgroup_tiles: false,
     };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
         slices: 8,
-        per_thread: 1,
         subgroup_tiles: false,
     };
 
@@ -72,7 +64,7 @@ impl Shape {
 
     /// Candidates per workgroup.
     pub fn candidates_per_workgroup(&self) -> u32 {
-        self.lanes * self.per_thread
+        self.lanes
     }
 }
 
@@ -180,26 +172,150 @@ pub fn normal_lanes(p: usize, shape: Shape) -> u32 {
     ((p + 1).next_multiple_of(8) as u32).min(shape.lanes)
 }
 
+/// Most channels of one direction a sample record holds (`CB` in the kernels): a
+/// record's channels are evaluated together, unrolled, so the shader compiler shares what
+/// does not depend on the rgb parameters (half vector, D, G, Fresnel…) between them;
+/// RGB and monochrome data fit one record per direction, spectral data take several.
+pub const MAX_RECORD_CHANNELS: usize = 4;
+
+/// Records per row of the records texture (`RPR` in the kernels); a row is then at most
+/// 4,096 texels wide, within every device's limit.
+pub const RECORDS_PER_ROW: usize = 1024;
+
+/// Texels (RGBA32F) per record of `slots` channel slots: ωi (and the first group), ωo (and
+/// a), then two slots (v, w) per texel.
+pub fn record_texels(slots: usize) -> usize {
+    2 + slots.div_ceil(2)
+}
+
+/// Channels per sample record for `model`: its channel count, at most
+/// [`MAX_RECORD_CHANNELS`].
+pub fn record_channels(model: &Model) -> usize {
+    model.channels.clamp(1, MAX_RECORD_CHANNELS)
+}
+
+/// Scalar-view groups the private parameter array holds per candidate (`GP`): every
+/// group, and room for a record whose first group is the last one (its channel slots
+/// past the model's channels read zeros and are never used).
+pub fn padded_groups(model: &Model) -> usize {
+    let cb = record_channels(model);
+    if fixed_base(model) {
+        cb
+    } else {
+        model.groups() + cb
+    }
+}
+
+/// Whether every record starts at group 0 (one plane and at most one record per
+/// direction): the kernels then index the parameter views with constants only, which lets
+/// the compiler keep them in registers and share the channels' common factors.
+fn fixed_base(model: &Model) -> bool {
+    model.groups() == model.channels && model.channels <= MAX_RECORD_CHANNELS
+}
+
+/// The generated, unrolled helpers a module's kernels call per sample record (WGSL has
+/// no generics and every loop iteration counts against llvmpipe's loop limit, so the
+/// per-channel code is written out here, CB times):
+/// - `load_params(c)`: candidate c's flat vector into its views in P, each
+///   flat entry loaded once and stored to every view that uses it (a parameter shared by
+///   the channels is then one value the compiler can see is shared);
+/// - `eval_record(wi, wo, b)`: the model at the record's CB channels (views b, b + S, …);
+/// - `record_costs(s, y, obs, a)`: the compensated sum s plus the record's loss terms;
+/// - `record_obs(rec)`: the record's channel slots from the records texture;
+/// - `record_index(rec)`, `store_values(row, y, idx)`: the record's original sample
+///   indices and the scatter of its values to a row of `out` (`values` pass);
+/// - under subgroup tiles, `shuffle_obs`/`shuffle_index`: a record's per-channel data
+///   passed round a subgroup.
+pub fn record_source(model: &Model, shape: Shape) -> String {
+    let s = model.scalar_count();
+    let cb = record_channels(model);
+    let mut src = String::from(
+        "// ---- generated: per-record helpers (src/engine/wgsl.rs, record_source)\n",
+    );
+    // load_params: group g's view at P[g·S].
+    src += "fn load_params(c: u32) {\n    let base = c * dims.dim;\n";
+    let mut users: Vec<(usize, Vec<usize>)> = Vec::new();
+    for g in 0..model.groups() {
+        for j in 0..s {
+            let flat = model.slot(j, g);
+            match users.iter_mut().find(|(f, _)| *f == flat) {
+                Some((_, v)) => v.push(g * s + j),
+                None => users.push((flat, vec![g * s + j])),
+            }
+        }
+    }
+    for (flat, views) in &users {
+        src += &format!("    let v{flat} = params[base + {flat}u];\n");
+        for v in views {
+            src += &format!("    P[{v}u] = v{flat};\n");
+        }
+    }
+    src += "}\n\n";
+    let list = |f: &dyn Fn(usize) -> String| (0..cb).map(f).collect::<Vec<_>>().join(", ");
+    src += &format!(
+        "fn eval_record(wi: vec3<f32>, wo: vec3<f32>, b: u32) -> array<f32, CB> {{\n    return array<f32, CB>({});\n}}\n\n",
+        list(&|i| format!("eval_model(wi, wo, b + {}u)", i * s))
+    );
+    src += "fn record_costs(s: vec2<f32>, y: array<f32, CB>, obs: array<vec2<f32>, CB>, a: f32) -> vec2<f32> {\n    var t = s;\n";
+    for i in 0..cb {
+        src += &format!("    t = add_term(t, y[{i}], obs[{i}], a);\n");
+    }
+    src += "    return t;\n}\n\n";
+    src += &format!(
+        "fn record_index(rec: u32) -> array<u32, CB> {{\n    let i = index_base() + rec * CB;\n    return array<u32, CB>({});\n}}\n\n",
+        list(&|i| format!("tables[i + {i}u]"))
+    );
+    src += "fn store_values(row: u32, y: array<f32, CB>, idx: array<u32, CB>) {\n";
+    for i in 0..cb {
+        src += &format!(
+            "    if (idx[{i}] != NO_SAMPLE) {{\n        out[row + idx[{i}]] = y[{i}];\n    }}\n"
+        );
+    }
+    src += "}\n";
+    let texels = record_texels(cb);
+    src += "\nfn record_obs(r: u32) -> array<vec2<f32>, CB> {\n";
+    for t in 2..texels {
+        src += &format!("    let t{t} = record_texel(r, {t}u);\n");
+    }
+    src += &format!(
+        "    return array<vec2<f32>, CB>({});\n}}\n",
+        list(&|i| format!("t{}.{}", 2 + i / 2, if i % 2 == 0 { "xy" } else { "zw" }))
+    );
+    if shape.subgroup_tiles {
+        for (name, ty) in [("shuffle_obs", "vec2<f32>"), ("shuffle_index", "u32")] {
+            src += &format!(
+                "\nfn {name}(x: array<{ty}, CB>, j: u32) -> array<{ty}, CB> {{\n    return array<{ty}, CB>({});\n}}\n",
+                list(&|i| format!("subgroupShuffle(x[{i}], j)"))
+            );
+        }
+    }
+    src
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
-    // C counts scalar-view groups: channels, times planes under `+peraxis`.
-    let c = model.groups();
+    // G counts scalar-view groups: channels, times planes under `+peraxis`.
+    let g = model.groups();
     let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst C: u32 = {c}u;\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst CPT: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
-        c,
+        model.channels,
+        record_channels(model),
+        record_texels(record_channels(model)),
+        RECORDS_PER_ROW,
+        padded_groups(model),
+        fixed_base(model),
         shape.lanes,
         shape.slices,
-        shape.per_thread,
         term_code(term),
         finish_code(finish),
         p * (p + 1) / 2,
         normal_entries(p),
         normal_lanes(p, shape),
         (p + 1).div_ceil(normal_lanes(p, shape) as usize),
-        (s * c * shape.per_thread as usize).max(1)
+        (s * padded_groups(model)).max(1)
     );
     src += COMMON;
     src += all_accessors();
@@ -215,6 +331,8 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     }
     src += "\n";
     src += &eval_model_source(model);
+    src += "\n";
+    src += &record_source(model, shape);
     src += "\n";
     src += LOSS;
     src += "\n";
