@@ -455,7 +455,8 @@ impl Backend for GpuBackend {
     fn max_batch_samples(&self) -> usize {
         // A sample takes at most a record of its own; the tables an index per slot.
         let rows = self.limits.max_texture_dimension_2d as usize;
-        (rows * wgsl::RECORDS_PER_ROW).min((self.max_binding() / 4) as usize / wgsl::MAX_RECORD_CHANNELS)
+        (rows * wgsl::RECORDS_PER_ROW)
+            .min((self.max_binding() / 4) as usize / wgsl::MAX_RECORD_CHANNELS)
     }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;

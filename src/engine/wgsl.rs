@@ -229,9 +229,8 @@ fn fixed_base(model: &Model) -> bool {
 pub fn record_source(model: &Model, shape: Shape) -> String {
     let s = model.scalar_count();
     let cb = record_channels(model);
-    let mut src = String::from(
-        "// ---- generated: per-record helpers (src/engine/wgsl.rs, record_source)\n",
-    );
+    let mut src =
+        String::from("// ---- generated: per-record helpers (src/engine/wgsl.rs, record_source)\n");
     // load_params: group g's view at P[g·S].
     src += "fn load_params(c: u32) {\n    let base = c * dims.dim;\n";
     let mut users: Vec<(usize, Vec<usize>)> = Vec::new();
