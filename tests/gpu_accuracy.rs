@@ -310,7 +310,7 @@ fn gpu_gg_g1(points: &[[f32; 4]]) -> Vec<f32> {
             .expect("a device");
     let source = format!(
         "var<private> P: array<f32, 8>;\n\
-         @group(0) @binding(0) var<storage, read> LUT: array<f32>;\n\
+         @group(0) @binding(0) var<storage, read> LUT: array<f32>;\nfn lut(k: u32) -> f32 {{ return LUT[k]; }}\n\
          @group(0) @binding(1) var<storage, read> pts: array<vec4<f32>>;\n\
          @group(0) @binding(2) var<storage, read_write> g1: array<f32>;\n{}\n{}\n{}\n\
          @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {{\n\

@@ -78,9 +78,9 @@ fn gtr_d_vec(m: vec3<f32>, alpha: f32, gamma: f32) -> f32 {
 }
 
 // Generalized Gaussian (Holzschuch & Pacanowski 2017) with its Smith G1 from the Lambda
-// table. requires: var<storage, read> LUT: array<f32>;  declared by the engine, holding
-// LambdaTable::to_f32() from index 0 when the model has a GG term (layout and grid: see
-// LambdaTable in src/bsdf/microfacet.rs): LUT[(ip + 1) * GG_NA_STRIDE + ia + 1] for grid
+// table. requires: fn lut(k: u32) -> f32, declared by the engine, returning entry k of
+// LambdaTable::to_f32() when the model has a GG term (layout and grid: see LambdaTable in
+// src/bsdf/microfacet.rs): lut((ip + 1) * GG_NA_STRIDE + ia + 1) for grid
 // node ip <-> ln p uniform on [ln 0.2, ln 5] (GG_NP points), ia <-> x = b/(1+b) uniform on
 // [0, 1] (GG_NA points), with one ghost row/column stored on each side for the bicubic
 // stencil; b = r_c(p) * beta * tan(theta); value T = Lambda / (J0(p) (a + 1/r_c(p))).
@@ -91,16 +91,19 @@ const GG_NA_STRIDE: u32 = 131u;
 const GG_LNP_LO: f32 = -1.6094379124341003;
 const GG_LNP_HI: f32 = 1.6094379124341003;
 
-// ln Gamma(x), x > 0: upward recurrence to z >= 10, then Stirling's series to 1/z^9. No
+// ln Gamma(x), x > 0: ten steps of the upward recurrence, Gamma(x) = Gamma(x + 10) /
+// (x (x + 1) … (x + 9)), then Stirling's series at z = x + 10 >= 10 to 1/z^9. No
 // cancellation-prone coefficients, so f32 keeps ~1e-6 relative accuracy in Gamma over the
-// range used (0.2 <= x <= 7.5). The CPU side uses crate::math::ln_gamma (Lanczos, f64).
+// range used (0.2 <= x <= 7.5; the product stays below 1e12). A fixed count rather than
+// "until z >= 10": the compiler unrolls it, where a data-dependent loop costs masked
+// iterations on SIMD CPU devices and counts against llvmpipe's loop limit (kernel.wgsl).
+// The CPU side uses crate::math::ln_gamma (Lanczos, f64).
 fn gg_ln_gamma(x: f32) -> f32 {
-    var z = x;
     var prod = 1.0;
-    for (var k = 0; k < 12 && z < 10.0; k = k + 1) {
-        prod = prod * z;
-        z = z + 1.0;
+    for (var k = 0; k < 10; k = k + 1) {
+        prod = prod * (x + f32(k));
     }
+    let z = x + 10.0;
     let zi = 1.0 / z;
     let zi2 = zi * zi;
     let series = zi * (1.0 / 12.0 - zi2 * (1.0 / 360.0 - zi2 * (1.0 / 1260.0 - zi2 * (1.0 / 1680.0 - zi2 * (1.0 / 1188.0)))));
@@ -145,7 +148,7 @@ fn gg_table(p: f32, x: f32) -> f32 {
     var t = 0.0;
     for (var i = 0u; i < 4u; i = i + 1u) {
         let k = (ip + i) * GG_NA_STRIDE + ia;
-        let r = wa.x * LUT[k] + wa.y * LUT[k + 1u] + wa.z * LUT[k + 2u] + wa.w * LUT[k + 3u];
+        let r = wa.x * lut(k) + wa.y * lut(k + 1u) + wa.z * lut(k + 2u) + wa.w * lut(k + 3u);
         t = t + wp[i] * r;
     }
     // Cubic overshoot where T leaves 0 must not make Lambda negative (G1 > 1).

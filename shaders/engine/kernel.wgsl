@@ -50,8 +50,9 @@ struct Dims {
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
-// Lookup table of models that need one (GG's Smith Λ); a single zero otherwise.
-@group(0) @binding(5) var<storage, read> LUT: array<f32>;
+// Lookup table of models that need one (GG's Smith Λ), LUT_WIDTH entries per row of an
+// R32F texture (fetched as vectors on CPU devices, like the records); a zero otherwise.
+@group(0) @binding(5) var LUT: texture_2d<f32>;
 // owners[2c] = the problem of candidate c; owners[2c + 1] = where its row of model values
 // starts in `out` (values entry point only).
 @group(0) @binding(6) var<storage, read> owners: array<u32>;
@@ -59,6 +60,13 @@ struct Dims {
 @group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
 
 const NO_SAMPLE: u32 = 0xffffffffu;
+
+const LUT_WIDTH: u32 = 256u;
+
+// Entry k of the lookup table (shaders/bsdf/microfacet.wgsl reads it through this).
+fn lut(k: u32) -> f32 {
+    return textureLoad(LUT, vec2<u32>(k % LUT_WIDTH, k / LUT_WIDTH), 0).x;
+}
 
 fn index_base() -> u32 {
     return 3u * dims.n_problems;

@@ -44,6 +44,9 @@ struct RecordLayout {
 
 const NO_SAMPLE: u32 = u32::MAX;
 
+/// Entries per row of the lookup-table texture (`LUT_WIDTH` in shaders/engine/kernel.wgsl).
+const LUT_WIDTH: usize = 256;
+
 impl RecordLayout {
     fn of(model: &Model) -> RecordLayout {
         RecordLayout {
@@ -273,7 +276,16 @@ impl GpuBackend {
                 storage(2, true),
                 storage(3, true),
                 storage(4, false),
-                storage(5, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
                 storage(6, true),
                 storage(7, false),
             ],
@@ -434,6 +446,37 @@ impl GpuBackend {
         })
     }
 
+    /// A read-only 2D texture of `width` × `height` texels of `format` holding `data`.
+    fn texture(
+        &self,
+        label: &str,
+        width: usize,
+        height: usize,
+        format: wgpu::TextureFormat,
+        data: &[f32],
+    ) -> wgpu::TextureView {
+        let texture = self.device.create_texture_with_data(
+            &self.queue,
+            &wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: width as u32,
+                    height: height as u32,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(data),
+        );
+        texture.create_view(&Default::default())
+    }
+
     fn max_binding(&self) -> u64 {
         self.limits
             .max_storage_buffer_binding_size
@@ -519,28 +562,24 @@ impl Backend for GpuBackend {
                 })
         };
         let storage = wgpu::BufferUsages::STORAGE;
-        let records_tex = self.device.create_texture_with_data(
-            &self.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("records"),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&records),
+        let records_view = self.texture(
+            "records",
+            width as usize,
+            height as usize,
+            wgpu::TextureFormat::Rgba32Float,
+            &records,
         );
-        let records_view = records_tex.create_view(&Default::default());
         let tables_buf = init("tables", bytemuck::cast_slice(&tables), storage);
-        let lut_buf = init("lut", bytemuck::cast_slice(&lut), storage);
+        let mut lut = lut;
+        let lut_rows = lut.len().div_ceil(LUT_WIDTH).max(1);
+        lut.resize(lut_rows * LUT_WIDTH, 0.0);
+        let lut_view = self.texture(
+            "lut",
+            LUT_WIDTH,
+            lut_rows,
+            wgpu::TextureFormat::R32Float,
+            &lut,
+        );
         let dims_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("dims"),
             size: std::mem::size_of::<Dims>() as u64,
@@ -556,7 +595,7 @@ impl Backend for GpuBackend {
             shape,
             records_view,
             tables_buf,
-            lut_buf,
+            lut_view,
             dims_buf,
             io: None,
             evaluations: vec![0; problems.len()],
@@ -590,7 +629,7 @@ pub struct GpuEvaluator<'a> {
     shape: Shape,
     records_view: wgpu::TextureView,
     tables_buf: wgpu::Buffer,
-    lut_buf: wgpu::Buffer,
+    lut_view: wgpu::TextureView,
     dims_buf: wgpu::Buffer,
     io: Option<IoBuffers>,
     /// Model-sample evaluations per problem.
@@ -695,7 +734,10 @@ impl GpuEvaluator<'_> {
                 entry(2, &self.tables_buf),
                 entry(3, &params),
                 entry(4, &out),
-                entry(5, &self.lut_buf),
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(&self.lut_view),
+                },
                 entry(6, &owners),
                 entry(7, &normal),
             ],
