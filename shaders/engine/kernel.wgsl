@@ -44,9 +44,7 @@ struct Dims {
 @group(0) @binding(1) var records: texture_2d<f32>;
 // Per problem q (several independent fits share a dispatch, their records one after the
 // other): tables[3q] = its first record, tables[3q + 1] = one past its last,
-// tables[3q + 2] = its number of samples K_q. Then, from index_base(), CB entries per
-// record: the original index of each channel slot's sample within its problem, or
-// NO_SAMPLE.
+// tables[3q + 2] = its number of samples K_q.
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
@@ -58,6 +56,9 @@ struct Dims {
 @group(0) @binding(6) var<storage, read> owners: array<u32>;
 // The `normal` pass's output: NE numbers per group of dim + 1 candidates (normal.wgsl).
 @group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
+// Texel r (RPR per row): the original index, within its problem, of the sample in each
+// channel slot of record r, or NO_SAMPLE.
+@group(0) @binding(8) var indices: texture_2d<u32>;
 
 const NO_SAMPLE: u32 = 0xffffffffu;
 
@@ -68,8 +69,8 @@ fn lut(k: u32) -> f32 {
     return textureLoad(LUT, vec2<u32>(k % LUT_WIDTH, k / LUT_WIDTH), 0).x;
 }
 
-fn index_base() -> u32 {
-    return 3u * dims.n_problems;
+fn record_indices(r: u32) -> vec4<u32> {
+    return textureLoad(indices, vec2<u32>(r % RPR, r / RPR), 0);
 }
 
 // Neumaier's compensated addition (Neumaier 1974, "Rundungsfehleranalyse einiger

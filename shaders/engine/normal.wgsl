@@ -98,7 +98,7 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
         var acc: array<f32, PD + 1u>;
         var comp: array<f32, PD + 1u>;
         for (var k = first + slice(lid); k < end; k = k + SL) {
-            let o = tables[index_base() + k];
+            let o = record_indices(k / CB)[k % CB];
             if (o == NO_SAMPLE) {
                 continue;
             }
@@ -196,7 +196,7 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
     var comp: array<f32, NE>;
     var x: array<f32, PD + 1u>;
     for (var k = first + lid.x; k < end; k = k + NSL) {
-        let o = tables[index_base() + k];
+        let o = record_indices(k / CB)[k % CB];
         if (o == NO_SAMPLE) {
             continue;
         }

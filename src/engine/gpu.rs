@@ -288,6 +288,17 @@ impl GpuBackend {
                 },
                 storage(6, true),
                 storage(7, false),
+                // Per record, the original index of each channel slot's sample.
+                wgpu::BindGroupLayoutEntry {
+                    binding: 8,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -453,7 +464,7 @@ impl GpuBackend {
         width: usize,
         height: usize,
         format: wgpu::TextureFormat,
-        data: &[f32],
+        data: &[u8],
     ) -> wgpu::TextureView {
         let texture = self.device.create_texture_with_data(
             &self.queue,
@@ -472,7 +483,7 @@ impl GpuBackend {
                 view_formats: &[],
             },
             wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(data),
+            data,
         );
         texture.create_view(&Default::default())
     }
@@ -546,8 +557,16 @@ impl Backend for GpuBackend {
             self.limits.max_texture_dimension_2d
         );
         records.resize((width * height * 4) as usize, 0.0);
-        let mut tables = ranges;
-        tables.extend(index);
+        let tables = ranges;
+        // The indices as one RGBA32U texel per record (slots past CB unused).
+        let mut texels = vec![
+            NO_SAMPLE;
+            4 * (width / wgsl::record_texels(layout.slots) as u32 * height)
+                as usize
+        ];
+        for (r, slots) in index.chunks(layout.slots).enumerate() {
+            texels[4 * r..4 * r + layout.slots].copy_from_slice(slots);
+        }
         let lut: Vec<f32> = model
             .nodes()
             .iter()
@@ -567,7 +586,14 @@ impl Backend for GpuBackend {
             width as usize,
             height as usize,
             wgpu::TextureFormat::Rgba32Float,
-            &records,
+            bytemuck::cast_slice(&records),
+        );
+        let index_view = self.texture(
+            "indices",
+            (width / wgsl::record_texels(layout.slots) as u32) as usize,
+            height as usize,
+            wgpu::TextureFormat::Rgba32Uint,
+            bytemuck::cast_slice(&texels),
         );
         let tables_buf = init("tables", bytemuck::cast_slice(&tables), storage);
         let mut lut = lut;
@@ -578,7 +604,7 @@ impl Backend for GpuBackend {
             LUT_WIDTH,
             lut_rows,
             wgpu::TextureFormat::R32Float,
-            &lut,
+            bytemuck::cast_slice(&lut),
         );
         let dims_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("dims"),
@@ -594,6 +620,7 @@ impl Backend for GpuBackend {
             pipes,
             shape,
             records_view,
+            index_view,
             tables_buf,
             lut_view,
             dims_buf,
@@ -628,6 +655,7 @@ pub struct GpuEvaluator<'a> {
     /// loops short (`LOOPS_CUT_SHORT`), then `Shape::LONG_DATA`.
     shape: Shape,
     records_view: wgpu::TextureView,
+    index_view: wgpu::TextureView,
     tables_buf: wgpu::Buffer,
     lut_view: wgpu::TextureView,
     dims_buf: wgpu::Buffer,
@@ -737,6 +765,10 @@ impl GpuEvaluator<'_> {
                 wgpu::BindGroupEntry {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(&self.lut_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: wgpu::BindingResource::TextureView(&self.index_view),
                 },
                 entry(6, &owners),
                 entry(7, &normal),

@@ -261,8 +261,8 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
     }
     src += "    return t;\n}\n\n";
     src += &format!(
-        "fn record_index(rec: u32) -> array<u32, CB> {{\n    let i = index_base() + rec * CB;\n    return array<u32, CB>({});\n}}\n\n",
-        list(&|i| format!("tables[i + {i}u]"))
+        "fn record_index(rec: u32) -> array<u32, CB> {{\n    let i = record_indices(rec);\n    return array<u32, CB>({});\n}}\n\n",
+        list(&|i| format!("i.{}", ["x", "y", "z", "w"][i]))
     );
     src += "fn store_values(row: u32, y: array<f32, CB>, idx: array<u32, CB>) {\n";
     for i in 0..cb {
