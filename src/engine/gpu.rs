@@ -5,6 +5,18 @@
 //! buffers are reused across optimizer iterations and grown only when a larger batch
 //! arrives.
 //!
+//! **Channels together, data in textures.** The samples are uploaded as records, one per
+//! direction, plane and block of up to four channels ([`RecordLayout`]); a thread
+//! evaluates a record's channels in one unrolled call (`eval_record`, generated in
+//! [`super::wgsl::record_source`]), so the compiler computes what the channels share
+//! (half vector, D, G, Fresnel…) once. The records, their sample indices and GG's lookup
+//! table are sampled textures, not storage buffers: Mesa 22's llvmpipe (lavapipe) loads a
+//! storage buffer lane by lane through the stack, about 15 cycles a scalar (perf showed
+//! 14 such loads per record as the kernel's whole cost), while it fetches texels with
+//! vector gathers. Measured on lavapipe (2-core AMD EPYC, RGB set of 1,143 rows, evals/s):
+//! `lambert` 1.7e8 → 2.5e8 (channels together) → 8.3e8 (textures), `ggx` 1.2e8 → 1.6e8
+//! → 3.2e8.
+//!
 //! Levenberg–Marquardt's normal equations are reduced on the device too: one submission
 //! runs the `values` pass over every group of P + 1 candidates (a restart's point and its
 //! P forward-difference neighbours), whose model values stay in the `out` buffer, then the
