@@ -8,13 +8,14 @@
 //! sample from `Model::eval` on data whose rows are shuffled (channel-major, repeated
 //! measurements, directions on two planes).
 
+mod common;
+
 use bsdfit::bsdf::{every_spec, Model};
-use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::data::{Dataset, Kind, RawRow};
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::engine::{normal_equations_of_values, Backend, Problem};
 use glam::DVec3;
-use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
@@ -197,20 +198,7 @@ fn shuffled_dataset(kind: Kind, seed: u64) -> Dataset {
             }
         }
     }
-    rows.shuffle(&mut rng);
-    let rows: Vec<(usize, RawRow)> = rows
-        .into_iter()
-        .enumerate()
-        .map(|(i, r)| (i + 1, r))
-        .collect();
-    Dataset::from_rows(
-        kind,
-        "shuffled",
-        &rows,
-        "<shuffled>",
-        &ReadOptions::default(),
-    )
-    .unwrap()
+    common::shuffled_dataset(kind, rows, &mut rng, "shuffled")
 }
 
 fn close(a: f64, b: f64, rel: f64) -> bool {

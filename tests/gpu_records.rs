@@ -9,14 +9,15 @@
 //! within REL = 2e-3 relative (FLOOR = 1e-30 sr⁻¹ for values below f32's range), costs
 //! within 1e-3 relative. NaN never passes.
 
+mod common;
+
 use bsdfit::bsdf::Model;
-use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::data::{Dataset, Kind, RawRow};
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::engine::wgsl::Shape;
 use bsdfit::engine::{Backend, Problem};
-use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -62,14 +63,7 @@ fn untidy(kind: Kind, wavelengths: &[f64], planes: &[f64], directions: usize) ->
             }
         }
     }
-    rows.shuffle(&mut rng);
-    let rows: Vec<(usize, RawRow)> = rows
-        .into_iter()
-        .enumerate()
-        .map(|(i, r)| (i + 1, r))
-        .collect();
-    Dataset::from_rows(kind, "untidy", &rows, "<untidy>", &ReadOptions::default())
-        .expect("valid data")
+    common::shuffled_dataset(kind, rows, &mut rng, "untidy")
 }
 
 fn close(a: f64, b: f64, rel: f64, floor: f64) -> bool {

@@ -40,9 +40,21 @@ fn residual_g(v: f32, a: f32) -> f32 {
     return a * v;
 }
 
-// g(y) of a record's measurement v (records hold y itself for SMAPE, g(y) otherwise).
-fn measured_g(v: f32, a: f32) -> f32 {
-    return select(v, a * v, TERM == 0u);
+// Channel slot k of the records (CB per record): the index of its sample in its problem
+// (NO_SAMPLE: an empty slot), √w, the inner factor a, and g(y) (records hold y itself for
+// SMAPE, whose residuals are those of a y).
+struct ChannelSlot {
+    o: u32,
+    rw: f32,
+    a: f32,
+    gy: f32,
+}
+
+fn channel_slot(k: u32) -> ChannelSlot {
+    let r = k / CB;
+    let v = record_slot(r, k % CB);
+    let a = record_texel(r, 1u).w;
+    return ChannelSlot(record_indices(r)[k % CB], sqrt(v.y), a, select(v.x, a * v.x, TERM == 0u));
 }
 
 // g(y1) − g(y0). For g(v) = a v this is a (y1 − y0): the difference of two f32 values
@@ -98,23 +110,20 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
         var acc: array<f32, PD + 1u>;
         var comp: array<f32, PD + 1u>;
         for (var k = first + slice(lid); k < end; k = k + SL) {
-            let o = record_indices(k / CB)[k % CB];
-            if (o == NO_SAMPLE) {
+            let s = channel_slot(k);
+            if (s.o == NO_SAMPLE) {
                 continue;
             }
-            let s = record_slot(k / CB, k % CB);
-            let a = record_texel(k / CB, 1u).w;
-            let rw = sqrt(s.y);
-            let y0 = out[row0 + o];
-            let r = rw * (residual_g(y0, a) - measured_g(s.x, a));
+            let y0 = out[row0 + s.o];
+            let r = s.rw * (residual_g(y0, s.a) - s.gy);
             var xa = r;
             if (own > 0u) {
-                xa = rw * residual_g_diff(out[row0 + own * kq + o], y0, a);
+                xa = s.rw * residual_g_diff(out[row0 + own * kq + s.o], y0, s.a);
             }
             for (var b = 0u; b <= PD; b = b + 1u) {
                 var xb = r;
                 if (b > 0u) {
-                    xb = rw * residual_g_diff(out[row0 + b * kq + o], y0, a);
+                    xb = s.rw * residual_g_diff(out[row0 + b * kq + s.o], y0, s.a);
                 }
                 let t = xa * xb;
                 let sum = acc[b] + t;
@@ -196,17 +205,14 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
     var comp: array<f32, NE>;
     var x: array<f32, PD + 1u>;
     for (var k = first + lid.x; k < end; k = k + NSL) {
-        let o = record_indices(k / CB)[k % CB];
-        if (o == NO_SAMPLE) {
+        let s = channel_slot(k);
+        if (s.o == NO_SAMPLE) {
             continue;
         }
-        let s = record_slot(k / CB, k % CB);
-        let a = record_texel(k / CB, 1u).w;
-        let rw = sqrt(s.y);
-        let y0 = out[row0 + o];
-        x[0] = rw * (residual_g(y0, a) - measured_g(s.x, a));
+        let y0 = out[row0 + s.o];
+        x[0] = s.rw * (residual_g(y0, s.a) - s.gy);
         for (var j = 1u; j <= PD; j = j + 1u) {
-            x[j] = rw * residual_g_diff(out[row0 + j * kq + o], y0, a);
+            x[j] = s.rw * residual_g_diff(out[row0 + j * kq + s.o], y0, s.a);
         }
         var e = 0u;
         for (var a = 1u; a <= PD; a = a + 1u) {

@@ -9,6 +9,26 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
 
+/// A data set of `rows` in a random order (as measurement files list them), numbered as
+/// lines 1, 2, … of a file `<name>`.
+pub fn shuffled_dataset(
+    kind: bsdfit::data::Kind,
+    mut rows: Vec<bsdfit::data::RawRow>,
+    rng: &mut ChaCha8Rng,
+    name: &str,
+) -> bsdfit::data::Dataset {
+    use rand::seq::SliceRandom;
+    rows.shuffle(rng);
+    let rows: Vec<(usize, bsdfit::data::RawRow)> = rows
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| (i + 1, r))
+        .collect();
+    let file = format!("<{name}>");
+    bsdfit::data::Dataset::from_rows(kind, name, &rows, &file, &Default::default())
+        .expect("valid data")
+}
+
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
