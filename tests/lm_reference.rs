@@ -177,3 +177,85 @@ fn oren_nayar_brdf_fit() {
     let f = |u: &[f64]| obj.borrow_mut().residuals(u).unwrap();
     compare("oren-nayar", model.dim, &[0.5, 0.5, 0.5, 0.5], &f);
 }
+
+#[test]
+fn trial_sums_of_squares_come_from_the_loss_sum() {
+    // LM's trial points take Σr² from the evaluator's loss sum (one number per point)
+    // instead of K residuals. It must equal Σ of the squared residual rows, priors
+    // included, for every finish of a sum-of-squares loss (Σ, mean, √mean) and the
+    // logarithmic term, on both backends. Tolerance: 1e-10 relative on the CPU (f64, a
+    // different summation order), 1e-5 on the GPU (f32 costs against f32 values summed
+    // in f64). NaN never passes.
+    let (model, _, data) = synth_geometry(
+        "on",
+        "rho=0.3:0.5:0.7,sigma=0.6",
+        "inplane10",
+        &[450.0, 550.0, 650.0],
+        (0.015, 1e-4),
+        4,
+    );
+    let (btdf_model, _, btdf_data) = synth_geometry(
+        "btdf(tr)+scale",
+        "scale=0.8,alpha=0.2,eta=1.5",
+        "oblique",
+        &[633.0],
+        (0.02, 1e-4),
+        2,
+    );
+    let spec = bsdfit::inference::constraints::ConstraintSpec {
+        priors: vec!["sigma=0.5:0.1".into()],
+        ..Default::default()
+    };
+    let on_prior =
+        bsdfit::inference::constraints::Constraints::resolve(&model, &spec, false).unwrap();
+    let gpu = bsdfit::engine::gpu::GpuBackend::new().expect("a Vulkan adapter (lavapipe in CI)");
+    let cpu = CpuBackend::new();
+    let backends: [(&dyn Backend, f64); 2] = [(&cpu, 1e-10), (&gpu, 1e-5)];
+    for (backend, tol) in backends {
+        let cases = [
+            (&model, &data, Metric::Chi2, Some(&on_prior)),
+            (&model, &data, Metric::Rmse, None),
+            (&model, &data, Metric::Ngan, None),
+            (&btdf_model, &btdf_data, Metric::Logcosf, None),
+            (&btdf_model, &btdf_data, Metric::F, None),
+        ];
+        for (m, d, metric, prior) in cases {
+            let none = bsdfit::inference::constraints::Constraints::none(m);
+            let space = prior.unwrap_or(&none);
+            let loss = Loss::new(metric, Weights::Invunc);
+            let mut eval = backend
+                .prepare(Problem {
+                    model: m,
+                    data: d,
+                    loss,
+                })
+                .unwrap();
+            let mut obj = UnitBox {
+                model: m,
+                space,
+                eval: eval.as_mut(),
+                loss_terms: vec![loss.terms(d)],
+                start_problem: vec![],
+            };
+            let dim = space.dim();
+            let points: Vec<f64> = (0..4)
+                .flat_map(|i| (0..dim).map(move |j| 0.2 + 0.15 * ((i + j) % 5) as f64))
+                .collect();
+            let sums = obj.sum_squares(&points).unwrap();
+            let rows = obj.residuals(&points).unwrap();
+            let per_point = rows.len() / 4;
+            for (i, s) in sums.iter().enumerate() {
+                let reference: f64 = rows[i * per_point..(i + 1) * per_point]
+                    .iter()
+                    .map(|r| r * r)
+                    .sum();
+                assert!(
+                    s.is_finite() && (s - reference).abs() <= tol * reference,
+                    "{} {metric:?} on {}: Σr² {s}, from the residuals {reference}",
+                    m.spec,
+                    backend.id()
+                );
+            }
+        }
+    }
+}

@@ -3,7 +3,7 @@
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
-use crate::engine::loss::{chi2, Loss};
+use crate::engine::loss::{chi2, Finish, Loss, Term};
 use crate::engine::{Backend, Evaluator, Problem};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::covariance::{covariance, Covariance};
@@ -261,10 +261,37 @@ impl BatchResiduals for UnitBox<'_, '_> {
     fn sum_squares_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
         let problems = self.problems_of(owners);
         let phys = self.to_physical(points);
-        Ok(self
-            .problem_residuals(&problems, &phys)?
+        let squares = !self.loss_terms.is_empty()
+            && self
+                .loss_terms
+                .iter()
+                .all(|t| matches!(t.term, Term::Square | Term::LogSquare));
+        if !squares {
+            return Ok(self
+                .problem_residuals(&problems, &phys)?
+                .iter()
+                .map(|r| crate::optim::sanitize(r.iter().map(|v| v * v).sum()))
+                .collect());
+        }
+        // A sum-of-squares loss's terms are the squared residuals, w (g(y′) − g(y))², so
+        // the data part of Σr² is the loss's own sum: one number per point from the
+        // evaluator (reduced on the device by the GPU engine) instead of K model values
+        // read back. LM's trial points need nothing else.
+        let costs = self.eval.costs_of(&problems, &phys)?;
+        Ok(costs
             .iter()
-            .map(|r| crate::optim::sanitize(r.iter().map(|v| v * v).sum()))
+            .zip(&problems)
+            .zip(phys.chunks(self.model.dim))
+            .map(|((&c, &q), flat)| {
+                let t = &self.loss_terms[q];
+                let k = t.y.len().max(1) as f64;
+                let data = match t.finish {
+                    Finish::Sum => c,
+                    Finish::Mean => c * k,
+                    Finish::SqrtMean => c * c * k,
+                };
+                crate::optim::sanitize(data + self.space.prior_chi2(flat))
+            })
             .collect())
     }
     fn sum_squares(&mut self, points: &[f64]) -> anyhow::Result<Vec<f64>> {
