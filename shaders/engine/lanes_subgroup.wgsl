@@ -44,8 +44,19 @@ fn is_live(inv: Invocation) -> bool {
     return first_candidate(inv.wg) + inv.lid.x < dims.n_candidates;
 }
 
+// Whether no lane of this subgroup holds a candidate (the last workgroup of a small
+// batch): it returns at once rather than shadow the last candidate, whose work the
+// SIMD device would otherwise repeat for every such subgroup. Uniform in the subgroup,
+// and the kernels have no workgroup barrier.
+fn subgroup_idle(inv: Invocation) -> bool {
+    return !subgroupAny(is_live(inv));
+}
+
 @compute @workgroup_size(CL, 1)
 fn costs(inv: Invocation) {
+    if (subgroup_idle(inv)) {
+        return;
+    }
     let c = load_candidate(inv);
     let q = owners[2u * c];
     var acc = vec2<f32>(0.0, 0.0);
@@ -76,6 +87,9 @@ fn costs(inv: Invocation) {
 
 @compute @workgroup_size(CL, 1)
 fn values(inv: Invocation) {
+    if (subgroup_idle(inv)) {
+        return;
+    }
     let c = load_candidate(inv);
     let q = owners[2u * c];
     let row = owners[2u * c + 1u];
