@@ -145,10 +145,8 @@ fn exponential_decay_with_offset() {
     compare("decay", 3, &[0.5, 0.5, 0.5], &f);
 }
 
-#[test]
-fn oren_nayar_brdf_fit() {
-    // A real fitting problem: Oren–Nayar on synthetic in-plane data, residuals from the
-    // CPU backend through the optimizers' unit box (RMSE loss, uniform weights).
+/// Oren–Nayar (RGB ρ, σ = 0.6) on the paper's in-plane geometry, 1.5 % noise.
+fn oren_nayar_data() -> (bsdfit::bsdf::Model, bsdfit::data::Dataset) {
     let (model, _, data) = synth_geometry(
         "on",
         "rho=0.3:0.5:0.7,sigma=0.6",
@@ -157,6 +155,14 @@ fn oren_nayar_brdf_fit() {
         (0.015, 1e-4),
         4,
     );
+    (model, data)
+}
+
+#[test]
+fn oren_nayar_brdf_fit() {
+    // A real fitting problem: Oren–Nayar on synthetic in-plane data, residuals from the
+    // CPU backend through the optimizers' unit box (RMSE loss, uniform weights).
+    let (model, data) = oren_nayar_data();
     let loss = Loss::new(Metric::Rmse, Weights::Uniform);
     let cpu = CpuBackend::new();
     let mut eval = cpu
@@ -186,14 +192,7 @@ fn trial_sums_of_squares_come_from_the_loss_sum() {
     // logarithmic term, on both backends. Tolerance: 1e-10 relative on the CPU (f64, a
     // different summation order), 1e-5 on the GPU (f32 costs against f32 values summed
     // in f64). NaN never passes.
-    let (model, _, data) = synth_geometry(
-        "on",
-        "rho=0.3:0.5:0.7,sigma=0.6",
-        "inplane10",
-        &[450.0, 550.0, 650.0],
-        (0.015, 1e-4),
-        4,
-    );
+    let (model, data) = oren_nayar_data();
     let (btdf_model, _, btdf_data) = synth_geometry(
         "btdf(tr)+scale",
         "scale=0.8,alpha=0.2,eta=1.5",
