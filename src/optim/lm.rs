@@ -1,9 +1,13 @@
 //! Levenberg–Marquardt with Marquardt's diagonal scaling (Moré 1978, "The Levenberg-
 //! Marquardt algorithm: implementation and theory"; as levmar/MINPACK), batched: each
-//! iteration sends the forward-difference Jacobian points of every active restart as one
-//! batch and the trial points as a second. Steps are projected onto the unit box.
+//! iteration sends one batch, the trial point of every active restart with its
+//! forward-difference neighbours, whose normal equations give the trial's Σr² and, if the
+//! step is accepted, the next Jacobian; a rejected step keeps the normal equations of the
+//! point it stays at. So an iteration costs P + 1 evaluations and one submission (a
+//! Jacobian batch and a trial batch cost P + 2 and two, and recomputed an unchanged
+//! Jacobian after each rejected step). Steps are projected onto the unit box.
 
-use super::{BatchResiduals, RestartResult};
+use super::{sanitize, BatchResiduals, NormalEquations, RestartResult};
 use nalgebra::{DMatrix, DVector};
 
 #[derive(Clone, Debug)]
@@ -73,6 +77,8 @@ fn bounded_step(a: &DMatrix<f64>, g: &DVector<f64>, x: &[f64]) -> DVector<f64> {
 struct State {
     x: Vec<f64>,
     ss: f64,
+    /// The normal equations at x.
+    normal: NormalEquations,
     lambda: f64,
     active: bool,
     iterations: usize,
@@ -88,19 +94,33 @@ pub fn minimize(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<Vec<RestartResult>> {
     let p = obj.dim();
+    // Forward-difference steps at each of `points`: +h, or −h where +h leaves the box.
+    let steps = |points: &[f64]| -> Vec<f64> {
+        points
+            .iter()
+            .map(|&x| {
+                if x + opts.fd_step <= 1.0 {
+                    opts.fd_step
+                } else {
+                    -opts.fd_step
+                }
+            })
+            .collect()
+    };
     let flat: Vec<f64> = starts.iter().flatten().copied().collect();
     let every: Vec<usize> = (0..starts.len()).collect();
-    let ss0 = obj.sum_squares_of(&every, &flat)?;
+    let normal0 = obj.normal_equations_of(&every, &flat, &steps(&flat))?;
     let mut st: Vec<State> = starts
         .iter()
-        .zip(ss0)
-        .map(|(x, ss)| State {
+        .zip(normal0)
+        .map(|(x, normal)| State {
             x: x.clone(),
-            ss,
+            ss: sanitize(normal.ss),
+            normal,
             lambda: opts.initial_lambda,
             active: true,
             iterations: 0,
-            evaluations: 1,
+            evaluations: p + 1,
         })
         .collect();
     for _ in 0..opts.max_iterations {
@@ -115,26 +135,11 @@ pub fn minimize(
         if act.is_empty() {
             break;
         }
-        // Batch 1: the normal equations of every active restart (the backend may reduce
-        // them where it evaluates the residuals).
-        let mut points = Vec::with_capacity(act.len() * p);
-        let mut hs = Vec::with_capacity(act.len() * p);
-        for &i in &act {
-            points.extend_from_slice(&st[i].x);
-            for j in 0..p {
-                hs.push(if st[i].x[j] + opts.fd_step <= 1.0 {
-                    opts.fd_step
-                } else {
-                    -opts.fd_step
-                });
-            }
-        }
-        let normal = obj.normal_equations_of(&act, &points, &hs)?;
-        // Solve each damped system.
+        // Solve each damped system at the restart's current point.
         let mut trial = Vec::with_capacity(act.len() * p);
-        for (a, &i) in act.iter().enumerate() {
+        for &i in &act {
             let s = &st[i];
-            let ne = &normal[a];
+            let ne = &s.normal;
             let jtj = DMatrix::from_row_slice(p, p, &ne.jtj);
             let g = DVector::from_column_slice(&ne.jtr);
             let dmax = (0..p).map(|j| jtj[(j, j)]).fold(0.0, f64::max).max(1e-300);
@@ -148,14 +153,15 @@ pub fn minimize(
                 trial.push(v.clamp(0.0, 1.0));
             }
         }
-        // Batch 2: trial points.
-        let tr = obj.sum_squares_of(&act, &trial)?;
-        for (a, &i) in act.iter().enumerate() {
+        // One batch: the trial points with their neighbours (the backend may reduce the
+        // normal equations where it evaluates the residuals).
+        let normal = obj.normal_equations_of(&act, &trial, &steps(&trial))?;
+        for (ne, (a, &i)) in normal.into_iter().zip(act.iter().enumerate()) {
             let s = &mut st[i];
             s.iterations += 1;
             s.evaluations += p + 1;
             let x_new = &trial[a * p..(a + 1) * p];
-            let ss_new = tr[a];
+            let ss_new = sanitize(ne.ss);
             let step: f64 = x_new
                 .iter()
                 .zip(&s.x)
@@ -166,6 +172,7 @@ pub fn minimize(
                 let gain = (s.ss - ss_new) / s.ss.max(1e-300);
                 s.x.copy_from_slice(x_new);
                 s.ss = ss_new;
+                s.normal = ne;
                 s.lambda = (s.lambda / 3.0).max(1e-12);
                 if gain < opts.ftol || step < opts.xtol {
                     s.active = false;
