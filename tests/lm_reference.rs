@@ -185,8 +185,8 @@ fn oren_nayar_brdf_fit() {
 }
 
 #[test]
-fn trial_sums_of_squares_come_from_the_loss_sum() {
-    // LM's trial points take Σr² from the evaluator's loss sum (one number per point)
+fn sums_of_squares_come_from_the_loss_sum() {
+    // `sum_squares_of` takes Σr² from the evaluator's loss sum (one number per point)
     // instead of K residuals. It must equal Σ of the squared residual rows, priors
     // included, for every finish of a sum-of-squares loss (Σ, mean, √mean) and the
     // logarithmic term, on both backends. Tolerance: 1e-10 relative on the CPU (f64, a

@@ -276,7 +276,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
         // A sum-of-squares loss's terms are the squared residuals, w (g(y′) − g(y))², so
         // the data part of Σr² is the loss's own sum: one number per point from the
         // evaluator (reduced on the device by the GPU engine) instead of K model values
-        // read back. LM's trial points need nothing else.
+        // read back.
         let costs = self.eval.costs_of(&problems, &phys)?;
         Ok(costs
             .iter()
