@@ -310,6 +310,18 @@ impl LossTerms {
         self.sqrt_w[k] * (self.transform(k, yp) - self.gy[k])
     }
 
+    /// [`Self::residual`] of a whole row of model values (samples 0..K), into `out`: the
+    /// term's shape is matched once, not per value, so the square terms vectorise.
+    pub fn residuals_into(&self, values: &[f64], out: &mut Vec<f64>) {
+        let rows = values.iter().zip(&self.a).zip(&self.gy).zip(&self.sqrt_w);
+        match self.term {
+            Term::LogSquare => {
+                out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * ((a * v).ln_1p() - gy)))
+            }
+            _ => out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * (a * v - gy))),
+        }
+    }
+
     pub fn finish_sum(&self, sum: f64) -> f64 {
         let k = self.y.len().max(1) as f64;
         match self.finish {

@@ -157,10 +157,10 @@ pub fn normal_equations_of_values(
             let k = t.y.len();
             let vals = &values[at..at + k * (p + 1)];
             at += k * (p + 1);
-            let rows: Vec<f64> = vals
-                .chunks(k)
-                .flat_map(|row| row.iter().enumerate().map(|(j, &v)| t.residual(j, v)))
-                .collect();
+            let mut rows = Vec::with_capacity(vals.len());
+            for row in vals.chunks(k) {
+                t.residuals_into(row, &mut rows);
+            }
             crate::optim::NormalEquations::from_residuals(&rows, h, k)
         })
         .collect()
