@@ -501,6 +501,8 @@ fn bench_sweep_times_both_backends_and_compares_them() {
     let c = &s["comparison"];
     assert_eq!(c["fits_compared"], 6, "{c}");
     assert_eq!(c["rankings_identical"], true, "{c}");
+    assert_eq!(c["groups_reordered"], 0, "{c}");
+    assert_eq!(c["rankings_agree_up_to_ties"], true, "{c}");
     let loss = c["max_rel_loss_diff"]["value"].as_f64().unwrap();
     let param = c["max_param_diff_unit_box"]["value"].as_f64().unwrap();
     assert!(loss <= c["loss_tolerance"].as_f64().unwrap(), "{c}");

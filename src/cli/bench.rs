@@ -301,19 +301,36 @@ fn sweep_bench(
             "rankings (data set × loss × weighting, models by best loss): {}",
             if c.rankings_identical {
                 "identical".to_string()
+            } else if c.rankings_agree_up_to_ties {
+                format!(
+                    "the same up to ties within {:.0e} ({} group(s) order tied models differently)",
+                    c.loss_tolerance, c.groups_reordered
+                )
             } else {
-                format!("{} group(s) differ", c.ranking_differences.len())
+                format!(
+                    "{} group(s) order models oppositely beyond {:.0e} ({} reordered in all)",
+                    c.ranking_differences.len(),
+                    c.loss_tolerance,
+                    c.groups_reordered
+                )
             }
         );
         for d in &c.ranking_differences {
-            println!(
-                "  {} {}/{}: cpu {} | gpu {}",
-                d.data,
-                d.loss,
-                d.weights,
-                d.cpu.join(" < "),
-                d.gpu.join(" < ")
-            );
+            println!("  {} {}/{}:", d.data, d.loss, d.weights);
+            for p in &d.inverted {
+                println!(
+                    "    cpu {} {:.6e} < {} {:.6e}; gpu {:.6e} > {:.6e}",
+                    p.better_on_cpu,
+                    p.cpu_losses[0],
+                    p.better_on_gpu,
+                    p.cpu_losses[1],
+                    p.gpu_losses[0],
+                    p.gpu_losses[1]
+                );
+            }
+            if d.inverted.is_empty() {
+                println!("    cpu {} | gpu {}", d.cpu.join(" < "), d.gpu.join(" < "));
+            }
         }
         println!(
             "largest relative best-loss difference: {:.2e} ({}), tolerance {:.0e}",

@@ -190,7 +190,8 @@ impl SweepTiming {
     }
 }
 
-/// A (data set, loss, weighting) whose model order differs between the backends.
+/// A (data set, loss, weighting) in which the backends order two models oppositely and
+/// at least one of them by more than the loss tolerance.
 #[derive(Clone, Debug, Serialize)]
 pub struct RankingDifference {
     pub data: String,
@@ -198,6 +199,62 @@ pub struct RankingDifference {
     pub weights: String,
     pub cpu: Vec<String>,
     pub gpu: Vec<String>,
+    /// The inverted pairs, `better < worse` as the CPU orders them, with both losses.
+    pub inverted: Vec<InvertedPair>,
+}
+
+/// Two models that the backends order oppositely: the CPU's better one first.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct InvertedPair {
+    pub better_on_cpu: String,
+    pub better_on_gpu: String,
+    /// The two best losses (CPU's better model first) on the CPU, then on the GPU.
+    pub cpu_losses: [f64; 2],
+    pub gpu_losses: [f64; 2],
+}
+
+/// A best loss for ordering: NaN (a failed fit) as +∞, last.
+fn order_key(x: f64) -> f64 {
+    if x.is_nan() {
+        f64::INFINITY
+    } else {
+        x
+    }
+}
+
+/// Whether `a` is better than `b` by more than `tol` relative (NaN counts as +∞).
+fn decisively_below(a: f64, b: f64, tol: f64) -> bool {
+    let (a, b) = (order_key(a), order_key(b));
+    a < b && (b == f64::INFINITY || b - a > tol * a.abs().max(b.abs()))
+}
+
+/// The pairs of one group's models (name, best loss on the CPU, on the GPU) that the two
+/// backends order oppositely with a gap above `tol` on at least one of them. Models whose
+/// losses lie within `tol` are tied: a model that reduces to another (`dmg(on)` with no
+/// grains is `on`) has the same optimum, and which of the two the last digit puts first
+/// is noise, on one backend as between two.
+pub fn inverted_pairs(models: &[(String, f64, f64)], tol: f64) -> Vec<InvertedPair> {
+    let mut out = Vec::new();
+    for (a, ca, ga) in models {
+        for (b, cb, gb) in models {
+            let (kca, kcb) = (order_key(*ca), order_key(*cb));
+            let cpu_first = kca < kcb || (kca == kcb && a < b);
+            if !cpu_first {
+                continue;
+            }
+            let gpu_reversed = order_key(*gb) < order_key(*ga);
+            let decisive = decisively_below(*ca, *cb, tol) || decisively_below(*gb, *ga, tol);
+            if gpu_reversed && decisive {
+                out.push(InvertedPair {
+                    better_on_cpu: a.clone(),
+                    better_on_gpu: b.clone(),
+                    cpu_losses: [*ca, *cb],
+                    gpu_losses: [*ga, *gb],
+                });
+            }
+        }
+    }
+    out
 }
 
 /// Where a largest difference occurred.
@@ -212,8 +269,15 @@ pub struct DiffAt {
 pub struct SweepComparison {
     /// Fits present in both sweeps (same data, model, loss, weights, optimizer).
     pub fits_compared: usize,
-    /// Per data set × loss × weighting, models ordered by best loss: identical orders?
+    /// Per data set × loss × weighting, models ordered by best loss (ties broken by
+    /// name): identical orders?
     pub rankings_identical: bool,
+    /// Groups whose order so defined differs, ties included.
+    pub groups_reordered: usize,
+    /// No two models ordered oppositely by the backends with a gap above the loss
+    /// tolerance on either: the rankings are the same up to ties within it.
+    pub rankings_agree_up_to_ties: bool,
+    /// The groups where they do not, with the inverted pairs.
     pub ranking_differences: Vec<RankingDifference>,
     /// Largest |gpu − cpu| / max(|cpu|, |gpu|) of the best losses (∞ if one is not finite).
     pub max_rel_loss_diff: DiffAt,
@@ -250,8 +314,9 @@ fn rankings(rows: &[Row]) -> BTreeMap<(String, String, String), Vec<String>> {
         .into_iter()
         .map(|(k, mut v)| {
             v.sort_by(|a, b| {
-                let key = |x: f64| if x.is_nan() { f64::INFINITY } else { x };
-                key(a.0).total_cmp(&key(b.0)).then_with(|| a.1.cmp(&b.1))
+                order_key(a.0)
+                    .total_cmp(&order_key(b.0))
+                    .then_with(|| a.1.cmp(&b.1))
             });
             (k, v.into_iter().map(|(_, m)| m).collect())
         })
@@ -335,34 +400,68 @@ pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
         }
     }
     let (rc, rg) = (rankings(cpu), rankings(gpu));
+    let best_losses = |rows: &[Row]| -> BTreeMap<(String, String, String, String), f64> {
+        rows.iter()
+            .map(|r| {
+                let id = (
+                    r.data.clone(),
+                    r.model.clone(),
+                    r.loss.clone(),
+                    r.weights.clone(),
+                );
+                (id, r.best_loss)
+            })
+            .collect()
+    };
+    let (cpu_loss, gpu_loss) = (best_losses(cpu), best_losses(gpu));
+    let mut reordered = 0;
     let mut diffs = Vec::new();
     for (k, order) in &rc {
         let other = rg.get(k).cloned().unwrap_or_default();
-        if &other != order {
+        if &other == order {
+            continue;
+        }
+        reordered += 1;
+        let group: Vec<(String, f64, f64)> = order
+            .iter()
+            .filter_map(|m| {
+                let id = (k.0.clone(), m.clone(), k.1.clone(), k.2.clone());
+                let (c, g) = (cpu_loss.get(&id)?, gpu_loss.get(&id)?);
+                Some((m.clone(), *c, *g))
+            })
+            .collect();
+        let inverted = inverted_pairs(&group, SWEEP_LOSS_TOL);
+        // A model fitted on one backend only is a difference too.
+        if !inverted.is_empty() || group.len() != order.len() || other.len() != order.len() {
             diffs.push(RankingDifference {
                 data: k.0.clone(),
                 loss: k.1.clone(),
                 weights: k.2.clone(),
                 cpu: order.clone(),
                 gpu: other,
+                inverted,
             });
         }
     }
     for (k, order) in &rg {
         if !rc.contains_key(k) {
+            reordered += 1;
             diffs.push(RankingDifference {
                 data: k.0.clone(),
                 loss: k.1.clone(),
                 weights: k.2.clone(),
                 cpu: Vec::new(),
                 gpu: order.clone(),
+                inverted: Vec::new(),
             });
         }
     }
     let within = loss.value <= SWEEP_LOSS_TOL && param.value <= SWEEP_PARAM_TOL;
     SweepComparison {
         fits_compared: compared,
-        rankings_identical: diffs.is_empty(),
+        rankings_identical: reordered == 0,
+        groups_reordered: reordered,
+        rankings_agree_up_to_ties: diffs.is_empty(),
         ranking_differences: diffs,
         max_rel_loss_diff: loss,
         max_param_diff_unit_box: param,
@@ -382,4 +481,45 @@ pub struct SweepBench {
     pub gpu_cpu_time_ratio: Option<f64>,
     /// Null unless both backends ran.
     pub comparison: Option<SweepComparison>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn group(v: &[(&str, f64, f64)]) -> Vec<(String, f64, f64)> {
+        v.iter().map(|&(m, c, g)| (m.to_string(), c, g)).collect()
+    }
+
+    #[test]
+    fn ties_within_the_tolerance_are_not_inversions() {
+        // dmg(on) reduces to on: equal optima whose last digits order them differently.
+        let g = group(&[
+            ("on", 2.0000001, 2.0),
+            ("dmg(on)", 2.0, 2.0000002),
+            ("lambert", 3.0, 3.0),
+        ]);
+        assert!(inverted_pairs(&g, 1e-3).is_empty());
+        // A gap of 5e-4 relative on one backend only is still within 1e-3.
+        let g = group(&[("a", 1.0, 1.0005), ("b", 1.0005, 1.0)]);
+        assert!(inverted_pairs(&g, 1e-3).is_empty());
+    }
+
+    #[test]
+    fn a_decisive_gap_on_either_backend_is_an_inversion() {
+        // The CPU puts a 2 % ahead; the GPU, stuck 3 % higher, puts it behind b.
+        let g = group(&[("a", 1.0, 1.03), ("b", 1.02, 1.02), ("c", 2.0, 2.0)]);
+        let inv = inverted_pairs(&g, 1e-3);
+        assert_eq!(inv.len(), 1, "{inv:?}");
+        assert_eq!(inv[0].better_on_cpu, "a");
+        assert_eq!(inv[0].better_on_gpu, "b");
+        assert_eq!(inv[0].cpu_losses, [1.0, 1.02]);
+        assert_eq!(inv[0].gpu_losses, [1.03, 1.02]);
+        // Decisive on the GPU only (CPU tie, GPU gap): an inversion too.
+        let g = group(&[("a", 1.0, 1.01), ("b", 1.0, 1.0)]);
+        assert_eq!(inverted_pairs(&g, 1e-3).len(), 1);
+        // A NaN loss ranks last; finite against NaN is decisive.
+        let g = group(&[("a", 1.0, f64::NAN), ("b", 2.0, 2.0)]);
+        assert_eq!(inverted_pairs(&g, 1e-3).len(), 1);
+    }
 }
