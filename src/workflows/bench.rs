@@ -161,9 +161,11 @@ pub fn median_speedup(rows: &[BenchRow]) -> Option<f64> {
 
 /// Stated agreement expected between the f64 CPU and f32 GPU sweeps. Best losses: 1e-3
 /// relative (the costs themselves agree to ~1e-6 with the compensated sums; the rest is
-/// where each optimizer stops: LM on the GPU differentiates with unit-box steps of ≈ 1e-3
-/// instead of 1e-6). Parameters: 1e-2 of their search box (unit-box coordinates, so a
-/// log-scaled roughness is compared relatively), the resolution those steps give.
+/// where each optimizer stops: the GPU's searches differentiate with unit-box steps of
+/// ≈ 1e-3 instead of 1e-6, though LM fits end with an f64 polish). Parameters: 1e-2 of
+/// their search box (unit-box coordinates, so a log-scaled roughness is compared
+/// relatively), the resolution those steps give. Models whose losses agree within the
+/// loss tolerance are tied in the rankings.
 pub const SWEEP_LOSS_TOL: f64 = 1e-3;
 pub const SWEEP_PARAM_TOL: f64 = 1e-2;
 
