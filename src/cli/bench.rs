@@ -39,8 +39,10 @@ pub struct BenchArgs {
     /// Also time a whole sweep (`bsdfit sweep` with its defaults, no pictures) once per
     /// backend, each into its own temporary folder, and compare the two: wall time, fits,
     /// evaluations, evals/s, the GPU/CPU time ratio, whether the rankings (per data set ×
-    /// loss × weighting, models by best loss) are identical, and the largest loss and
-    /// parameter differences against the stated f32 tolerance. `--models` applies to it.
+    /// loss × weighting, models by best loss) are identical, and if not whether they agree
+    /// up to ties (losses within the 1e-3 tolerance) or which pairs of models the two
+    /// order oppositely, and the largest loss and parameter differences against the
+    /// stated f32 tolerance. `--models` applies to it.
     #[arg(long)]
     pub sweep: bool,
     /// Data of `--sweep`: files or directories of *.csv (default: the bundled data/, as
