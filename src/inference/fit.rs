@@ -494,11 +494,23 @@ pub fn fit_many(
                     // Forward differences need a step well above √ε of the backend's
                     // arithmetic (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly
                     // rounding noise), and an f32 Σr² cannot show a relative gain much
-                    // below 1e-6, so the restarts stop there (the f64 polish goes on).
+                    // below 16u ≈ 1e-6, so the restarts stop there at the latest. With
+                    // the f64 polish to finish the best one, they only have to find its
+                    // basin: they stop at a predicted gain of 1e-4 (on the default sweep
+                    // a quarter fewer evaluations than at 16u, polish included, with the
+                    // same rankings against the CPU).
                     let u = backend.unit_roundoff();
+                    let polish = opts.polish && u > f64::EPSILON;
                     let mut lm_opts = opts.lm.clone();
                     lm_opts.fd_step = lm_opts.fd_step.max(4.0 * u.sqrt());
-                    lm_opts.ftol = lm_opts.ftol.max(16.0 * u);
+                    if u > f64::EPSILON {
+                        let floor = if polish {
+                            POLISHED_SEARCH_FTOL
+                        } else {
+                            16.0 * u
+                        };
+                        lm_opts.ftol = lm_opts.ftol.max(floor);
+                    }
                     let mut results = lm::minimize(
                         &mut obj,
                         &starts,
@@ -540,6 +552,9 @@ pub fn fit_many(
     }
     Ok((optima, space, stats))
 }
+
+/// LM's `ftol` for restarts in f32 whose best is then polished in f64 (see `fit_many`).
+pub const POLISHED_SEARCH_FTOL: f64 = 1e-4;
 
 /// Continue the best restart of each problem (`per` consecutive restarts each) with
 /// Levenberg–Marquardt in f64 on the CPU reference, from where the f32 search stopped,
