@@ -1,7 +1,7 @@
 //! The GPU engine: wgpu compute on Vulkan, f32. One submission evaluates every candidate
 //! of every restart over every sample and reduces on the device to one cost per
 //! candidate (shaders/engine/kernel.wgsl). Pipelines are compiled once per (model, loss
-//! shape) and cached; the dataset is uploaded once per problem; parameter and output
+//! shape, entry point), when first used, and cached; the dataset is uploaded once per problem; parameter and output
 //! buffers are reused across optimizer iterations and grown only when a larger batch
 //! arrives.
 //!
@@ -41,7 +41,7 @@ use crate::optim::NormalEquations;
 use anyhow::{anyhow, bail, Context, Result};
 use bytemuck::{Pod, Zeroable};
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use wgpu::util::DeviceExt;
 
 /// How samples become the kernels' records (`Record` in shaders/engine/kernel.wgsl):
@@ -156,12 +156,27 @@ struct Dims {
     pad: u32,
 }
 
+/// A (model, loss shape)'s module and its entry points, each compiled when first used:
+/// a driver compiles a pipeline when it is created (lavapipe runs LLVM then, 0.04–0.3 s a
+/// pipeline for the catalogue's models), and most evaluators never use all three (on CPU
+/// devices `normal` is the host's, `costs` serves only the start screening and compass).
+/// On the default sweep on lavapipe, compiling all three up front took 6–10 s of its
+/// ≈ 50 s of thread time, a sixth of it for `normal` alone.
 struct Pipelines {
-    costs: wgpu::ComputePipeline,
-    values: wgpu::ComputePipeline,
+    module: wgpu::ShaderModule,
+    costs: OnceLock<wgpu::ComputePipeline>,
+    values: OnceLock<wgpu::ComputePipeline>,
     /// LM's normal equations from the values of groups of P + 1 candidates.
-    normal: wgpu::ComputePipeline,
+    normal: OnceLock<wgpu::ComputePipeline>,
+    /// The entry point `normal` compiles (the one-slice shape is the CPU devices', see
+    /// normal.wgsl for why).
+    normal_entry: &'static str,
 }
+
+/// A pipeline cache entry: compiled once, by whichever evaluator asks first, while the
+/// others wait on this entry alone (not on the whole cache), so workers compiling
+/// different models do not queue behind each other.
+type PipelinesSlot = Arc<OnceLock<std::result::Result<Arc<Pipelines>, String>>>;
 
 pub struct GpuBackend {
     device: wgpu::Device,
@@ -170,7 +185,7 @@ pub struct GpuBackend {
     limits: wgpu::Limits,
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
-    pipelines: Mutex<HashMap<String, Arc<Pipelines>>>,
+    pipelines: Mutex<HashMap<String, PipelinesSlot>>,
     /// Per model spec, the fewest samples (of a batch's largest problem) with which the
     /// backend's shape had its loops cut short: later evaluators with at least as many
     /// start in `Shape::LONG_DATA` instead of paying a cut-short submission each.
@@ -187,6 +202,14 @@ pub struct GpuBackend {
     /// pass cost more than it saved (lavapipe, 64-restart LM fits on W80&G3.4: fa(eon)
     /// 1.06 s → 0.57 s, rmg(eon) 1.59 s → 1.08 s with the host's).
     device_normal: bool,
+}
+
+/// The kernels' entry points (see [`Pipelines`]).
+#[derive(Clone, Copy)]
+enum Entry {
+    Costs,
+    Values,
+    Normal,
 }
 
 /// The bits of the NaN that an invocation whose loops were cut short writes instead of
@@ -397,39 +420,59 @@ impl GpuBackend {
             finish,
             shape
         );
-        let mut cache = self
+        let slot: PipelinesSlot = self
             .pipelines
             .lock()
-            .map_err(|_| anyhow!("pipeline cache poisoned"))?;
-        if let Some(p) = cache.get(&key) {
-            return Ok(p.clone());
-        }
-        let source = compose(model, term, finish, shape);
-        let module = self.module(&model.spec, source)?;
-        let make = |entry: &str| {
+            .map_err(|_| anyhow!("pipeline cache poisoned"))?
+            .entry(key)
+            .or_default()
+            .clone();
+        slot.get_or_init(|| {
+            let source = compose(model, term, finish, shape);
+            let module = self
+                .module(&model.spec, source)
+                .map_err(|e| e.to_string())?;
+            self.check_errors().map_err(|e| e.to_string())?;
+            Ok(Arc::new(Pipelines {
+                module,
+                costs: OnceLock::new(),
+                values: OnceLock::new(),
+                normal: OnceLock::new(),
+                normal_entry: if shape.slices == 1 {
+                    "normal_by_samples"
+                } else {
+                    "normal"
+                },
+            }))
+        })
+        .clone()
+        .map_err(|e| anyhow!(e))
+    }
+
+    /// One of `pipes`' entry points, compiled now if it is the first use.
+    fn entry<'p>(&self, pipes: &'p Pipelines, which: Entry) -> Result<&'p wgpu::ComputePipeline> {
+        let (cell, name) = match which {
+            Entry::Costs => (&pipes.costs, "costs"),
+            Entry::Values => (&pipes.values, "values"),
+            Entry::Normal => (&pipes.normal, pipes.normal_entry),
+        };
+        let mut made = false;
+        let pipeline = cell.get_or_init(|| {
+            made = true;
             self.device
                 .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
+                    label: Some(name),
                     layout: Some(&self.pipeline_layout),
-                    module: &module,
-                    entry_point: Some(entry),
+                    module: &pipes.module,
+                    entry_point: Some(name),
                     compilation_options: Default::default(),
                     cache: None,
                 })
-        };
-        let p = Arc::new(Pipelines {
-            costs: make("costs"),
-            values: make("values"),
-            // The one-slice shape is the CPU devices' (see normal.wgsl for why).
-            normal: make(if shape.slices == 1 {
-                "normal_by_samples"
-            } else {
-                "normal"
-            }),
         });
-        self.check_errors()?;
-        cache.insert(key, p.clone());
-        Ok(p)
+        if made {
+            self.check_errors()?;
+        }
+        Ok(pipeline)
     }
 
     /// Validate a generated module with naga, then hand it to the driver.
@@ -871,6 +914,15 @@ impl GpuEvaluator<'_> {
                 bytemuck::cast_slice(&vec![poison; normal_len]),
             );
         }
+        let evaluate = self.gpu.entry(
+            &self.pipes,
+            if values { Entry::Values } else { Entry::Costs },
+        )?;
+        let normal = if normal_len > 0 {
+            Some(self.gpu.entry(&self.pipes, Entry::Normal)?)
+        } else {
+            None
+        };
         let mut enc = self
             .gpu
             .device
@@ -882,17 +934,13 @@ impl GpuEvaluator<'_> {
                 label: Some("evaluate"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(if values {
-                &self.pipes.values
-            } else {
-                &self.pipes.costs
-            });
+            pass.set_pipeline(evaluate);
             pass.set_bind_group(0, &io.bind_group, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
             if normal_len > 0 {
                 // wgpu orders the two dispatches (the second reads what the first wrote
                 // to `out`) with a barrier between them.
-                pass.set_pipeline(&self.pipes.normal);
+                pass.set_pipeline(normal.expect("compiled when normal_len > 0"));
                 pass.dispatch_workgroups(normal_x, normal_y, 1);
             }
         }
