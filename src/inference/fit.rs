@@ -667,7 +667,7 @@ pub fn fit_outcome(
     let t0 = Instant::now();
     let (optima, space, _) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
     let best = optima.into_iter().next().expect("one problem, one optimum");
-    let mut o = conclude(model, data, loss, backend, best, space)?;
+    let mut o = conclude(model, data, loss, best, space)?;
     o.seconds = t0.elapsed().as_secs_f64();
     Ok(o)
 }
@@ -687,7 +687,7 @@ pub fn fit_stage(
     let (optima, space, _) = fit_many(model, datas, losses, backend, opts, progress)?;
     let mut outcomes = Vec::with_capacity(datas.len());
     for ((data, &loss), best) in datas.iter().zip(losses).zip(optima) {
-        outcomes.push(conclude(model, data, loss, backend, best, space.clone())?);
+        outcomes.push(conclude(model, data, loss, best, space.clone())?);
     }
     let seconds = t0.elapsed().as_secs_f64();
     let total: usize = datas.iter().map(|d| d.len()).sum::<usize>().max(1);
@@ -701,17 +701,25 @@ pub fn fit_stage(
         .collect())
 }
 
-/// χ², the covariance and the warnings at a problem's optimum.
+/// χ², the covariance and the warnings at a problem's optimum, in f64 on the CPU
+/// reference whatever the search ran on.
+///
+/// Why not on the search's backend: they take one point and its 2P central-difference
+/// neighbours, a few hundred thousand evaluations at most, which a device serves in a
+/// handful of latency-bound submissions plus an evaluator (upload, buffers) per fit (on
+/// lavapipe the conclusions took 7.9 s of the default sweep's 52 s of thread time, against
+/// 2.5 s on the CPU); and f32 central differences leave the covariance's Jacobian with
+/// relative errors of ~u/1e-4 ≈ 6e-4, where f64 gives ~1e-8.
 fn conclude(
     model: &Model,
     data: &Dataset,
     loss: Loss,
-    backend: &dyn Backend,
     best: Optimum,
     space: Constraints,
 ) -> anyhow::Result<FitOutcome> {
     let t0 = Instant::now();
-    let mut eval = backend.prepare(Problem { model, data, loss })?;
+    let cpu = crate::engine::cpu::CpuBackend::new();
+    let mut eval = cpu.prepare(Problem { model, data, loss })?;
     let flat = best.flat;
     let searched = best.evaluations;
     let values = eval.values(&flat)?;
