@@ -339,7 +339,19 @@ fn screened_starts(
     let owners: Vec<usize> = (0..problems)
         .flat_map(|q| std::iter::repeat_n(q, pool.len()))
         .collect();
-    let costs = obj.problem_costs(&owners, &points)?;
+    let costs = if matches!(opts.optimizer, Optimizer::Lm) && !obj.loss_terms.is_empty() {
+        // Ranked by Σr² (the loss up to its monotone finish) from the model values: LM
+        // itself uses only the values (and normal-equation) kernels, so a GPU engine then
+        // never compiles its costs kernel for the fit (on lavapipe 0.05–0.3 s per model
+        // and loss shape, ≈ 6 % of the default sweep's thread time).
+        let phys = obj.to_physical(&points);
+        obj.problem_residuals(&owners, &phys)?
+            .iter()
+            .map(|r| r.iter().map(|v| v * v).sum())
+            .collect()
+    } else {
+        obj.problem_costs(&owners, &points)?
+    };
     for (costs, own) in costs.chunks(pool.len()).zip(&owns) {
         let mut order: Vec<usize> = (0..pool.len()).collect();
         order.sort_by(|&a, &b| {
