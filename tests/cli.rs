@@ -498,6 +498,23 @@ fn bench_sweep_times_both_backends_and_compares_them() {
         s["gpu_cpu_time_ratio"].as_f64().is_some_and(|r| r > 0.0),
         "{s}"
     );
+    // The GPU's device submissions: some, and no more evaluations in all than the sweep
+    // counted (its polish and the fits' conclusions run on the CPU); the CPU reference
+    // submits nothing.
+    assert!(backends[0].get("submissions").is_none(), "{s}");
+    let sub = &backends[1]["submissions"];
+    let n = sub["submissions"].as_f64().expect("gpu submissions");
+    assert!(n > 0.0, "{sub}");
+    let on_device = sub["evaluations"]["mean"].as_f64().unwrap() * n;
+    let counted = backends[1]["evaluations"].as_f64().unwrap();
+    assert!(
+        on_device > 0.0 && on_device <= counted * (1.0 + 1e-9),
+        "{sub} vs {counted}"
+    );
+    let cand = &sub["candidates"];
+    assert!(cand["median"].as_f64().unwrap() >= 1.0, "{sub}");
+    assert!(cand["max"].as_f64() >= cand["p90"].as_f64(), "{sub}");
+    assert!(sub["seconds"]["median"].as_f64().unwrap() > 0.0, "{sub}");
     let c = &s["comparison"];
     assert_eq!(c["fits_compared"], 6, "{c}");
     assert_eq!(c["rankings_identical"], true, "{c}");

@@ -38,7 +38,8 @@ pub struct BenchArgs {
     pub json: Option<PathBuf>,
     /// Also time a whole sweep (`bsdfit sweep` with its defaults, no pictures) once per
     /// backend, each into its own temporary folder, and compare the two: wall time, fits,
-    /// evaluations, evals/s, the GPU/CPU time ratio, whether the rankings (per data set ×
+    /// evaluations, evals/s, the GPU's device submissions (how many; candidates,
+    /// evaluations and milliseconds each), the GPU/CPU time ratio, whether the rankings (per data set ×
     /// loss × weighting, models by best loss) are identical, and if not whether they agree
     /// up to ties (losses within the 1e-3 tolerance) or which pairs of models the two
     /// order oppositely, and the largest loss and parameter differences against the
@@ -63,7 +64,14 @@ struct SweepCommand {
 }
 
 /// Run the sweep on one backend into a fresh temporary folder; its rows and wall time.
-fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<(Vec<crate::output::results::Row>, f64)> {
+/// One backend's timed sweep: its rows, wall seconds and device submissions.
+type TimedSweep = (
+    Vec<crate::output::results::Row>,
+    f64,
+    Option<crate::engine::SubmissionStats>,
+);
+
+fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<TimedSweep> {
     use clap::Parser;
     use std::ffi::OsString;
     let dir = std::env::temp_dir().join(format!(
@@ -102,14 +110,15 @@ fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<(Vec<crate::output::resul
             .args;
         eprintln!("bench --sweep: sweep on {backend} into {}", dir.display());
         let t0 = std::time::Instant::now();
-        super::sweep::run_sweep(&sweep).with_context(|| format!("--sweep on {backend}"))?;
+        let submissions =
+            super::sweep::run_sweep(&sweep).with_context(|| format!("--sweep on {backend}"))?;
         let wall = t0.elapsed().as_secs_f64();
         let rows = crate::output::results::read_results(
             &dir.join(crate::output::results::RESULTS_CSV),
             false,
             &mut |m| eprintln!("note: {m}"),
         )?;
-        Ok((rows, wall))
+        Ok((rows, wall, submissions))
     })();
     if let Err(e) = std::fs::remove_dir_all(&dir) {
         eprintln!("note: could not remove {}: {e}", dir.display());
@@ -270,8 +279,8 @@ fn sweep_bench(
     let mut timings = Vec::new();
     let mut results = Vec::new();
     for b in backends {
-        let (rows, wall) = timed_sweep(a, b.id())?;
-        timings.push(SweepTiming::new(b.id(), wall, &rows));
+        let (rows, wall, submissions) = timed_sweep(a, b.id())?;
+        timings.push(SweepTiming::new(b.id(), wall, &rows, submissions));
         results.push((b.id(), rows));
     }
     println!();
@@ -284,6 +293,26 @@ fn sweep_bench(
             "{:<8} {:>10.2} {:>6} {:>14} {:>12.3e}",
             t.backend, t.wall_seconds, t.fits, t.evaluations, t.evals_per_s
         );
+    }
+    for t in &timings {
+        if let Some(s) = &t.submissions {
+            println!(
+                "{} submissions: {}; candidates each: median {:.0}, p90 {:.0}, max {:.0}; \
+                 evaluations each: median {:.3e}, p90 {:.3e}, max {:.3e}; time each: median \
+                 {:.2} ms, mean {:.2} ms ({:.1} s in all, summed over the sweep's threads)",
+                t.backend,
+                s.submissions,
+                s.candidates.median,
+                s.candidates.p90,
+                s.candidates.max,
+                s.evaluations.median,
+                s.evaluations.p90,
+                s.evaluations.max,
+                s.seconds.median * 1e3,
+                s.seconds.mean * 1e3,
+                s.seconds_total
+            );
+        }
     }
     let find = |id: &str| timings.iter().find(|t| t.backend == id);
     let ratio = match (find("cpu"), find("gpu")) {

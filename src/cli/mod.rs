@@ -200,7 +200,7 @@ pub fn main() -> i32 {
         Command::Synth(a) => synth::run(a),
         Command::Models => models::run(),
         Command::Bench(a) => bench::run(a),
-        Command::Sweep(a) => sweep::run_sweep(&a),
+        Command::Sweep(a) => sweep::run_sweep(&a).map(|_| ()),
         Command::Merge(a) => sweep::run_merge(&a),
         Command::Render(a) => render::run(&a),
         Command::Diagnose(a) => diagnose::run(&a),

@@ -112,7 +112,9 @@ fn describe_constraints(text: &str) -> &str {
 }
 
 /// The `sweep` command.
-pub fn run_sweep(args: &SweepArgs) -> Result<()> {
+/// Run a sweep; returns the device submissions' statistics when a GPU backend ran fits
+/// (`bench --sweep` prints them).
+pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionStats>> {
     let t0 = Instant::now();
     let shard = args.shard.as_deref().map(parse_shard).transpose()?;
     let paths = expand_data(&args.data)?;
@@ -194,7 +196,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
                 files[t.data].name, t.model, t.loss, t.weights, t.optimizer
             );
         }
-        return Ok(());
+        return Ok(None);
     }
 
     let mut skipped: Vec<Skipped> = Vec::new();
@@ -202,6 +204,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
     let mut new_rows = 0usize;
     let mut workers = 0usize;
     let t_fits = Instant::now();
+    let mut submissions = None;
     if !todo.is_empty() {
         // Models that cannot be built are skipped up front (cheap, sequential).
         let mut runnable: Vec<(&Task, Model)> = Vec::new();
@@ -382,6 +385,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
             Ok(())
         })?;
         progress.finish();
+        submissions = backend.submissions();
     }
     let fit_wall = t_fits.elapsed().as_secs_f64();
     // Canonical results.csv (unchanged bytes when nothing new ran), then summaries.
@@ -411,7 +415,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<()> {
         };
         crate::output::report::publish(&args.out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
     }
-    Ok(())
+    Ok(submissions)
 }
 
 /// Group tasks into stages (indices into `runnable`, in task order): same model spec,

@@ -202,7 +202,13 @@ pub struct GpuBackend {
     /// pass cost more than it saved (lavapipe, 64-restart LM fits on W80&G3.4: fa(eon)
     /// 1.06 s → 0.57 s, rmg(eon) 1.59 s → 1.08 s with the host's).
     device_normal: bool,
+    /// (candidates, evaluations, seconds) of every submission, for `bench --sweep`; at
+    /// most `SUBMISSION_LOG_CAP` of them (16 bytes each).
+    submission_log: Mutex<Vec<(u32, u64, f32)>>,
 }
+
+/// The most submissions [`GpuBackend::submissions`] describes (the first ones).
+const SUBMISSION_LOG_CAP: usize = 1 << 20;
 
 /// The kernels' entry points (see [`Pipelines`]).
 #[derive(Clone, Copy)]
@@ -348,6 +354,7 @@ impl GpuBackend {
             errors,
             chunk_bytes: MAX_CHUNK_BYTES,
             device_normal,
+            submission_log: Mutex::default(),
         })
     }
 
@@ -551,6 +558,10 @@ impl Backend for GpuBackend {
         (rows * wgsl::RECORDS_PER_ROW)
             .min((self.max_binding() / 4) as usize / wgsl::MAX_RECORD_CHANNELS)
     }
+    fn submissions(&self) -> Option<super::SubmissionStats> {
+        let log = self.submission_log.lock().ok()?;
+        Some(super::SubmissionStats::of(&log))
+    }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;
         let first = problems[0];
@@ -716,6 +727,8 @@ struct Submission<'s> {
     m: usize,
     out_len: usize,
     output: Output,
+    /// Model-sample evaluations it makes (for the submission log).
+    evaluations: usize,
 }
 
 /// What one submission reads back.
@@ -875,7 +888,9 @@ impl GpuEvaluator<'_> {
             m,
             out_len,
             output,
+            evaluations,
         } = *job;
+        let started = std::time::Instant::now();
         let p = self.model.dim;
         let o_bytes = (out_len * 4) as u64;
         let (groups, normal_len) = match output {
@@ -971,6 +986,15 @@ impl GpuEvaluator<'_> {
         };
         io.staging.unmap();
         self.read_back += bytes;
+        if let Ok(mut log) = self.gpu.submission_log.lock() {
+            if log.len() < SUBMISSION_LOG_CAP {
+                log.push((
+                    m as u32,
+                    evaluations as u64,
+                    started.elapsed().as_secs_f32(),
+                ));
+            }
+        }
         self.gpu.check_errors()?;
         if data.iter().any(|v| v.to_bits() == LOOPS_CUT_SHORT) {
             return Err(LoopsCutShort.into());
@@ -1031,6 +1055,7 @@ impl GpuEvaluator<'_> {
                 m: end - start,
                 out_len: outs,
                 output: Output::Out,
+                evaluations: owners[start..end].iter().map(|&q| sizes[q]).sum(),
             })?;
             result.extend(data.iter().map(|&v| v as f64));
             start = end;
@@ -1125,6 +1150,7 @@ impl GpuEvaluator<'_> {
                 m: groups * (p + 1),
                 out_len: outs,
                 output: Output::Normal { groups },
+                evaluations: outs,
             })?;
             for (sums, h) in data.chunks(ne).zip(steps[start * p..end * p].chunks(p)) {
                 result.push(normal_from_sums(sums, h));

@@ -49,6 +49,65 @@ pub trait Backend: Send + Sync {
     fn max_batch_samples(&self) -> usize {
         usize::MAX
     }
+    /// Sizes and times of the device submissions made so far by every evaluator of this
+    /// backend (`None` for host backends, which submit nothing).
+    fn submissions(&self) -> Option<SubmissionStats> {
+        None
+    }
+}
+
+/// What a device backend's submissions looked like: how many, how large (candidates, and
+/// model-sample evaluations), and how long each took from upload to read-back.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SubmissionStats {
+    pub submissions: usize,
+    /// Candidates (parameter vectors) per submission.
+    pub candidates: Spread,
+    /// Model-sample evaluations per submission (candidates × their samples and channels).
+    pub evaluations: Spread,
+    /// Wall seconds per submission, upload to read-back. Submissions from several
+    /// threads overlap, so their sum can exceed the wall time.
+    pub seconds: Spread,
+    pub seconds_total: f64,
+}
+
+/// Median, 90th percentile, largest and mean of a set of figures.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Spread {
+    pub median: f64,
+    pub p90: f64,
+    pub max: f64,
+    pub mean: f64,
+}
+
+impl Spread {
+    pub fn of(mut v: Vec<f64>) -> Spread {
+        if v.is_empty() {
+            return Spread::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Spread {
+            median: at(0.5),
+            p90: at(0.9),
+            max: v[v.len() - 1],
+            mean: v.iter().sum::<f64>() / v.len() as f64,
+        }
+    }
+}
+
+impl SubmissionStats {
+    /// From (candidates, evaluations, seconds) per submission.
+    pub fn of(records: &[(u32, u64, f32)]) -> SubmissionStats {
+        let col = |f: &dyn Fn(&(u32, u64, f32)) -> f64| records.iter().map(f).collect();
+        SubmissionStats {
+            submissions: records.len(),
+            candidates: Spread::of(col(&|r| r.0 as f64)),
+            evaluations: Spread::of(col(&|r| r.1 as f64)),
+            seconds: Spread::of(col(&|r| r.2 as f64)),
+            seconds_total: records.iter().map(|r| r.2 as f64).sum(),
+        }
+    }
 }
 
 /// Check that problems can share one evaluator: same model, same loss metric.
@@ -201,5 +260,23 @@ pub fn select(
                 Ok(Box::new(cpu::CpuBackend::new()))
             }
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Spread, SubmissionStats};
+
+    #[test]
+    fn spreads_take_the_nearest_rank_and_the_mean() {
+        let s = Spread::of((1..=10).rev().map(f64::from).collect());
+        // Ranks (n − 1)·q rounded: 4.5 → 5 (the 6th value) and 8.1 → 8 (the 9th).
+        assert_eq!((s.median, s.p90, s.max, s.mean), (6.0, 9.0, 10.0, 5.5));
+        let empty = Spread::of(Vec::new());
+        assert_eq!((empty.median, empty.max, empty.mean), (0.0, 0.0, 0.0));
+        let log = SubmissionStats::of(&[(2, 100, 0.5), (4, 300, 1.5)]);
+        assert_eq!(log.submissions, 2);
+        assert_eq!((log.candidates.max, log.evaluations.mean), (4.0, 200.0));
+        assert_eq!(log.seconds_total, 2.0);
     }
 }

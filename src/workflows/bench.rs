@@ -177,10 +177,18 @@ pub struct SweepTiming {
     pub fits: usize,
     pub evaluations: u64,
     pub evals_per_s: f64,
+    /// The device submissions (absent for the CPU reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub submissions: Option<crate::engine::SubmissionStats>,
 }
 
 impl SweepTiming {
-    pub fn new(backend: &str, wall_seconds: f64, rows: &[Row]) -> SweepTiming {
+    pub fn new(
+        backend: &str,
+        wall_seconds: f64,
+        rows: &[Row],
+        submissions: Option<crate::engine::SubmissionStats>,
+    ) -> SweepTiming {
         let evaluations: u64 = rows.iter().map(|r| r.evaluations).sum();
         SweepTiming {
             backend: backend.to_string(),
@@ -188,6 +196,7 @@ impl SweepTiming {
             fits: rows.len(),
             evaluations,
             evals_per_s: evaluations as f64 / wall_seconds.max(1e-9),
+            submissions,
         }
     }
 }
