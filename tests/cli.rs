@@ -560,6 +560,8 @@ fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
         p(&file),
         "--sweep-restarts",
         "2",
+        "--sweep-reference-seed",
+        "7",
         "--json",
         p(&json),
     ]);
@@ -574,6 +576,37 @@ fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
         .collect();
     assert_eq!(ids, ["cpu"]);
     assert!(v["sweep"]["gpu_cpu_time_ratio"].is_null() && v["sweep"]["comparison"].is_null());
+    // The reference against itself with seed 7: 3 fits (rmse/uniform, rmse/relunc,
+    // chi2) of a convex Lambertian loss, so both seeds reach the same optimum.
+    let r = &v["sweep"]["reference_seed"];
+    assert_eq!(r["seed"], 7, "{r}");
+    let c = &r["comparison"];
+    assert_eq!(c["fits_compared"], 3, "{c}");
+    assert_eq!(c["rankings_agree_up_to_ties"], true, "{c}");
+    assert!(
+        c["max_rel_loss_diff"]["value"]
+            .as_f64()
+            .is_some_and(|d| d < 1e-6),
+        "{c}"
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("seed 1 against seed 7"), "{text}");
+    // Its own seed is refused, naming the option.
+    let out = bsdfit(&[
+        "bench",
+        "--backend",
+        "cpu",
+        "--models",
+        "lambert",
+        "--sweep",
+        "--sweep-data",
+        p(&file),
+        "--sweep-reference-seed",
+        "1",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--sweep-reference-seed 1"), "{err}");
 }
 
 /// `bench --data FILE` measures on the file: the rows name it and count its samples,

@@ -53,7 +53,16 @@ pub struct BenchArgs {
     /// Restarts per fit of `--sweep` (default 8, the sweep's).
     #[arg(long, default_value_t = 8, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub sweep_restarts: usize,
+    /// With `--sweep`: also run the CPU reference's sweep with this seed (the sweeps use
+    /// seed 1) and compare the two CPU sweeps as the GPU's is compared: how much
+    /// multi-start variance alone moves the losses and reorders the rankings, the scale
+    /// against which the GPU's differences should be read. Costs one more CPU sweep.
+    #[arg(long, requires = "sweep", value_parser = super::parse_seed)]
+    pub sweep_reference_seed: Option<u64>,
 }
+
+/// The seed of `bench --sweep`'s sweeps (`sweep`'s default).
+const SWEEP_SEED: u64 = 1;
 
 /// `sweep`'s own argument parser, so `bench --sweep` runs the sweep with exactly the
 /// defaults a user's `bsdfit sweep` gets.
@@ -71,7 +80,7 @@ type TimedSweep = (
     Option<crate::engine::SubmissionStats>,
 );
 
-fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<TimedSweep> {
+fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
     use clap::Parser;
     use std::ffi::OsString;
     let dir = std::env::temp_dir().join(format!(
@@ -93,6 +102,7 @@ fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<TimedSweep> {
     for (k, v) in [
         ("--backend", backend.to_string()),
         ("--restarts", a.sweep_restarts.to_string()),
+        ("--seed", seed.to_string()),
     ] {
         argv.push(k.into());
         argv.push(v.into());
@@ -108,7 +118,10 @@ fn timed_sweep(a: &BenchArgs, backend: &str) -> Result<TimedSweep> {
         let sweep = SweepCommand::try_parse_from(argv)
             .map_err(|e| anyhow::anyhow!("--sweep: {e}"))?
             .args;
-        eprintln!("bench --sweep: sweep on {backend} into {}", dir.display());
+        eprintln!(
+            "bench --sweep: sweep on {backend} (seed {seed}) into {}",
+            dir.display()
+        );
         let t0 = std::time::Instant::now();
         let submissions =
             super::sweep::run_sweep(&sweep).with_context(|| format!("--sweep on {backend}"))?;
@@ -131,6 +144,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
+    anyhow::ensure!(
+        a.sweep_reference_seed != Some(SWEEP_SEED),
+        "--sweep-reference-seed {SWEEP_SEED} is the sweeps' own seed: give another"
+    );
     anyhow::ensure!(
         a.seconds.is_finite() && a.seconds > 0.0 && a.seconds <= 3600.0,
         "--seconds must be in (0, 3600], got {}",
@@ -279,7 +296,7 @@ fn sweep_bench(
     let mut timings = Vec::new();
     let mut results = Vec::new();
     for b in backends {
-        let (rows, wall, submissions) = timed_sweep(a, b.id())?;
+        let (rows, wall, submissions) = timed_sweep(a, b.id(), SWEEP_SEED)?;
         timings.push(SweepTiming::new(b.id(), wall, &rows, submissions));
         results.push((b.id(), rows));
     }
@@ -328,65 +345,114 @@ fn sweep_bench(
         println!("GPU/CPU sweep time ratio: {r:.3}");
     }
     if let Some(c) = &comparison {
-        println!(
-            "rankings (data set × loss × weighting, models by best loss): {}",
-            if c.rankings_identical {
-                "identical".to_string()
-            } else if c.rankings_agree_up_to_ties {
-                format!(
-                    "the same up to ties within {:.0e} ({} group(s) order tied models differently)",
-                    c.loss_tolerance, c.groups_reordered
-                )
-            } else {
-                format!(
-                    "{} group(s) order models oppositely beyond {:.0e} ({} reordered in all)",
-                    c.ranking_differences.len(),
-                    c.loss_tolerance,
-                    c.groups_reordered
-                )
-            }
-        );
-        for d in &c.ranking_differences {
-            println!("  {} {}/{}:", d.data, d.loss, d.weights);
-            for p in &d.inverted {
-                println!(
-                    "    cpu {} {:.6e} < {} {:.6e}; gpu {:.6e} > {:.6e}",
-                    p.better_on_cpu,
-                    p.cpu_losses[0],
-                    p.better_on_gpu,
-                    p.cpu_losses[1],
-                    p.gpu_losses[0],
-                    p.gpu_losses[1]
-                );
-            }
-            if d.inverted.is_empty() {
-                println!("    cpu {} | gpu {}", d.cpu.join(" < "), d.gpu.join(" < "));
-            }
-        }
-        println!(
-            "largest relative best-loss difference: {:.2e} ({}), tolerance {:.0e}",
-            c.max_rel_loss_diff.value, c.max_rel_loss_diff.at, c.loss_tolerance
-        );
-        println!(
-            "largest parameter difference (unit box): {:.2e} ({}), tolerance {:.0e}",
-            c.max_param_diff_unit_box.value, c.max_param_diff_unit_box.at, c.param_tolerance
-        );
-        println!(
-            "{} of {} fits compared; {}",
-            c.fits_compared,
+        print_comparison(
+            c,
             timings.first().map_or(0, |t| t.fits),
-            if c.within_tolerance {
-                "within the f32 tolerance"
-            } else {
-                "NOT within the f32 tolerance"
-            }
+            ["cpu", "gpu"],
+            "the f32 tolerance",
         );
     }
+    // The reference against itself with another seed: multi-start variance alone.
+    let reference_seed = match (a.sweep_reference_seed, rows_of("cpu")) {
+        (Some(seed), Some(first)) => {
+            let (rows, wall, _) = timed_sweep(a, "cpu", seed)?;
+            let c = compare_sweeps(first, &rows);
+            println!();
+            println!(
+                "CPU reference, seed {SWEEP_SEED} against seed {seed} ({wall:.2} s): the spread of \
+                 multi-start search alone"
+            );
+            print_comparison(
+                &c,
+                first.len(),
+                [format!("seed {SWEEP_SEED}"), format!("seed {seed}")],
+                "the tolerance",
+            );
+            Some(crate::workflows::bench::ReferenceSeed {
+                seed,
+                wall_seconds: wall,
+                comparison: c,
+            })
+        }
+        (Some(_), None) => {
+            eprintln!("note: --sweep-reference-seed needs the CPU reference's sweep; skipped");
+            None
+        }
+        (None, _) => None,
+    };
     Ok(SweepBench {
         data: data.iter().map(|p| p.display().to_string()).collect(),
         restarts: a.sweep_restarts,
         backends: timings,
         gpu_cpu_time_ratio: ratio,
         comparison,
+        reference_seed,
     })
+}
+
+/// Print a comparison of two sweeps, `labels` naming the first and the second (the
+/// comparison's `cpu` and `gpu` sides).
+fn print_comparison(
+    c: &crate::workflows::bench::SweepComparison,
+    fits: usize,
+    labels: [impl std::fmt::Display; 2],
+    tolerance: &str,
+) {
+    let [first, second] = &labels;
+    println!(
+        "rankings (data set × loss × weighting, models by best loss): {}",
+        if c.rankings_identical {
+            "identical".to_string()
+        } else if c.rankings_agree_up_to_ties {
+            format!(
+                "the same up to ties within {:.0e} ({} group(s) order tied models differently)",
+                c.loss_tolerance, c.groups_reordered
+            )
+        } else {
+            format!(
+                "{} group(s) order models oppositely beyond {:.0e} ({} reordered in all)",
+                c.ranking_differences.len(),
+                c.loss_tolerance,
+                c.groups_reordered
+            )
+        }
+    );
+    for d in &c.ranking_differences {
+        println!("  {} {}/{}:", d.data, d.loss, d.weights);
+        for p in &d.inverted {
+            println!(
+                "    {first} {} {:.6e} < {} {:.6e}; {second} {:.6e} > {:.6e}",
+                p.better_on_cpu,
+                p.cpu_losses[0],
+                p.better_on_gpu,
+                p.cpu_losses[1],
+                p.gpu_losses[0],
+                p.gpu_losses[1]
+            );
+        }
+        if d.inverted.is_empty() {
+            println!(
+                "    {first} {} | {second} {}",
+                d.cpu.join(" < "),
+                d.gpu.join(" < ")
+            );
+        }
+    }
+    println!(
+        "largest relative best-loss difference: {:.2e} ({}), tolerance {:.0e}",
+        c.max_rel_loss_diff.value, c.max_rel_loss_diff.at, c.loss_tolerance
+    );
+    println!(
+        "largest parameter difference (unit box): {:.2e} ({}), tolerance {:.0e}",
+        c.max_param_diff_unit_box.value, c.max_param_diff_unit_box.at, c.param_tolerance
+    );
+    println!(
+        "{} of {fits} fits compared; {}",
+        c.fits_compared,
+        if c.within_tolerance {
+            format!("within {tolerance}")
+        } else {
+            format!("NOT within {tolerance}")
+        }
+    );
 }

@@ -492,6 +492,20 @@ pub struct SweepBench {
     pub gpu_cpu_time_ratio: Option<f64>,
     /// Null unless both backends ran.
     pub comparison: Option<SweepComparison>,
+    /// `--sweep-reference-seed`: the CPU reference's sweep with another seed, compared
+    /// with its first (absent without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_seed: Option<ReferenceSeed>,
+}
+
+/// The CPU reference's sweep with a second seed against its first: multi-start variance
+/// alone. In `comparison`, the `cpu` side is the first sweep and the `gpu` side the
+/// second.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceSeed {
+    pub seed: u64,
+    pub wall_seconds: f64,
+    pub comparison: SweepComparison,
 }
 
 #[cfg(test)]
