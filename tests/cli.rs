@@ -547,17 +547,23 @@ fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
     ]);
     assert_ok(&out, "synth");
     let json = dir.path().join("bench.json");
-    let out = bsdfit(&[
-        "bench",
-        "--backend",
-        "cpu",
-        "--models",
-        "lambert",
+    let bench_cpu = |more: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--backend",
+            "cpu",
+            "--models",
+            "lambert",
+            "--sweep",
+            "--sweep-data",
+            p(&file),
+        ];
+        args.extend(more);
+        bsdfit(&args)
+    };
+    let out = bench_cpu(&[
         "--seconds",
         "0.02",
-        "--sweep",
-        "--sweep-data",
-        p(&file),
         "--sweep-restarts",
         "2",
         "--sweep-reference-seed",
@@ -592,18 +598,7 @@ fn bench_sweep_with_the_cpu_backend_times_the_cpu_only() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("seed 1 against seed 7"), "{text}");
     // Its own seed is refused, naming the option.
-    let out = bsdfit(&[
-        "bench",
-        "--backend",
-        "cpu",
-        "--models",
-        "lambert",
-        "--sweep",
-        "--sweep-data",
-        p(&file),
-        "--sweep-reference-seed",
-        "1",
-    ]);
+    let out = bench_cpu(&["--sweep-reference-seed", "1"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--sweep-reference-seed 1"), "{err}");
