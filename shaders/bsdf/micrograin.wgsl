@@ -108,23 +108,49 @@ fn mg_g1_over_mu(tau0: f32, beta: f32, mu: f32) -> f32 {
     return 1.0 / (mg_gamma_beta(b, clamp(mu, 0.0, 1.0)) * (p.x + p.y));
 }
 
-// Rough dielectric grain: F(ωi·h) D G1i G1o/(4 μi μo) + (1 − F(μi))(1 − F(μo)) ρ_g/π.
-fn mg_rough_grain(tau0: f32, beta: f32, eta_g: f32, rho_g: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+// The rough grain at one direction pair without ρ_g (RoughGrain::at in micrograin.rs):
+// x = the specular term F(ωi·h) D G1i G1o/(4 μi μo), y = the product of the Fresnel
+// transmittances (1 − F(μi))(1 − F(μo)). ρ_g is the grain's only per-channel parameter, so
+// the channels of a record call this with the same arguments one after the other: the
+// last call's arguments and result are kept per invocation and reused when they match
+// exactly (a pure function, so a match is always right; NaN never matches). The Λ series
+// inside is most of rmg's cost, which this divides by the channel count.
+var<private> MG_MEMO_VALID: bool = false;
+var<private> MG_MEMO_KEY: vec3<f32>;
+var<private> MG_MEMO_WI: vec3<f32>;
+var<private> MG_MEMO_WO: vec3<f32>;
+var<private> MG_MEMO_VAL: vec2<f32>;
+
+fn mg_rough_grain_shared(tau0: f32, beta: f32, eta_g: f32, wi: vec3<f32>, wo: vec3<f32>) -> vec2<f32> {
+    let key = vec3<f32>(tau0, beta, eta_g);
+    if (MG_MEMO_VALID && all(key == MG_MEMO_KEY) && all(wi == MG_MEMO_WI) && all(wo == MG_MEMO_WO)) {
+        return MG_MEMO_VAL;
+    }
+    var value = vec2<f32>(0.0, 0.0);
     let mu_i = wi.z;
     let mu_o = wo.z;
-    if (mu_i <= 0.0 || mu_o <= 0.0) {
-        return 0.0;
+    if (mu_i > 0.0 && mu_o > 0.0) {
+        let eta = max(eta_g, 1.0);
+        value.y = fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta);
+        let hs = wi + wo;
+        let hl2 = dot(hs, hs);
+        if (hl2 >= 1e-30) {
+            let h = hs * inverseSqrt(hl2);
+            let cd = clamp(dot(wi, h), 0.0, 1.0);
+            value.x = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
+                * mg_g1_over_mu(tau0, beta, mu_i) * mg_g1_over_mu(tau0, beta, mu_o) * 0.25;
+        }
     }
-    let eta = max(eta_g, 1.0);
-    let diffuse = fresnel_transmittance(mu_i, eta) * fresnel_transmittance(mu_o, eta) * rho_g * INV_PI;
-    let hs = wi + wo;
-    let hl2 = dot(hs, hs);
-    if (hl2 < 1e-30) {
-        return diffuse;
-    }
-    let h = hs * inverseSqrt(hl2);
-    let cd = clamp(dot(wi, h), 0.0, 1.0);
-    let spec = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
-        * mg_g1_over_mu(tau0, beta, mu_i) * mg_g1_over_mu(tau0, beta, mu_o) * 0.25;
-    return spec + diffuse;
+    MG_MEMO_VALID = true;
+    MG_MEMO_KEY = key;
+    MG_MEMO_WI = wi;
+    MG_MEMO_WO = wo;
+    MG_MEMO_VAL = value;
+    return value;
+}
+
+// Rough dielectric grain: F(ωi·h) D G1i G1o/(4 μi μo) + (1 − F(μi))(1 − F(μo)) ρ_g/π.
+fn mg_rough_grain(tau0: f32, beta: f32, eta_g: f32, rho_g: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    let parts = mg_rough_grain_shared(tau0, beta, eta_g, wi, wo);
+    return parts.x + parts.y * rho_g * INV_PI;
 }

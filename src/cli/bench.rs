@@ -12,9 +12,9 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct BenchArgs {
-    /// Models to measure (default: the whole catalogue, BRDF and BTDF; with --data, the
-    /// catalogue of the data's kind).
-    #[arg(long, value_delimiter = ';')]
+    /// Models to measure, comma-separated as in `sweep` (default: the whole catalogue,
+    /// BRDF and BTDF; with --data, the catalogue of the data's kind).
+    #[arg(long, value_delimiter = ',')]
     pub models: Option<Vec<String>>,
     /// Measure on this data file (any format `fit` reads) instead of the built-in
     /// synthetic sets (816 BRDF samples in 3 channels, 195 BTDF samples).
