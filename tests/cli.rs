@@ -627,7 +627,7 @@ fn bench_measures_on_a_data_file() {
         "--backend",
         "cpu",
         "--models",
-        "fa(lambert);lambert",
+        "fa(lambert),lambert",
         "--data",
         p(&file),
         "--restarts",
