@@ -42,6 +42,14 @@ fn gpu() -> &'static GpuBackend {
     })
 }
 
+fn assert_no_failures(failures: &[String]) {
+    assert!(
+        failures.is_empty(),
+        "GPU/CPU parity failures:\n{}",
+        failures.join("\n")
+    );
+}
+
 /// Random geometries (θ up to 85°, any φ) with random positive values and uncertainties.
 fn random_dataset(kind: Kind, channels: usize, n: usize, seed: u64) -> Dataset {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -80,20 +88,19 @@ fn grid_dataset(kind: Kind, channels: usize, seed: u64) -> Dataset {
     for ti in [0.0, 25.0, 50.0, 75.0] {
         for phi_o in [0.0, 90.0, 180.0] {
             for to in (0..=8).map(|i| 10.0 * i as f64) {
-                for &w in &wl[..channels] {
+                for &wavelength_nm in &wl[..channels] {
                     let value: f64 = rng.random_range(0.01..2.0);
-                    rows.push((
-                        rows.len() + 1,
-                        RawRow {
-                            theta_i: ti,
-                            phi_i: 0.0,
-                            theta_o: to,
-                            phi_o,
-                            wavelength_nm: w,
-                            value,
-                            uncertainty: value * 0.02,
-                        },
-                    ));
+                    let (theta_i, theta_o, uncertainty) = (ti, to, value * 0.02);
+                    let row = RawRow {
+                        theta_i,
+                        phi_i: 0.0,
+                        theta_o,
+                        phi_o,
+                        wavelength_nm,
+                        value,
+                        uncertainty,
+                    };
+                    rows.push((rows.len() + 1, row));
                 }
             }
         }
@@ -218,11 +225,7 @@ fn every_model_matches_the_cpu_reference() {
             }
         }
     }
-    assert!(
-        failures.is_empty(),
-        "GPU/CPU parity failures:\n{}",
-        failures.join("\n")
-    );
+    assert_no_failures(&failures);
 }
 
 /// The same data with every direction as the GPU engine receives it: its components
@@ -278,11 +281,7 @@ fn every_model_matches_the_cpu_reference_on_a_goniometer_grid() {
             Err(e) => failures.push(format!("{spec} (grid): {e}")),
         }
     }
-    assert!(
-        failures.is_empty(),
-        "GPU/CPU parity failures:\n{}",
-        failures.join("\n")
-    );
+    assert_no_failures(&failures);
 }
 
 /// Sharp lobes at α = 0.002 on their peaks: GGX reflection (`ggx`, the lobe of
