@@ -1,9 +1,9 @@
 //! The GPU engine: wgpu compute on Vulkan, f32. One submission evaluates every candidate
 //! of every restart over every sample and reduces on the device to one cost per
 //! candidate (shaders/engine/kernel.wgsl). Pipelines are compiled once per (model, loss
-//! shape, entry point), when first used, and cached; the dataset is uploaded once per problem; parameter and output
-//! buffers are reused across optimizer iterations and grown only when a larger batch
-//! arrives.
+//! shape, entry point), when first used, and cached; the dataset is uploaded once per
+//! problem; parameter and output buffers are reused across optimizer iterations and grown
+//! only when a larger batch arrives.
 //!
 //! **Channels together, data in textures.** The samples are uploaded as records, one per
 //! direction, plane and block of up to four channels ([`RecordLayout`]); a thread
