@@ -92,7 +92,7 @@ fn run(c: &Case) -> FitReport {
             .find(|(n, _)| *n == base)
             .map(|f| f.1)
             .unwrap_or(match d.scale {
-                Scale::Linear => 5e-3 * (d.hi - d.lo),
+                Scale::Linear | Scale::Quadratic => 5e-3 * (d.hi - d.lo),
                 Scale::Log => 2e-2 * want.abs(),
             });
         let std = rep.flat_std[j];
@@ -436,7 +436,7 @@ fn mrm82_falloff_on_tape_shaped_data() {
     for (j, name) in rep.flat_names.iter().enumerate() {
         let (est, want) = (rep.flat_params[j], truth[j]);
         let floor = match decls[j].scale {
-            Scale::Linear => 5e-3 * (decls[j].hi - decls[j].lo),
+            Scale::Linear | Scale::Quadratic => 5e-3 * (decls[j].hi - decls[j].lo),
             Scale::Log => 2e-2 * want,
         };
         let std = rep.flat_std[j].unwrap_or_else(|| panic!("{name}: no standard uncertainty"));

@@ -13,6 +13,10 @@ pub enum Scale {
     Linear,
     /// Logarithmic, for parameters spanning decades (roughness); needs lo > 0.
     Log,
+    /// Quadratic: value = lo + (hi − lo)·u², for a parameter that a model depends on
+    /// through its square root near `lo` (VMF's roughness r: slope m ≈ √r), whose
+    /// derivative is then finite at the bound.
+    Quadratic,
 }
 
 /// One parameter, declared once by the model that owns it.
@@ -74,6 +78,13 @@ impl ParamDecl {
             ..self
         }
     }
+    /// Map to the unit box quadratically (see [`Scale::Quadratic`]).
+    pub const fn quadratic(self) -> Self {
+        ParamDecl {
+            scale: Scale::Quadratic,
+            ..self
+        }
+    }
     /// Declare the value at which the parameter adds nothing (see [`ParamDecl::neutral`]).
     pub const fn neutral_at(self, v: f64) -> Self {
         ParamDecl {
@@ -106,6 +117,7 @@ impl ParamDecl {
         match self.scale {
             Scale::Linear => self.lo + u * (self.hi - self.lo),
             Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
+            Scale::Quadratic => self.lo + u * u * (self.hi - self.lo),
         }
         .clamp(self.lo, self.hi)
     }
@@ -116,6 +128,7 @@ impl ParamDecl {
         match self.scale {
             Scale::Linear => (v - self.lo) / (self.hi - self.lo),
             Scale::Log => (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()),
+            Scale::Quadratic => ((v - self.lo) / (self.hi - self.lo)).sqrt(),
         }
     }
 }

@@ -375,7 +375,9 @@ impl Bsdf for Vmf {
     fn params(&self) -> Vec<ParamDecl> {
         vec![
             ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0),
-            ParamDecl::shared("r", 0.0, R_MAX, 0.5, "roughness").neutral_at(0.0),
+            ParamDecl::shared("r", 0.0, R_MAX, 0.5, "roughness")
+                .neutral_at(0.0)
+                .quadratic(),
         ]
     }
     fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
