@@ -331,6 +331,39 @@ impl LossTerms {
         }
     }
 
+    /// Σr² of the model values `values` (samples 0..K) after the best common rescaling
+    /// s·values with s ∈ [1/max_scale, max_scale], or unscaled where that is lower: how
+    /// well the values' *shape* matches the data. s minimises the linear residual
+    /// √w·a·(s·y′ − y) in closed form; the logarithmic terms use the same s. NaN if Σr²
+    /// of the unscaled values is NaN.
+    ///
+    /// Why: it ranks the random points that become LM's starts. A level that is off is
+    /// what LM corrects most easily (albedos, k_s, S, τ), a shape that is off is not; and
+    /// where much of the box gives a model ≈ 0 (a strong absorption, a needle-sharp NDF),
+    /// raw Σr² prefers those dead points to any that overshoots, while their Jacobian
+    /// vanishes (in f32 it is exactly 0) and LM cannot leave them.
+    pub fn rescaled_sum_squares(&self, values: &[f64], max_scale: f64) -> f64 {
+        let (mut fy, mut ff) = (0.0, 0.0);
+        for (k, &f) in values.iter().enumerate() {
+            let c2 = self.w[k] * self.a[k] * self.a[k];
+            fy += c2 * f * self.y[k];
+            ff += c2 * f * f;
+        }
+        let sum_squares = |s: f64| -> f64 {
+            values
+                .iter()
+                .enumerate()
+                .map(|(k, &f)| self.residual(k, s * f).powi(2))
+                .sum()
+        };
+        let unscaled = sum_squares(1.0);
+        if !(ff > 0.0 && fy > 0.0) || unscaled.is_nan() {
+            return unscaled;
+        }
+        let s = (fy / ff).clamp(1.0 / max_scale, max_scale);
+        unscaled.min(sum_squares(s))
+    }
+
     /// The loss of a whole vector of model values.
     pub fn loss(&self, values: &[f64]) -> f64 {
         let s: f64 = values
@@ -361,4 +394,63 @@ pub fn normalised_residuals(data: &Dataset, values: &[f64]) -> Vec<f64> {
         .zip(values)
         .map(|(s, &v)| (v - s.value) / s.uncertainty)
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn terms(term: Term) -> LossTerms {
+        LossTerms::new(
+            term,
+            Finish::Sum,
+            vec![1.0, 2.0, 0.5, 1.0],
+            vec![1.0, 0.9, 0.7, 0.5],
+            vec![0.2, 0.5, 1.0, 0.4],
+        )
+    }
+
+    fn raw(t: &LossTerms, values: &[f64]) -> f64 {
+        values
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| t.residual(k, v).powi(2))
+            .sum()
+    }
+
+    #[test]
+    fn a_rescaled_shape_outranks_a_dead_model_that_raw_sum_squares_prefers() {
+        for term in [Term::Square, Term::LogSquare] {
+            let t = terms(term);
+            let dead = [0.0; 4];
+            // The data's shape at 4× its level: raw Σr² ranks it below the dead model.
+            let loud: Vec<f64> = t.y.iter().map(|y| 4.0 * y).collect();
+            assert!(raw(&t, &loud) > raw(&t, &dead), "{term:?}");
+            let (r_loud, r_dead) = (
+                t.rescaled_sum_squares(&loud, 100.0),
+                t.rescaled_sum_squares(&dead, 100.0),
+            );
+            assert!(r_loud < 1e-3 * r_dead, "{term:?}: {r_loud} vs {r_dead}");
+            assert_eq!(r_dead, raw(&t, &dead));
+            // A level beyond the allowed rescaling is only partly forgiven.
+            let far: Vec<f64> = t.y.iter().map(|y| 1e4 * y).collect();
+            let r_far = t.rescaled_sum_squares(&far, 100.0);
+            assert!(r_far > 1e3 * r_loud && r_far < raw(&t, &far), "{term:?}");
+        }
+    }
+
+    #[test]
+    fn rescaling_never_ranks_worse_than_raw_and_keeps_nan() {
+        let t = terms(Term::Square);
+        for values in [
+            [0.3, 0.1, 2.0, 0.0],
+            [0.2, 0.5, 1.0, 0.4],
+            [-1.0, 0.2, 0.1, 0.3],
+        ] {
+            let r = t.rescaled_sum_squares(&values, 100.0);
+            assert!(r.is_finite() && r <= raw(&t, &values) + 1e-15, "{values:?}");
+        }
+        let r = t.rescaled_sum_squares(&[0.3, f64::NAN, 2.0, 0.1], 100.0);
+        assert!(r.is_nan());
+    }
 }
