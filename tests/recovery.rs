@@ -92,8 +92,8 @@ fn run(c: &Case) -> FitReport {
             .find(|(n, _)| *n == base)
             .map(|f| f.1)
             .unwrap_or(match d.scale {
-                Scale::Linear | Scale::Quadratic => 5e-3 * (d.hi - d.lo),
-                Scale::Log => 2e-2 * want.abs(),
+                Scale::Linear | Scale::Quadratic | Scale::QuadraticHi => 5e-3 * (d.hi - d.lo),
+                Scale::Log | Scale::Logit => 2e-2 * want.abs(),
             });
         let std = rep.flat_std[j];
         let tol = (4.0 * std.unwrap_or(0.0)).max(floor);
@@ -436,8 +436,10 @@ fn mrm82_falloff_on_tape_shaped_data() {
     for (j, name) in rep.flat_names.iter().enumerate() {
         let (est, want) = (rep.flat_params[j], truth[j]);
         let floor = match decls[j].scale {
-            Scale::Linear | Scale::Quadratic => 5e-3 * (decls[j].hi - decls[j].lo),
-            Scale::Log => 2e-2 * want,
+            Scale::Linear | Scale::Quadratic | Scale::QuadraticHi => {
+                5e-3 * (decls[j].hi - decls[j].lo)
+            }
+            Scale::Log | Scale::Logit => 2e-2 * want,
         };
         let std = rep.flat_std[j].unwrap_or_else(|| panic!("{name}: no standard uncertainty"));
         let tol = (4.0 * std).max(floor);

@@ -17,6 +17,14 @@ pub enum Scale {
     /// through its square root near `lo` (VMF's roughness r: slope m ≈ √r), whose
     /// derivative is then finite at the bound.
     Quadratic,
+    /// Quadratic towards `hi`: value = hi − (hi − lo)·(1 − u)², for a parameter that a
+    /// model depends on through √(hi − value) (VMF's albedo: its order ≥ 4 residual
+    /// uses √(1 − ρ)), whose derivative is then finite at the bound.
+    QuadraticHi,
+    /// Logit: ln(v/(1 − v)) linear in u, for a fraction in (0, 1) whose both ends span
+    /// decades (micrograin's filling factor τ0: the model scales with τ0 near 0 and
+    /// with ln(1 − τ0) near 1); needs 0 < lo < hi < 1.
+    Logit,
 }
 
 /// One parameter, declared once by the model that owns it.
@@ -85,6 +93,20 @@ impl ParamDecl {
             ..self
         }
     }
+    /// Map to the unit box quadratically towards `hi` (see [`Scale::QuadraticHi`]).
+    pub const fn quadratic_hi(self) -> Self {
+        ParamDecl {
+            scale: Scale::QuadraticHi,
+            ..self
+        }
+    }
+    /// Map to the unit box by the logit (see [`Scale::Logit`]).
+    pub const fn logit(self) -> Self {
+        ParamDecl {
+            scale: Scale::Logit,
+            ..self
+        }
+    }
     /// Declare the value at which the parameter adds nothing (see [`ParamDecl::neutral`]).
     pub const fn neutral_at(self, v: f64) -> Self {
         ParamDecl {
@@ -118,6 +140,11 @@ impl ParamDecl {
             Scale::Linear => self.lo + u * (self.hi - self.lo),
             Scale::Log => (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp(),
             Scale::Quadratic => self.lo + u * u * (self.hi - self.lo),
+            Scale::QuadraticHi => self.hi - (1.0 - u) * (1.0 - u) * (self.hi - self.lo),
+            Scale::Logit => {
+                let l = logit(self.lo) + u * (logit(self.hi) - logit(self.lo));
+                1.0 / (1.0 + (-l).exp())
+            }
         }
         .clamp(self.lo, self.hi)
     }
@@ -129,8 +156,14 @@ impl ParamDecl {
             Scale::Linear => (v - self.lo) / (self.hi - self.lo),
             Scale::Log => (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()),
             Scale::Quadratic => ((v - self.lo) / (self.hi - self.lo)).sqrt(),
+            Scale::QuadraticHi => 1.0 - ((self.hi - v) / (self.hi - self.lo)).sqrt(),
+            Scale::Logit => (logit(v) - logit(self.lo)) / (logit(self.hi) - logit(self.lo)),
         }
     }
+}
+
+fn logit(v: f64) -> f64 {
+    (v / (1.0 - v)).ln()
 }
 
 /// What a model is for. Layers name the roles they accept as a base, so allow-lists are
@@ -271,4 +304,53 @@ pub struct Entry {
     pub build: Builder,
     /// The argument names a term accepts (`btdf(tr)`): its variants. Empty otherwise.
     pub variants: &'static [&'static str],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every scale maps the box's ends to the bounds, increases strictly, and inverts:
+    /// the optimizers' box and the reported values must describe the same point.
+    #[test]
+    fn every_scale_maps_the_box_onto_the_bounds_and_back() {
+        let base = ParamDecl::shared("x", 2e-3, 0.995, 0.5, "test");
+        for d in [
+            base,
+            base.log(),
+            base.quadratic(),
+            base.quadratic_hi(),
+            base.logit(),
+        ] {
+            assert!((d.from_unit(0.0) - d.lo).abs() < 1e-12, "{:?}", d.scale);
+            assert!((d.from_unit(1.0) - d.hi).abs() < 1e-12, "{:?}", d.scale);
+            let mut last = f64::NEG_INFINITY;
+            for i in 0..=200 {
+                let u = i as f64 / 200.0;
+                let v = d.from_unit(u);
+                assert!(v > last, "{:?} not increasing at u = {u}", d.scale);
+                last = v;
+                let back = d.to_unit(v);
+                assert!(
+                    (back - u).abs() < 1e-9,
+                    "{:?}: u {u} → {v} → {back}",
+                    d.scale
+                );
+            }
+        }
+    }
+
+    /// The reason for the quadratic maps: √(v − lo) (resp. √(hi − v)) is linear in u, so
+    /// its derivative in the box stays finite at the bound.
+    #[test]
+    fn quadratic_maps_make_a_square_root_linear_at_their_bound() {
+        let d = ParamDecl::shared("x", 0.0, 1.0, 0.5, "test");
+        for u in [0.0, 1e-6, 0.3, 0.999] {
+            let v = d.quadratic().from_unit(u);
+            assert!((v.sqrt() - u).abs() < 1e-12, "u {u}");
+            // 1 − v rounds to ≈ 1e-16 absolute: √ of it to ≈ 1e-10 at u = 1e-6.
+            let v = d.quadratic_hi().from_unit(1.0 - u);
+            assert!(((1.0 - v).sqrt() - u).abs() < 1e-9, "u {u}");
+        }
+    }
 }

@@ -82,7 +82,7 @@ pub fn layer_wgsl(name: &'static str, source: &'static str) -> WgslFn {
 }
 
 pub const TAU0: ParamDecl = ParamDecl::shared("tau0", 1e-3, 0.999, 0.5, "filling factor")
-    .log()
+    .logit()
     // The thinnest layer: w ≈ τ0 at every angle.
     .neutral_at_lo();
 /// Grain albedo.

@@ -374,7 +374,9 @@ impl Bsdf for Vmf {
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0),
+            ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo")
+                .neutral_at(0.0)
+                .quadratic_hi(),
             ParamDecl::shared("r", 0.0, R_MAX, 0.5, "roughness")
                 .neutral_at(0.0)
                 .quadratic(),
