@@ -72,19 +72,29 @@ fn gpu_lm_reaches_the_f64_optimum_in_a_narrow_valley() {
                 "{file} {spec}: {name} cpu {a} gpu {b}"
             );
         }
-        // χ² and the standard uncertainties are computed in f64 on the CPU for both fits,
-        // at optima 1e-6 apart: they agree to ~1e-6 (measured 7.6e-6 for χ²_red and 1.2e-6
-        // for the uncertainties). Computed from the f32 engine's central differences, the
-        // uncertainties differed by up to 3.2e-4 (η on diffuser-d), above this bound.
+        // χ² and the standard uncertainties are computed in f64 on the CPU for both fits.
+        // Where χ² is the loss it is stationary at the optimum, so optima 1e-6 apart in
+        // loss give χ²_red and uncertainties that agree to ~1e-6 (measured 7.6e-6 and
+        // 1.2e-6); computed from the f32 engine's central differences, the uncertainties
+        // differed by up to 3.2e-4 (η on diffuser-d), above the 1e-4 bound. Where another
+        // loss is fitted, χ²_red and the uncertainties change to first order along the
+        // valley: two f64 LM runs that stop 2.7e-9 apart in `f` (both by ftol, their steps
+        // down to the forward differences' resolution) are 3e-5 apart in the scale and
+        // 1.4e-4 apart in χ²_red; the bound is then the search's loss tolerance, 1e-3.
+        let conclusion_tol = if loss.metric == Metric::Chi2 {
+            1e-4
+        } else {
+            1e-3
+        };
         let rel = (g.best.chi2_red - c.best.chi2_red).abs() / c.best.chi2_red;
         assert!(
-            rel < 1e-4,
+            rel < conclusion_tol,
             "{file} {spec}: χ²_red relative difference {rel:.2e}"
         );
         for (name, (a, b)) in c.flat_names.iter().zip(c.flat_std.iter().zip(&g.flat_std)) {
             let (a, b) = (a.expect("determined"), b.expect("determined"));
             assert!(
-                (a - b).abs() <= 1e-4 * a,
+                (a - b).abs() <= conclusion_tol * a,
                 "{file} {spec}: standard uncertainty of {name}: cpu {a} gpu {b}"
             );
         }

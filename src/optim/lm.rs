@@ -1,6 +1,6 @@
-//! Levenberg–Marquardt with Marquardt's diagonal scaling (Moré 1978, "The Levenberg-
-//! Marquardt algorithm: implementation and theory"; as levmar/MINPACK), batched: each
-//! iteration sends one batch, the trial point of every active restart with its
+//! Levenberg–Marquardt with Marquardt's diagonal scaling, kept as the running maximum of
+//! diag(JᵀJ) (Moré 1978, "The Levenberg-Marquardt algorithm: implementation and theory";
+//! as MINPACK), batched: each iteration sends one batch, the trial point of every active restart with its
 //! forward-difference neighbours, whose normal equations give the trial's Σr² and, if the
 //! step is accepted, the next Jacobian; a rejected step keeps the normal equations of the
 //! point it stays at. So an iteration costs P + 1 evaluations and one submission (a
@@ -101,6 +101,13 @@ struct State {
     /// The normal equations at x.
     normal: NormalEquations,
     lambda: f64,
+    /// The damping's scaling: the largest diag(JᵀJ) met at the accepted points so far
+    /// (Moré 1978; MINPACK's `mode = 1`), not the current one. Why: a parameter the
+    /// data barely determine at the current point (a base albedo under a nearly opaque
+    /// grain layer) gets almost no damping from its own diag(JᵀJ), so its Gauss–Newton
+    /// steps run far beyond where the model is linear, are rejected, and λ rises for all
+    /// parameters; the running maximum keeps its damping where it was once meaningful.
+    scale: Vec<f64>,
     active: bool,
     iterations: usize,
     evaluations: usize,
@@ -137,6 +144,7 @@ pub fn minimize(
         .map(|(x, normal)| State {
             x: x.clone(),
             ss: sanitize(normal.ss),
+            scale: (0..p).map(|j| normal.jtj[j * p + j]).collect(),
             normal,
             lambda: opts.initial_lambda,
             active: true,
@@ -167,7 +175,8 @@ pub fn minimize(
             let dmax = (0..p).map(|j| jtj[(j, j)]).fold(0.0, f64::max).max(1e-300);
             let mut a_mat = jtj.clone();
             for j in 0..p {
-                a_mat[(j, j)] += s.lambda * jtj[(j, j)].max(1e-9 * dmax);
+                let d = s.scale[j].max(jtj[(j, j)]);
+                a_mat[(j, j)] += s.lambda * d.max(1e-9 * dmax);
             }
             let delta = bounded_step(&a_mat, &g, &s.x);
             let start = trial.len();
@@ -215,6 +224,12 @@ pub fn minimize(
             if ss_new < s.ss {
                 let gain = (s.ss - ss_new) / s.ss.max(1e-300);
                 s.x.copy_from_slice(x_new);
+                for j in 0..p {
+                    let d = ne.jtj[j * p + j];
+                    if d.is_finite() {
+                        s.scale[j] = s.scale[j].max(d);
+                    }
+                }
                 s.ss = ss_new;
                 s.normal = ne;
                 s.lambda = (s.lambda / 3.0).max(1e-12);
