@@ -488,9 +488,14 @@ fn progress_lines_when_stderr_is_not_a_terminal() {
     let tmp = tempfile::tempdir().unwrap();
     let (brdf, btdf) = data(tmp.path());
     let out = tmp.path().join("o");
+    // Enough restarts that the sweep outlasts the shortest interval (0.05 s) even in a
+    // release build: a run shorter than the interval rightly prints no line.
+    let mut args = sweep_args(&brdf, &btdf, &out, &[]);
+    let at = args.iter().position(|&a| a == "--restarts").unwrap() + 1;
+    args[at] = "400";
     let o = bin()
         .env("BSDFIT_PROGRESS_SECS", "0.05")
-        .args(sweep_args(&brdf, &btdf, &out, &[]))
+        .args(args)
         .output()
         .unwrap();
     ok(&o, "sweep");
@@ -508,7 +513,7 @@ fn progress_lines_when_stderr_is_not_a_terminal() {
             "--model",
             "on",
             "--restarts",
-            "64",
+            "1000",
             "--optimizer",
             "compass",
             "--loss",

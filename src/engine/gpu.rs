@@ -965,7 +965,7 @@ impl GpuEvaluator<'_> {
             (&io.out, o_bytes)
         };
         enc.copy_buffer_to_buffer(source, 0, &io.staging, 0, bytes);
-        q.submit(Some(enc.finish()));
+        let index = q.submit(Some(enc.finish()));
         let slice = io.staging.slice(0..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -973,7 +973,10 @@ impl GpuEvaluator<'_> {
         });
         self.gpu
             .device
-            .poll(wgpu::PollType::wait_indefinitely())
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: None,
+            })
             .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
         rx.recv()
             .map_err(|_| anyhow!("GPU read-back was dropped"))?

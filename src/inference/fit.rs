@@ -48,9 +48,10 @@ pub struct FitOptions {
     pub problem_points: Vec<Vec<f64>>,
     pub compass: compass::CompassOptions,
     pub lm: lm::LmOptions,
-    /// Levenberg–Marquardt on a backend that evaluates in f32: continue the best restart
-    /// of each problem in f64 on the CPU reference, so that the reported optimum is an
-    /// f64 optimum (see [`polish_in_f64`]).
+    /// Levenberg–Marquardt: the restarts only find the basins, with the same settings on
+    /// every backend, and the best restart of each problem is continued in f64 on the
+    /// CPU reference to f64's convergence (see [`search_options`], [`polish_in_f64`]).
+    /// Off: every restart goes to the backend's own convergence, and nothing is polished.
     pub polish: bool,
     /// `--fix`, `--bounds`, `--prior` (resolved against each model fitted).
     pub constraints: ConstraintSpec,
@@ -524,26 +525,7 @@ pub fn fit_many(
                 }
                 Optimizer::Lm => {
                     let finish = obj.loss_terms.clone();
-                    // Forward differences need a step well above √ε of the backend's
-                    // arithmetic (f32 on the GPU: a 1e-6 step leaves the Jacobian mostly
-                    // rounding noise), and an f32 Σr² cannot show a relative gain much
-                    // below 16u ≈ 1e-6, so the restarts stop there at the latest. With
-                    // the f64 polish to finish the best one, they only have to find its
-                    // basin: they stop at a predicted gain of 1e-4 (on the default sweep
-                    // a quarter fewer evaluations than at 16u, polish included, with the
-                    // same rankings against the CPU).
-                    let u = backend.unit_roundoff();
-                    let polish = opts.polish && u > f64::EPSILON;
-                    let mut lm_opts = opts.lm.clone();
-                    lm_opts.fd_step = lm_opts.fd_step.max(4.0 * u.sqrt());
-                    if u > f64::EPSILON {
-                        let floor = if polish {
-                            POLISHED_SEARCH_FTOL
-                        } else {
-                            16.0 * u
-                        };
-                        lm_opts.ftol = lm_opts.ftol.max(floor);
-                    }
+                    let lm_opts = search_options(&opts.lm, opts.polish, backend.unit_roundoff());
                     let mut results = lm::minimize(
                         &mut obj,
                         &starts,
@@ -551,7 +533,7 @@ pub fn fit_many(
                         &|start, s| finish[start / per].finish_sum(s),
                         progress,
                     )?;
-                    if opts.polish && u > f64::EPSILON {
+                    if opts.polish {
                         polished =
                             polish_in_f64(&problems, &space, &finish, &mut results, per, &opts.lm)?;
                     }
@@ -560,8 +542,8 @@ pub fn fit_many(
             }
         };
         for (q, restarts) in results.chunks(per).enumerate() {
-            // A polished restart is the best: it was the best in f32, and any other is
-            // at most rounding noise below its f32 cost.
+            // A polished restart is the best: it was the best of the search, and the
+            // polish only lowered its cost.
             let best = match polished.get(q) {
                 Some(&(i, _)) => &restarts[i],
                 None => restarts
@@ -586,21 +568,52 @@ pub fn fit_many(
     Ok((optima, space, stats))
 }
 
-/// LM's `ftol` for restarts in f32 whose best is then polished in f64 (see `fit_many`).
+/// LM's `ftol` for restarts whose best is then polished in f64 (see [`search_options`]).
 pub const POLISHED_SEARCH_FTOL: f64 = 1e-4;
 
+/// LM's forward-difference step (unit box) for restarts whose best is then polished:
+/// 4√u of f32, the smallest step whose f32 differences are not mostly rounding noise.
+pub const POLISHED_SEARCH_FD_STEP: f64 = 9.765625e-4;
+
+/// LM's options for the restarts, before any polish.
+///
+/// With the f64 polish (the default) the restarts only have to find each problem's
+/// basin, and they search the same way on every backend: forward differences with the
+/// step f32 needs, and a stop at a predicted gain of 1e-4 of Σr². The f64 CPU reference
+/// and the f32 GPU engine then take the same steps up to rounding, so the two differ
+/// only where rounding tips a restart into another basin. On the default sweep (seeds
+/// 1–6) that left 0–1 of its 36 rankings different between them, against 0–3 when the
+/// CPU searched with f64's step to f64's floor, which took twice its evaluations for
+/// about the same optima (docs/losses.md).
+///
+/// Without the polish, each backend goes as far as its arithmetic allows: a step well
+/// above √u (`u` the backend's unit roundoff) and a stop at 16u, below which an f32 Σr²
+/// cannot tell a gain from rounding (f64 keeps `lm`'s own 1e-6 and 1e-10).
+fn search_options(lm: &lm::LmOptions, polish: bool, u: f64) -> lm::LmOptions {
+    let mut o = lm.clone();
+    if polish {
+        o.fd_step = o.fd_step.max(POLISHED_SEARCH_FD_STEP);
+        o.ftol = o.ftol.max(POLISHED_SEARCH_FTOL);
+    } else {
+        o.fd_step = o.fd_step.max(4.0 * u.sqrt());
+        o.ftol = o.ftol.max(16.0 * u);
+    }
+    o
+}
+
 /// Continue the best restart of each problem (`per` consecutive restarts each) with
-/// Levenberg–Marquardt in f64 on the CPU reference, from where the f32 search stopped,
-/// with f64's forward-difference step and tolerance (an f64 run never ends above its
-/// start). Returns, per problem, the polished restart (index within the problem) and the
+/// Levenberg–Marquardt in f64 on the CPU reference, from where the search stopped, with
+/// f64's forward-difference step and tolerance (an f64 run never ends above its start).
+/// Returns, per problem, the polished restart (index within the problem) and the
 /// polish's evaluations.
 ///
-/// Why: in f32 the Jacobian's forward differences need unit-box steps of ≈ 1e-3, whose
-/// truncation error tilts the Gauss–Newton step; in a long, narrow valley (strongly
-/// correlated parameters, e.g. a BTDF's roughness, scale and index) the f32 search
-/// stalls where the tilted step stops descending, up to 10 % above the f64 optimum on
-/// the bundled diffusers. One f64 continuation per problem costs a few per cent of the
-/// search, and makes the GPU's optima f64 optima.
+/// Why: the search's forward differences use unit-box steps of ≈ 1e-3 (all f32 allows),
+/// whose truncation error tilts the Gauss–Newton step; in a long, narrow valley (strongly
+/// correlated parameters, e.g. a BTDF's roughness, scale and index) the search stalls
+/// where the tilted step stops descending, up to 10 % above the f64 optimum on the
+/// bundled diffusers. One f64 continuation per problem costs a few per cent of the
+/// search's evaluations (a fifth of a GPU sweep's time, whose polish is the CPU's
+/// work), and makes every backend's optima f64 optima.
 fn polish_in_f64(
     problems: &[Problem],
     space: &Constraints,
