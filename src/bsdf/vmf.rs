@@ -184,20 +184,26 @@ struct Geometry {
     c2phi: f64,
 }
 
-/// Order 1 (single scattering): max(0, f10 + 2 f11 cos φ + 2 f12 cos 2φ).
-/// `s_io` = σ(μi) σ(μo), `den` = μo σ(μi) + μi σ(−μo).
-fn order1(r: f64, g: &Geometry, s_io: f64, den: f64) -> f64 {
+/// The C_1ij of order 1 (rational fits in r): C100..C103, C110..C112, C120, C121.
+fn order1_coefficients(r: f64) -> [f64; 9] {
     let (r2, r3, r4) = (r * r, r * r * r, r * r * r * r);
-    let c100 = 1.0 + (-0.1 * r + 0.84 * r4) / (1.0 + 9.0 * r3);
-    let c101 = (0.0173 * r + 20.4 * r2 - 9.47 * r3) / (1.0 + 7.46 * r);
-    let c102 = (-0.927 * r + 2.37 * r2) / (1.24 + r2);
-    let c103 = (-0.11 * r - 1.54 * r2) / (1.0 - 1.05 * r + 7.1 * r2);
-    let c110 = (0.54 * r - 0.182 * r3) / (1.0 + 1.32 * r2);
-    let c111 = (-0.097 * r + 0.62 * r2 - 0.375 * r3) / (1.0 + 0.4 * r3);
-    let c112 = 0.283 + 0.862 * r - 0.681 * r2;
-    let c120 = (2.25 * r + 5.1 * r2) / (1.0 + 9.8 * r + 32.4 * r2);
-    let c121 = (-4.32 * r + 6.0 * r3) / (1.0 + 9.7 * r + 287.0 * r3);
+    [
+        1.0 + (-0.1 * r + 0.84 * r4) / (1.0 + 9.0 * r3),
+        (0.0173 * r + 20.4 * r2 - 9.47 * r3) / (1.0 + 7.46 * r),
+        (-0.927 * r + 2.37 * r2) / (1.24 + r2),
+        (-0.11 * r - 1.54 * r2) / (1.0 - 1.05 * r + 7.1 * r2),
+        (0.54 * r - 0.182 * r3) / (1.0 + 1.32 * r2),
+        (-0.097 * r + 0.62 * r2 - 0.375 * r3) / (1.0 + 0.4 * r3),
+        0.283 + 0.862 * r - 0.681 * r2,
+        (2.25 * r + 5.1 * r2) / (1.0 + 9.8 * r + 32.4 * r2),
+        (-4.32 * r + 6.0 * r3) / (1.0 + 9.7 * r + 287.0 * r3),
+    ]
+}
 
+/// Order 1 (single scattering): max(0, f10 + 2 f11 cos φ + 2 f12 cos 2φ), `c` from
+/// [`order1_coefficients`]. `s_io` = σ(μi) σ(μo), `den` = μo σ(μi) + μi σ(−μo).
+fn order1(c: &[f64; 9], g: &Geometry, s_io: f64, den: f64) -> f64 {
+    let [c100, c101, c102, c103, c110, c111, c112, c120, c121] = *c;
     let f10 = (c100 + c101 * g.prod + c102 * g.prod * g.prod + c103 * (g.ui * g.ui + g.uo * g.uo))
         * s_io
         / den;
@@ -209,7 +215,7 @@ fn order1(r: f64, g: &Geometry, s_io: f64, den: f64) -> f64 {
 /// Orders 2 and 3 share one form: max(0, f_k0 + 2 f_k1 cos φ) with
 /// f_k0 = (C_k00 + C_k01 μiμo + C_k02 (μi + μo) + C_k03 μi²μo² + C_k04 (μi² + μo²)) / (μi + μo),
 /// f_k1 = sinθi sinθo (C_k10 + C_k11 μiμo + C_k12 (μi + μo)) / (μi + μo).
-fn order_k(c0: [f64; 5], c1: [f64; 3], g: &Geometry) -> f64 {
+fn order_k((c0, c1): &OrderK, g: &Geometry) -> f64 {
     let fk0 = (c0[0]
         + c0[1] * g.prod
         + c0[2] * g.sum
@@ -220,8 +226,11 @@ fn order_k(c0: [f64; 5], c1: [f64; 3], g: &Geometry) -> f64 {
     (fk0 + 2.0 * fk1 * g.cphi).max(0.0)
 }
 
-/// Order 2 (double scattering).
-fn order2(r: f64, g: &Geometry) -> f64 {
+/// C_k00..C_k04 and C_k10..C_k12 of order k = 2 or 3.
+type OrderK = ([f64; 5], [f64; 3]);
+
+/// The C_2ij of order 2 (double scattering).
+fn order2_coefficients(r: f64) -> OrderK {
     let (r2, r3, r4) = (r * r, r * r * r, r * r * r * r);
     let r25 = r2 * r.sqrt();
     let c0 = [
@@ -236,11 +245,11 @@ fn order2(r: f64, g: &Geometry) -> f64 {
         (2.77 * r2 - 8.332 * r25 + 6.073 * r3) / (1.0 + 50.0 * r4),
         (-0.431 * r2 - 0.295 * r3) / (1.0 + 23.9 * r3),
     ];
-    order_k(c0, c1, g)
+    (c0, c1)
 }
 
-/// Order 3 (triple scattering).
-fn order3(r: f64, g: &Geometry) -> f64 {
+/// The C_3ij of order 3 (triple scattering).
+fn order3_coefficients(r: f64) -> OrderK {
     let (r2, r3, r4) = (r * r, r * r * r, r * r * r * r);
     let sr = r.sqrt();
     let (r25, r45, r5) = (r2 * sr, r4 * sr, r4 * r);
@@ -256,72 +265,74 @@ fn order3(r: f64, g: &Geometry) -> f64 {
         (-0.134 * r2 + 0.162 * r25 + 0.302 * r3) / (1.0 + 57.5 * r45),
         (-0.119 * r2 + 0.5 * r25 - 0.207 * r3) / (1.0 + 18.7 * r3),
     ];
-    order_k(c0, c1, g)
+    (c0, c1)
 }
 
-/// The parts of the fitted residual ([`residual`]) that do not depend on ρ:
-/// q = 0.0225272 + (r − 0.264641) r and t = −0.0578978/(0.287663 + μiμo) + |tanh r − 0.0898863|.
-#[derive(Clone, Copy, Debug)]
-struct ResidualAt {
+/// The ρ- and r-dependent factor K of the fitted residual for scattering orders ≥ 4,
+/// f_m = max(0, K t) (1/sr; added as is, outside the 1/π), t from [`VmfAt`]; `q` =
+/// 0.0225272 + (r − 0.264641) r.
+fn residual_factor(rho: f64, q: f64) -> f64 {
+    let cc = (1.0 - rho).max(0.0).sqrt();
+    let ck = (1.0 - 0.5441615108674713 * cc - 0.45302863761693374 * (1.0 - rho))
+        / (1.0 + 1.4293127703064865 * cc);
+    let erf_cc = 1.0 - erfc(cc);
+    let ca = rho / (1.0075 + 1.16942 * cc).powf((q * erf_cc).atan());
+    0.384016 * (ca - 0.341969) * ca * ck
+}
+
+/// What VMF depends on at one roughness r > 0, whatever the directions and ρ: the slope,
+/// the σ series' moments and the C_kij fits. Computed once per parameter vector rather
+/// than per direction: they are most of an evaluation's cost.
+#[derive(Clone, Debug)]
+struct VmfLobe {
+    m: f64,
+    a: [f64; L_MAX + 1],
+    c1: [f64; 9],
+    c2: OrderK,
+    c3: OrderK,
+    /// q of [`residual_factor`].
     q: f64,
-    t: f64,
+    /// |tanh r − 0.0898863|, the residual's t without its μiμo term.
+    t_r: f64,
 }
 
-impl ResidualAt {
-    fn new(r: f64, prod: f64) -> ResidualAt {
-        ResidualAt {
-            q: 0.0225272 + (r - 0.264641) * r,
-            t: -0.0578978 / (0.287663 + prod) + (r.tanh() - 0.0898863).abs(),
+impl VmfLobe {
+    /// None for r ≤ 0 (and NaN): exact Lambert, as published.
+    fn new(r: f64) -> Option<VmfLobe> {
+        if r.is_nan() || r <= 0.0 {
+            return None;
         }
-    }
-
-    /// Fitted residual f_m for scattering orders ≥ 4 (1/sr; added as is, outside the 1/π).
-    fn residual(&self, rho: f64) -> f64 {
-        let cc = (1.0 - rho).max(0.0).sqrt();
-        let ck = (1.0 - 0.5441615108674713 * cc - 0.45302863761693374 * (1.0 - rho))
-            / (1.0 + 1.4293127703064865 * cc);
-        let erf_cc = 1.0 - erfc(cc);
-        let ca = rho / (1.0075 + 1.16942 * cc).powf((self.q * erf_cc).atan());
-        (0.384016 * (ca - 0.341969) * ca * ck * self.t).max(0.0)
-    }
-}
-
-/// What VMF depends on besides ρ at one direction pair: the three scattering orders'
-/// shapes (the cross sections and their polynomial fits, the costly part) and the
-/// ρ-independent parts of the residual.
-#[derive(Clone, Copy, Debug)]
-enum VmfAt {
-    /// Below the surface: 0.
-    Below,
-    /// r ≤ 0: exact Lambert.
-    Lambert,
-    Rough {
-        orders: [f64; 3],
-        residual: ResidualAt,
-    },
-}
-
-impl VmfAt {
-    fn new(r: f64, wi: DVec3, wo: DVec3) -> VmfAt {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return VmfAt::Below;
-        }
-        // r ≤ 0 (and NaN) is exact Lambert, as published.
-        let r = if r > 0.0 {
-            r.min(1.0)
-        } else {
-            return VmfAt::Lambert;
-        };
-        let (ui, uo) = (wi.z.clamp(MU_MIN, 1.0), wo.z.clamp(MU_MIN, 1.0));
-
-        // Cross sections.
+        let r = r.min(1.0);
         let m = slope(r);
         let a = if m >= M_SWITCH {
             moments(2.0 / (m * m))
         } else {
             [0.0; L_MAX + 1]
         };
-        let (s_i, s_o, s_mo) = (sigma(ui, m, &a), sigma(uo, m, &a), sigma(-uo, m, &a));
+        Some(VmfLobe {
+            m,
+            a,
+            c1: order1_coefficients(r),
+            c2: order2_coefficients(r),
+            c3: order3_coefficients(r),
+            q: 0.0225272 + (r - 0.264641) * r,
+            t_r: (r.tanh() - 0.0898863).abs(),
+        })
+    }
+
+    /// The residual factor K for facet albedo ρ (one per channel).
+    fn residual_factor(&self, rho: f64) -> f64 {
+        residual_factor(rho, self.q)
+    }
+
+    /// The three scattering orders' shapes and the residual's t at one direction pair.
+    fn at(&self, wi: DVec3, wo: DVec3) -> VmfAt {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return VmfAt::Below;
+        }
+        let (ui, uo) = (wi.z.clamp(MU_MIN, 1.0), wo.z.clamp(MU_MIN, 1.0));
+        let (m, a) = (self.m, &self.a);
+        let (s_i, s_o, s_mo) = (sigma(ui, m, a), sigma(uo, m, a), sigma(-uo, m, a));
         let den = (uo * s_i + ui * s_mo).max(1e-300);
 
         // cos φ, φ the azimuth between wi and wo; either direction on the normal: its terms vanish.
@@ -341,28 +352,54 @@ impl VmfAt {
             c2phi: 2.0 * cphi * cphi - 1.0,
         };
         VmfAt::Rough {
-            orders: [order1(r, &g, s_i * s_o, den), order2(r, &g), order3(r, &g)],
-            residual: ResidualAt::new(r, g.prod),
+            orders: [
+                order1(&self.c1, &g, s_i * s_o, den),
+                order_k(&self.c2, &g),
+                order_k(&self.c3, &g),
+            ],
+            t: -0.0578978 / (0.287663 + g.prod) + self.t_r,
         }
     }
+}
 
-    /// f for facet albedo ρ.
-    fn value(&self, rho: f64) -> f64 {
+/// VMF at one direction pair, besides ρ.
+#[derive(Clone, Copy, Debug)]
+enum VmfAt {
+    /// Below the surface: 0.
+    Below,
+    /// The three scattering orders' shapes and the residual's geometric factor t.
+    Rough { orders: [f64; 3], t: f64 },
+}
+
+impl VmfAt {
+    /// f for facet albedo ρ, `k` the lobe's [`VmfLobe::residual_factor`] of ρ.
+    fn value(&self, rho: f64, k: f64) -> f64 {
         match self {
             VmfAt::Below => 0.0,
-            VmfAt::Lambert => rho * FRAC_1_PI,
-            VmfAt::Rough { orders, residual } => {
+            VmfAt::Rough { orders, t } => {
                 let orders =
                     rho * orders[0] + rho * rho * orders[1] + rho * rho * rho * orders[2];
-                FRAC_1_PI * orders + residual.residual(rho)
+                FRAC_1_PI * orders + (k * t).max(0.0)
             }
         }
     }
 }
 
+/// Exact Lambert ρ/π above the surface (r ≤ 0).
+fn lambert(rho: f64, wi: DVec3, wo: DVec3) -> f64 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        0.0
+    } else {
+        rho * FRAC_1_PI
+    }
+}
+
 /// The VMF diffuse BRDF (1/sr) for one channel: facet albedo `rho`, roughness `r` ∈ [0, 1].
 pub fn f_vmf(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
-    VmfAt::new(r, wi, wo).value(rho)
+    match VmfLobe::new(r) {
+        Some(lobe) => lobe.at(wi, wo).value(rho, lobe.residual_factor(rho)),
+        None => lambert(rho, wi, wo),
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -386,11 +423,21 @@ impl Bsdf for Vmf {
         f_vmf(p[0], p[1], wi, wo)
     }
     fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let r = p.get(0, 1);
+        let Some(lobe) = VmfLobe::new(p.get(0, 1)) else {
+            each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = lambert(p.get(i, 0), wi, wo);
+                }
+            });
+            return;
+        };
+        let k: Vec<f64> = (0..p.len())
+            .map(|i| lobe.residual_factor(p.get(i, 0)))
+            .collect();
         each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            let at = VmfAt::new(r, wi, wo);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = at.value(p.get(i, 0));
+            let at = lobe.at(wi, wo);
+            for ((o, &k), i) in out.iter_mut().zip(&k).zip(0..) {
+                *o = at.value(p.get(i, 0), k);
             }
         });
     }
