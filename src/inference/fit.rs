@@ -582,9 +582,9 @@ pub const POLISHED_SEARCH_FD_STEP: f64 = 9.765625e-4;
 /// step f32 needs, and a stop at a predicted gain of 1e-4 of Σr². The f64 CPU reference
 /// and the f32 GPU engine then take the same steps up to rounding, so the two differ
 /// only where rounding tips a restart into another basin. On the default sweep (seeds
-/// 1–6) that left 0–1 of its 36 rankings different between them, against 0–3 when the
-/// CPU searched with f64's step to f64's floor, which took twice its evaluations for
-/// about the same optima (docs/losses.md).
+/// 1–8) that left 0–2 of its 36 rankings different between them (4 of 288 in all),
+/// against 0–3 per seed when the CPU searched with f64's step to f64's floor, which took
+/// twice its evaluations for slightly better optima (docs/losses.md).
 ///
 /// Without the polish, each backend goes as far as its arithmetic allows: a step well
 /// above √u (`u` the backend's unit roundoff) and a stop at 16u, below which an f32 Σr²
