@@ -108,6 +108,33 @@ fn mg_g1_over_mu(tau0: f32, beta: f32, mu: f32) -> f32 {
     return 1.0 / (mg_gamma_beta(b, clamp(mu, 0.0, 1.0)) * (p.x + p.y));
 }
 
+// G1(μ)/μ of the last μi and of the last μo, kept per invocation (keys: τ0, β, μ): a
+// thread walks records in order, and consecutive records often share θi or θo (a
+// goniometer scans θo at a fixed θi), so the Λ series runs once per run of them, as the
+// CPU twin's RoughGrainMemo does. Exact: a pure function; NaN never matches.
+var<private> MG_G1I_KEY: vec3<f32> = vec3<f32>(-1.0, -1.0, -1.0);
+var<private> MG_G1I: f32;
+var<private> MG_G1O_KEY: vec3<f32> = vec3<f32>(-1.0, -1.0, -1.0);
+var<private> MG_G1O: f32;
+
+fn mg_g1_over_mu_i(tau0: f32, beta: f32, mu: f32) -> f32 {
+    let key = vec3<f32>(tau0, beta, mu);
+    if (!all(key == MG_G1I_KEY)) {
+        MG_G1I = mg_g1_over_mu(tau0, beta, mu);
+        MG_G1I_KEY = key;
+    }
+    return MG_G1I;
+}
+
+fn mg_g1_over_mu_o(tau0: f32, beta: f32, mu: f32) -> f32 {
+    let key = vec3<f32>(tau0, beta, mu);
+    if (!all(key == MG_G1O_KEY)) {
+        MG_G1O = mg_g1_over_mu(tau0, beta, mu);
+        MG_G1O_KEY = key;
+    }
+    return MG_G1O;
+}
+
 // The rough grain at one direction pair without ρ_g (RoughGrain::at in micrograin.rs):
 // x = the specular term F(ωi·h) D G1i G1o/(4 μi μo), y = the product of the Fresnel
 // transmittances (1 − F(μi))(1 − F(μo)). ρ_g is the grain's only per-channel parameter, so
@@ -138,7 +165,7 @@ fn mg_rough_grain_shared(tau0: f32, beta: f32, eta_g: f32, wi: vec3<f32>, wo: ve
             let h = hs * inverseSqrt(hl2);
             let cd = clamp(dot(wi, h), 0.0, 1.0);
             value.x = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
-                * mg_g1_over_mu(tau0, beta, mu_i) * mg_g1_over_mu(tau0, beta, mu_o) * 0.25;
+                * mg_g1_over_mu_i(tau0, beta, mu_i) * mg_g1_over_mu_o(tau0, beta, mu_o) * 0.25;
         }
     }
     MG_MEMO_VALID = true;

@@ -20,7 +20,7 @@
 //! Twins: `shaders/bsdf/micrograin.wgsl` + `shaders/bsdf/rmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{
-    layer, layer_wgsl, rough_grain, weight, RoughGrain, BETA_LO, ETA_G, MICROGRAIN_BASES,
+    layer, layer_wgsl, rough_grain, weight, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G, MICROGRAIN_BASES,
     RHO_G, TAU0,
 };
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
@@ -71,13 +71,14 @@ impl Bsdf for RoughMicrograin {
     /// The weight and the grain's specular term and transmittances once per direction.
     fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
         let (tau0, beta, eta_g) = (p.get(0, 0), p.get(0, 1), p.get(0, 3));
+        let mut memo = RoughGrainMemo::default();
         each_direction(dirs, p.len(), out, |d, wi, wo, out| {
             if wi.z <= 0.0 || wo.z <= 0.0 {
                 out.fill(0.0);
                 return;
             }
             let w = weight(tau0, beta, wi.z, wo.z);
-            let grain = RoughGrain::at(tau0, beta, eta_g, wi, wo);
+            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, wi, wo);
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 *o = layer(w, grain.value(p.get(i, 2)), b);
             }
