@@ -456,6 +456,16 @@ impl GpuBackend {
         .map_err(|e| anyhow!(e))
     }
 
+    /// The pipelines whose `values` entry serves every loss of `model`: that entry writes
+    /// the model values and reads neither the loss term nor its finish, so it is composed
+    /// once per model (with χ²'s constants), not once per loss shape. lavapipe compiles a
+    /// pipeline (NIR, then LLVM) when it is created, and NIR's passes run again even when
+    /// Mesa's disk cache holds the machine code: on the default sweep that was 14 % of
+    /// the GPU sweep's time, half of it for `values` entries compiled a second time.
+    fn value_pipelines(&self, model: &Model, shape: Shape) -> Result<Arc<Pipelines>> {
+        self.pipelines(model, Term::Square, Finish::Sum, shape)
+    }
+
     /// One of `pipes`' entry points, compiled now if it is the first use.
     fn entry<'p>(&self, pipes: &'p Pipelines, which: Entry) -> Result<&'p wgpu::ComputePipeline> {
         let (cell, name) = match which {
@@ -584,7 +594,7 @@ impl Backend for GpuBackend {
         } else {
             self.shape
         };
-        let pipes = self.pipelines(model, terms[0].term, terms[0].finish, shape)?;
+        let value_pipes = self.value_pipelines(model, shape)?;
         let layout = RecordLayout::of(model);
         let mut records: Vec<f32> = Vec::new();
         let mut ranges: Vec<u32> = Vec::with_capacity(3 * problems.len());
@@ -667,7 +677,8 @@ impl Backend for GpuBackend {
             gpu: self,
             model,
             terms,
-            pipes,
+            pipes: None,
+            value_pipes,
             shape,
             records_view,
             index_view,
@@ -700,8 +711,12 @@ pub struct GpuEvaluator<'a> {
     model: &'a crate::bsdf::Model,
     /// Each problem's loss constants (its sample count is `y.len()`).
     terms: Vec<LossTerms>,
-    pipes: Arc<Pipelines>,
-    /// The shape `pipes` were compiled for: the backend's, until a CPU device cuts its
+    /// The pipelines of the loss's own entries (`costs`, `normal`), composed when first
+    /// needed: an LM fit on a CPU device uses only `values`.
+    pipes: Option<Arc<Pipelines>>,
+    /// Those of the `values` entry ([`GpuBackend::value_pipelines`]).
+    value_pipes: Arc<Pipelines>,
+    /// The shape the pipelines were compiled for: the backend's, until a CPU device cuts its
     /// loops short (`LOOPS_CUT_SHORT`), then `Shape::LONG_DATA`.
     shape: Shape,
     records_view: wgpu::TextureView,
@@ -865,10 +880,8 @@ impl GpuEvaluator<'_> {
                         let k = m.entry(self.model.spec.clone()).or_insert(largest);
                         *k = (*k).min(largest);
                     }
-                    let t = &self.terms[0];
-                    self.pipes = self
-                        .gpu
-                        .pipelines(self.model, t.term, t.finish, self.shape)?;
+                    self.pipes = None;
+                    self.value_pipes = self.gpu.value_pipelines(self.model, self.shape)?;
                 }
                 other => return other,
             }
@@ -898,6 +911,11 @@ impl GpuEvaluator<'_> {
             Output::Normal { groups } => (groups, groups * normal_entries(p)),
         };
         let n_bytes = (normal_len * 4) as u64;
+        let pipes = if !values || normal_len > 0 {
+            Some(self.loss_pipelines()?)
+        } else {
+            None
+        };
         self.ensure_io((host.len() * 4) as u64, o_bytes, n_bytes);
         let io = self.io.as_ref().expect("io buffers allocated");
         let grid = |total: u32| {
@@ -929,14 +947,13 @@ impl GpuEvaluator<'_> {
                 bytemuck::cast_slice(&vec![poison; normal_len]),
             );
         }
-        let evaluate = self.gpu.entry(
-            &self.pipes,
-            if values { Entry::Values } else { Entry::Costs },
-        )?;
-        let normal = if normal_len > 0 {
-            Some(self.gpu.entry(&self.pipes, Entry::Normal)?)
-        } else {
-            None
+        let evaluate = match &pipes {
+            Some(pipes) if !values => self.gpu.entry(pipes, Entry::Costs)?,
+            _ => self.gpu.entry(&self.value_pipes, Entry::Values)?,
+        };
+        let normal = match &pipes {
+            Some(pipes) if normal_len > 0 => Some(self.gpu.entry(pipes, Entry::Normal)?),
+            _ => None,
         };
         let mut enc = self
             .gpu
@@ -1003,6 +1020,19 @@ impl GpuEvaluator<'_> {
             return Err(LoopsCutShort.into());
         }
         Ok(data)
+    }
+
+    /// The pipelines of the loss's own entries, composed on first use.
+    fn loss_pipelines(&mut self) -> Result<Arc<Pipelines>> {
+        if let Some(p) = &self.pipes {
+            return Ok(p.clone());
+        }
+        let t = &self.terms[0];
+        let p = self
+            .gpu
+            .pipelines(self.model, t.term, t.finish, self.shape)?;
+        self.pipes = Some(p.clone());
+        Ok(p)
     }
 
     fn check_batch(&self, owners: &[usize], params: &[f64], per_owner: usize) -> Result<()> {
