@@ -443,8 +443,19 @@ fn print_comparison(
         c.max_rel_loss_diff.value, c.max_rel_loss_diff.at, c.loss_tolerance
     );
     println!(
-        "largest parameter difference (unit box): {:.2e} ({}), tolerance {:.0e}",
-        c.max_param_diff_unit_box.value, c.max_param_diff_unit_box.at, c.param_tolerance
+        "largest parameter difference (unit box), over the fits at one optimum and the \
+         parameters both determined: {:.2e} ({}), tolerance {:.0e}; not compared: {} fit(s) \
+         at different optima, {} undetermined value(s)",
+        c.max_param_diff_unit_box.value,
+        c.max_param_diff_unit_box.at,
+        c.param_tolerance,
+        c.fits_at_different_optima,
+        c.params_undetermined
+    );
+    println!(
+        "largest parameter difference in standard uncertainties (same fits and parameters): \
+         {:.2e} σ ({})",
+        c.max_param_diff_sigma.value, c.max_param_diff_sigma.at
     );
     println!(
         "{} of {fits} fits compared; {}",

@@ -292,8 +292,19 @@ pub struct SweepComparison {
     pub ranking_differences: Vec<RankingDifference>,
     /// Largest |gpu − cpu| / max(|cpu|, |gpu|) of the best losses (∞ if one is not finite).
     pub max_rel_loss_diff: DiffAt,
-    /// Largest difference of a fitted parameter in its unit-box coordinate.
+    /// Largest difference of a fitted parameter in its unit-box coordinate, over the fits
+    /// whose best losses agree within the loss tolerance and the parameters both
+    /// backends determined (finite standard uncertainty smaller than the range).
     pub max_param_diff_unit_box: DiffAt,
+    /// The same comparison in units of the parameter's standard uncertainty (the larger
+    /// of the two backends'): how the engines' difference compares with what the data
+    /// determine. Reported, not held to a tolerance.
+    pub max_param_diff_sigma: DiffAt,
+    /// Fits whose best losses differ beyond the loss tolerance (different optima): their
+    /// parameters are not compared.
+    pub fits_at_different_optima: usize,
+    /// Parameter values not compared because a backend left them undetermined.
+    pub params_undetermined: usize,
     pub loss_tolerance: f64,
     pub param_tolerance: f64,
     pub within_tolerance: bool,
@@ -344,9 +355,19 @@ fn rel_diff(c: f64, g: f64) -> f64 {
     (g - c).abs() / c.abs().max(g.abs())
 }
 
-/// Unit-box coordinates of a results row's parameters: (name, coordinate) per fitted
-/// value, in the JSON's order (`rho[1]` for an array entry).
-fn unit_params(r: &Row) -> Vec<(String, f64)> {
+/// A fitted value of a results row: its name (`rho[1]` for an array entry), unit-box
+/// coordinate, and whether the fit determined it (a finite standard uncertainty smaller
+/// than the parameter's declared range; null where the normal matrix is singular).
+struct UnitParam {
+    name: String,
+    unit: f64,
+    value: f64,
+    std: Option<f64>,
+    determined: bool,
+}
+
+/// A results row's fitted values ([`UnitParam`]), in the JSON's order.
+fn unit_params(r: &Row) -> Vec<UnitParam> {
     let Ok(model) = Model::parse(&r.model, 1) else {
         return Vec::new();
     };
@@ -356,26 +377,36 @@ fn unit_params(r: &Row) -> Vec<(String, f64)> {
         .zip(model.flat_decls())
         .map(|(n, d)| (n.split(['[', '@']).next().unwrap_or("").to_string(), d))
         .collect();
-    let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&r.params)
-    else {
-        return Vec::new();
+    let object = |json: &str| match serde_json::from_str::<serde_json::Value>(json) {
+        Ok(serde_json::Value::Object(map)) => map,
+        _ => serde_json::Map::new(),
+    };
+    let (values, stds) = (object(&r.params), object(&r.param_std));
+    // Entry i of a value (the value itself for a scalar).
+    let entry = |v: Option<&serde_json::Value>, i: Option<usize>| -> Option<f64> {
+        match (v?, i) {
+            (serde_json::Value::Array(a), Some(i)) => a.get(i)?.as_f64(),
+            (v, None) => v.as_f64(),
+            _ => None,
+        }
     };
     let mut out = Vec::new();
-    for (name, v) in map {
-        let Some(d) = decls.get(&name) else { continue };
-        match v {
-            serde_json::Value::Array(a) => {
-                for (i, x) in a.iter().enumerate() {
-                    if let Some(x) = x.as_f64() {
-                        out.push((format!("{name}[{i}]"), d.to_unit(x)));
-                    }
-                }
-            }
-            v => {
-                if let Some(x) = v.as_f64() {
-                    out.push((name, d.to_unit(x)));
-                }
-            }
+    for (name, v) in &values {
+        let Some(d) = decls.get(name) else { continue };
+        let indices: Vec<Option<usize>> = match v {
+            serde_json::Value::Array(a) => (0..a.len()).map(Some).collect(),
+            _ => vec![None],
+        };
+        for i in indices {
+            let Some(x) = entry(Some(v), i) else { continue };
+            let std = entry(stds.get(name), i);
+            out.push(UnitParam {
+                name: i.map_or(name.clone(), |i| format!("{name}[{i}]")),
+                unit: d.to_unit(x),
+                value: x,
+                std,
+                determined: std.is_some_and(|s| s.is_finite() && s < d.hi - d.lo),
+            });
         }
     }
     out
@@ -385,8 +416,10 @@ fn unit_params(r: &Row) -> Vec<(String, f64)> {
 pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
     let gpu_by: BTreeMap<FitId, &Row> = gpu.iter().map(|r| (fit_id(r), r)).collect();
     let mut compared = 0;
+    let (mut different_optima, mut undetermined) = (0, 0);
     let mut loss = DiffAt::default();
     let mut param = DiffAt::default();
+    let mut param_sigma = DiffAt::default();
     for c in cpu {
         let Some(g) = gpu_by.get(&fit_id(c)) else {
             continue;
@@ -400,13 +433,27 @@ pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
                 at: where_.clone(),
             };
         }
-        for ((name, uc), (_, ug)) in unit_params(c).into_iter().zip(unit_params(g)) {
-            let d = (ug - uc).abs();
-            if d > param.value {
-                param = DiffAt {
-                    value: d,
-                    at: format!("{where_} · {name}"),
-                };
+        // Parameters are compared where both backends reached one optimum (the loss
+        // difference above reports the others), and only those both determined: one
+        // the data leave free takes any value at the same loss.
+        if d.is_nan() || d > SWEEP_LOSS_TOL {
+            different_optima += 1;
+            continue;
+        }
+        for (pc, pg) in unit_params(c).into_iter().zip(unit_params(g)) {
+            if !(pc.determined && pg.determined) {
+                undetermined += 1;
+                continue;
+            }
+            let at = || format!("{where_} · {}", pc.name);
+            let d = (pg.unit - pc.unit).abs();
+            if d > param.value || (d.is_nan() && !param.value.is_nan()) {
+                param = DiffAt { value: d, at: at() };
+            }
+            let sigma = pc.std.unwrap_or(0.0).max(pg.std.unwrap_or(0.0));
+            let d = (pg.value - pc.value).abs() / sigma;
+            if d > param_sigma.value || (d.is_nan() && !param_sigma.value.is_nan()) {
+                param_sigma = DiffAt { value: d, at: at() };
             }
         }
     }
@@ -476,6 +523,9 @@ pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
         ranking_differences: diffs,
         max_rel_loss_diff: loss,
         max_param_diff_unit_box: param,
+        max_param_diff_sigma: param_sigma,
+        fits_at_different_optima: different_optima,
+        params_undetermined: undetermined,
         loss_tolerance: SWEEP_LOSS_TOL,
         param_tolerance: SWEEP_PARAM_TOL,
         within_tolerance: within,
@@ -511,6 +561,7 @@ pub struct ReferenceSeed {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bsdf::ParamDecl;
 
     fn group(v: &[(&str, f64, f64)]) -> Vec<(String, f64, f64)> {
         v.iter().map(|&(m, c, g)| (m.to_string(), c, g)).collect()
@@ -546,5 +597,80 @@ mod tests {
         // A NaN loss ranks last; finite against NaN is decisive.
         let g = group(&[("a", 1.0, f64::NAN), ("b", 2.0, 2.0)]);
         assert_eq!(inverted_pairs(&g, 1e-3).len(), 1);
+    }
+
+    /// A results row of `vmf` (ρ per channel, r in [0, 1]) with the given loss,
+    /// parameters and standard uncertainties (JSON).
+    fn vmf_row(data: &str, loss: f64, params: &str, std: &str) -> Row {
+        Row {
+            data: data.into(),
+            data_hash: String::new(),
+            data_path: String::new(),
+            kind: "brdf".into(),
+            material: String::new(),
+            model: "vmf".into(),
+            loss: "rmse".into(),
+            weights: "uniform".into(),
+            optimizer: "lm".into(),
+            restarts: 8,
+            seed: 1,
+            samples: 100,
+            n_params: 4,
+            best_loss: loss,
+            chi2_red: 1.0,
+            restarts_within_1pct: 8,
+            evaluations: 1,
+            params: params.into(),
+            param_std: std.into(),
+            warnings: "[]".into(),
+            seconds: 0.0,
+            backend: String::new(),
+            constraints: String::new(),
+        }
+    }
+
+    #[test]
+    fn parameters_are_compared_at_one_optimum_where_both_determine_them() {
+        let p = |rho1: f64, r: f64| format!(r#"{{"rho":[0.2,{rho1},0.4],"r":{r}}}"#);
+        let determined = r#"{"rho":[0.01,0.01,0.01],"r":0.02}"#;
+        // r undetermined on the GPU (singular: null), ρ[1] off by 0.05.
+        let r_free = r#"{"rho":[0.01,0.01,0.01],"r":null}"#;
+        let cpu = [
+            vmf_row("a", 1.0, &p(0.30, 0.2), determined),
+            vmf_row("b", 1.0, &p(0.30, 0.2), determined),
+            vmf_row("c", 1.0, &p(0.30, 0.2), determined),
+        ];
+        let gpu = [
+            // Same optimum, r free on the GPU: r's 0.6 is not compared, ρ[1]'s 0.05 is.
+            vmf_row("a", 1.0 + 1e-6, &p(0.35, 0.8), r_free),
+            // Another optimum (2 % higher): its parameters are not compared.
+            vmf_row("b", 1.02, &p(0.9, 0.9), determined),
+            // Same optimum, the same parameters.
+            vmf_row("c", 1.0, &p(0.30, 0.2), determined),
+        ];
+        let c = compare_sweeps(&cpu, &gpu);
+        assert_eq!(c.fits_compared, 3);
+        assert_eq!(c.fits_at_different_optima, 1);
+        assert_eq!(c.params_undetermined, 1);
+        let rho = ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "").quadratic_hi();
+        let expected = (rho.to_unit(0.35) - rho.to_unit(0.30)).abs();
+        assert!(
+            (c.max_param_diff_unit_box.value - expected).abs() < 1e-12,
+            "{:?}",
+            c.max_param_diff_unit_box
+        );
+        assert!(
+            c.max_param_diff_unit_box.at.ends_with("rho[1]"),
+            "{:?}",
+            c.max_param_diff_unit_box
+        );
+        // 0.05 in ρ[1] against σ = 0.01: 5σ.
+        assert!(
+            (c.max_param_diff_sigma.value - 5.0).abs() < 1e-9,
+            "{:?}",
+            c.max_param_diff_sigma
+        );
+        assert!(c.max_rel_loss_diff.value > 0.019 && c.max_rel_loss_diff.at.starts_with("b "));
+        assert!(!c.within_tolerance);
     }
 }
