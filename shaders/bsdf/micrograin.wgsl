@@ -117,22 +117,15 @@ var<private> MG_G1I: f32;
 var<private> MG_G1O_KEY: vec3<f32> = vec3<f32>(-1.0, -1.0, -1.0);
 var<private> MG_G1O: f32;
 
-fn mg_g1_over_mu_i(tau0: f32, beta: f32, mu: f32) -> f32 {
+// G1(μ)/μ from the memo (key, value) or computed and kept there.
+fn mg_g1_over_mu_memo(key_at: ptr<private, vec3<f32>>, value_at: ptr<private, f32>, tau0: f32, beta: f32,
+                      mu: f32) -> f32 {
     let key = vec3<f32>(tau0, beta, mu);
-    if (!all(key == MG_G1I_KEY)) {
-        MG_G1I = mg_g1_over_mu(tau0, beta, mu);
-        MG_G1I_KEY = key;
+    if (!all(key == *key_at)) {
+        *value_at = mg_g1_over_mu(tau0, beta, mu);
+        *key_at = key;
     }
-    return MG_G1I;
-}
-
-fn mg_g1_over_mu_o(tau0: f32, beta: f32, mu: f32) -> f32 {
-    let key = vec3<f32>(tau0, beta, mu);
-    if (!all(key == MG_G1O_KEY)) {
-        MG_G1O = mg_g1_over_mu(tau0, beta, mu);
-        MG_G1O_KEY = key;
-    }
-    return MG_G1O;
+    return *value_at;
 }
 
 // The rough grain at one direction pair without ρ_g (RoughGrain::at in micrograin.rs):
@@ -165,7 +158,8 @@ fn mg_rough_grain_shared(tau0: f32, beta: f32, eta_g: f32, wi: vec3<f32>, wo: ve
             let h = hs * inverseSqrt(hl2);
             let cd = clamp(dot(wi, h), 0.0, 1.0);
             value.x = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
-                * mg_g1_over_mu_i(tau0, beta, mu_i) * mg_g1_over_mu_o(tau0, beta, mu_o) * 0.25;
+                * mg_g1_over_mu_memo(&MG_G1I_KEY, &MG_G1I, tau0, beta, mu_i)
+                * mg_g1_over_mu_memo(&MG_G1O_KEY, &MG_G1O, tau0, beta, mu_o) * 0.25;
         }
     }
     MG_MEMO_VALID = true;
