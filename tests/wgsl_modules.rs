@@ -75,3 +75,29 @@ fn twins_read_parameters_only_through_generated_accessors() {
     }
     assert!(offenders.is_empty(), "{}", offenders.join("\n"));
 }
+
+#[test]
+fn a_single_vmf_node_is_prepared_once_per_candidate() {
+    // dmg(vmf): the VMF base (offset 3 in the scalar view: tau0, beta, rho_g, then the
+    // base's rho, r) is prepared by load_params, and its function reads the lobe.
+    let m = Model::parse("dmg(vmf)", 3).unwrap();
+    let src = compose(&m, Term::Square, Finish::Sum, Shape::ALL[0]);
+    assert!(src.contains("const VMF_PREPARED: bool = true;"), "{src}");
+    let load = &src[src.find("fn load_params").unwrap()..];
+    let load = &load[..load.find("\n}\n").unwrap()];
+    assert!(load.contains("vmf_prepare(3u);"), "{load}");
+    // Models without a VMF node declare nothing and call nothing.
+    let m = Model::parse("dmg(eon)", 3).unwrap();
+    let src = compose(&m, Term::Square, Finish::Sum, Shape::ALL[0]);
+    assert!(!src.contains("VMF_PREPARED") && !src.contains("vmf_prepare("));
+    // The other branch (several VMF nodes, each computing its own lobe) validates too.
+    let m = Model::parse("vmf", 3).unwrap();
+    for shape in Shape::ALL {
+        let src = compose(&m, Term::Square, Finish::Sum, shape).replace(
+            "const VMF_PREPARED: bool = true;",
+            "const VMF_PREPARED: bool = false;",
+        );
+        assert!(src.contains("const VMF_PREPARED: bool = false;"));
+        validate(&src).unwrap_or_else(|e| panic!("{shape:?}: {e}"));
+    }
+}

@@ -91,36 +91,49 @@ struct VmfGeometry {
     c2phi: f32,
 }
 
-// Order 1: max(0, f10 + 2 f11 cos(phi) + 2 f12 cos(2 phi)).
-fn vmf_order1(r: f32, g: VmfGeometry, s_io: f32, den: f32) -> f32 {
+// C100..C103, C110..C112, C120, C121 of order 1 (rational fits in r).
+fn vmf_order1_coefficients(r: f32) -> array<f32, 9> {
     let r2 = r * r;
     let r3 = r2 * r;
     let r4 = r2 * r2;
-    let c100 = 1.0 + (-0.1 * r + 0.84 * r4) / (1.0 + 9.0 * r3);
-    let c101 = (0.0173 * r + 20.4 * r2 - 9.47 * r3) / (1.0 + 7.46 * r);
-    let c102 = (-0.927 * r + 2.37 * r2) / (1.24 + r2);
-    let c103 = (-0.11 * r - 1.54 * r2) / (1.0 - 1.05 * r + 7.1 * r2);
-    let c110 = (0.54 * r - 0.182 * r3) / (1.0 + 1.32 * r2);
-    let c111 = (-0.097 * r + 0.62 * r2 - 0.375 * r3) / (1.0 + 0.4 * r3);
-    let c112 = 0.283 + 0.862 * r - 0.681 * r2;
-    let c120 = (2.25 * r + 5.1 * r2) / (1.0 + 9.8 * r + 32.4 * r2);
-    let c121 = (-4.32 * r + 6.0 * r3) / (1.0 + 9.7 * r + 287.0 * r3);
+    return array<f32, 9>(
+        1.0 + (-0.1 * r + 0.84 * r4) / (1.0 + 9.0 * r3),
+        (0.0173 * r + 20.4 * r2 - 9.47 * r3) / (1.0 + 7.46 * r),
+        (-0.927 * r + 2.37 * r2) / (1.24 + r2),
+        (-0.11 * r - 1.54 * r2) / (1.0 - 1.05 * r + 7.1 * r2),
+        (0.54 * r - 0.182 * r3) / (1.0 + 1.32 * r2),
+        (-0.097 * r + 0.62 * r2 - 0.375 * r3) / (1.0 + 0.4 * r3),
+        0.283 + 0.862 * r - 0.681 * r2,
+        (2.25 * r + 5.1 * r2) / (1.0 + 9.8 * r + 32.4 * r2),
+        (-4.32 * r + 6.0 * r3) / (1.0 + 9.7 * r + 287.0 * r3),
+    );
+}
 
-    let f10 = (c100 + c101 * g.prod + c102 * g.prod * g.prod + c103 * (g.ui * g.ui + g.uo * g.uo)) * s_io / den;
-    let f11 = sqrt(g.sin2) * (c110 + c111 * g.prod) * pow(max(s_io, 1e-30), c112) / den;
-    let f12 = g.sin2 * (c120 + c121 * g.uo) * (c120 + c121 * g.ui) / g.sum;
+// Order 1: max(0, f10 + 2 f11 cos(phi) + 2 f12 cos(2 phi)), c from vmf_order1_coefficients.
+fn vmf_order1(c: array<f32, 9>, g: VmfGeometry, s_io: f32, den: f32) -> f32 {
+    let f10 = (c[0] + c[1] * g.prod + c[2] * g.prod * g.prod + c[3] * (g.ui * g.ui + g.uo * g.uo)) * s_io / den;
+    let f11 = sqrt(g.sin2) * (c[4] + c[5] * g.prod) * pow(max(s_io, 1e-30), c[6]) / den;
+    let f12 = g.sin2 * (c[7] + c[8] * g.uo) * (c[7] + c[8] * g.ui) / g.sum;
     return max(f10 + 2.0 * f11 * g.cphi + 2.0 * f12 * g.c2phi, 0.0);
 }
 
-// Orders 2 and 3: max(0, f_k0 + 2 f_k1 cos(phi)); c0 = C_k00..C_k04, c1 = C_k10..C_k12.
-fn vmf_order_k(c0: array<f32, 5>, c1: array<f32, 3>, g: VmfGeometry) -> f32 {
+// C_k00..C_k04 and C_k10..C_k12 of order k = 2 or 3.
+struct VmfOrderK {
+    c0: array<f32, 5>,
+    c1: array<f32, 3>,
+}
+
+// Orders 2 and 3: max(0, f_k0 + 2 f_k1 cos(phi)).
+fn vmf_order_k(c: VmfOrderK, g: VmfGeometry) -> f32 {
+    let c0 = c.c0;
+    let c1 = c.c1;
     let fk0 = (c0[0] + c0[1] * g.prod + c0[2] * g.sum + c0[3] * g.prod * g.prod + c0[4] * (g.ui * g.ui + g.uo * g.uo))
         / g.sum;
     let fk1 = sqrt(g.sin2) * (c1[0] + c1[1] * g.prod + c1[2] * g.sum) / g.sum;
     return max(fk0 + 2.0 * fk1 * g.cphi, 0.0);
 }
 
-fn vmf_order2(r: f32, g: VmfGeometry) -> f32 {
+fn vmf_order2_coefficients(r: f32) -> VmfOrderK {
     let r2 = r * r;
     let r3 = r2 * r;
     let r4 = r2 * r2;
@@ -137,10 +150,10 @@ fn vmf_order2(r: f32, g: VmfGeometry) -> f32 {
         (2.77 * r2 - 8.332 * r25 + 6.073 * r3) / (1.0 + 50.0 * r4),
         (-0.431 * r2 - 0.295 * r3) / (1.0 + 23.9 * r3),
     );
-    return vmf_order_k(c0, c1, g);
+    return VmfOrderK(c0, c1);
 }
 
-fn vmf_order3(r: f32, g: VmfGeometry) -> f32 {
+fn vmf_order3_coefficients(r: f32) -> VmfOrderK {
     let r2 = r * r;
     let r3 = r2 * r;
     let r4 = r2 * r2;
@@ -160,16 +173,56 @@ fn vmf_order3(r: f32, g: VmfGeometry) -> f32 {
         (-0.134 * r2 + 0.162 * r25 + 0.302 * r3) / (1.0 + 57.5 * r45),
         (-0.119 * r2 + 0.5 * r25 - 0.207 * r3) / (1.0 + 18.7 * r3),
     );
-    return vmf_order_k(c0, c1, g);
+    return VmfOrderK(c0, c1);
 }
 
-// Fitted residual for scattering orders >= 4 (1/sr, outside the 1/pi).
-fn vmf_residual(rho: f32, r: f32, prod: f32) -> f32 {
+// The residual's factor K for scattering orders >= 4, f_m = max(0, K t) (1/sr, outside the
+// 1/pi), t its geometric part; q = 0.0225272 + (r - 0.264641) r.
+fn vmf_residual_factor(rho: f32, q: f32) -> f32 {
     let cc = sqrt(max(1.0 - rho, 0.0));
     let ck = (1.0 - 0.5441615108674713 * cc - 0.45302863761693374 * (1.0 - rho)) / (1.0 + 1.4293127703064865 * cc);
     let erf_cc = 1.0 - vmf_erfc(cc);
-    let ca = rho / pow(1.0075 + 1.16942 * cc, atan((0.0225272 + (r - 0.264641) * r) * erf_cc));
-    return max(0.384016 * (ca - 0.341969) * ca * ck * (-0.0578978 / (0.287663 + prod) + abs(tanh(r) - 0.0898863)), 0.0);
+    let ca = rho / pow(1.0075 + 1.16942 * cc, atan(q * erf_cc));
+    return 0.384016 * (ca - 0.341969) * ca * ck;
+}
+
+// What VMF depends on at one roughness r > 0, whatever the directions and rho.
+struct VmfLobe {
+    m: f32,
+    a: array<f32, 13>,
+    c1: array<f32, 9>,
+    c2: VmfOrderK,
+    c3: VmfOrderK,
+    q: f32,
+    t_r: f32,   // |tanh(r) - 0.0898863|
+}
+
+fn vmf_lobe(r: f32) -> VmfLobe {
+    let m = vmf_slope(r);
+    var a: array<f32, 13>;
+    if (m >= VMF_M_SWITCH) {
+        var kappa = 0.0;
+        if (r < 1.0) {
+            kappa = 2.0 / (m * m);
+        }
+        a = vmf_moments(kappa);
+    }
+    return VmfLobe(m, a, vmf_order1_coefficients(r), vmf_order2_coefficients(r), vmf_order3_coefficients(r),
+                   0.0225272 + (r - 0.264641) * r, abs(tanh(r) - 0.0898863));
+}
+
+// The lobe of the candidate being evaluated, computed once by `vmf_prepare` when the
+// generated module calls it after loading the candidate's parameters (VMF_PREPARED: the
+// model has one VMF node; src/engine/wgsl.rs), rather than once per record as the lobe
+// depends on r alone. The CPU twin computes it once per parameter vector likewise.
+// (A memo keyed on r, updated inside the record loop, was slower on lavapipe.)
+var<private> VMF_LOBE: VmfLobe;
+
+fn vmf_prepare(o: u32) {
+    let r = min(vmf_r(o), 1.0);
+    if (r > 0.0) {
+        VMF_LOBE = vmf_lobe(r);
+    }
 }
 
 fn vmf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
@@ -181,21 +234,17 @@ fn vmf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     if (!(r > 0.0)) {
         return rho * INV_PI;
     }
+    var lobe: VmfLobe;
+    if (VMF_PREPARED) {
+        lobe = VMF_LOBE;
+    } else {
+        lobe = vmf_lobe(r);
+    }
     let ui = clamp(wi.z, VMF_MU_MIN, 1.0);
     let uo = clamp(wo.z, VMF_MU_MIN, 1.0);
-
-    let m = vmf_slope(r);
-    var a: array<f32, 13>;
-    if (m >= VMF_M_SWITCH) {
-        var kappa = 0.0;
-        if (r < 1.0) {
-            kappa = 2.0 / (m * m);
-        }
-        a = vmf_moments(kappa);
-    }
-    let s_i = vmf_sigma(ui, m, a);
-    let s_o = vmf_sigma(uo, m, a);
-    let s_mo = vmf_sigma(-uo, m, a);
+    let s_i = vmf_sigma(ui, lobe.m, lobe.a);
+    let s_o = vmf_sigma(uo, lobe.m, lobe.a);
+    let s_mo = vmf_sigma(-uo, lobe.m, lobe.a);
     let den = max(uo * s_i + ui * s_mo, 1e-30);
 
     let nn = dot(wi.xy, wi.xy) * dot(wo.xy, wo.xy);
@@ -206,7 +255,8 @@ fn vmf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     let g = VmfGeometry(ui, uo, ui * uo, ui + uo, max(1.0 - ui * ui, 0.0) * max(1.0 - uo * uo, 0.0), cphi,
                         2.0 * cphi * cphi - 1.0);
 
-    let orders = rho * vmf_order1(r, g, s_i * s_o, den) + rho * rho * vmf_order2(r, g)
-        + rho * rho * rho * vmf_order3(r, g);
-    return INV_PI * orders + vmf_residual(rho, r, g.prod);
+    let orders = rho * vmf_order1(lobe.c1, g, s_i * s_o, den) + rho * rho * vmf_order_k(lobe.c2, g)
+        + rho * rho * rho * vmf_order_k(lobe.c3, g);
+    let t = -0.0578978 / (0.287663 + g.prod) + lobe.t_r;
+    return INV_PI * orders + max(vmf_residual_factor(rho, lobe.q) * t, 0.0);
 }

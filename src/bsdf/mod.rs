@@ -259,6 +259,17 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
         true
     }
     fn wgsl(&self) -> WgslFn;
+    /// A WGSL function `fn <name>(o: u32)`, in one of [`Self::wgsl`]'s sources, that
+    /// computes once per candidate what depends on this node's shared (neither rgb nor
+    /// per-axis) parameters alone, into module-scope variables its node function then
+    /// reads instead of recomputing it for every record (as `eval_channels` computes
+    /// such parts once per parameter vector). The generated module calls it with the
+    /// node's offset after loading each candidate, and declares `const <NAME>D: bool`
+    /// (the name in upper case): true when the model has exactly one such node, false
+    /// otherwise, in which case the node function must compute the parts itself.
+    fn wgsl_prepare(&self) -> Option<&'static str> {
+        None
+    }
     /// A lookup table the WGSL twin reads as `LUT` (f32 copy of the CPU's f64 table), if any.
     fn lut(&self) -> Option<Vec<f32>> {
         None

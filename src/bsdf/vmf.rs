@@ -444,6 +444,10 @@ impl Bsdf for Vmf {
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))
     }
+    fn wgsl_prepare(&self) -> Option<&'static str> {
+        // The lobe (slope, moments, C_kij fits) depends on r alone, as in VmfLobe.
+        Some("vmf_prepare")
+    }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).

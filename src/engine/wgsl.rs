@@ -249,6 +249,11 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
             src += &format!("    P[{v}u] = v{flat};\n");
         }
     }
+    for (function, offsets) in prepared_nodes(model) {
+        if let [offset] = offsets[..] {
+            src += &format!("    {function}({offset}u);\n");
+        }
+    }
     src += "}\n\n";
     let list = |f: &dyn Fn(usize) -> String| (0..cb).map(f).collect::<Vec<_>>().join(", ");
     src += &format!(
@@ -291,6 +296,23 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
     src
 }
 
+/// The nodes with a per-candidate prepare function ([`crate::bsdf::Bsdf::wgsl_prepare`]):
+/// each function with the offsets of the nodes that have it, in first-use order. One
+/// node: the module calls it per candidate. Several: their values would collide in the
+/// function's module-scope variables, so none is called and each node computes its own.
+fn prepared_nodes(model: &Model) -> Vec<(&'static str, Vec<usize>)> {
+    let mut out: Vec<(&'static str, Vec<usize>)> = Vec::new();
+    for node in model.nodes() {
+        if let Some(f) = node.bsdf.wgsl_prepare() {
+            match out.iter_mut().find(|(g, _)| *g == f) {
+                Some((_, offsets)) => offsets.push(node.offset),
+                None => out.push((f, vec![node.offset])),
+            }
+        }
+    }
+    out
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
     let s = model.scalar_count();
@@ -318,6 +340,13 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     );
     src += COMMON;
     src += all_accessors();
+    for (function, offsets) in prepared_nodes(model) {
+        src += &format!(
+            "const {}D: bool = {};\n",
+            function.to_uppercase(),
+            offsets.len() == 1
+        );
+    }
     let mut included: Vec<&str> = Vec::new();
     for node in model.nodes() {
         for (name, text) in node.bsdf.wgsl().sources {
