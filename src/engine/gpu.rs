@@ -688,6 +688,7 @@ impl Backend for GpuBackend {
             io: None,
             evaluations: vec![0; problems.len()],
             read_back: 0,
+            poison: Vec::new(),
         }))
     }
 }
@@ -729,6 +730,8 @@ pub struct GpuEvaluator<'a> {
     evaluations: Vec<u64>,
     /// Bytes copied back from the device so far.
     read_back: u64,
+    /// `LOOPS_CUT_SHORT` NaNs written over `out` (and `normal`) before each submission.
+    poison: Vec<f32>,
 }
 
 /// One submission: the `values` (else `costs`) pipeline over `m` candidates whose
@@ -938,13 +941,18 @@ impl GpuEvaluator<'_> {
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
         q.write_buffer(&io.params, 0, bytemuck::cast_slice(host));
         q.write_buffer(&io.owners, 0, bytemuck::cast_slice(owners));
-        let poison = f32::from_bits(LOOPS_CUT_SHORT);
-        q.write_buffer(&io.out, 0, bytemuck::cast_slice(&vec![poison; out_len]));
+        // One poison buffer per evaluator, grown as needed: a fresh one per submission
+        // (megabytes for LM's values) cost an allocation and its page faults each time.
+        let need = out_len.max(normal_len);
+        if self.poison.len() < need {
+            self.poison.resize(need, f32::from_bits(LOOPS_CUT_SHORT));
+        }
+        q.write_buffer(&io.out, 0, bytemuck::cast_slice(&self.poison[..out_len]));
         if normal_len > 0 {
             q.write_buffer(
                 &io.normal,
                 0,
-                bytemuck::cast_slice(&vec![poison; normal_len]),
+                bytemuck::cast_slice(&self.poison[..normal_len]),
             );
         }
         let evaluate = match &pipes {
