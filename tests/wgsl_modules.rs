@@ -86,10 +86,11 @@ fn a_single_vmf_node_is_prepared_once_per_candidate() {
     let load = &src[src.find("fn load_params").unwrap()..];
     let load = &load[..load.find("\n}\n").unwrap()];
     assert!(load.contains("vmf_prepare(3u);"), "{load}");
-    // Models without a VMF node declare nothing and call nothing.
+    // Models without a VMF node call nothing, and their constant is false.
     let m = Model::parse("dmg(eon)", 3).unwrap();
     let src = compose(&m, Term::Square, Finish::Sum, Shape::ALL[0]);
-    assert!(!src.contains("VMF_PREPARED") && !src.contains("vmf_prepare("));
+    assert!(src.contains("const VMF_PREPARED: bool = false;"), "{src}");
+    assert!(!src.contains("vmf_prepare("), "{src}");
     // The other branch (several VMF nodes, each computing its own lobe) validates too.
     let m = Model::parse("vmf", 3).unwrap();
     for shape in Shape::ALL {

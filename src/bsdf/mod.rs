@@ -265,8 +265,9 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     /// reads instead of recomputing it for every record (as `eval_channels` computes
     /// such parts once per parameter vector). The generated module calls it with the
     /// node's offset after loading each candidate, and declares `const <NAME>D: bool`
-    /// (the name in upper case): true when the model has exactly one such node, false
-    /// otherwise, in which case the node function must compute the parts itself.
+    /// (the name in upper case) in every module: true when the model has exactly one such
+    /// node, false otherwise (none, or several whose values would collide), in which case
+    /// the node function must compute the parts itself.
     fn wgsl_prepare(&self) -> Option<&'static str> {
         None
     }

@@ -158,6 +158,31 @@ pub fn all_accessors() -> &'static str {
     })
 }
 
+/// The per-candidate prepare functions of the catalogue ([`crate::bsdf::Bsdf::wgsl_prepare`]):
+/// every module declares each one's constant, since a shader file may hold several node
+/// functions (every `btdf(·)` variant) and is included whole.
+fn all_prepare_functions() -> &'static [&'static str] {
+    static ALL: std::sync::OnceLock<Vec<&'static str>> = std::sync::OnceLock::new();
+    ALL.get_or_init(|| {
+        let mut all: Vec<&'static str> = Vec::new();
+        for kind in [crate::data::Kind::Brdf, crate::data::Kind::Btdf] {
+            for spec in crate::bsdf::every_spec(kind) {
+                let Ok(model) = Model::parse(&spec, 1) else {
+                    continue;
+                };
+                for node in model.nodes() {
+                    if let Some(f) = node.bsdf.wgsl_prepare() {
+                        if !all.contains(&f) {
+                            all.push(f);
+                        }
+                    }
+                }
+            }
+        }
+        all
+    })
+}
+
 /// How many numbers the `normal` pass (shaders/engine/normal.wgsl) writes per group of
 /// P + 1 candidates: the upper triangle of JᵀJ, Jᵀr and Σr².
 pub fn normal_entries(p: usize) -> usize {
@@ -340,12 +365,12 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
     );
     src += COMMON;
     src += all_accessors();
-    for (function, offsets) in prepared_nodes(model) {
-        src += &format!(
-            "const {}D: bool = {};\n",
-            function.to_uppercase(),
-            offsets.len() == 1
-        );
+    let prepared = prepared_nodes(model);
+    for function in all_prepare_functions() {
+        let once = prepared
+            .iter()
+            .any(|(f, offsets)| f == function && offsets.len() == 1);
+        src += &format!("const {}D: bool = {once};\n", function.to_uppercase());
     }
     let mut included: Vec<&str> = Vec::new();
     for node in model.nodes() {
