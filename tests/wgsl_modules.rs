@@ -3,7 +3,7 @@
 
 use bsdfit::bsdf::{catalogue, Model};
 use bsdfit::data::Kind;
-use bsdfit::engine::loss::{Finish, Term};
+use bsdfit::engine::loss::Term;
 use bsdfit::engine::wgsl::{compose, validate, Shape};
 
 #[test]
@@ -22,13 +22,9 @@ fn every_generated_module_validates() {
                 }
             };
             for term in [Term::AbsRatio, Term::Square, Term::LogSquare] {
-                for finish in [Finish::Mean, Finish::SqrtMean, Finish::Sum] {
-                    for shape in Shape::ALL {
-                        if let Err(e) = validate(&compose(&model, term, finish, shape)) {
-                            failures.push(format!(
-                                "{spec} ({channels} ch, {term:?}, {finish:?}, {shape:?}):\n{e}"
-                            ));
-                        }
+                for shape in Shape::ALL {
+                    if let Err(e) = validate(&compose(&model, term, shape)) {
+                        failures.push(format!("{spec} ({channels} ch, {term:?}, {shape:?}):\n{e}"));
                     }
                 }
             }
@@ -81,20 +77,20 @@ fn a_single_vmf_node_is_prepared_once_per_candidate() {
     // dmg(vmf): the VMF base (offset 3 in the scalar view: tau0, beta, rho_g, then the
     // base's rho, r) is prepared by load_params, and its function reads the lobe.
     let m = Model::parse("dmg(vmf)", 3).unwrap();
-    let src = compose(&m, Term::Square, Finish::Sum, Shape::ALL[0]);
+    let src = compose(&m, Term::Square, Shape::ALL[0]);
     assert!(src.contains("const VMF_PREPARED: bool = true;"), "{src}");
     let load = &src[src.find("fn load_params").unwrap()..];
     let load = &load[..load.find("\n}\n").unwrap()];
     assert!(load.contains("vmf_prepare(3u);"), "{load}");
     // Models without a VMF node call nothing, and their constant is false.
     let m = Model::parse("dmg(eon)", 3).unwrap();
-    let src = compose(&m, Term::Square, Finish::Sum, Shape::ALL[0]);
+    let src = compose(&m, Term::Square, Shape::ALL[0]);
     assert!(src.contains("const VMF_PREPARED: bool = false;"), "{src}");
     assert!(!src.contains("vmf_prepare("), "{src}");
     // The other branch (several VMF nodes, each computing its own lobe) validates too.
     let m = Model::parse("vmf", 3).unwrap();
     for shape in Shape::ALL {
-        let src = compose(&m, Term::Square, Finish::Sum, shape).replace(
+        let src = compose(&m, Term::Square, shape).replace(
             "const VMF_PREPARED: bool = true;",
             "const VMF_PREPARED: bool = false;",
         );

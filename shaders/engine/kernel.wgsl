@@ -157,11 +157,11 @@ fn loops_completed() -> bool {
 // a payload the host looks for (src/engine/gpu.rs, LOOPS_CUT_SHORT), to fail loudly.
 const LOOPS_CUT_SHORT: u32 = 0x7fa11ed5u;
 
-// A candidate's cost from its compensated sum over the samples of problem q. An
-// overflowed (±∞) or NaN sum stays what it is: its compensation is NaN.
-fn finish_cost(acc: vec2<f32>, q: u32) -> f32 {
-    let total = select(acc.x, acc.x + acc.y, abs(acc.x) <= 3.4028235e38);
-    return loss_finish(total, f32(tables[3u * q + 2u]));
+// A candidate's sum of loss terms from its compensated sum over the samples of its
+// problem (the host finishes it). An overflowed (±∞) or NaN sum stays what it is: its
+// compensation is NaN.
+fn cost_sum(acc: vec2<f32>) -> f32 {
+    return select(acc.x, acc.x + acc.y, abs(acc.x) <= 3.4028235e38);
 }
 
 // The entry points, `costs` and `values`, are in lanes_plain.wgsl (a candidate per thread,

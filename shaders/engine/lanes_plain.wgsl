@@ -49,7 +49,7 @@ fn costs(inv: Invocation) {
         comp = partial_comp[inv.lid.x];
     }
     if (live && inv.lid.y == 0u) {
-        out[c] = finish_cost(vec2<f32>(acc, comp), q);
+        out[c] = cost_sum(vec2<f32>(acc, comp));
     }
     // Any slice's loops cut short spoils the candidate's sum.
     if (live && !loops_completed()) {

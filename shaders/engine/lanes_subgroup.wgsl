@@ -81,7 +81,7 @@ fn costs(inv: Invocation) {
     }
     let completed = loops_completed();
     if (is_live(inv)) {
-        out[c] = select(bitcast<f32>(LOOPS_CUT_SHORT), finish_cost(acc, q), completed);
+        out[c] = select(bitcast<f32>(LOOPS_CUT_SHORT), cost_sum(acc), completed);
     }
 }
 

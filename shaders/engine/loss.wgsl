@@ -1,7 +1,8 @@
-// Per-sample loss terms and their finalisation: the GPU twin of src/engine/loss.rs.
-// TERM and FINISH are constants generated per pipeline (see src/engine/wgsl.rs):
-// TERM 0 = |y′−y|/(|y′|+|y|+ε) (SMAPE), 1 = (a y′ − a y)², 2 = (log1p(a y′) − log1p(a y))².
-// FINISH 0 = Σ/K, 1 = sqrt(Σ/K), 2 = Σ.
+// Per-sample loss terms: the GPU twin of src/engine/loss.rs. TERM is a constant generated
+// per pipeline (see src/engine/wgsl.rs): 0 = |y′−y|/(|y′|+|y|+ε) (SMAPE),
+// 1 = (a y′ − a y)², 2 = (log1p(a y′) − log1p(a y))². The kernel returns their sum; the
+// host finishes it (Σ/K, sqrt(Σ/K) or Σ) per problem, in f64 (LossTerms::finish_sum), so
+// problems whose losses share a term shape share a pipeline.
 
 const LOSS_EPS: f32 = 1e-6;
 
@@ -37,14 +38,4 @@ fn loss_term(yp: f32, v: f32, w: f32, a: f32) -> f32 {
     }
     let d = a * yp - v;
     return w * d * d;
-}
-
-fn loss_finish(sum: f32, k: f32) -> f32 {
-    if (FINISH == 0u) {
-        return sum / k;
-    }
-    if (FINISH == 1u) {
-        return sqrt(max(sum / k, 0.0));
-    }
-    return sum;
 }

@@ -36,7 +36,7 @@
 use super::wgsl::{self, compose, normal_entries, validate, Shape};
 use super::{Backend, Evaluator, Problem};
 use crate::bsdf::Model;
-use crate::engine::loss::{Finish, LossTerms, Term};
+use crate::engine::loss::{LossTerms, Term};
 use crate::optim::NormalEquations;
 use anyhow::{anyhow, bail, Context, Result};
 use bytemuck::{Pod, Zeroable};
@@ -411,20 +411,13 @@ impl GpuBackend {
         bail!("GPU error: {msg}")
     }
 
-    fn pipelines(
-        &self,
-        model: &Model,
-        term: Term,
-        finish: Finish,
-        shape: Shape,
-    ) -> Result<Arc<Pipelines>> {
+    fn pipelines(&self, model: &Model, term: Term, shape: Shape) -> Result<Arc<Pipelines>> {
         let key = format!(
-            "{}|{}|{}|{:?}|{:?}|{:?}",
+            "{}|{}|{}|{:?}|{:?}",
             model.spec,
             model.channels,
             model.axes.len(),
             term,
-            finish,
             shape
         );
         let slot: PipelinesSlot = self
@@ -435,7 +428,7 @@ impl GpuBackend {
             .or_default()
             .clone();
         slot.get_or_init(|| {
-            let source = compose(model, term, finish, shape);
+            let source = compose(model, term, shape);
             let module = self
                 .module(&model.spec, source)
                 .map_err(|e| e.to_string())?;
@@ -457,13 +450,14 @@ impl GpuBackend {
     }
 
     /// The pipelines whose `values` entry serves every loss of `model`: that entry writes
-    /// the model values and reads neither the loss term nor its finish, so it is composed
-    /// once per model (with χ²'s constants), not once per loss shape. lavapipe compiles a
+    /// the model values and reads no loss term, so it is composed once per model (with the
+    /// square term's constant: the module the square losses' own entries use), not once
+    /// per loss shape. lavapipe compiles a
     /// pipeline (NIR, then LLVM) when it is created, and NIR's passes run again even when
     /// Mesa's disk cache holds the machine code: on the default sweep that was 14 % of
     /// the GPU sweep's time, half of it for `values` entries compiled a second time.
     fn value_pipelines(&self, model: &Model, shape: Shape) -> Result<Arc<Pipelines>> {
-        self.pipelines(model, Term::Square, Finish::Sum, shape)
+        self.pipelines(model, Term::Square, shape)
     }
 
     /// One of `pipes`' entry points, compiled now if it is the first use.
@@ -571,6 +565,10 @@ impl Backend for GpuBackend {
     fn submissions(&self) -> Option<super::SubmissionStats> {
         let log = self.submission_log.lock().ok()?;
         Some(super::SubmissionStats::of(&log))
+    }
+    fn prepare_kernels(&self, model: &Model) -> Result<()> {
+        let pipes = self.value_pipelines(model, self.shape)?;
+        self.entry(&pipes, Entry::Values).map(|_| ())
     }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;
@@ -1030,15 +1028,18 @@ impl GpuEvaluator<'_> {
         Ok(data)
     }
 
-    /// The pipelines of the loss's own entries, composed on first use.
+    /// The pipelines of the loss's own entries, composed on first use. Their `costs` entry
+    /// returns each candidate's plain sum of terms, which the host finishes per problem
+    /// ([`LossTerms::finish_sum`], in f64): so problems whose losses share a term shape
+    /// (χ², RMSE, Ngan, Löw, f, cos·f: all squares) share one evaluator and one module,
+    /// the one `values` uses for square terms.
     fn loss_pipelines(&mut self) -> Result<Arc<Pipelines>> {
         if let Some(p) = &self.pipes {
             return Ok(p.clone());
         }
-        let t = &self.terms[0];
         let p = self
             .gpu
-            .pipelines(self.model, t.term, t.finish, self.shape)?;
+            .pipelines(self.model, self.terms[0].term, self.shape)?;
         self.pipes = Some(p.clone());
         Ok(p)
     }
@@ -1098,7 +1099,12 @@ impl GpuEvaluator<'_> {
                 output: Output::Out,
                 evaluations: owners[start..end].iter().map(|&q| sizes[q]).sum(),
             })?;
-            result.extend(data.iter().map(|&v| v as f64));
+            if values_mode {
+                result.extend(data.iter().map(|&v| v as f64));
+            } else {
+                let finished = data.iter().zip(&owners[start..end]);
+                result.extend(finished.map(|(&v, &q)| self.terms[q].finish_sum(v as f64)));
+            }
             start = end;
         }
         for &q in owners {

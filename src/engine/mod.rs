@@ -34,7 +34,7 @@ pub trait Backend: Send + Sync {
         f64::EPSILON / 2.0
     }
     /// One evaluator for several independent problems that share one model and one loss
-    /// metric (different data sets, weightings, Monte Carlo replicas): a batch may mix
+    /// term shape (different data sets, losses, weightings, Monte Carlo replicas): a batch may mix
     /// candidates of every problem, and is evaluated in one submission.
     fn prepare_many<'a>(
         &'a self,
@@ -53,6 +53,12 @@ pub trait Backend: Send + Sync {
     /// backend (`None` for host backends, which submit nothing).
     fn submissions(&self) -> Option<SubmissionStats> {
         None
+    }
+    /// Compile now what evaluating `model` will need (a hint: a device backend compiles its
+    /// kernels, a host backend has nothing to do), so that a scheduler can do it ahead,
+    /// on a thread of its own, while the device serves other fits.
+    fn prepare_kernels(&self, _model: &Model) -> anyhow::Result<()> {
+        Ok(())
     }
 }
 
@@ -110,7 +116,8 @@ impl SubmissionStats {
     }
 }
 
-/// Check that problems can share one evaluator: same model, same loss metric.
+/// Check that problems can share one evaluator: same model, and losses of one term shape
+/// (their finishes may differ: each problem's sum is finished on its own).
 pub fn check_shared(problems: &[Problem]) -> anyhow::Result<()> {
     let first = problems
         .first()
@@ -126,8 +133,8 @@ pub fn check_shared(problems: &[Problem]) -> anyhow::Result<()> {
             p.model.spec
         );
         anyhow::ensure!(
-            p.loss.metric == first.loss.metric,
-            "problems batched together must share one loss metric ({} vs {})",
+            p.loss.metric.term() == first.loss.metric.term(),
+            "problems batched together must share one loss term shape ({} vs {})",
             first.loss.metric,
             p.loss.metric
         );

@@ -3,7 +3,7 @@
 //! (from its `shaders/<model>.wgsl`) with its offset into the scalar view.
 
 use crate::bsdf::{Model, Node};
-use crate::engine::loss::{Finish, Term};
+use crate::engine::loss::Term;
 
 pub const COMMON: &str = include_str!("../../shaders/bsdf/common.wgsl");
 pub const LOSS: &str = include_str!("../../shaders/engine/loss.wgsl");
@@ -73,14 +73,6 @@ fn term_code(t: Term) -> u32 {
         Term::AbsRatio => 0,
         Term::Square => 1,
         Term::LogSquare => 2,
-    }
-}
-
-fn finish_code(f: Finish) -> u32 {
-    match f {
-        Finish::Mean => 0,
-        Finish::SqrtMean => 1,
-        Finish::Sum => 2,
     }
 }
 
@@ -339,13 +331,13 @@ fn prepared_nodes(model: &Model) -> Vec<(&'static str, Vec<usize>)> {
 }
 
 /// The full module for a model and a loss shape.
-pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> String {
+pub fn compose(model: &Model, term: Term, shape: Shape) -> String {
     let s = model.scalar_count();
     // G counts scalar-view groups: channels, times planes under `+peraxis`.
     let g = model.groups();
     let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst FINISH: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         model.channels,
         record_channels(model),
@@ -356,7 +348,6 @@ pub fn compose(model: &Model, term: Term, finish: Finish, shape: Shape) -> Strin
         shape.lanes,
         shape.slices,
         term_code(term),
-        finish_code(finish),
         p * (p + 1) / 2,
         normal_entries(p),
         normal_lanes(p, shape),

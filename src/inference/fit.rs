@@ -413,10 +413,11 @@ pub struct ManyStats {
     pub batches: usize,
 }
 
-/// Fit one model to several data sets under one loss metric, all problems × restarts
-/// stepped in lockstep so that each optimizer step is one submission to the backend
-/// (split only where the backend cannot hold all the samples at once). `losses[q]` is
-/// problem q's loss (same metric, any weighting). Returns each problem's optimum.
+/// Fit one model to several data sets, all problems × restarts stepped in lockstep so
+/// that each optimizer step is one submission to the backend (split only where the
+/// backend cannot hold all the samples at once). `losses[q]` is problem q's loss (any
+/// metric and weighting, all of one term shape: [`crate::engine::check_shared`]).
+/// Returns each problem's optimum.
 pub fn fit_many(
     model: &Model,
     datas: &[&Dataset],
