@@ -572,6 +572,14 @@ pub fn fit_many(
 /// LM's `ftol` for restarts whose best is then polished in f64 (see [`search_options`]).
 pub const POLISHED_SEARCH_FTOL: f64 = 1e-4;
 
+/// LM's stall test for restarts whose best is then polished: a restart that gained less
+/// than 1e-3 over its last 10 iterations stops (the polish continues the best restart in
+/// f64, where the step is not tilted by f32's forward differences). On the default
+/// sweep (seeds 1–4) it left every mean loss excess over the best known unchanged to 3
+/// digits and saved 2–3 % of the evaluations, mostly single-restart submissions;
+/// 1e-2 saved 7 % but lost quality.
+pub const POLISHED_SEARCH_STALL: (usize, f64) = (10, 1e-3);
+
 /// LM's forward-difference step (unit box) for restarts whose best is then polished:
 /// 4√u of f32, the smallest step whose f32 differences are not mostly rounding noise.
 pub const POLISHED_SEARCH_FD_STEP: f64 = 9.765625e-4;
@@ -595,6 +603,8 @@ fn search_options(lm: &lm::LmOptions, polish: bool, u: f64) -> lm::LmOptions {
     if polish {
         o.fd_step = o.fd_step.max(POLISHED_SEARCH_FD_STEP);
         o.ftol = o.ftol.max(POLISHED_SEARCH_FTOL);
+        o.stall_window = POLISHED_SEARCH_STALL.0;
+        o.stall_gain = o.stall_gain.max(POLISHED_SEARCH_STALL.1);
     } else {
         o.fd_step = o.fd_step.max(4.0 * u.sqrt());
         o.ftol = o.ftol.max(16.0 * u);
