@@ -1064,6 +1064,19 @@ impl GpuEvaluator<'_> {
     /// cost per candidate, or (`values_mode`) its problem's K model values. Batches larger
     /// than a binding go in several submissions.
     fn run(&mut self, owners: &[usize], params: &[f64], values_mode: bool) -> Result<Vec<f64>> {
+        let raw = self.run_f32(owners, params, values_mode)?;
+        Ok(if values_mode {
+            raw.iter().map(|&v| v as f64).collect()
+        } else {
+            let sums = raw.iter().zip(owners);
+            sums.map(|(&v, &q)| self.terms[q].finish_sum(v as f64))
+                .collect()
+        })
+    }
+
+    /// [`Self::run`] as the device wrote it: the f32 values, or each candidate's f32 sum
+    /// of loss terms (not finished).
+    fn run_f32(&mut self, owners: &[usize], params: &[f64], values_mode: bool) -> Result<Vec<f32>> {
         self.check_batch(owners, params, 1)?;
         let p = self.model.dim;
         let n = owners.len();
@@ -1071,7 +1084,7 @@ impl GpuEvaluator<'_> {
         let per = |q: usize| if values_mode { sizes[q] } else { 1 };
         let max = (self.gpu.max_binding() / 4) as usize;
         let max_candidates = MAX_GROUPS_X as usize * MAX_GROUPS_X as usize;
-        let mut result = Vec::with_capacity(owners.iter().map(|&q| per(q)).sum());
+        let mut result = Vec::new();
         let mut start = 0;
         while start < n {
             // The largest run of candidates whose parameters and outputs fit a binding.
@@ -1099,11 +1112,10 @@ impl GpuEvaluator<'_> {
                 output: Output::Out,
                 evaluations: owners[start..end].iter().map(|&q| sizes[q]).sum(),
             })?;
-            if values_mode {
-                result.extend(data.iter().map(|&v| v as f64));
+            if result.is_empty() {
+                result = data; // the whole batch in one submission: no copy
             } else {
-                let finished = data.iter().zip(&owners[start..end]);
-                result.extend(finished.map(|(&v, &q)| self.terms[q].finish_sum(v as f64)));
+                result.extend_from_slice(&data);
             }
             start = end;
         }
@@ -1156,7 +1168,7 @@ impl GpuEvaluator<'_> {
                 .iter()
                 .flat_map(|&q| std::iter::repeat_n(q, p + 1))
                 .collect();
-            let values = self.run(&expanded, params, true)?;
+            let values = self.run_f32(&expanded, params, true)?;
             let terms: Vec<&LossTerms> = self.terms.iter().collect();
             return Ok(super::normal_equations_of_values(
                 &values, &terms, owners, steps, p,

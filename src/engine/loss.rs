@@ -312,13 +312,14 @@ impl LossTerms {
 
     /// [`Self::residual`] of a whole row of model values (samples 0..K), into `out`: the
     /// term's shape is matched once, not per value, so the square terms vectorise.
-    pub fn residuals_into(&self, values: &[f64], out: &mut Vec<f64>) {
+    /// The values may be f32 (a device's, read back): each is widened to f64 here.
+    pub fn residuals_into<V: Copy + Into<f64>>(&self, values: &[V], out: &mut Vec<f64>) {
         let rows = values.iter().zip(&self.a).zip(&self.gy).zip(&self.sqrt_w);
         match self.term {
             Term::LogSquare => {
-                out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * ((a * v).ln_1p() - gy)))
+                out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * ((a * v.into()).ln_1p() - gy)))
             }
-            _ => out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * (a * v - gy))),
+            _ => out.extend(rows.map(|(((&v, &a), &gy), &sw)| sw * (a * v.into() - gy))),
         }
     }
 

@@ -207,14 +207,18 @@ pub trait Evaluator {
 
 /// Normal equations of groups of P + 1 candidates from their model values (the rows of
 /// each group's P + 1 candidates, K_owner values each) and the unit-box steps (N × P).
-pub fn normal_equations_of_values(
-    values: &[f64],
+///
+/// The values may be a device's f32, read back: they are widened one at a time into the
+/// residuals (f64), with no f64 copy of the whole batch, and the buffers are reused from
+/// group to group.
+pub fn normal_equations_of_values<V: Copy + Into<f64>>(
+    values: &[V],
     terms: &[&crate::engine::loss::LossTerms],
     owners: &[usize],
     steps: &[f64],
     p: usize,
 ) -> Vec<crate::optim::NormalEquations> {
-    let mut at = 0;
+    let (mut at, mut r0, mut diff) = (0, Vec::new(), Vec::new());
     owners
         .iter()
         .zip(steps.chunks(p))
@@ -223,11 +227,17 @@ pub fn normal_equations_of_values(
             let k = t.y.len();
             let vals = &values[at..at + k * (p + 1)];
             at += k * (p + 1);
-            let mut rows = Vec::with_capacity(vals.len());
-            for row in vals.chunks(k) {
-                t.residuals_into(row, &mut rows);
+            r0.clear();
+            t.residuals_into(&vals[..k], &mut r0);
+            diff.clear();
+            for row in vals[k..].chunks(k.max(1)) {
+                let start = diff.len();
+                t.residuals_into(row, &mut diff);
+                for (d, &r) in diff[start..].iter_mut().zip(&r0) {
+                    *d -= r;
+                }
             }
-            crate::optim::NormalEquations::from_residuals(&rows, h, k)
+            crate::optim::NormalEquations::from_differences(&r0, &diff, h)
         })
         .collect()
 }

@@ -120,11 +120,6 @@ impl NormalEquations {
     pub fn from_residuals(rows: &[f64], steps: &[f64], k: usize) -> NormalEquations {
         let p = steps.len();
         let r0 = &rows[..k];
-        // The differences r(x + h_j e_j) − r(x), one contiguous row per parameter; the
-        // steps divide the P(P + 1)/2 + P sums instead of the P·K differences. Each sum
-        // is a dot product of two rows with independent partial sums, which the compiler
-        // vectorises (a row-by-row triangular update does not vectorise, and LM forms
-        // these for every candidate group it evaluates).
         let mut diff = vec![0.0; p * k];
         for (j, d) in diff.chunks_exact_mut(k.max(1)).enumerate().take(p) {
             let moved = &rows[(j + 1) * k..(j + 2) * k];
@@ -132,6 +127,18 @@ impl NormalEquations {
                 *t = a - b;
             }
         }
+        Self::from_differences(r0, &diff, steps)
+    }
+
+    /// From the residuals r(x) (K) and the differences r(x + h_j e_j) − r(x), one
+    /// contiguous row of K per parameter (P × K). The steps divide the P(P + 1)/2 + P
+    /// sums instead of the P·K differences. Each sum is a dot product of two rows with
+    /// independent partial sums, which the compiler vectorises (a row-by-row triangular
+    /// update does not vectorise, and LM forms these for every candidate group it
+    /// evaluates).
+    pub fn from_differences(r0: &[f64], diff: &[f64], steps: &[f64]) -> NormalEquations {
+        let p = steps.len();
+        let k = r0.len();
         let row = |j: usize| &diff[j * k..(j + 1) * k];
         let mut jtj = vec![0.0; p * p];
         let mut jtr = vec![0.0; p];
