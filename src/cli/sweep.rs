@@ -279,8 +279,8 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
             // their own: a driver compiles when a pipeline is created (lavapipe: NIR,
             // then LLVM, 0.01–0.1 s a model), and this thread does it while the workers
             // wait on the device, instead of on a worker's path. A worker that needs a
-            // kernel still being compiled waits for that one alone; an error is left for
-            // the worker to meet and report against its fits.
+            // kernel still being compiled waits for that one alone; an error (or a panic
+            // in the driver) is left for the worker to meet and report against its fits.
             {
                 let (stages, runnable, stop) = (&stages, &runnable, &stop);
                 scope.spawn(move || {
@@ -288,7 +288,10 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
                         if stop.load(std::sync::atomic::Ordering::SeqCst) {
                             break;
                         }
-                        let _ = backend.prepare_kernels(&runnable[stage[0]].1);
+                        let model = &runnable[stage[0]].1;
+                        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                            backend.prepare_kernels(model)
+                        }));
                     }
                 });
             }
