@@ -493,6 +493,12 @@ fn bench_sweep_times_both_backends_and_compares_them() {
         assert!(b["wall_seconds"].as_f64().is_some_and(|w| w > 0.0), "{b}");
         assert!(b["evaluations"].as_u64().is_some_and(|e| e > 0), "{b}");
         assert!(b["evals_per_s"].as_f64().is_some_and(|e| e > 0.0), "{b}");
+        // Every phase timed, none negative or NaN; the search did run.
+        let ph = &b["phases"];
+        for key in ["setup", "screening", "search", "polish", "conclusions"] {
+            assert!(ph[key].as_f64().is_some_and(|s| s >= 0.0), "{key}: {ph}");
+        }
+        assert!(ph["search"].as_f64().unwrap() > 0.0, "{ph}");
     }
     assert!(
         s["gpu_cpu_time_ratio"].as_f64().is_some_and(|r| r > 0.0),

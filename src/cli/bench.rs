@@ -72,14 +72,15 @@ struct SweepCommand {
     args: super::sweep::SweepArgs,
 }
 
-/// Run the sweep on one backend into a fresh temporary folder; its rows and wall time.
-/// One backend's timed sweep: its rows, wall seconds and device submissions.
+/// One backend's timed sweep: its rows, wall seconds, and what it measured of itself
+/// (device submissions, time per phase).
 type TimedSweep = (
     Vec<crate::output::results::Row>,
     f64,
-    Option<crate::engine::SubmissionStats>,
+    super::sweep::SweepStats,
 );
 
+/// Run the sweep on one backend into a fresh temporary folder.
 fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
     use clap::Parser;
     use std::ffi::OsString;
@@ -296,8 +297,14 @@ fn sweep_bench(
     let mut timings = Vec::new();
     let mut results = Vec::new();
     for b in backends {
-        let (rows, wall, submissions) = timed_sweep(a, b.id(), SWEEP_SEED)?;
-        timings.push(SweepTiming::new(b.id(), wall, &rows, submissions));
+        let (rows, wall, stats) = timed_sweep(a, b.id(), SWEEP_SEED)?;
+        timings.push(SweepTiming::new(
+            b.id(),
+            wall,
+            &rows,
+            stats.submissions,
+            stats.phases,
+        ));
         results.push((b.id(), rows));
     }
     println!();
@@ -309,6 +316,14 @@ fn sweep_bench(
         println!(
             "{:<8} {:>10.2} {:>6} {:>14} {:>12.3e}",
             t.backend, t.wall_seconds, t.fits, t.evaluations, t.evals_per_s
+        );
+    }
+    for t in &timings {
+        let p = &t.phases;
+        println!(
+            "{} phases (s, summed over the sweep's worker threads): set-up {:.2}, screening \
+             {:.2}, search {:.2}, f64 polish {:.2}, conclusions {:.2}",
+            t.backend, p.setup, p.screening, p.search, p.polish, p.conclusions
         );
     }
     for t in &timings {

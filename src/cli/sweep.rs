@@ -6,7 +6,7 @@ use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::bsdf::Model;
 use crate::engine::{self, loss::Loss};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
-use crate::inference::fit::{fit, fit_stage, FitOptions};
+use crate::inference::fit::{fit, fit_stage, FitOptions, PhaseSeconds};
 use crate::output::files::check_writable_dir;
 use crate::output::report::RunInfo;
 use crate::output::results::{
@@ -112,9 +112,18 @@ fn describe_constraints(text: &str) -> &str {
 }
 
 /// The `sweep` command.
-/// Run a sweep; returns the device submissions' statistics when a GPU backend ran fits
-/// (`bench --sweep` prints them).
-pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionStats>> {
+/// What a sweep measured about itself (`bench --sweep` prints it).
+#[derive(Clone, Debug, Default)]
+pub struct SweepStats {
+    /// The device submissions, when a GPU backend ran fits.
+    pub submissions: Option<crate::engine::SubmissionStats>,
+    /// Thread-seconds per phase, summed over the stages fitted together (a stage that
+    /// failed and was fitted one task at a time is not counted).
+    pub phases: PhaseSeconds,
+}
+
+/// Run a sweep.
+pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
     let t0 = Instant::now();
     let shard = args.shard.as_deref().map(parse_shard).transpose()?;
     let paths = expand_data(&args.data)?;
@@ -196,7 +205,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
                 files[t.data].name, t.model, t.loss, t.weights, t.optimizer
             );
         }
-        return Ok(None);
+        return Ok(SweepStats::default());
     }
 
     let mut skipped: Vec<Skipped> = Vec::new();
@@ -205,6 +214,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
     let mut workers = 0usize;
     let t_fits = Instant::now();
     let mut submissions = None;
+    let phases = std::sync::Mutex::new(PhaseSeconds::default());
     if !todo.is_empty() {
         // Models that cannot be built are skipped up front (cheap, sequential).
         let mut runnable: Vec<(&Task, Model)> = Vec::new();
@@ -299,7 +309,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
             for _ in 0..workers {
                 let tx = tx.clone();
                 let (runnable, next, stop, files) = (&runnable, &next, &stop, &files);
-                let (stages, constraints) = (&stages, &constraints);
+                let (stages, constraints, phases) = (&stages, &constraints, &phases);
                 scope.spawn(move || loop {
                     let si = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
                     if si >= stages.len() || stop.load(std::sync::atomic::Ordering::SeqCst) {
@@ -326,7 +336,12 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
                         fit_stage(model, &datas, &losses, backend, &opts, &mut |_| {})
                     }));
                     let results: Vec<_> = match together {
-                        Ok(Ok(reports)) => reports.into_iter().map(|r| Ok(Ok(r))).collect(),
+                        Ok(Ok((reports, spent))) => {
+                            if let Ok(mut p) = phases.lock() {
+                                *p += spent;
+                            }
+                            reports.into_iter().map(|r| Ok(Ok(r))).collect()
+                        }
                         // One bad fit fails the stage: fit each alone, so the failure is
                         // attributed to its own task and the others still land.
                         _ => stage
@@ -437,7 +452,10 @@ pub fn run_sweep(args: &SweepArgs) -> Result<Option<crate::engine::SubmissionSta
         };
         crate::output::report::publish(&args.out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
     }
-    Ok(submissions)
+    Ok(SweepStats {
+        submissions,
+        phases: phases.into_inner().unwrap_or_default(),
+    })
 }
 
 /// Group tasks into stages (indices into `runnable`, in task order): same model spec,

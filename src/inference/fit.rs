@@ -411,6 +411,34 @@ pub struct ManyStats {
     pub evaluations: u64,
     /// Evaluators prepared (submissions carry every problem of one evaluator).
     pub batches: usize,
+    /// Where the time went.
+    pub phases: PhaseSeconds,
+}
+
+/// Wall-clock seconds of the phases of fitting, on the thread that ran them (summed over
+/// threads where several fits ran at once): where a sweep's time goes (`bench --sweep`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PhaseSeconds {
+    /// Preparing the evaluators (uploads, tables; kernels compiled on first use).
+    pub setup: f64,
+    /// Ranking the random starts.
+    pub screening: f64,
+    /// The optimizer's restarts on the backend.
+    pub search: f64,
+    /// The f64 polish of each problem's best restart (LM only), on the CPU.
+    pub polish: f64,
+    /// χ², covariance and warnings at each optimum, on the CPU.
+    pub conclusions: f64,
+}
+
+impl std::ops::AddAssign for PhaseSeconds {
+    fn add_assign(&mut self, o: PhaseSeconds) {
+        self.setup += o.setup;
+        self.screening += o.screening;
+        self.search += o.search;
+        self.polish += o.polish;
+        self.conclusions += o.conclusions;
+    }
 }
 
 /// Fit one model to several data sets, all problems × restarts stepped in lockstep so
@@ -499,7 +527,9 @@ pub fn fit_many(
                 loss: losses[q],
             })
             .collect();
+        let clock = Instant::now();
         let mut eval = backend.prepare_many(&problems)?;
+        stats.phases.setup += clock.elapsed().as_secs_f64();
         let n = problems.len();
         // Each problem's polished restart and the polish's evaluations (empty: none).
         let mut polished: Vec<(usize, u64)> = Vec::new();
@@ -519,10 +549,15 @@ pub fn fit_many(
                 loss_terms: terms,
                 start_problem: (0..n).flat_map(|q| std::iter::repeat_n(q, per)).collect(),
             };
+            let clock = Instant::now();
             let starts = screened_starts(&mut obj, range.clone(), opts)?;
+            stats.phases.screening += clock.elapsed().as_secs_f64();
+            let clock = Instant::now();
             match opts.optimizer {
                 Optimizer::Compass => {
-                    compass::minimize(&mut obj, &starts, &opts.compass, progress)?
+                    let results = compass::minimize(&mut obj, &starts, &opts.compass, progress)?;
+                    stats.phases.search += clock.elapsed().as_secs_f64();
+                    results
                 }
                 Optimizer::Lm => {
                     let finish = obj.loss_terms.clone();
@@ -534,9 +569,12 @@ pub fn fit_many(
                         &|start, s| finish[start / per].finish_sum(s),
                         progress,
                     )?;
+                    stats.phases.search += clock.elapsed().as_secs_f64();
                     if opts.polish {
+                        let clock = Instant::now();
                         polished =
                             polish_in_f64(&problems, &space, &finish, &mut results, per, &opts.lm)?;
+                        stats.phases.polish += clock.elapsed().as_secs_f64();
                     }
                     results
                 }
@@ -729,9 +767,10 @@ pub fn fit_outcome(
     Ok(o)
 }
 
-/// Fit one model to several data sets (a sweep's stage: same model and loss metric, any
-/// weightings) in lockstep ([`fit_many`]), then report each fit. A report's `seconds` are
-/// the stage's, shared among its fits by their sample counts; its `evaluations` its own.
+/// Fit one model to several data sets (a sweep's stage: same model and loss term shape,
+/// any losses and weightings) in lockstep ([`fit_many`]), then report each fit, with the
+/// stage's time per phase. A report's `seconds` are the stage's, shared among its fits by
+/// their sample counts; its `evaluations` its own.
 pub fn fit_stage(
     model: &Model,
     datas: &[&Dataset],
@@ -739,23 +778,27 @@ pub fn fit_stage(
     backend: &dyn Backend,
     opts: &FitOptions,
     progress: &mut dyn FnMut(usize),
-) -> anyhow::Result<Vec<FitReport>> {
+) -> anyhow::Result<(Vec<FitReport>, PhaseSeconds)> {
     let t0 = Instant::now();
-    let (optima, space, _) = fit_many(model, datas, losses, backend, opts, progress)?;
+    let (optima, space, stats) = fit_many(model, datas, losses, backend, opts, progress)?;
+    let mut phases = stats.phases;
+    let clock = Instant::now();
     let mut outcomes = Vec::with_capacity(datas.len());
     for ((data, &loss), best) in datas.iter().zip(losses).zip(optima) {
         outcomes.push(conclude(model, data, loss, best, space.clone())?);
     }
+    phases.conclusions += clock.elapsed().as_secs_f64();
     let seconds = t0.elapsed().as_secs_f64();
     let total: usize = datas.iter().map(|d| d.len()).sum::<usize>().max(1);
-    Ok(outcomes
+    let reports = outcomes
         .into_iter()
         .zip(datas.iter().zip(losses))
         .map(|(mut o, (data, &loss))| {
             o.seconds = seconds * data.len() as f64 / total as f64;
             make_report(model, data, loss, opts, backend, o)
         })
-        .collect())
+        .collect();
+    Ok((reports, phases))
 }
 
 /// χ², the covariance and the warnings at a problem's optimum, in f64 on the CPU

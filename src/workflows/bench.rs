@@ -180,6 +180,8 @@ pub struct SweepTiming {
     /// The device submissions (absent for the CPU reference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub submissions: Option<crate::engine::SubmissionStats>,
+    /// Thread-seconds per phase of fitting, summed over the sweep's workers.
+    pub phases: crate::inference::fit::PhaseSeconds,
 }
 
 impl SweepTiming {
@@ -188,6 +190,7 @@ impl SweepTiming {
         wall_seconds: f64,
         rows: &[Row],
         submissions: Option<crate::engine::SubmissionStats>,
+        phases: crate::inference::fit::PhaseSeconds,
     ) -> SweepTiming {
         let evaluations: u64 = rows.iter().map(|r| r.evaluations).sum();
         SweepTiming {
@@ -197,6 +200,7 @@ impl SweepTiming {
             evaluations,
             evals_per_s: evaluations as f64 / wall_seconds.max(1e-9),
             submissions,
+            phases,
         }
     }
 }
