@@ -270,12 +270,12 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
         // default χ² and RMSE, or χ² and f, are both squares): its fits step in lockstep,
         // so each optimizer step is one submission of all their candidates (many fits
         // per dispatch). On lavapipe, one stage per loss instead took 4,311 submissions
-        // against 2,821, and the default sweep 3.7 s against 3.3 s. Stages run on one worker per core; this thread
-        // appends every finished fit to results.csv at once, so an interrupted run loses
-        // at most the stages in flight. Each fit is deterministic on its own (its starts
-        // do not depend on the stage), and results.csv is rewritten in canonical order at
-        // the end, so the outcome does not depend on the staging or on which worker
-        // finished first.
+        // against 2,821, and the default sweep 3.7 s against 3.3 s. Stages run on one
+        // worker per core; this thread appends every finished fit to results.csv at
+        // once, so an interrupted run loses at most the stages in flight. Each fit is
+        // deterministic on its own (its starts do not depend on the stage), and
+        // results.csv is rewritten in canonical order at the end, so the outcome does not
+        // depend on the staging or on which worker finished first.
         let stages = stages_of(&runnable);
         workers = std::thread::available_parallelism()
             .map(|n| n.get())
