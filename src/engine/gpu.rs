@@ -1,7 +1,8 @@
 //! The GPU engine: wgpu compute on Vulkan, f32. One submission evaluates every candidate
-//! of every restart over every sample and reduces on the device to one cost per
-//! candidate (shaders/engine/kernel.wgsl). Pipelines are compiled once per (model, loss
-//! shape, entry point), when first used, and cached; the dataset is uploaded once per
+//! of every restart over every sample and reduces on the device to one sum of loss terms
+//! per candidate (shaders/engine/kernel.wgsl), which the host finishes per problem in f64.
+//! Pipelines are compiled once per (model, loss term shape, entry point), when first used
+//! or ahead (`prepare_kernels`), and cached; the dataset is uploaded once per
 //! problem; parameter and output buffers are reused across optimizer iterations and grown
 //! only when a larger batch arrives.
 //!

@@ -3,7 +3,8 @@
 //! Every loss is a sum over the K (sample, channel) pairs of a per-sample term, then a
 //! finalisation. Per sample we precompute a weight `w` (uncertainty weight × geometric
 //! factor) and an inner factor `a` (cos θt for the cosine-weighted BTDF metrics), so the
-//! CPU and the GPU evaluate the same three term shapes:
+//! CPU and the GPU evaluate the same three term shapes (the GPU sums them per candidate;
+//! the finalisation is always the host's, [`LossTerms::finish_sum`]):
 //! - `AbsRatio`:   w · |y′ − y| / (|y′| + |y| + ε)                 (SMAPE)
 //! - `Square`:     w · (a y′ − a y)²                               (RMSE, Ngan, Löw, f, cosf, χ²)
 //! - `LogSquare`:  w · (ln(1 + a y′) − ln(1 + a y))²               (logf, logcosf)
