@@ -19,7 +19,7 @@ use bsdfit::inference::fit::{fit, FitOptions, FitReport, Optimizer};
 fn fit_on(backend: &dyn Backend, file: &str, spec: &str, loss: Loss) -> FitReport {
     let data = Dataset::read(&bundled_data_dir().join(file), &ReadOptions::default()).unwrap();
     let model = Model::for_data(spec, &data).unwrap();
-    // The sweep's options: 8 restarts, seed 1.
+    // 8 restarts (the sweep's default when this test was written), seed 1.
     let opts = FitOptions {
         optimizer: Optimizer::Lm,
         restarts: 8,

@@ -50,8 +50,8 @@ pub struct BenchArgs {
     /// `sweep`).
     #[arg(long, num_args = 1.., requires = "sweep")]
     pub sweep_data: Vec<PathBuf>,
-    /// Restarts per fit of `--sweep` (default 8, the sweep's).
-    #[arg(long, default_value_t = 8, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    /// Restarts per fit of `--sweep` (default: the sweep's).
+    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub sweep_restarts: usize,
     /// With `--sweep`: also run the CPU reference's sweep with this seed (the sweeps use
     /// seed 1) and compare the two CPU sweeps as the GPU's is compared: how much

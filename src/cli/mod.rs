@@ -23,7 +23,7 @@ mod render;
 mod sweep;
 mod synth;
 
-/// Random restarts of `fit` and `diagnose` (one default for both; `sweep` uses fewer).
+/// Random restarts per fit of `fit`, `diagnose` and `sweep` (one default for all).
 pub const DEFAULT_RESTARTS: usize = 16;
 
 /// Value parser of `--seed`: a non-negative integer (clap would otherwise read `-1` as an

@@ -687,7 +687,6 @@ impl Backend for GpuBackend {
             io: None,
             evaluations: vec![0; problems.len()],
             read_back: 0,
-            poison: Vec::new(),
         }))
     }
 }
@@ -700,6 +699,10 @@ struct IoBuffers {
     /// The `normal` pass's output (NE numbers per group of P + 1 candidates).
     normal: wgpu::Buffer,
     staging: wgpu::Buffer,
+    /// `LOOPS_CUT_SHORT` NaNs, as many as the larger of `out` and `normal`, written once:
+    /// each submission first copies them over its outputs on the device, so anything the
+    /// kernel fails to write reads as loops cut short.
+    poison: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     params_cap: u64,
     out_cap: u64,
@@ -729,8 +732,6 @@ pub struct GpuEvaluator<'a> {
     evaluations: Vec<u64>,
     /// Bytes copied back from the device so far.
     read_back: u64,
-    /// `LOOPS_CUT_SHORT` NaNs written over `out` (and `normal`) before each submission.
-    poison: Vec<f32>,
 }
 
 /// One submission: the `values` (else `costs`) pipeline over `m` candidates whose
@@ -758,7 +759,7 @@ enum Output {
 }
 
 impl GpuEvaluator<'_> {
-    fn ensure_io(&mut self, params_bytes: u64, out_bytes: u64, normal_bytes: u64) {
+    fn ensure_io(&mut self, params_bytes: u64, out_bytes: u64, normal_bytes: u64) -> Result<()> {
         // wgpu binds no empty buffer: the `normal` output exists (4 bytes) in every pass.
         let normal_bytes = normal_bytes.max(4);
         let fits = self.io.as_ref().is_some_and(|io| {
@@ -767,7 +768,7 @@ impl GpuEvaluator<'_> {
                 && io.normal_cap >= normal_bytes
         });
         if fits {
-            return;
+            return Ok(());
         }
         let (pc, oc, nc) = match &self.io {
             Some(io) => (
@@ -813,6 +814,21 @@ impl GpuEvaluator<'_> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let poison = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("poison"),
+            size: oc.max(nc),
+            usage: wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: true,
+        });
+        {
+            let mut view = poison
+                .slice(..)
+                .get_mapped_range_mut()
+                .map_err(|e| anyhow!("GPU poison buffer: {e:?}"))?;
+            let words = vec![LOOPS_CUT_SHORT; view.len() / 4];
+            view.copy_from_slice(bytemuck::cast_slice(&words));
+        }
+        poison.unmap();
         fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
             wgpu::BindGroupEntry {
                 binding,
@@ -849,11 +865,13 @@ impl GpuEvaluator<'_> {
             out,
             normal,
             staging,
+            poison,
             bind_group,
             params_cap: pc,
             out_cap: oc,
             normal_cap: nc,
         });
+        Ok(())
     }
 
     /// [`Self::dispatch_once`], moved to `Shape::LONG_DATA` and run again where a CPU
@@ -918,7 +936,7 @@ impl GpuEvaluator<'_> {
         } else {
             None
         };
-        self.ensure_io((host.len() * 4) as u64, o_bytes, n_bytes);
+        self.ensure_io((host.len() * 4) as u64, o_bytes, n_bytes)?;
         let io = self.io.as_ref().expect("io buffers allocated");
         let grid = |total: u32| {
             let x = total.clamp(1, MAX_GROUPS_X);
@@ -940,20 +958,6 @@ impl GpuEvaluator<'_> {
         q.write_buffer(&self.dims_buf, 0, bytemuck::bytes_of(&dims));
         q.write_buffer(&io.params, 0, bytemuck::cast_slice(host));
         q.write_buffer(&io.owners, 0, bytemuck::cast_slice(owners));
-        // One poison buffer per evaluator, grown as needed: a fresh one per submission
-        // (megabytes for LM's values) cost an allocation and its page faults each time.
-        let need = out_len.max(normal_len);
-        if self.poison.len() < need {
-            self.poison.resize(need, f32::from_bits(LOOPS_CUT_SHORT));
-        }
-        q.write_buffer(&io.out, 0, bytemuck::cast_slice(&self.poison[..out_len]));
-        if normal_len > 0 {
-            q.write_buffer(
-                &io.normal,
-                0,
-                bytemuck::cast_slice(&self.poison[..normal_len]),
-            );
-        }
         let evaluate = match &pipes {
             Some(pipes) if !values => self.gpu.entry(pipes, Entry::Costs)?,
             _ => self.gpu.entry(&self.value_pipes, Entry::Values)?,
@@ -968,6 +972,13 @@ impl GpuEvaluator<'_> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("bsdfit"),
             });
+        // The outputs poisoned on the device, from the evaluator's poison buffer: writing
+        // them from the host cost two copies of every output per submission (into wgpu's
+        // staging, then into the buffer), 4 % of the default sweep's CPU time on lavapipe.
+        enc.copy_buffer_to_buffer(&io.poison, 0, &io.out, 0, o_bytes);
+        if normal_len > 0 {
+            enc.copy_buffer_to_buffer(&io.poison, 0, &io.normal, 0, n_bytes);
+        }
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("evaluate"),
