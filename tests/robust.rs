@@ -442,7 +442,7 @@ fn fit_defaults_to_chi2_and_lm_on_any_data() {
     );
     let h = text(&run(&["sweep", "--help"]).stdout);
     assert!(
-        h.contains("hundreds of fits") && h.contains("own --out"),
+        h.contains("rankings changed with the seed") && h.contains("own --out"),
         "{h}"
     );
 }
