@@ -106,27 +106,28 @@ struct Part<'a> {
 
 impl<'a> Part<'a> {
     /// Group the samples by direction (ωi, ωo bit for bit) and plane, directions in the
-    /// order of their first sample, rows of a direction in sample order.
+    /// order their first samples come in [`walk_order`](super::walk_order), rows of a
+    /// direction in sample order.
     fn new(problem: Problem<'a>) -> Part<'a> {
         let model = problem.model;
         let samples = &problem.data.samples;
         let mut index: HashMap<([u64; 6], usize), usize> = HashMap::new();
         let mut first: Vec<Dir> = Vec::new();
-        let mut direction_of = Vec::with_capacity(samples.len());
-        let mut group = Vec::with_capacity(samples.len());
-        for s in samples {
+        let mut direction_of = vec![0; samples.len()];
+        let mut group = vec![0u32; samples.len()];
+        for k in super::walk_order(problem.data) {
+            let s = &samples[k];
             let (wi, wo) = (s.wi(), s.wo());
             let g = model.group_of(s);
             let key = (
                 [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z].map(f64::to_bits),
                 g / model.channels,
             );
-            let d = *index.entry(key).or_insert_with(|| {
+            direction_of[k] = *index.entry(key).or_insert_with(|| {
                 first.push((wi, wo));
                 first.len() - 1
             });
-            direction_of.push(d);
-            group.push(g as u32);
+            group[k] = g as u32;
         }
         // Counting sort of the samples by direction (stable: sample order within one).
         let mut count = vec![0usize; first.len() + 1];

@@ -82,7 +82,8 @@ impl RecordLayout {
     }
 
     /// Append the records of one data set: a record per (ωi, ωo bit for bit, plane, a,
-    /// channel block) in the order of their first sample, and another wherever a
+    /// channel block) in the order their first samples come in
+    /// [`walk_order`](super::walk_order), and another wherever a
     /// channel is measured again at the same direction (each repeat its own record, as
     /// each is its own term of the loss).
     fn write(
@@ -97,7 +98,8 @@ impl RecordLayout {
         let first = records.len() / self.floats();
         let index_start = index.len();
         let mut at: HashMap<([u64; 7], usize, usize), usize> = HashMap::new();
-        for (k, s) in data.samples.iter().enumerate() {
+        for k in super::walk_order(data) {
+            let s = &data.samples[k];
             let (wi, wo) = (s.wi(), s.wo());
             let g = model.group_of(s);
             let (plane, ch) = (g / model.channels, g % model.channels);

@@ -14,6 +14,31 @@ pub mod gpu;
 pub mod loss;
 pub mod wgsl;
 
+/// The order in which both backends walk a problem's samples: by cos θi, then cos θo
+/// (a stable sort, so file order within one pair).
+///
+/// Why: models keep one-entry memos of what depends on μi or μo alone (micrograin's
+/// G1(μ)/μ, whose Λ series is most of `rmg`'s and `dmg`'s cost; the Fresnel
+/// transmittances), and a memo serves a run of consecutive directions that repeat the
+/// value. Goniometric data repeat the same few polar angles in many azimuths and planes
+/// — the bundled in-plane sets hold 128 directions but 71 distinct (θi, θo) pairs and 9
+/// values of θo — yet files list them by plane or azimuth, so θo changed at nearly every
+/// direction. Walked in this order, μo changes only between pairs: `bsdfit bench
+/// --models 'rmg(ggx)' --data data/w80-g40-full.csv` measured 1.8× the rate on lavapipe
+/// and 1.2× on the CPU reference (whose per-direction work outside the series is larger).
+/// Both backends sum a candidate's loss terms in this order.
+pub fn walk_order(data: &Dataset) -> Vec<usize> {
+    let key: Vec<(f64, f64)> = data.samples.iter().map(|s| (s.wi().z, s.wo().z)).collect();
+    let mut order: Vec<usize> = (0..key.len()).collect();
+    order.sort_by(|&a, &b| {
+        key[a]
+            .0
+            .total_cmp(&key[b].0)
+            .then(key[a].1.total_cmp(&key[b].1))
+    });
+    order
+}
+
 /// One fitting problem: a model compiled for the dataset's channels, the data, the loss.
 #[derive(Clone, Copy)]
 pub struct Problem<'a> {
