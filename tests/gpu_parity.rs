@@ -284,6 +284,57 @@ fn every_model_matches_the_cpu_reference_on_a_goniometer_grid() {
     assert_no_failures(&failures);
 }
 
+/// Micrograin (`rmg`: G1(μ)/μ) and VMF (σ(±μ)) compute per candidate what depends on μ
+/// alone at every polar cosine of the problem, where the data have few (its μ table) and
+/// one thread walks a candidate's records; otherwise per record. On the goniometer grid
+/// (12 cosines) the one-slice shape takes the tables and the sliced one does not: the two
+/// must agree to f32 rounding, since the tables hold the same functions at the records'
+/// own f32 cosines. Bound per value: 1e-5 relative (a few f32 ulps through the rest of the
+/// model; the same code otherwise), NaN never passing. (Each path is also checked against
+/// the CPU reference: the tables on the grid, per record on random directions.)
+#[test]
+fn mu_tables_give_the_per_record_values() {
+    let data = grid_dataset(Kind::Brdf, 3, 23);
+    let one_slice = GpuBackend::new()
+        .expect("GPU adapter")
+        .with_shape(Shape::CPU_DEVICE);
+    let sliced = GpuBackend::new()
+        .expect("GPU adapter")
+        .with_shape(Shape::LONG_DATA);
+    let mut failures = Vec::new();
+    for spec in ["rmg(ggx)", "rmg(vmf)", "fa(vmf)", "dmg(vmf)", "vmf"] {
+        let model = Model::parse(spec, 3).unwrap();
+        // The module the one-slice shape compiles for this batch uses the tables.
+        let src = bsdfit::engine::wgsl::compose(
+            &model,
+            bsdfit::engine::loss::Term::Square,
+            Shape::CPU_DEVICE.for_batch(true),
+        );
+        assert!(src.contains("const MU_TABLES: bool = true;"), "{spec}");
+        let params = random_params(&model, CANDIDATES, 24);
+        let problem = Problem {
+            model: &model,
+            data: &data,
+            loss: Loss::new(Metric::Chi2, Weights::Uniform),
+        };
+        let values = |b: &GpuBackend| b.prepare(problem).unwrap().values(&params).unwrap();
+        let (table, per_record) = (values(&one_slice), values(&sliced));
+        let bad = table
+            .iter()
+            .zip(&per_record)
+            .filter(|(a, b)| {
+                let err = (*a - *b).abs();
+                // NaN (either value, or both) fails.
+                err.is_nan() || err > 1e-5 * a.abs().max(b.abs()) + FLOOR
+            })
+            .count();
+        if bad > 0 {
+            failures.push(format!("{spec}: {bad} of {} values differ", table.len()));
+        }
+    }
+    assert_no_failures(&failures);
+}
+
 /// Sharp lobes at α = 0.002 on their peaks: GGX reflection (`ggx`, the lobe of
 /// `fa(lambert)`) within 0.05° of the mirror direction and exactly on it, the `+retro`
 /// and MRM lobes (with and without `+falloff`) within 0.05° of ωo = ωi and exactly on it. The f32 GGX must be written without

@@ -22,7 +22,11 @@ fn every_generated_module_validates() {
                 }
             };
             for term in [Term::AbsRatio, Term::Square, Term::LogSquare] {
-                for shape in Shape::ALL {
+                // With and without μ tables: the models' table and per-record paths.
+                for shape in Shape::ALL
+                    .into_iter()
+                    .flat_map(|s| [true, false].map(|t| s.with_mu_tables(t)))
+                {
                     if let Err(e) = validate(&compose(&model, term, shape)) {
                         failures.push(format!("{spec} ({channels} ch, {term:?}, {shape:?}):\n{e}"));
                     }

@@ -128,6 +128,38 @@ fn mg_g1_over_mu_memo(key_at: ptr<private, vec3<f32>>, value_at: ptr<private, f3
     return *value_at;
 }
 
+// G1(μ)/μ of the candidate at each entry of its problem's μ table (kernel.wgsl), computed
+// by `rmg_prepare` once per candidate, before the record loop. Why: with the Λ series
+// inside the record loop, even behind a memo that spares most records the series, `rmg`
+// ran at 1.2e8 evaluations/s on lavapipe (w80-g40-full, 16 restarts); with the series
+// taken out of the loop altogether (wrong values, a bound) 2.6e8, and with this table
+// the same 2.6e8 (`bsdfit bench --models 'rmg(ggx)'`). A loop inside the record loop
+// costs that SIMD device more than its trips. The values are those the memo would give,
+// bit for bit: the table holds the records' own f32 cosines.
+var<private> MG_G1_OVER_MU: array<f32, MU_TABLE_LEN>;
+
+// Fill MG_G1_OVER_MU for the candidate (clamped τ0, β as mg_g1_over_mu clamps them).
+fn mg_fill_g1_table(tau0: f32, beta: f32) {
+    if (!MU_TABLES) {
+        return;
+    }
+    let n = mu_table_len();
+    for (var i = 0u; i < n; i = i + 1u) {
+        MG_G1_OVER_MU[i] = mg_g1_over_mu(tau0, beta, mu_table_at(i));
+    }
+}
+
+// G1(μ)/μ at the record's μ of table index `slot`: from MG_G1_OVER_MU when `tabulated`
+// (the model's prepare function filled it, and every problem has a μ table: MU_TABLES),
+// else from the memo. Both are constants, so a module holds one of the two paths.
+fn mg_g1_over_mu_at(tabulated: bool, slot: u32, key_at: ptr<private, vec3<f32>>, value_at: ptr<private, f32>,
+                    tau0: f32, beta: f32, mu: f32) -> f32 {
+    if (tabulated && MU_TABLES) {
+        return MG_G1_OVER_MU[min(slot, MU_TABLE_LEN - 1u)];
+    }
+    return mg_g1_over_mu_memo(key_at, value_at, tau0, beta, mu);
+}
+
 // The rough grain at one direction pair without ρ_g (RoughGrain::at in micrograin.rs):
 // x = the specular term F(ωi·h) D G1i G1o/(4 μi μo), y = the product of the Fresnel
 // transmittances (1 − F(μi))(1 − F(μo)). ρ_g is the grain's only per-channel parameter, so
@@ -158,8 +190,8 @@ fn mg_rough_grain_shared(tau0: f32, beta: f32, eta_g: f32, wi: vec3<f32>, wo: ve
             let h = hs * inverseSqrt(hl2);
             let cd = clamp(dot(wi, h), 0.0, 1.0);
             value.x = fresnel_dielectric(cd, eta) * mg_ndf(tau0, beta, h)
-                * mg_g1_over_mu_memo(&MG_G1I_KEY, &MG_G1I, tau0, beta, mu_i)
-                * mg_g1_over_mu_memo(&MG_G1O_KEY, &MG_G1O, tau0, beta, mu_o) * 0.25;
+                * mg_g1_over_mu_at(RMG_PREPARED, RECORD_MU.x, &MG_G1I_KEY, &MG_G1I, tau0, beta, mu_i)
+                * mg_g1_over_mu_at(RMG_PREPARED, RECORD_MU.y, &MG_G1O_KEY, &MG_G1O, tau0, beta, mu_o) * 0.25;
         }
     }
     MG_MEMO_VALID = true;

@@ -218,10 +218,24 @@ fn vmf_lobe(r: f32) -> VmfLobe {
 // (A memo keyed on r, updated inside the record loop, was slower on lavapipe.)
 var<private> VMF_LOBE: VmfLobe;
 
+// σ(μ) and σ(−μ) of the candidate's lobe at every μ of its problem's μ table (kernel.wgsl),
+// computed by `vmf_prepare` (when MU_TABLES) so that the record loop only looks them up:
+// σ's Legendre series is a loop, which costs lavapipe much inside the record loop.
+var<private> VMF_SIGMA_AT_MU: array<f32, MU_TABLE_LEN>;
+var<private> VMF_SIGMA_AT_NEG_MU: array<f32, MU_TABLE_LEN>;
+
 fn vmf_prepare(o: u32) {
     let r = min(vmf_r(o), 1.0);
     if (r > 0.0) {
         VMF_LOBE = vmf_lobe(r);
+        if (MU_TABLES) {
+            let n = mu_table_len();
+            for (var i = 0u; i < n; i = i + 1u) {
+                let u = clamp(mu_table_at(i), VMF_MU_MIN, 1.0);
+                VMF_SIGMA_AT_MU[i] = vmf_sigma(u, VMF_LOBE.m, VMF_LOBE.a);
+                VMF_SIGMA_AT_NEG_MU[i] = vmf_sigma(-u, VMF_LOBE.m, VMF_LOBE.a);
+            }
+        }
     }
 }
 
@@ -242,9 +256,19 @@ fn vmf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     }
     let ui = clamp(wi.z, VMF_MU_MIN, 1.0);
     let uo = clamp(wo.z, VMF_MU_MIN, 1.0);
-    let s_i = vmf_sigma(ui, lobe.m, lobe.a);
-    let s_o = vmf_sigma(uo, lobe.m, lobe.a);
-    let s_mo = vmf_sigma(-uo, lobe.m, lobe.a);
+    var s_i: f32;
+    var s_o: f32;
+    var s_mo: f32;
+    if (VMF_PREPARED && MU_TABLES) {
+        let slots = min(RECORD_MU, vec2<u32>(MU_TABLE_LEN - 1u));
+        s_i = VMF_SIGMA_AT_MU[slots.x];
+        s_o = VMF_SIGMA_AT_MU[slots.y];
+        s_mo = VMF_SIGMA_AT_NEG_MU[slots.y];
+    } else {
+        s_i = vmf_sigma(ui, lobe.m, lobe.a);
+        s_o = vmf_sigma(uo, lobe.m, lobe.a);
+        s_mo = vmf_sigma(-uo, lobe.m, lobe.a);
+    }
     let den = max(uo * s_i + ui * s_mo, 1e-30);
 
     let nn = dot(wi.xy, wi.xy) * dot(wo.xy, wo.xy);

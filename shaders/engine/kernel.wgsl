@@ -13,7 +13,8 @@
 // and at most CB channels: RGB and monochrome data).
 
 // Record r, texel t of the records texture (RPR records of TPR texels per row): texel 0
-// holds ωi (xyz) and the record's first scalar-view group (w, bits of a u32), texel 1 ωo
+// holds ωi (xyz) and the record's packed word (w, bits of a u32: its first scalar-view
+// group, then the indices of its μi and μo in its problem's μ table), texel 1 ωo
 // and the loss's inner factor a, then each texel two channel slots (v, w): the
 // measurement as the loss compares it (y for SMAPE, g(y) otherwise) and the loss weight
 // (w < 0: no sample in this slot); the generated `record_obs` reads those.
@@ -44,7 +45,9 @@ struct Dims {
 @group(0) @binding(1) var records: texture_2d<f32>;
 // Per problem q (several independent fits share a dispatch, their records one after the
 // other): tables[3q] = its first record, tables[3q + 1] = one past its last,
-// tables[3q + 2] = its number of samples K_q.
+// tables[3q + 2] = its number of samples K_q. Then, for n problems, tables[3n + q] = where
+// problem q's μ table starts: its length there, then its values (f32 bits): the distinct
+// cos θi and cos θo of its records, none where there are more than MU_TABLE_LEN.
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> params: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<f32>;
@@ -93,10 +96,35 @@ fn slice(lid: vec3<u32>) -> u32 {
     return lid.y;
 }
 
-// Where the views of a record's first group start in a candidate's views: a constant 0
-// under FIXED_BASE.
-fn record_base(wi_w: f32) -> u32 {
-    return select(bitcast<u32>(wi_w) * S, 0u, FIXED_BASE);
+// A record's packed word: bits 0–15 its first scalar-view group, 16–21 the index of its
+// μi in its problem's μ table, 22–27 that of its μo (MU_TABLE_LEN: not in the table).
+const MU_TABLE_LEN: u32 = 63u;
+
+// The μ-table indices (μi, μo) of the record being evaluated, set by `begin_record`: a
+// model that computes per candidate what depends on μ alone (`rmg_prepare`) looks its
+// values up with them instead of computing them in the record loop.
+var<private> RECORD_MU: vec2<u32>;
+
+// The problem of the candidate being evaluated (set by the generated `load_params`).
+var<private> CANDIDATE_PROBLEM: u32;
+
+// Start a record from texel 0's w (its packed word): keep its μ indices in RECORD_MU and
+// return where the views of its first group start in a candidate's views (a constant 0
+// under FIXED_BASE).
+fn begin_record(wi_w: f32) -> u32 {
+    let word = bitcast<u32>(wi_w);
+    RECORD_MU = vec2<u32>((word >> 16u) & 63u, (word >> 22u) & 63u);
+    return select((word & 0xffffu) * S, 0u, FIXED_BASE);
+}
+
+// The length of the μ table of the candidate's problem (0: it has none).
+fn mu_table_len() -> u32 {
+    return tables[tables[3u * dims.n_problems + CANDIDATE_PROBLEM]];
+}
+
+// Entry i of the μ table of the candidate's problem.
+fn mu_table_at(i: u32) -> f32 {
+    return bitcast<f32>(tables[tables[3u * dims.n_problems + CANDIDATE_PROBLEM] + 1u + i]);
 }
 
 // The compensated sum s (sum, Neumaier compensation) plus the loss term of a channel
@@ -121,7 +149,7 @@ fn plain_costs(q: u32, slice: u32) -> vec2<f32> {
     for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
         let wi = record_texel(k, 0u);
         let wo = record_texel(k, 1u);
-        acc = record_costs(acc, eval_record(wi.xyz, wo.xyz, record_base(wi.w)), record_obs(k), wo.w);
+        acc = record_costs(acc, eval_record(wi.xyz, wo.xyz, begin_record(wi.w)), record_obs(k), wo.w);
     }
     return acc;
 }
@@ -132,7 +160,7 @@ fn plain_values(q: u32, row: u32, slice: u32) {
     let end = tables[3u * q + 1u];
     for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
         let wi = record_texel(k, 0u);
-        let y = eval_record(wi.xyz, record_texel(k, 1u).xyz, record_base(wi.w));
+        let y = eval_record(wi.xyz, record_texel(k, 1u).xyz, begin_record(wi.w));
         store_values(row, y, record_index(k));
     }
 }

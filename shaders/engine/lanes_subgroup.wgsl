@@ -74,7 +74,7 @@ fn costs(inv: Invocation) {
             for (var j = 0u; j < n; j = j + 1u) {
                 let wi = subgroupShuffle(my_wi, j);
                 let wo = subgroupShuffle(my_wo, j);
-                let y = eval_record(wi.xyz, wo.xyz, record_base(wi.w));
+                let y = eval_record(wi.xyz, wo.xyz, begin_record(wi.w));
                 acc = record_costs(acc, y, shuffle_obs(my_obs, j), wo.w);
             }
         }
@@ -107,7 +107,7 @@ fn values(inv: Invocation) {
             let n = min(end - k0, inv.lanes);
             for (var j = 0u; j < n; j = j + 1u) {
                 let wi = subgroupShuffle(my_wi, j);
-                let y = eval_record(wi.xyz, subgroupShuffle(my_wo, j), record_base(wi.w));
+                let y = eval_record(wi.xyz, subgroupShuffle(my_wo, j), begin_record(wi.w));
                 // A lane past the last candidate shadows it and stores the very same
                 // values to the same places: no branch on liveness inside the tile.
                 store_values(row, y, shuffle_index(my_idx, j));

@@ -87,6 +87,10 @@ impl Bsdf for RoughMicrograin {
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("rmg", include_str!("../../shaders/bsdf/rmg.wgsl"))
     }
+    fn wgsl_prepare(&self) -> Option<&'static str> {
+        // G1(μ)/μ at every polar cosine of the problem, once per candidate.
+        Some("rmg_prepare")
+    }
 }
 
 /// Registry entry (one line in [`super::registry::REGISTRY`]).

@@ -15,12 +15,26 @@ pub const LANES_SUBGROUP: &str = include_str!("../../shaders/engine/lanes_subgro
 /// How threads map to work (shaders/engine/lanes_*.wgsl): workgroups of `lanes`
 /// candidate lanes × `slices` record slices, and whether a subgroup loads records once
 /// per tile and passes them round (lanes_subgroup.wgsl; needs the device's subgroup
-/// feature).
+/// feature); and what the kernels may assume of the batch's data (`mu_tables`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Shape {
     pub lanes: u32,
     pub slices: u32,
     pub subgroup_tiles: bool,
+    /// Models compute per candidate, before the record loop, what depends on the polar
+    /// cosine μ alone, at every μ of the candidate's problem (its μ table, kernel.wgsl),
+    /// and look it up per record: micrograin's G1(μ)/μ, whose Λ series is a loop, and
+    /// VMF's cross sections σ(±μ), whose Legendre series is one. A loop inside the record
+    /// loop cost lavapipe far more than its trips: `rmg(ggx)` ran at 1.2e8 evaluations/s
+    /// with its series behind a memo, 2.1–2.4e8 with the table; `vmf` 1.6e8 → 2.7e8
+    /// (`bsdfit bench`, bundled W80&G40 data). Set per batch ([`Shape::for_batch`]): only
+    /// where every problem has a table (at most `MU_TABLE_LEN` distinct cosines; none
+    /// for, say, a MERL subsample) and one thread walks all of a candidate's records
+    /// (`slices` = 1), since each slice's thread would fill the tables again. Without it
+    /// the models compute those factors per record, as before; the fallback is compiled
+    /// out where the tables are used, its mere presence in the record loop costing as
+    /// much as the loop itself.
+    pub mu_tables: bool,
 }
 
 impl Shape {
@@ -30,6 +44,7 @@ impl Shape {
         lanes: 64,
         slices: 1,
         subgroup_tiles: false,
+        mu_tables: true,
     };
     /// SIMD CPU devices with subgroups (lavapipe has them): records loaded once per
     /// subgroup tile.
@@ -37,6 +52,7 @@ impl Shape {
         lanes: 64,
         slices: 1,
         subgroup_tiles: true,
+        mu_tables: true,
     };
     /// Where a CPU device cut a one-slice kernel's loops short (a data set too large for
     /// one thread per candidate; llvmpipe's loop limit, kernel.wgsl `loops_completed`):
@@ -45,12 +61,14 @@ impl Shape {
         lanes: 8,
         slices: 32,
         subgroup_tiles: false,
+        mu_tables: false,
     };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
         slices: 8,
         subgroup_tiles: false,
+        mu_tables: false,
     };
 
     /// Every shape the engine uses (tests run each code path on any device; subgroup
@@ -65,6 +83,25 @@ impl Shape {
     /// Candidates per workgroup.
     pub fn candidates_per_workgroup(&self) -> u32 {
         self.lanes
+    }
+
+    /// This shape with `mu_tables` set to `yes`.
+    pub fn with_mu_tables(self, yes: bool) -> Shape {
+        Shape {
+            mu_tables: yes,
+            ..self
+        }
+    }
+
+    /// This thread mapping for a batch whose problems all have μ tables or not:
+    /// `mu_tables` where they do and one thread walks a candidate's records.
+    pub fn for_batch(self, every_problem_has_a_mu_table: bool) -> Shape {
+        self.with_mu_tables(self.slices == 1 && every_problem_has_a_mu_table)
+    }
+
+    /// The same thread mapping (whatever `mu_tables`).
+    pub fn maps_like(&self, other: Shape) -> bool {
+        self.with_mu_tables(true) == other.with_mu_tables(true)
     }
 }
 
@@ -235,7 +272,8 @@ fn fixed_base(model: &Model) -> bool {
 /// per-channel code is written out here, CB times):
 /// - `load_params(c)`: candidate c's flat vector into its views in P, each
 ///   flat entry loaded once and stored to every view that uses it (a parameter shared by
-///   the channels is then one value the compiler can see is shared);
+///   the channels is then one value the compiler can see is shared), its problem into
+///   `CANDIDATE_PROBLEM`, then the prepare functions of the model's nodes;
 /// - `eval_record(wi, wo, b)`: the model at the record's CB channels (views b, b + S, …);
 /// - `record_costs(s, y, obs, a)`: the compensated sum s plus the record's loss terms;
 /// - `record_obs(rec)`: the record's channel slots from the records texture;
@@ -249,7 +287,7 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
     let mut src =
         String::from("// ---- generated: per-record helpers (src/engine/wgsl.rs, record_source)\n");
     // load_params: group g's view at P[g·S].
-    src += "fn load_params(c: u32) {\n    let base = c * dims.dim;\n";
+    src += "fn load_params(c: u32) {\n    CANDIDATE_PROBLEM = owners[2u * c];\n    let base = c * dims.dim;\n";
     let mut users: Vec<(usize, Vec<usize>)> = Vec::new();
     for g in 0..model.groups() {
         for j in 0..s {
@@ -337,7 +375,7 @@ pub fn compose(model: &Model, term: Term, shape: Shape) -> String {
     let g = model.groups();
     let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
+        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst MU_TABLES: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
         model.spec,
         model.channels,
         record_channels(model),
@@ -345,6 +383,7 @@ pub fn compose(model: &Model, term: Term, shape: Shape) -> String {
         RECORDS_PER_ROW,
         padded_groups(model),
         fixed_base(model),
+        shape.mu_tables,
         shape.lanes,
         shape.slices,
         term_code(term),
