@@ -530,6 +530,11 @@ fn bench_sweep_times_both_backends_and_compares_them() {
     let param = c["max_param_diff_unit_box"]["value"].as_f64().unwrap();
     assert!(loss <= c["loss_tolerance"].as_f64().unwrap(), "{c}");
     assert!(param <= c["param_tolerance"].as_f64().unwrap(), "{c}");
+    assert_eq!(c["fits_at_different_optima"], 0, "{c}");
+    let over = c["max_param_diff_over_tolerance"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!(over <= 1.0, "{c}");
     assert_eq!(c["within_tolerance"], true, "{c}");
     let stdout = text(&out.stdout);
     assert!(stdout.contains("GPU/CPU sweep time ratio"), "{stdout}");

@@ -42,8 +42,10 @@ pub struct BenchArgs {
     /// evaluations and milliseconds each), the GPU/CPU time ratio, whether the rankings (per data set ×
     /// loss × weighting, models by best loss) are identical, and if not whether they agree
     /// up to ties (losses within the 1e-3 tolerance) or which pairs of models the two
-    /// order oppositely, and the largest loss and parameter differences against the
-    /// stated f32 tolerance. `--models` applies to it.
+    /// order oppositely, the fits at different local optima (losses more than 1e-3
+    /// apart), and the largest parameter differences at one optimum against the stated
+    /// f32 tolerance (1e-2 of the parameter's box, or 0.05 of its standard uncertainty
+    /// where that is looser). `--models` applies to it.
     #[arg(long)]
     pub sweep: bool,
     /// Data of `--sweep`: files or directories of *.csv (default: the bundled data/, as
@@ -454,18 +456,20 @@ fn print_comparison(
         }
     }
     println!(
-        "largest relative best-loss difference: {:.2e} ({}), tolerance {:.0e}",
-        c.max_rel_loss_diff.value, c.max_rel_loss_diff.at, c.loss_tolerance
+        "largest relative best-loss difference: {:.2e} ({}); {} fit(s) differ by more than \
+         {:.0e}, at different local optima ({first} lower in {}, {second} in {}): where \
+         restarts land is multi-start's chance, not f32's",
+        c.max_rel_loss_diff.value,
+        c.max_rel_loss_diff.at,
+        c.fits_at_different_optima,
+        c.loss_tolerance,
+        c.fits_at_different_optima - c.different_optima_lower_on_gpu,
+        c.different_optima_lower_on_gpu
     );
     println!(
         "largest parameter difference (unit box), over the fits at one optimum and the \
-         parameters both determined: {:.2e} ({}), tolerance {:.0e}; not compared: {} fit(s) \
-         at different optima, {} undetermined value(s)",
-        c.max_param_diff_unit_box.value,
-        c.max_param_diff_unit_box.at,
-        c.param_tolerance,
-        c.fits_at_different_optima,
-        c.params_undetermined
+         parameters both determined ({} undetermined value(s) left out): {:.2e} ({})",
+        c.params_undetermined, c.max_param_diff_unit_box.value, c.max_param_diff_unit_box.at
     );
     println!(
         "largest parameter difference in standard uncertainties (same fits and parameters): \
@@ -473,7 +477,15 @@ fn print_comparison(
         c.max_param_diff_sigma.value, c.max_param_diff_sigma.at
     );
     println!(
-        "{} of {fits} fits compared; {}",
+        "largest parameter difference over its tolerance ({:.0e} of the box, or {} σ where \
+         that is looser): {:.2} ({})",
+        c.param_tolerance,
+        c.param_tolerance_sigma,
+        c.max_param_diff_over_tolerance.value,
+        c.max_param_diff_over_tolerance.at
+    );
+    println!(
+        "{} of {fits} fits compared; at one optimum, {}",
         c.fits_compared,
         if c.within_tolerance {
             format!("within {tolerance}")
