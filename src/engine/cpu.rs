@@ -31,7 +31,8 @@
 //! (one `Node::eval` per sample and channel, the geometry recomputed for each channel).
 //! At 2.25 GHz that is 36–47 cycles per row, most of them (`perf`) in the lobe's
 //! shared factors: three square roots and two divisions per direction, shared by its
-//! three rows.
+//! three rows. Measured again with the current code (the same command): 1.6e8 per
+//! CPU-second, 14 cycles per row, 3–4× BBM's rate.
 
 use super::{Backend, Evaluator, Problem};
 use crate::bsdf::{Channels, Dir, Model};
