@@ -284,17 +284,18 @@ fn every_model_matches_the_cpu_reference_on_a_goniometer_grid() {
     assert_no_failures(&failures);
 }
 
-/// Micrograin (`rmg`: G1(μ)/μ) and VMF (σ(±μ)) compute per candidate what depends on μ
-/// alone at every polar cosine of the problem, where the data have few (its μ table) and
-/// one thread walks a candidate's records; otherwise per record. On the goniometer grid
-/// (12 cosines) the one-slice shape takes the tables and the sliced one does not: the two
-/// must agree to f32 rounding, since the tables hold the same functions at the records'
-/// own f32 cosines. Bound per value: 1e-5 relative (a few f32 ulps through the rest of the
+/// Micrograin (`rmg`: G1(μ)/μ), VMF (σ(±μ)) and GG transmission (G1(μ)/μ from its Λ
+/// table) compute per candidate what depends on μ alone at every polar cosine of the
+/// problem, where the data have few (its μ table) and one thread walks a candidate's
+/// records; otherwise per record. On the goniometer grid (at most 24 cosines) the
+/// one-slice shape takes the tables and the sliced one does not: the two must agree to
+/// f32 rounding, since the tables hold the same functions at the records' own f32
+/// cosines (GG's at a direction of that cosine in the xz plane, its sine from the
+/// cosine). Bound per value: 1e-5 relative (a few f32 ulps through the rest of the
 /// model; the same code otherwise), NaN never passing. (Each path is also checked against
 /// the CPU reference: the tables on the grid, per record on random directions.)
 #[test]
 fn mu_tables_give_the_per_record_values() {
-    let data = grid_dataset(Kind::Brdf, 3, 23);
     let one_slice = GpuBackend::new()
         .expect("GPU adapter")
         .with_shape(Shape::CPU_DEVICE);
@@ -302,8 +303,19 @@ fn mu_tables_give_the_per_record_values() {
         .expect("GPU adapter")
         .with_shape(Shape::LONG_DATA);
     let mut failures = Vec::new();
-    for spec in ["rmg(ggx)", "rmg(vmf)", "fa(vmf)", "dmg(vmf)", "vmf"] {
-        let model = Model::parse(spec, 3).unwrap();
+    let cases = [
+        (Kind::Brdf, "rmg(ggx)"),
+        (Kind::Brdf, "rmg(vmf)"),
+        (Kind::Brdf, "fa(vmf)"),
+        (Kind::Brdf, "dmg(vmf)"),
+        (Kind::Brdf, "vmf"),
+        (Kind::Btdf, "btdf(gg)"),
+        (Kind::Btdf, "btdf(gg)+absorb"),
+    ];
+    for (kind, spec) in cases {
+        let channels = if kind == Kind::Brdf { 3 } else { 1 };
+        let data = grid_dataset(kind, channels, 23);
+        let model = Model::parse(spec, channels).unwrap();
         // The module the one-slice shape compiles for this batch uses the tables.
         let src = bsdfit::engine::wgsl::compose(
             &model,

@@ -78,10 +78,40 @@ fn btdf_gtr_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     return btdf_transmit(g, gtr_d_vec(g.m, alpha, btdf_gtr_gamma(o)), ggx_g1_over_mu(wi, alpha), ggx_g1_over_mu(wo, alpha));
 }
 
+// The GG shape of the candidate (two ln Γ) and its G1(μ)/μ at every entry of its problem's
+// μ table (kernel.wgsl), computed by `btdf_gg_prepare` when the generated module calls it
+// after loading the candidate (BTDF_GG_PREPARED: the model has one GG node). Each G1
+// takes two rows of four texel fetches of the Λ table, fetched lane by lane on lavapipe:
+// 32 fetches per record were that model's whole cost there.
+var<private> BTDF_GG_SHAPE: Gg;
+var<private> BTDF_GG_G1_OVER_MU: array<f32, MU_TABLE_LEN>;
+
+fn btdf_gg_prepare(o: u32) {
+    BTDF_GG_SHAPE = gg_new(btdf_gg_beta(o), btdf_gg_p(o));
+    if (MU_TABLES) {
+        let n = mu_table_len();
+        for (var i = 0u; i < n; i = i + 1u) {
+            // A direction of that cosine (G1 depends on its polar angle alone).
+            let mu = mu_table_at(i);
+            let w = vec3<f32>(sqrt(max(1.0 - mu * mu, 0.0)), 0.0, mu);
+            BTDF_GG_G1_OVER_MU[i] = gg_g1_over_mu(w, BTDF_GG_SHAPE);
+        }
+    }
+}
+
 // The GG Smith G from the Lambda table (LUT).
 fn btdf_gg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let s = gg_new(btdf_gg_beta(o), btdf_gg_p(o));
+    var s: Gg;
+    if (BTDF_GG_PREPARED) {
+        s = BTDF_GG_SHAPE;
+    } else {
+        s = gg_new(btdf_gg_beta(o), btdf_gg_p(o));
+    }
     let g = btdf_geometry(wi, wo, btdf_gg_eta(o));
+    if (BTDF_GG_PREPARED && MU_TABLES) {
+        let slots = min(RECORD_MU, vec2<u32>(MU_TABLE_LEN - 1u));
+        return btdf_transmit(g, gg_d_vec(g.m, s), BTDF_GG_G1_OVER_MU[slots.x], BTDF_GG_G1_OVER_MU[slots.y]);
+    }
     return btdf_transmit(g, gg_d_vec(g.m, s), gg_g1_over_mu(wi, s), gg_g1_over_mu(wo, s));
 }
 

@@ -245,6 +245,14 @@ impl Bsdf for Btdf {
             _ => None,
         }
     }
+    fn wgsl_prepare(&self) -> Option<&'static str> {
+        match self.ndf {
+            // GG's shape constants and its G1(μ)/μ at every polar cosine of the problem:
+            // its Λ table costs 16 texel fetches per G1.
+            Ndf::Gg => Some("btdf_gg_prepare"),
+            _ => None,
+        }
+    }
 }
 
 /// A BTDF suffix combinator.
