@@ -358,6 +358,13 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
 fn prepared_nodes(model: &Model) -> Vec<(&'static str, Vec<usize>)> {
     let mut out: Vec<(&'static str, Vec<usize>)> = Vec::new();
     for node in model.nodes() {
+        // A prepare function reads the node's parameters from the first group's view; a
+        // node with a parameter of its own per measured plane (`+peraxis` on two planes)
+        // has different values in other groups, so it computes per record instead.
+        let own = node.offset..node.offset + node.bsdf.params().len();
+        if model.params[own].iter().any(|p| p.axes > 1) {
+            continue;
+        }
         if let Some(f) = node.bsdf.wgsl_prepare() {
             match out.iter_mut().find(|(g, _)| *g == f) {
                 Some((_, offsets)) => offsets.push(node.offset),
