@@ -789,8 +789,10 @@ fn wgsl_twins_match_the_rust_constants_and_validate() {
     assert!((lo - GG_P_LO.ln()).abs() < 1e-15 && (hi - GG_P_HI.ln()).abs() < 1e-15);
     // The sources parse and validate with the declarations the engine provides.
     let src = format!(
-        "var<private> P: array<f32, 8>;\n@group(0) @binding(5) var<storage, read> LUT: array<f32>;\nfn lut(k: u32) -> f32 {{ return LUT[k]; }}\n{}\n{}\n{}\n{}\n\
-         @compute @workgroup_size(1) fn main() {{\n let wi = vec3<f32>(0.0, 0.0, 1.0); let wo = -wi;\n \
+        "var<private> P: array<f32, 8>;\n@group(0) @binding(5) var<storage, read> LUT: array<f32>;\nfn lut(k: u32) -> f32 {{ return LUT[k]; }}\n\
+         const MU_TABLE_LEN: u32 = 63u;\nconst MU_TABLES: bool = true;\nconst BTDF_GG_PREPARED: bool = true;\n\
+         var<private> RECORD_MU: vec2<u32>;\nfn mu_table_len() -> u32 {{ return 1u; }}\nfn mu_table_at(i: u32) -> f32 {{ return 0.5; }}\n{}\n{}\n{}\n{}\n\
+         @compute @workgroup_size(1) fn main() {{\n btdf_gg_prepare(0u);\n let wi = vec3<f32>(0.0, 0.0, 1.0); let wo = -wi;\n \
          let v = btdf_tr_eval(0u, wi, wo) + btdf_beckmann_eval(0u, wi, wo) + btdf_gtr_eval(0u, wi, wo) + btdf_gg_eval(0u, wi, wo);\n \
          P[7] = btdf_diffuse_eval(0u, wi, wo, btdf_absorb_eval(0u, wi, wo, btdf_scale_eval(0u, wi, wo, v)));\n}}\n",
         include_str!("../shaders/bsdf/common.wgsl"),

@@ -20,12 +20,13 @@
 //!
 //! **Per-μ tables.** With each problem the engine uploads its μ table, the distinct f32
 //! cosines of θi and θo of its records (at most 63), and each record carries the indices
-//! of its μi and μo there. Models whose per-record work includes a loop over a function
-//! of μ alone (micrograin's Λ series, VMF's Legendre series for σ) evaluate it per
-//! candidate at every entry before the record loop (`rmg_prepare`, `vmf_prepare`) and
-//! look it up per record (`Shape::mu_tables`): on lavapipe `rmg(ggx)` went from 1.2e8 to
-//! 2.1–2.4e8 evaluations/s, `vmf` from 1.6e8 to 2.7e8, and the default sweep from 4.7 s
-//! to 3.8 s.
+//! of its μi and μo there. Models whose per-record work includes a loop or a table
+//! lookup for a function of μ alone (micrograin's Λ series, VMF's Legendre series for σ,
+//! GG transmission's Λ table) evaluate it per candidate at every entry before the record
+//! loop (`rmg_prepare`, `vmf_prepare`, `btdf_gg_prepare`) and look it up per record
+//! (`Shape::mu_tables`): on lavapipe `rmg(ggx)` went from 1.2e8 to 2.1–2.4e8
+//! evaluations/s, `vmf` from 1.6e8 to 2.7e8, `btdf(gg)` from 3.4e7 to 0.9–1.5e8, and the
+//! default sweep from 4.7 s to 3.5 s.
 //!
 //! Levenberg–Marquardt's normal equations are reduced on the device too: one submission
 //! runs the `values` pass over every group of P + 1 candidates (a restart's point and its

@@ -23,8 +23,9 @@ pub struct Shape {
     pub subgroup_tiles: bool,
     /// Models compute per candidate, before the record loop, what depends on the polar
     /// cosine μ alone, at every μ of the candidate's problem (its μ table, kernel.wgsl),
-    /// and look it up per record: micrograin's G1(μ)/μ, whose Λ series is a loop, and
-    /// VMF's cross sections σ(±μ), whose Legendre series is one. A loop inside the record
+    /// and look it up per record: micrograin's G1(μ)/μ, whose Λ series is a loop, VMF's
+    /// cross sections σ(±μ), whose Legendre series is one, and GG transmission's G1(μ)/μ,
+    /// 16 texel fetches of its Λ table each. A loop inside the record
     /// loop cost lavapipe far more than its trips: `rmg(ggx)` ran at 1.2e8 evaluations/s
     /// with its series behind a memo, 2.1–2.4e8 with the table; `vmf` 1.6e8 → 2.7e8
     /// (`bsdfit bench`, bundled W80&G40 data). Set per batch ([`Shape::for_batch`]): only
