@@ -301,7 +301,7 @@ fn mu_tables_give_the_per_record_values() {
         .with_shape(Shape::CPU_DEVICE);
     let sliced = GpuBackend::new()
         .expect("GPU adapter")
-        .with_shape(Shape::LONG_DATA);
+        .with_shape(Shape::GPU_DEVICE);
     let mut failures = Vec::new();
     let cases = [
         (Kind::Brdf, "rmg(ggx)"),

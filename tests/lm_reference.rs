@@ -177,7 +177,7 @@ fn oren_nayar_brdf_fit() {
         model: &model,
         space: &space,
         eval: eval.as_mut(),
-        loss_terms: vec![loss.terms(&data)],
+        finishers: vec![loss.finisher(&data)],
         start_problem: vec![],
     });
     let f = |u: &[f64]| obj.borrow_mut().residuals(u).unwrap();
@@ -233,7 +233,7 @@ fn sums_of_squares_come_from_the_loss_sum() {
                 model: m,
                 space,
                 eval: eval.as_mut(),
-                loss_terms: vec![loss.terms(d)],
+                finishers: vec![loss.finisher(d)],
                 start_problem: vec![],
             };
             let dim = space.dim();

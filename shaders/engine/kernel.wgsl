@@ -19,7 +19,8 @@
 // measurement as the loss compares it (y for SMAPE, g(y) otherwise) and the loss weight
 // (w < 0: no sample in this slot); the generated `record_obs` reads those.
 fn record_texel(r: u32, t: u32) -> vec4<f32> {
-    return textureLoad(records, vec2<u32>((r % RPR) * TPR + t, r / RPR), 0);
+    let local = r - dims.seg_first;
+    return textureLoad(records, vec2<u32>((local % RPR) * TPR + t, local / RPR), 0);
 }
 
 // Channel slot i of record r.
@@ -28,40 +29,27 @@ fn record_slot(r: u32, i: u32) -> vec2<f32> {
     return select(t.zw, t.xy, i % 2u == 0u);
 }
 
-struct Dims {
-    n_candidates: u32,
-    n_problems: u32,
-    dim: u32,
-    groups_x: u32,
-    // The `normal` pass (normal.wgsl): groups of dim + 1 candidates, workgroups per row.
-    n_groups: u32,
-    normal_groups_x: u32,
-    // 2, a count the compiler cannot see (`loops_completed`).
-    probe_trips: u32,
-    pad1: u32,
-}
-
-@group(0) @binding(0) var<uniform> dims: Dims;
-@group(0) @binding(1) var records: texture_2d<f32>;
-// Per problem q (several independent fits share a dispatch, their records one after the
-// other): tables[3q] = its first record, tables[3q + 1] = one past its last,
-// tables[3q + 2] = its number of samples K_q. Then, for n problems, tables[3n + q] = where
-// problem q's μ table starts: its length there, then its values (f32 bits): the distinct
-// cos θi and cos θo of its records, none where there are more than MU_TABLE_LEN.
-@group(0) @binding(2) var<storage, read> tables: array<u32>;
-@group(0) @binding(3) var<storage, read> params: array<f32>;
-@group(0) @binding(4) var<storage, read_write> out: array<f32>;
-// Lookup table of models that need one (GG's Smith Λ), LUT_WIDTH entries per row of an
-// R32F texture (fetched as vectors on CPU devices, like the records); a zero otherwise.
-@group(0) @binding(5) var LUT: texture_2d<f32>;
-// owners[2c] = the problem of candidate c; owners[2c + 1] = where its row of model values
-// starts in `out` (values entry point only).
-@group(0) @binding(6) var<storage, read> owners: array<u32>;
-// The `normal` pass's output: NE numbers per group of dim + 1 candidates (normal.wgsl).
-@group(0) @binding(7) var<storage, read_write> normal_out: array<f32>;
-// Texel r (RPR per row): the original index, within its problem, of the sample in each
-// channel slot of record r, or NO_SAMPLE.
-@group(0) @binding(8) var indices: texture_2d<u32>;
+// The bindings (`dims`, `records`, `tables`, `params`, `out`, `LUT`, `owners`,
+// `normal_out`) and the `Dims` struct are declared once, in src/engine/gpu/bindings.rs,
+// which writes their WGSL declarations ahead of this file. What they hold:
+// - `tables`: per problem q (several independent fits share a dispatch, their records
+//   one after the other): tables[3q] = its first record, tables[3q + 1] = one past its
+//   last, tables[3q + 2] = its number of samples K_q. Then, for n problems,
+//   tables[3n + q] = where problem q's μ table starts: its length there, then its values
+//   (f32 bits): the distinct cos θi and cos θo of its records, none where there are more
+//   than MU_TABLE_LEN.
+// - `owners`: owners[2c] = the problem of candidate c; owners[2c + 1] = where its row of
+//   model values starts in `out` (values entry point only).
+// - `LUT`: the lookup table of models that need one (GG's Smith Λ), LUT_WIDTH entries per
+//   row of an R32F texture (fetched as vectors on CPU devices, like the records); a zero
+//   otherwise.
+// - `normal_out`: the `normal` pass's output (normal.wgsl).
+//
+// Records are numbered over the whole batch; the bound `records` texture holds a segment
+// of them from dims.seg_first. A pass covers the window [dims.win_first, dims.win_end) of
+// those numbers, cut into tiles of dims.tile records: workgroup z = t works on tile t of
+// each of its candidates' records there, so that much data spreads over many workgroups
+// and no invocation walks more than a tile (llvmpipe's loop limit, `loops_completed`).
 
 const NO_SAMPLE: u32 = 0xffffffffu;
 
@@ -70,10 +58,6 @@ const LUT_WIDTH: u32 = 256u;
 // Entry k of the lookup table (shaders/bsdf/microfacet.wgsl reads it through this).
 fn lut(k: u32) -> f32 {
     return textureLoad(LUT, vec2<u32>(k % LUT_WIDTH, k / LUT_WIDTH), 0).x;
-}
-
-fn record_indices(r: u32) -> vec4<u32> {
-    return textureLoad(indices, vec2<u32>(r % RPR, r / RPR), 0);
 }
 
 // Neumaier's compensated addition (Neumaier 1974, "Rundungsfehleranalyse einiger
@@ -96,14 +80,19 @@ fn slice(lid: vec3<u32>) -> u32 {
     return lid.y;
 }
 
-// A record's packed word: bits 0–15 its first scalar-view group, 16–21 the index of its
-// μi in its problem's μ table, 22–27 that of its μo (MU_TABLE_LEN: not in the table).
+// A record's packed word: bits 0–11 its first scalar-view group, 12–15 which of its
+// CB channel slots hold a sample (bit i: slot i), 16–21 the index of its μi in its
+// problem's μ table, 22–27 that of its μo (MU_TABLE_LEN: not in the table).
 const MU_TABLE_LEN: u32 = 63u;
 
 // The μ-table indices (μi, μo) of the record being evaluated, set by `begin_record`: a
 // model that computes per candidate what depends on μ alone (`rmg_prepare`) looks its
 // values up with them instead of computing them in the record loop.
 var<private> RECORD_MU: vec2<u32>;
+
+// Which channel slots of that record hold a sample (bit i: slot i), set by
+// `begin_record`: the values pass writes 0 to the others (`store_values`).
+var<private> RECORD_SLOTS: u32;
 
 // The problem of the candidate being evaluated (set by the generated `load_params`).
 var<private> CANDIDATE_PROBLEM: u32;
@@ -114,7 +103,8 @@ var<private> CANDIDATE_PROBLEM: u32;
 fn begin_record(wi_w: f32) -> u32 {
     let word = bitcast<u32>(wi_w);
     RECORD_MU = vec2<u32>((word >> 16u) & 63u, (word >> 22u) & 63u);
-    return select((word & 0xffffu) * S, 0u, FIXED_BASE);
+    RECORD_SLOTS = (word >> 12u) & 15u;
+    return select((word & 0xfffu) * S, 0u, FIXED_BASE);
 }
 
 // The length of the μ table of the candidate's problem (0: it has none).
@@ -141,12 +131,26 @@ fn first_candidate(wg: vec3<u32>) -> u32 {
     return (wg.x + wg.y * dims.groups_x) * CL;
 }
 
-// Σ of the loss terms of the thread's candidate (its views in P) over the records of
-// problem q, this thread's slice of them: (sum, Neumaier compensation).
-fn plain_costs(q: u32, slice: u32) -> vec2<f32> {
+// The records of problem q in this pass's window: [x, y) (empty where it has none).
+fn window_range(q: u32) -> vec2<u32> {
+    let lo = max(tables[3u * q], dims.win_first);
+    let hi = min(tables[3u * q + 1u], dims.win_end);
+    return vec2<u32>(lo, max(lo, hi));
+}
+
+// The records of problem q in tile t of this pass's window: [x, y).
+fn tile_range(q: u32, t: u32) -> vec2<u32> {
+    let w = window_range(q);
+    let lo = min(w.x + t * dims.tile, w.y);
+    return vec2<u32>(lo, min(lo + dims.tile, w.y));
+}
+
+// Σ of the loss terms of the thread's candidate (its views in P) over the records
+// [range.x, range.y), this thread's slice of them: (sum, Neumaier compensation).
+fn plain_costs(range: vec2<u32>, slice: u32) -> vec2<f32> {
     var acc = vec2<f32>(0.0, 0.0);
-    let end = tables[3u * q + 1u];
-    for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
+    let end = range.y;
+    for (var k = range.x + slice; k < end; k = k + SL) {
         let wi = record_texel(k, 0u);
         let wo = record_texel(k, 1u);
         acc = record_costs(acc, eval_record(wi.xyz, wo.xyz, begin_record(wi.w)), record_obs(k), wo.w);
@@ -154,14 +158,15 @@ fn plain_costs(q: u32, slice: u32) -> vec2<f32> {
     return acc;
 }
 
-// The model values of the thread's candidate at each sample of problem q (this thread's
-// slice of its records), written to its row of `out` in the samples' original order.
-fn plain_values(q: u32, row: u32, slice: u32) {
-    let end = tables[3u * q + 1u];
-    for (var k = tables[3u * q] + slice; k < end; k = k + SL) {
+// The model values of the thread's candidate at the records [range.x, range.y) (this
+// thread's slice of them), written to its row of `out`, whose slot i of record k is
+// out[row + (k − first)·CB + i], `first` the first record of the candidate's row.
+fn plain_values(range: vec2<u32>, first: u32, row: u32, slice: u32) {
+    let end = range.y;
+    for (var k = range.x + slice; k < end; k = k + SL) {
         let wi = record_texel(k, 0u);
         let y = eval_record(wi.xyz, record_texel(k, 1u).xyz, begin_record(wi.w));
-        store_values(row, y, record_index(k));
+        store_values(row + (k - first) * CB, y);
     }
 }
 

@@ -1,7 +1,8 @@
 // How threads map to work, plain form (GPUs, and CPU devices without subgroups): a
 // workgroup is CL candidate lanes × SL slices; thread (lane, slice) evaluates candidate
-// `lane` on records slice, slice + SL, …, then the SL partial sums of each candidate are
-// reduced in workgroup memory to one cost. Neighbouring threads hold different
+// `lane` on records slice, slice + SL, … of the workgroup's tile (workgroup z), then the
+// SL partial sums of each candidate are reduced in workgroup memory to one partial cost
+// per (candidate, tile), which the host adds up in f64. Neighbouring threads hold different
 // candidates and read the same record at once, which a GPU serves as one broadcast load;
 // SL > 1 keeps enough threads in flight when candidates are few.
 
@@ -23,7 +24,7 @@ fn costs(inv: Invocation) {
     if (live) {
         q = owners[2u * c];
         load_params(c);
-        let sums = plain_costs(q, slice(inv.lid));
+        let sums = plain_costs(tile_range(q, inv.wg.z), slice(inv.lid));
         acc = sums.x;
         comp = sums.y;
     }
@@ -48,12 +49,13 @@ fn costs(inv: Invocation) {
         acc = partial[inv.lid.x];
         comp = partial_comp[inv.lid.x];
     }
+    let o = c * dims.n_tiles + inv.wg.z;
     if (live && inv.lid.y == 0u) {
-        out[c] = cost_sum(vec2<f32>(acc, comp));
+        out[o] = cost_sum(vec2<f32>(acc, comp));
     }
     // Any slice's loops cut short spoils the candidate's sum.
     if (live && !loops_completed()) {
-        out[c] = bitcast<f32>(LOOPS_CUT_SHORT);
+        out[o] = bitcast<f32>(LOOPS_CUT_SHORT);
     }
 }
 
@@ -64,8 +66,12 @@ fn values(inv: Invocation) {
         return;
     }
     load_params(c);
-    plain_values(owners[2u * c], owners[2u * c + 1u], slice(inv.lid));
-    if (!loops_completed()) {
-        out[owners[2u * c + 1u]] = bitcast<f32>(LOOPS_CUT_SHORT);
+    let q = owners[2u * c];
+    let row = owners[2u * c + 1u];
+    let tile = tile_range(q, inv.wg.z);
+    plain_values(tile, window_range(q).x, row, slice(inv.lid));
+    // Where this thread's loops were cut short, the first value of its tile says so.
+    if (!loops_completed() && tile.x < tile.y) {
+        out[row + (tile.x - window_range(q).x) * CB] = bitcast<f32>(LOOPS_CUT_SHORT);
     }
 }

@@ -59,12 +59,13 @@ fn costs(inv: Invocation) {
     }
     let c = load_candidate(inv);
     let q = owners[2u * c];
+    let range = tile_range(q, inv.wg.z);
     var acc = vec2<f32>(0.0, 0.0);
     if (subgroup_problem(q) == NO_SAMPLE) {
-        acc = plain_costs(q, 0u);
+        acc = plain_costs(range, 0u);
     } else {
-        let end = tables[3u * q + 1u];
-        for (var k0 = tables[3u * q]; k0 < end; k0 = k0 + inv.lanes) {
+        let end = range.y;
+        for (var k0 = range.x; k0 < end; k0 = k0 + inv.lanes) {
             // Each loaded component costs a lane-by-lane loop: only what the loss needs.
             let mine = min(k0 + inv.lane, end - 1u);
             let my_wi = record_texel(mine, 0u);
@@ -81,7 +82,7 @@ fn costs(inv: Invocation) {
     }
     let completed = loops_completed();
     if (is_live(inv)) {
-        out[c] = select(bitcast<f32>(LOOPS_CUT_SHORT), cost_sum(acc), completed);
+        out[c * dims.n_tiles + inv.wg.z] = select(bitcast<f32>(LOOPS_CUT_SHORT), cost_sum(acc), completed);
     }
 }
 
@@ -93,29 +94,30 @@ fn values(inv: Invocation) {
     let c = load_candidate(inv);
     let q = owners[2u * c];
     let row = owners[2u * c + 1u];
+    let range = tile_range(q, inv.wg.z);
+    let first = window_range(q).x;
     if (subgroup_problem(q) == NO_SAMPLE) {
         if (is_live(inv)) {
-            plain_values(q, row, 0u);
+            plain_values(range, first, row, 0u);
         }
     } else {
-        let end = tables[3u * q + 1u];
-        for (var k0 = tables[3u * q]; k0 < end; k0 = k0 + inv.lanes) {
+        let end = range.y;
+        for (var k0 = range.x; k0 < end; k0 = k0 + inv.lanes) {
             let mine = min(k0 + inv.lane, end - 1u);
             let my_wi = record_texel(mine, 0u);
             let my_wo = record_texel(mine, 1u).xyz;
-            let my_idx = record_index(mine);
             let n = min(end - k0, inv.lanes);
             for (var j = 0u; j < n; j = j + 1u) {
                 let wi = subgroupShuffle(my_wi, j);
                 let y = eval_record(wi.xyz, subgroupShuffle(my_wo, j), begin_record(wi.w));
                 // A lane past the last candidate shadows it and stores the very same
                 // values to the same places: no branch on liveness inside the tile.
-                store_values(row, y, shuffle_index(my_idx, j));
+                store_values(row + (k0 + j - first) * CB, y);
             }
         }
     }
-    // Where this thread's loops were cut short, the first value of its row says so.
-    if (is_live(inv) && !loops_completed()) {
-        out[row] = bitcast<f32>(LOOPS_CUT_SHORT);
+    // Where this thread's loops were cut short, the first value of its tile says so.
+    if (is_live(inv) && !loops_completed() && range.x < range.y) {
+        out[row + (range.x - first) * CB] = bitcast<f32>(LOOPS_CUT_SHORT);
     }
 }

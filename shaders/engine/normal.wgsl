@@ -1,8 +1,11 @@
 // Levenberg–Marquardt normal equations reduced on the device (the `normal` entry point),
 // run right after `values` in the same submission: `out` then holds the model values of
 // every group of PD + 1 candidates (the group's point, then the point moved along each
-// parameter), and each workgroup reduces one group to NE = PD(PD + 1)/2 + PD + 1 numbers
-// in `normal_out`, so the host reads back those instead of (PD + 1) × K values.
+// parameter) at the records of the pass's window, each candidate's row in record-slot
+// order (CB slots a record), and workgroup (g, t) reduces group g over the records of
+// tile t to NE = PD(PD + 1)/2 + PD + 1 numbers in `normal_out` (at (g·n_tiles + t)·NE),
+// so the host reads back those, and adds up the tiles and windows in f64, instead of
+// (PD + 1) × K values.
 //
 // Per sample, the group's PD + 1 residual factors are x_0 = r = √w (g(y′_0) − g(y)) and
 // x_{j+1} = d_j = √w (g(y′_j) − g(y′_0)) (y′_0 the point's value, y′_j the one moved along
@@ -16,7 +19,7 @@
 // ∞ − x is ∞): a NaN value at a sample of candidate j makes row and column j of JᵀJ and
 // Jᵀr_j NaN, one at the point makes everything NaN.
 //
-// Two forms of the same sums; the host picks one per device (src/engine/gpu.rs).
+// Two forms of the same sums; the host picks one per device (src/engine/gpu/mod.rs).
 //
 // `normal` (GPUs): thread (lane, slice) owns row a = lane of the (PD + 1)² Gram matrix Σ x_a x_b and
 // walks channel slots slice, slice + SL, … (CB per record, the empty ones skipped) in a loop whose counter is the same in every lane:
@@ -40,11 +43,11 @@ fn residual_g(v: f32, a: f32) -> f32 {
     return a * v;
 }
 
-// Channel slot k of the records (CB per record): the index of its sample in its problem
-// (NO_SAMPLE: an empty slot), √w, the inner factor a, and g(y) (records hold y itself for
-// SMAPE, whose residuals are those of a y).
+// Channel slot k of the records (CB per record): whether it holds a sample (its weight
+// is not negative), √w, the inner factor a, and g(y) (records hold y itself for SMAPE,
+// whose residuals are those of a y).
 struct ChannelSlot {
-    o: u32,
+    present: bool,
     rw: f32,
     a: f32,
     gy: f32,
@@ -54,7 +57,30 @@ fn channel_slot(k: u32) -> ChannelSlot {
     let r = k / CB;
     let v = record_slot(r, k % CB);
     let a = record_texel(r, 1u).w;
-    return ChannelSlot(record_indices(r)[k % CB], sqrt(v.y), a, select(v.x, a * v.x, TERM == 0u));
+    return ChannelSlot(v.y >= 0.0, sqrt(max(v.y, 0.0)), a, select(v.x, a * v.x, TERM == 0u));
+}
+
+// Where group g's values are, and which of its slots tile t covers: the point's row
+// starts at `row0`, candidate j's at row0 + j·`stride`; the tile's slots are
+// [first, end) (global slot numbers, CB per record), and slot k is at offset
+// k − `base` of a row.
+struct GroupTile {
+    row0: u32,
+    stride: u32,
+    base: u32,
+    first: u32,
+    end: u32,
+}
+
+fn group_tile(g: u32, t: u32) -> GroupTile {
+    // The group's candidates are consecutive: its point is candidate g (PD + 1), whose
+    // owner entry gives the problem and where its row of values starts; the moved
+    // candidates' rows follow, one window of the problem's slots apart.
+    let c0 = g * (PD + 1u);
+    let q = owners[2u * c0];
+    let w = window_range(q);
+    let tile = tile_range(q, t);
+    return GroupTile(owners[2u * c0 + 1u], (w.y - w.x) * CB, w.x * CB, tile.x * CB, tile.y * CB);
 }
 
 // g(y1) − g(y0). For g(v) = a v this is a (y1 − y0): the difference of two f32 values
@@ -87,22 +113,15 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
     // Group g of the batch (the same for every thread of the workgroup).
     let g = wg.x + wg.y * dims.normal_groups_x;
     let live = g < dims.n_groups;
-    var row0 = 0u;
-    var first = 0u;
-    var end = 0u;
-    var kq = 0u;
+    var gt = GroupTile(0u, 0u, 0u, 0u, 0u);
     if (live) {
-        // The group's candidates are consecutive: its point is candidate g (PD + 1), whose
-        // owner entry gives the problem and where its row of values starts; the moved
-        // candidates' rows follow, K_q values apart.
-        let c0 = g * (PD + 1u);
-        let q = owners[2u * c0];
-        row0 = owners[2u * c0 + 1u];
-        // The problem's channel slots, CB per record (some hold no sample).
-        first = tables[3u * q] * CB;
-        end = tables[3u * q + 1u] * CB;
-        kq = tables[3u * q + 2u];
+        gt = group_tile(g, wg.z);
     }
+    let row0 = gt.row0;
+    let base = gt.base;
+    let kq = gt.stride;
+    let first = gt.first;
+    let end = gt.end;
     for (var block = 0u; block < NB; block = block + 1u) {
         let a = block * EL + lid.x;
         // Lanes past the last row repeat row 0; nothing of theirs is written.
@@ -111,19 +130,19 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
         var comp: array<f32, PD + 1u>;
         for (var k = first + slice(lid); k < end; k = k + SL) {
             let s = channel_slot(k);
-            if (s.o == NO_SAMPLE) {
+            if (!s.present) {
                 continue;
             }
-            let y0 = out[row0 + s.o];
+            let y0 = out[row0 + (k - base)];
             let r = s.rw * (residual_g(y0, s.a) - s.gy);
             var xa = r;
             if (own > 0u) {
-                xa = s.rw * residual_g_diff(out[row0 + own * kq + s.o], y0, s.a);
+                xa = s.rw * residual_g_diff(out[row0 + own * kq + (k - base)], y0, s.a);
             }
             for (var b = 0u; b <= PD; b = b + 1u) {
                 var xb = r;
                 if (b > 0u) {
-                    xb = s.rw * residual_g_diff(out[row0 + b * kq + s.o], y0, s.a);
+                    xb = s.rw * residual_g_diff(out[row0 + b * kq + (k - base)], y0, s.a);
                 }
                 let t = xa * xb;
                 let sum = acc[b] + t;
@@ -159,7 +178,7 @@ fn normal(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) li
             let slot = normal_slot(a, b);
             if (live && lid.y == 0u && slot < NE) {
                 // As for costs: an overflowed or NaN sum stays what it is.
-                normal_out[g * NE + slot] =
+                normal_out[(g * dims.n_tiles + wg.z) * NE + slot] =
                     select(total, total + total_comp, abs(total) <= 3.4028235e38);
             }
         }
@@ -188,31 +207,27 @@ var<workgroup> ncut_short: atomic<u32>;
 fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
     let g = wg.x + wg.y * dims.normal_groups_x;
     let live = g < dims.n_groups;
-    var row0 = 0u;
-    var first = 0u;
-    var end = 0u;
-    var kq = 0u;
+    var gt = GroupTile(0u, 0u, 0u, 0u, 0u);
     if (live) {
-        let c0 = g * (PD + 1u);
-        let q = owners[2u * c0];
-        row0 = owners[2u * c0 + 1u];
-        // The problem's channel slots, CB per record (some hold no sample).
-        first = tables[3u * q] * CB;
-        end = tables[3u * q + 1u] * CB;
-        kq = tables[3u * q + 2u];
+        gt = group_tile(g, wg.z);
     }
+    let row0 = gt.row0;
+    let base = gt.base;
+    let kq = gt.stride;
+    let first = gt.first;
+    let end = gt.end;
     var acc: array<f32, NE>;
     var comp: array<f32, NE>;
     var x: array<f32, PD + 1u>;
     for (var k = first + lid.x; k < end; k = k + NSL) {
         let s = channel_slot(k);
-        if (s.o == NO_SAMPLE) {
+        if (!s.present) {
             continue;
         }
-        let y0 = out[row0 + s.o];
+        let y0 = out[row0 + (k - base)];
         x[0] = s.rw * (residual_g(y0, s.a) - s.gy);
         for (var j = 1u; j <= PD; j = j + 1u) {
-            x[j] = s.rw * residual_g_diff(out[row0 + j * kq + s.o], y0, s.a);
+            x[j] = s.rw * residual_g_diff(out[row0 + j * kq + (k - base)], y0, s.a);
         }
         var e = 0u;
         for (var a = 1u; a <= PD; a = a + 1u) {
@@ -254,11 +269,11 @@ fn normal_by_samples(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invoca
                 total_comp = total_comp + nblock_comp[lid.x * NSL + l] + two_sum_err(total, v, sum);
                 total = sum;
             }
-            normal_out[g * NE + e] = select(total, total + total_comp, abs(total) <= 3.4028235e38);
+            normal_out[(g * dims.n_tiles + wg.z) * NE + e] = select(total, total + total_comp, abs(total) <= 3.4028235e38);
         }
         workgroupBarrier();
     }
     if (live && lid.x == 0u && atomicLoad(&ncut_short) != 0u) {
-        normal_out[g * NE] = bitcast<f32>(LOOPS_CUT_SHORT);
+        normal_out[(g * dims.n_tiles + wg.z) * NE] = bitcast<f32>(LOOPS_CUT_SHORT);
     }
 }

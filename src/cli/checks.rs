@@ -22,10 +22,15 @@ pub fn batch_candidates(restarts: usize, params: usize) -> u64 {
     restarts as u64 * SCREEN.max(2 * params as u64 + 1)
 }
 
-/// Bytes of one batch: candidates × (P parameters + K sample values) × 8 bytes (f64).
+/// Bytes of one batch: candidates × (P parameters + the P(P + 1)/2 + P + 1 sums of
+/// their normal equations + the values of one window of samples) × 8 bytes (f64). The
+/// engine streams the samples window by window ([`crate::engine::reduce`]), so a window
+/// (at most [`crate::engine::cpu::WINDOW_ROWS`] samples) is all a batch holds of them.
 pub fn batch_bytes(candidates: u64, params: usize, samples: usize) -> u64 {
+    let window = samples.min(crate::engine::cpu::WINDOW_ROWS) as u64;
+    let sums = crate::engine::reduce::gram_entries(params) as u64;
     candidates
-        .saturating_mul(params as u64 + samples as u64)
+        .saturating_mul(params as u64 + sums + window)
         .saturating_mul(8)
 }
 
@@ -69,7 +74,9 @@ pub fn batch_memory(
     let per_unit = batch_bytes(candidates.div_ceil(value.max(1) as u64), params, samples).max(1);
     let max_value = BATCH_MEMORY_LIMIT / per_unit;
     let desc = format!(
-        "{option} {value}: a batch of {candidates} candidate parameter vectors × ({params} parameters + {samples} sample values) × 8 bytes needs about {} for {what}",
+        "{option} {value}: a batch of {candidates} candidate parameter vectors × ({params} parameters + {} normal-equation sums + {} values of a window of samples) × 8 bytes needs about {} for {what}",
+        crate::engine::reduce::gram_entries(params),
+        samples.min(crate::engine::cpu::WINDOW_ROWS),
         gib(bytes)
     );
     if bytes > BATCH_MEMORY_LIMIT {

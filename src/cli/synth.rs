@@ -33,6 +33,10 @@ pub struct SynthArgs {
     /// Material name written in the file.
     #[arg(long)]
     pub material: Option<String>,
+    /// Output file: a bsdfit CSV v1, or, where it ends in `.binary`, a MERL table
+    /// (three channels, read as R, G, B = the longest to the shortest wavelength; values
+    /// below 0 written as 0; the table holds no uncertainties: read it back with
+    /// --assume-uncertainty REL,ABS and --max-samples 0 for every cell).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -87,12 +91,44 @@ pub fn run(a: SynthArgs) -> Result<()> {
     )
     .map_err(|e| anyhow::anyhow!(e))?;
     ds.meta.insert("synth_geometry".into(), geometry.clone());
+    if a.out.extension().is_some_and(|e| e == "binary") {
+        return write_merl(&ds, &a.out, &geometry);
+    }
     ds.write(&a.out)?;
     eprintln!(
         "wrote {} ({}, {}, geometry {geometry})",
         a.out.display(),
         super::progress::plural(ds.len(), "sample"),
         super::progress::plural(ds.channel_count(), "channel")
+    );
+    Ok(())
+}
+
+/// `ds` as a MERL table: each sample in the cell of its directions (the last one where
+/// several fall in one cell), channels from the longest wavelength (R) to the shortest.
+fn write_merl(ds: &crate::data::Dataset, out: &std::path::Path, geometry: &str) -> Result<()> {
+    use crate::data::readers::merl;
+    anyhow::ensure!(
+        ds.kind == Kind::Brdf && ds.channel_count() == 3,
+        "--out {}: a MERL table holds three BRDF channels (R, G, B); this is {} data in {}",
+        out.display(),
+        ds.kind,
+        super::progress::plural(ds.channel_count(), "channel")
+    );
+    let mut cells: Vec<Option<[f64; 3]>> = vec![None; merl::CELLS];
+    for s in &ds.samples {
+        let cell = cells[merl::lookup_index(s.wi(), s.wo())].get_or_insert([0.0; 3]);
+        // Channels ascend in wavelength; MERL's R, G, B descend.
+        cell[2 - s.channel] = s.value.max(0.0);
+    }
+    let filled = cells.iter().filter(|c| c.is_some()).count();
+    std::fs::write(out, merl::serialise(&cells))
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!(
+        "wrote {} (MERL table: {filled} of {} cells from {}, geometry {geometry}; no uncertainties: read it with --assume-uncertainty)",
+        out.display(),
+        merl::CELLS,
+        super::progress::plural(ds.len(), "sample")
     );
     Ok(())
 }

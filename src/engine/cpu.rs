@@ -33,12 +33,22 @@
 //! shared factors: three square roots and two divisions per direction, shared by its
 //! three rows. Measured again with the current code (the same command): 1.6e8 per
 //! CPU-second, 14 cycles per row, 3–4× BBM's rate.
+//!
+//! **Streamed.** A problem's rows are cut into windows of at most [`WINDOW_ROWS`] rows
+//! (whole blocks). Costs are summed per (candidate, window) and normal equations per
+//! (group, window), all pairs in parallel, and the partial sums of each candidate or
+//! group added in window order (deterministic; a problem of one window sums exactly as
+//! one pass would); value windows hold every candidate's values at one window's rows.
+//! So the memory a batch takes is one window per worker, whatever the data's size, and
+//! a batch of few candidates on much data still keeps every thread busy.
 
+use super::reduce::{GramSums, RowTerms, ValueWindow, Values, WindowPart};
 use super::{Backend, Evaluator, Problem};
 use crate::bsdf::{Channels, Dir, Model};
 use crate::engine::loss::{LossTerms, Term, EPS};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::ops::Range;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 #[derive(Debug, Default, Clone)]
@@ -62,7 +72,8 @@ impl Backend for CpuBackend {
         problems: &[Problem<'a>],
     ) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;
-        let parts: Vec<Part> = problems.iter().map(|&p| Part::new(p)).collect();
+        let (parts, rows): (Vec<Part>, Vec<RowTerms>) =
+            problems.iter().map(|&p| Part::new(p)).unzip();
         let model = problems[0].model;
         let widest = parts.iter().map(|p| p.widest).max().unwrap_or(0);
         Ok(Box::new(CpuEvaluator {
@@ -70,6 +81,7 @@ impl Backend for CpuBackend {
             widest,
             scratch_len: model.scratch_len(widest),
             parts,
+            rows,
         }))
     }
 }
@@ -78,6 +90,11 @@ impl Backend for CpuBackend {
 /// dynamic dispatch and setup once for many directions, few enough that a block's values
 /// (directions × channels × nodes) stay in the L1 cache.
 const BLOCK: usize = 32;
+
+/// Most rows of one window (whole blocks; a block larger than this is a window of its
+/// own): a unit of parallel work and of the memory a value window takes per candidate
+/// (64 KiB of f64). The bundled data sets, and most measured ones, are one window.
+pub const WINDOW_ROWS: usize = 8192;
 
 /// Consecutive directions of one problem with the same channels (the same groups in
 /// the same order, `n` of them), evaluated in one call: directions `dirs` of the
@@ -89,17 +106,24 @@ struct Block {
     n: usize,
 }
 
+/// A run of whole blocks and the rows they hold.
+#[derive(Clone, Debug)]
+struct Window {
+    blocks: Range<usize>,
+    rows: Range<usize>,
+}
+
 /// One problem of a batch, with what its evaluations reuse.
 struct Part<'a> {
     problem: Problem<'a>,
     /// (ωi, ωo) of each direction, in direction order.
     dirs: Vec<Dir>,
     blocks: Vec<Block>,
-    /// Per row (samples in direction order): the sample it is, and its scalar-view group.
-    sample: Vec<usize>,
+    windows: Vec<Window>,
+    /// Per row (samples in direction order): its scalar-view group.
     group: Vec<u32>,
-    /// The loss constants in row order.
-    rows: LossTerms,
+    /// K, the problem's samples (= rows).
+    samples: usize,
     /// The most rows of one block.
     widest: usize,
     evaluations: AtomicU64,
@@ -108,8 +132,8 @@ struct Part<'a> {
 impl<'a> Part<'a> {
     /// Group the samples by direction (ωi, ωo bit for bit) and plane, directions in the
     /// order their first samples come in [`walk_order`](super::walk_order), rows of a
-    /// direction in sample order.
-    fn new(problem: Problem<'a>) -> Part<'a> {
+    /// direction in sample order. Returns the part and its loss constants in row order.
+    fn new(problem: Problem<'a>) -> (Part<'a>, RowTerms) {
         let model = problem.model;
         let samples = &problem.data.samples;
         let mut index: HashMap<([u64; 6], usize), usize> = HashMap::new();
@@ -130,6 +154,7 @@ impl<'a> Part<'a> {
             });
             group[k] = g as u32;
         }
+        drop(index);
         // Counting sort of the samples by direction (stable: sample order within one).
         let mut count = vec![0usize; first.len() + 1];
         for &d in &direction_of {
@@ -138,13 +163,14 @@ impl<'a> Part<'a> {
         for d in 0..first.len() {
             count[d + 1] += count[d];
         }
-        let mut order = vec![0usize; samples.len()];
+        let mut order = vec![0u32; samples.len()];
         let mut next = count.clone();
         for (k, &d) in direction_of.iter().enumerate() {
-            order[next[d]] = k;
+            order[next[d]] = k as u32;
             next[d] += 1;
         }
-        let group: Vec<u32> = order.iter().map(|&k| group[k]).collect();
+        drop(direction_of);
+        let group: Vec<u32> = order.iter().map(|&k| group[k as usize]).collect();
         // Blocks: runs of consecutive directions whose rows name the same groups.
         let rows_of = |d: usize| count[d]..count[d + 1];
         let mut blocks: Vec<Block> = Vec::new();
@@ -164,31 +190,53 @@ impl<'a> Part<'a> {
                 }),
             }
         }
+        // Windows: runs of whole blocks of at most WINDOW_ROWS rows.
+        let mut windows: Vec<Window> = Vec::new();
+        for (i, b) in blocks.iter().enumerate() {
+            let end = b.start + b.n * b.dirs.len();
+            match windows.last_mut() {
+                Some(w) if end - w.rows.start <= WINDOW_ROWS => {
+                    w.blocks.end = i + 1;
+                    w.rows.end = end;
+                }
+                _ => windows.push(Window {
+                    blocks: i..i + 1,
+                    rows: b.start..end,
+                }),
+            }
+        }
         let terms = problem.loss.terms(problem.data);
-        Part {
+        let part = Part {
             problem,
             widest: blocks.iter().map(|b| b.n * b.dirs.len()).max().unwrap_or(0),
             dirs: first,
             blocks,
+            windows,
             group,
-            rows: terms.reordered(&order),
-            sample: order,
+            samples: samples.len(),
             evaluations: AtomicU64::new(0),
-        }
+        };
+        (part, RowTerms::new(&terms, order))
     }
 
-    /// Calls `f(first row, values)` with the model values of every block's rows for one
+    /// Calls `f(first row, values)` with the model values of the blocks `blocks` for one
     /// candidate (`scratch.views` already holds its scalar views).
     #[inline]
-    fn for_each_block(&self, scratch: &mut Scratch, mut f: impl FnMut(usize, &[f64])) {
+    fn for_each_block(
+        &self,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        mut f: impl FnMut(usize, &[f64]),
+    ) {
         let model = self.problem.model;
         let stride = model.scalar_count();
         let Scratch {
             views,
             out,
             children,
+            ..
         } = scratch;
-        for b in &self.blocks {
+        for b in &self.blocks[blocks] {
             let p = Channels::new(views, stride, &self.group[b.start..b.start + b.n]);
             let out = &mut out[..b.n * b.dirs.len()];
             model
@@ -198,13 +246,21 @@ impl<'a> Part<'a> {
         }
     }
 
-    /// The loss of one candidate: the terms of the loss's shape, summed in row order.
-    fn cost(&self, scratch: &mut Scratch) -> f64 {
-        let t = &self.rows;
+    /// The model values of one candidate at a window's rows, into `out` (its rows' length).
+    fn window_values(&self, w: &Window, scratch: &mut Scratch, out: &mut [f64]) {
+        let first = w.rows.start;
+        self.for_each_block(w.blocks.clone(), scratch, |start, values| {
+            out[start - first..start - first + values.len()].copy_from_slice(values);
+        });
+    }
+
+    /// The sum of one candidate's loss terms (`t`, in row order) over a window's rows,
+    /// in row order.
+    fn cost_sum(&self, t: &LossTerms, w: &Window, scratch: &mut Scratch) -> f64 {
         let mut sum = 0.0;
         // One loop per term shape, so that the row loop has no branch on it.
         match t.term {
-            Term::Square => self.for_each_block(scratch, |start, values| {
+            Term::Square => self.for_each_block(w.blocks.clone(), scratch, |start, values| {
                 let r = start..start + values.len();
                 for (((&v, &a), &gy), &w) in values
                     .iter()
@@ -216,7 +272,7 @@ impl<'a> Part<'a> {
                     sum += w * d * d;
                 }
             }),
-            Term::LogSquare => self.for_each_block(scratch, |start, values| {
+            Term::LogSquare => self.for_each_block(w.blocks.clone(), scratch, |start, values| {
                 let r = start..start + values.len();
                 for (((&v, &a), &gy), &w) in values
                     .iter()
@@ -228,28 +284,50 @@ impl<'a> Part<'a> {
                     sum += w * d * d;
                 }
             }),
-            Term::AbsRatio => self.for_each_block(scratch, |start, values| {
+            Term::AbsRatio => self.for_each_block(w.blocks.clone(), scratch, |start, values| {
                 let r = start..start + values.len();
                 for ((&v, &y), &w) in values.iter().zip(&t.y[r.clone()]).zip(&t.w[r]) {
                     sum += w * (v - y).abs() / (v.abs() + y.abs() + EPS);
                 }
             }),
         }
-        t.finish_sum(sum)
+        sum
     }
 }
 
-/// What one rayon worker reuses from candidate to candidate.
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = Default::default();
+}
+
+/// What one rayon worker reuses from task to task.
+#[derive(Default)]
 struct Scratch {
     /// The scalar views of every group ([`Model::views_into`]).
     views: Vec<f64>,
     /// The values of one block's rows, and its nodes' children's values.
     out: Vec<f64>,
     children: Vec<f64>,
+    /// A group's values at a window (normal equations).
+    group_values: Vec<f64>,
+}
+
+impl Scratch {
+    /// Room for blocks of `widest` rows and the children of a model whose scratch is
+    /// `scratch_len` values.
+    fn fit(&mut self, widest: usize, scratch_len: usize) {
+        if self.out.len() < widest {
+            self.out.resize(widest, 0.0);
+        }
+        if self.children.len() < scratch_len {
+            self.children.resize(scratch_len, 0.0);
+        }
+    }
 }
 
 pub struct CpuEvaluator<'a> {
     parts: Vec<Part<'a>>,
+    /// Every problem's loss constants in row order.
+    rows: Vec<RowTerms>,
     /// The flat index of every group's scalars ([`Model::slot_table`]).
     slots: Vec<usize>,
     /// The most rows of one block over the parts, and the scratch it needs.
@@ -278,36 +356,32 @@ impl CpuEvaluator<'_> {
         for &q in owners {
             let part = &self.parts[q];
             part.evaluations
-                .fetch_add(part.sample.len() as u64, Ordering::Relaxed);
+                .fetch_add(part.samples as u64, Ordering::Relaxed);
         }
     }
 
-    fn scratch(&self) -> Scratch {
-        Scratch {
-            views: Vec::with_capacity(self.slots.len()),
-            out: vec![0.0; self.widest],
-            children: vec![0.0; self.scratch_len],
-        }
+    /// `f` with this thread's scratch, grown to this evaluator's needs (a fresh one if
+    /// the thread's is in use). Kept from task to task and call to call: fresh buffers
+    /// are pages the kernel must clear and map again.
+    fn with_scratch<R>(&self, f: impl FnOnce(&mut Scratch) -> R) -> R {
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut s) => {
+                s.fit(self.widest, self.scratch_len);
+                f(&mut s)
+            }
+            Err(_) => {
+                let mut s = Scratch::default();
+                s.fit(self.widest, self.scratch_len);
+                f(&mut s)
+            }
+        })
     }
 
-    /// `f(part, scratch)` for every candidate, in parallel, with the candidate's views in
-    /// the scratch.
-    fn map_candidates<T: Send>(
-        &self,
-        owners: &[usize],
-        params: &[f64],
-        f: impl Fn(&Part, &mut Scratch) -> T + Sync + Send,
-    ) -> Vec<T> {
-        params
-            .par_chunks(self.dim())
-            .zip(owners.par_iter())
-            .map_init(
-                || self.scratch(),
-                |scratch, (flat, &q)| {
-                    Model::views_into(flat, &self.slots, &mut scratch.views);
-                    f(&self.parts[q], scratch)
-                },
-            )
+    /// Every (item, window of its problem) pair, items in order: `problem(i)` gives item
+    /// i's problem.
+    fn tasks(&self, items: usize, problem: impl Fn(usize) -> usize) -> Vec<(usize, usize)> {
+        (0..items)
+            .flat_map(|i| (0..self.parts[problem(i)].windows.len()).map(move |w| (i, w)))
             .collect()
     }
 }
@@ -322,33 +396,96 @@ impl Evaluator for CpuEvaluator<'_> {
     }
 
     fn samples_of(&self, q: usize) -> usize {
-        self.parts[q].sample.len()
+        self.parts[q].samples
     }
 
+    /// Every (candidate, window) sum in parallel, then each candidate's sums added in
+    /// window order and finished.
     fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
         self.check(owners, params)?;
-        let out = self.map_candidates(owners, params, |part, scratch| part.cost(scratch));
+        let p = self.dim();
+        let tasks = self.tasks(owners.len(), |i| owners[i]);
+        let sums: Vec<f64> = tasks
+            .par_iter()
+            .map(|&(c, w)| {
+                self.with_scratch(|scratch| {
+                    let part = &self.parts[owners[c]];
+                    Model::views_into(&params[c * p..(c + 1) * p], &self.slots, &mut scratch.views);
+                    part.cost_sum(&self.rows[owners[c]].terms, &part.windows[w], scratch)
+                })
+            })
+            .collect();
+        let mut costs = vec![0.0; owners.len()];
+        for (&(c, _), s) in tasks.iter().zip(sums) {
+            costs[c] += s;
+        }
+        for (c, &q) in costs.iter_mut().zip(owners) {
+            *c = self.rows[q].terms.finish_sum(*c);
+        }
         self.count(owners);
-        Ok(out)
+        Ok(costs)
     }
 
-    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
+    /// Window w of every problem in turn (w = 0, 1, …): the candidates whose problem has
+    /// a window w, each evaluated there in parallel.
+    fn value_windows(
+        &mut self,
+        owners: &[usize],
+        params: &[f64],
+        visit: &mut dyn FnMut(&ValueWindow) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
         self.check(owners, params)?;
-        let rows = self.map_candidates(owners, params, |part, scratch| {
-            let mut row = vec![0.0; part.sample.len()];
-            part.for_each_block(scratch, |start, values| {
-                for (&k, &v) in part.sample[start..start + values.len()].iter().zip(values) {
-                    row[k] = v;
+        let p = self.dim();
+        let most = owners
+            .iter()
+            .map(|&q| self.parts[q].windows.len())
+            .max()
+            .unwrap_or(0);
+        let mut values: Vec<f64> = Vec::new();
+        for w in 0..most {
+            let mut parts = Vec::new();
+            let mut offset = 0;
+            for (c, &q) in owners.iter().enumerate() {
+                if let Some(win) = self.parts[q].windows.get(w) {
+                    parts.push(WindowPart {
+                        candidate: c,
+                        problem: q,
+                        rows: win.rows.clone(),
+                        offset,
+                    });
+                    offset += win.rows.len();
                 }
+            }
+            values.clear();
+            values.resize(offset, 0.0);
+            let mut slices: Vec<&mut [f64]> = Vec::with_capacity(parts.len());
+            let mut rest = values.as_mut_slice();
+            for part in &parts {
+                let (head, tail) = rest.split_at_mut(part.rows.len());
+                slices.push(head);
+                rest = tail;
+            }
+            slices.into_par_iter().zip(&parts).for_each(|(out, part)| {
+                self.with_scratch(|scratch| {
+                    let c = part.candidate;
+                    let pt = &self.parts[part.problem];
+                    Model::views_into(&params[c * p..(c + 1) * p], &self.slots, &mut scratch.views);
+                    pt.window_values(&pt.windows[w], scratch, out);
+                })
             });
-            row
-        });
+            visit(&ValueWindow {
+                parts: &parts,
+                values: Values::F64(&values),
+                rows: &self.rows,
+            })?;
+        }
         self.count(owners);
-        Ok(rows.concat())
+        Ok(())
     }
 
-    /// Residuals r_k = √w_k (g(y′_k) − g(y_k)) of every candidate in direction order,
-    /// then the normal equations of each group of P + 1 (sums over rows in that order).
+    /// Every (group, window) pair in parallel: the group's m + 1 candidates evaluated at
+    /// the window's rows, reduced there to its sums ([`GramSums`]); then each group's sums
+    /// added in window order and divided by the steps.
     fn normal_equations_of(
         &mut self,
         owners: &[usize],
@@ -356,38 +493,55 @@ impl Evaluator for CpuEvaluator<'_> {
         steps: &[f64],
     ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
         let p = self.dim();
+        let m = super::reduce::check_groups(owners, params, steps, p)?;
         anyhow::ensure!(
-            steps.len() == owners.len() * p,
-            "{} steps for {} groups of P = {p}",
-            steps.len(),
-            owners.len()
+            owners.iter().all(|&q| q < self.parts.len()),
+            "a group names a problem outside the batch's {}",
+            self.parts.len()
         );
-        let expanded: Vec<usize> = owners
-            .iter()
-            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
-            .collect();
-        self.check(&expanded, params)?;
-        let residuals = self.map_candidates(&expanded, params, |part, scratch| {
-            let t = &part.rows;
-            let mut row = Vec::with_capacity(part.sample.len());
-            part.for_each_block(scratch, |start, values| {
-                row.extend(
-                    values
-                        .iter()
+        let group_len = (m + 1) * p;
+        let tasks = self.tasks(owners.len(), |g| owners[g]);
+        let partial: Vec<GramSums> = tasks
+            .par_iter()
+            .map(|&(g, w)| {
+                self.with_scratch(|scratch| {
+                    let part = &self.parts[owners[g]];
+                    let win = &part.windows[w];
+                    let n = win.rows.len();
+                    let mut values = std::mem::take(&mut scratch.group_values);
+                    values.clear();
+                    values.resize((m + 1) * n, 0.0);
+                    for (j, flat) in params[g * group_len..(g + 1) * group_len]
+                        .chunks(p)
                         .enumerate()
-                        .map(|(i, &v)| t.residual(start + i, v)),
-                );
-            });
-            row
-        });
-        self.count(&expanded);
-        Ok(residuals
-            .par_chunks(p + 1)
-            .zip(steps.par_chunks(p))
-            .map(|(rows, h)| {
-                let k = rows[0].len();
-                crate::optim::NormalEquations::from_residuals(&rows.concat(), h, k)
+                    {
+                        Model::views_into(flat, &self.slots, &mut scratch.views);
+                        part.window_values(win, scratch, &mut values[j * n..(j + 1) * n]);
+                    }
+                    let sums = GramSums::of_rows(
+                        &self.rows[owners[g]].terms,
+                        win.rows.clone(),
+                        Values::F64(&values),
+                        m,
+                    );
+                    scratch.group_values = values;
+                    sums
+                })
             })
+            .collect();
+        let mut sums = vec![GramSums::zeros(m); owners.len()];
+        for (&(g, _), s) in tasks.iter().zip(&partial) {
+            sums[g].add(s);
+        }
+        for &q in owners {
+            let part = &self.parts[q];
+            part.evaluations
+                .fetch_add(((m + 1) * part.samples) as u64, Ordering::Relaxed);
+        }
+        Ok(sums
+            .iter()
+            .zip(steps.chunks(m.max(1)))
+            .map(|(s, h)| s.finish(h))
             .collect())
     }
 

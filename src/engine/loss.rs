@@ -14,6 +14,9 @@ use std::fmt;
 
 pub const EPS: f64 = 1e-6;
 
+/// The sample index of a padding row ([`LossTerms::in_rows`]).
+pub const NO_SAMPLE: u32 = u32::MAX;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Metric {
@@ -172,6 +175,43 @@ impl fmt::Display for Loss {
     }
 }
 
+/// What turns a sum of a loss's terms into the loss: its term shape, its finish and the
+/// number of samples it is finished over; a few bytes per problem, where the terms
+/// themselves are five numbers per sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Finisher {
+    pub term: Term,
+    pub finish: Finish,
+    pub count: usize,
+}
+
+impl Finisher {
+    /// The loss from the sum of its terms: Σ/K, √(Σ/K) or Σ.
+    pub fn finish_sum(&self, sum: f64) -> f64 {
+        let k = self.count.max(1) as f64;
+        match self.finish {
+            Finish::Mean => sum / k,
+            Finish::SqrtMean => (sum / k).max(0.0).sqrt(),
+            Finish::Sum => sum,
+        }
+    }
+
+    /// The sum of the terms from the loss (the inverse of [`Self::finish_sum`]).
+    pub fn sum_of(&self, loss: f64) -> f64 {
+        let k = self.count.max(1) as f64;
+        match self.finish {
+            Finish::Sum => loss,
+            Finish::Mean => loss * k,
+            Finish::SqrtMean => loss * loss * k,
+        }
+    }
+
+    /// Whether the terms are squared residuals (Levenberg–Marquardt applies).
+    pub fn is_sum_of_squares(&self) -> bool {
+        self.term != Term::AbsRatio
+    }
+}
+
 /// Per-sample constants of a loss on a dataset.
 #[derive(Clone, Debug)]
 pub struct LossTerms {
@@ -187,6 +227,10 @@ pub struct LossTerms {
     pub gy: Vec<f64>,
     /// √w_k, the factor of the weighted residual, computed once.
     pub sqrt_w: Vec<f64>,
+    /// K, the samples the loss is finished over (Σ/K, √(Σ/K)). Equal to the length of
+    /// the vectors, except for an evaluator's row order with padding rows
+    /// ([`LossTerms::in_rows`]), whose constants are all zero.
+    pub count: usize,
 }
 
 impl Loss {
@@ -197,6 +241,15 @@ impl Loss {
     /// Does the loss reduce to a weighted sum of squares (usable by Levenberg–Marquardt)?
     pub fn is_sum_of_squares(&self) -> bool {
         self.metric.term() != Term::AbsRatio
+    }
+
+    /// How the loss's sums are finished on a dataset (without computing its terms).
+    pub fn finisher(&self, data: &Dataset) -> Finisher {
+        Finisher {
+            term: self.metric.term(),
+            finish: self.metric.finish(),
+            count: data.len(),
+        }
     }
 
     /// Precompute weights and factors for a dataset.
@@ -253,6 +306,7 @@ impl LossTerms {
         LossTerms {
             term,
             finish,
+            count: y.len(),
             w,
             a,
             y,
@@ -264,16 +318,40 @@ impl LossTerms {
     /// The same terms with the samples in the order `order` (sample `order[r]` becomes
     /// sample r): the CPU evaluator's direction order.
     pub fn reordered(&self, order: &[usize]) -> LossTerms {
-        let pick = |v: &[f64]| order.iter().map(|&k| v[k]).collect::<Vec<f64>>();
-        LossTerms {
+        self.in_rows(order.iter().map(|&k| k as u32))
+    }
+
+    /// The terms in an evaluator's row order: row r holds sample `rows[r]`, or is padding
+    /// where that is [`NO_SAMPLE`] (every constant 0, so that a padding row whose model
+    /// value is 0 adds exactly 0 to every sum of terms, residuals and their products).
+    /// The finish still counts the samples only.
+    pub fn in_rows(&self, rows: impl Iterator<Item = u32>) -> LossTerms {
+        let n = rows.size_hint().0;
+        let mut out = LossTerms {
             term: self.term,
             finish: self.finish,
-            w: pick(&self.w),
-            a: pick(&self.a),
-            y: pick(&self.y),
-            gy: pick(&self.gy),
-            sqrt_w: pick(&self.sqrt_w),
+            w: Vec::with_capacity(n),
+            a: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
+            gy: Vec::with_capacity(n),
+            sqrt_w: Vec::with_capacity(n),
+            count: self.count,
+        };
+        for k in rows {
+            let k = k as usize;
+            let pick = |v: &[f64]| v.get(k).copied().unwrap_or(0.0);
+            out.w.push(pick(&self.w));
+            out.a.push(pick(&self.a));
+            out.y.push(pick(&self.y));
+            out.gy.push(pick(&self.gy));
+            out.sqrt_w.push(pick(&self.sqrt_w));
         }
+        out
+    }
+
+    /// Rows held (samples, and padding rows where the order has them).
+    pub fn rows(&self) -> usize {
+        self.y.len()
     }
 
     #[inline]
@@ -325,11 +403,15 @@ impl LossTerms {
     }
 
     pub fn finish_sum(&self, sum: f64) -> f64 {
-        let k = self.y.len().max(1) as f64;
-        match self.finish {
-            Finish::Mean => sum / k,
-            Finish::SqrtMean => (sum / k).max(0.0).sqrt(),
-            Finish::Sum => sum,
+        self.finisher().finish_sum(sum)
+    }
+
+    /// How the sums of these terms become the loss.
+    pub fn finisher(&self) -> Finisher {
+        Finisher {
+            term: self.term,
+            finish: self.finish,
+            count: self.count,
         }
     }
 

@@ -12,7 +12,10 @@ use crate::engine::loss::Loss;
 pub mod cpu;
 pub mod gpu;
 pub mod loss;
+pub mod reduce;
 pub mod wgsl;
+
+pub use reduce::{normal_equations_of_values, RowTerms, ValueWindow, Values, WindowPart};
 
 /// The order in which both backends walk a problem's samples: by cos θi, then cos θo
 /// (a stable sort, so file order within one pair).
@@ -171,6 +174,12 @@ pub fn check_shared(problems: &[Problem]) -> anyhow::Result<()> {
 /// Evaluates batches of physical parameter vectors (N × P, row-major) for one or more
 /// problems. The plain methods address problem 0; the `_of` methods take, per candidate
 /// (per group for the normal equations), the index of its problem.
+///
+/// **Streamed.** What a batch returns is reduced over the samples inside the backend:
+/// a loss per candidate ([`Self::costs_of`]), the normal equations per group
+/// ([`Self::normal_equations_of`]); model values leave an evaluator only window by
+/// window ([`Self::value_windows`]), for the host reductions of [`reduce`]. So memory
+/// grows with candidates × parameters², never with candidates × samples.
 pub trait Evaluator {
     /// P, the length of one parameter vector.
     fn dim(&self) -> usize;
@@ -183,21 +192,37 @@ pub trait Evaluator {
     /// The loss of each of the N candidates (NaN where the model is not finite; the
     /// optimizers treat NaN as +∞).
     fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>>;
-    /// Model values y′ of each candidate at each sample of its problem, the candidates'
-    /// rows (K_owner values each) one after the other.
-    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>>;
-    /// Levenberg–Marquardt normal equations for N groups of P + 1 candidates: `params`
-    /// (N × (P + 1) × P, physical) holds each group's point, then the point moved along
-    /// each parameter by the signed unit-box step in `steps` (N × P); `owners` gives each
-    /// group's problem. Returns JᵀJ, Jᵀr and Σr² of the loss's weighted residuals
-    /// r_k = √w_k (g(y′_k) − g(y_k)), the Jacobian J_kj = (r_k(moved_j) − r_k(point)) / step_j
-    /// taken in the optimizer's coordinates.
+    /// Hands the candidates' model values to `visit`, a window of rows at a time, in the
+    /// evaluator's row order ([`ValueWindow`]: each window says which rows of which
+    /// problem each candidate's values are, and carries every problem's loss constants in
+    /// that order). Every row of every candidate's problem is visited exactly once.
+    fn value_windows(
+        &mut self,
+        owners: &[usize],
+        params: &[f64],
+        visit: &mut dyn FnMut(&ValueWindow) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()>;
+    /// Levenberg–Marquardt normal equations for N groups of m + 1 candidates: `params`
+    /// (N × (m + 1) × P, physical) holds each group's point, then the point moved along
+    /// each of m parameters by the signed unit-box step in `steps` (N × m); `owners`
+    /// gives each group's problem. Returns JᵀJ (m × m), Jᵀr and Σr² of the loss's
+    /// weighted residuals r_k = √w_k (g(y′_k) − g(y_k)), the Jacobian J_kj =
+    /// (r_k(moved_j) − r_k(point)) / step_j taken in the optimizer's coordinates. By
+    /// default reduced on the host from the value windows ([`reduce::normal_equations`]).
     fn normal_equations_of(
         &mut self,
         owners: &[usize],
         params: &[f64],
         steps: &[f64],
-    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>>;
+    ) -> anyhow::Result<Vec<crate::optim::NormalEquations>> {
+        reduce::normal_equations(self, owners, params, steps)
+    }
+    /// Model values y′ of each candidate at each sample of its problem, in sample order,
+    /// the candidates' rows (K_owner values each) one after the other. Allocates
+    /// candidates × samples: for a fit's best point and for tests, not for optimizers.
+    fn values_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
+        reduce::values_in_sample_order(self, owners, params)
+    }
     /// Model-sample evaluations performed so far (one model at one sample and channel).
     fn evaluations(&self) -> u64 {
         (0..self.problems()).map(|q| self.evaluations_of(q)).sum()
@@ -220,7 +245,7 @@ pub trait Evaluator {
         let n = params.len() / self.dim().max(1);
         self.values_of(&vec![0; n], params)
     }
-    /// [`Self::normal_equations_of`] for problem 0.
+    /// [`Self::normal_equations_of`] for problem 0, groups of P + 1.
     fn normal_equations(
         &mut self,
         params: &[f64],
@@ -229,43 +254,6 @@ pub trait Evaluator {
         let n = steps.len() / self.dim().max(1);
         self.normal_equations_of(&vec![0; n], params, steps)
     }
-}
-
-/// Normal equations of groups of P + 1 candidates from their model values (the rows of
-/// each group's P + 1 candidates, K_owner values each) and the unit-box steps (N × P).
-///
-/// The values may be a device's f32, read back: they are widened one at a time into the
-/// residuals (f64), with no f64 copy of the whole batch, and the buffers are reused from
-/// group to group.
-pub fn normal_equations_of_values<V: Copy + Into<f64>>(
-    values: &[V],
-    terms: &[&crate::engine::loss::LossTerms],
-    owners: &[usize],
-    steps: &[f64],
-    p: usize,
-) -> Vec<crate::optim::NormalEquations> {
-    let (mut at, mut r0, mut diff) = (0, Vec::new(), Vec::new());
-    owners
-        .iter()
-        .zip(steps.chunks(p))
-        .map(|(&q, h)| {
-            let t = terms[q];
-            let k = t.y.len();
-            let vals = &values[at..at + k * (p + 1)];
-            at += k * (p + 1);
-            r0.clear();
-            t.residuals_into(&vals[..k], &mut r0);
-            diff.clear();
-            for row in vals[k..].chunks(k.max(1)) {
-                let start = diff.len();
-                t.residuals_into(row, &mut diff);
-                for (d, &r) in diff[start..].iter_mut().zip(&r0) {
-                    *d -= r;
-                }
-            }
-            crate::optim::NormalEquations::from_differences(&r0, &diff, h)
-        })
-        .collect()
 }
 
 /// Which backend a command should use.

@@ -55,15 +55,6 @@ impl Shape {
         subgroup_tiles: true,
         mu_tables: true,
     };
-    /// Where a CPU device cut a one-slice kernel's loops short (a data set too large for
-    /// one thread per candidate; llvmpipe's loop limit, kernel.wgsl `loops_completed`):
-    /// 8 candidates × 32 sample slices, reduced in workgroup memory.
-    pub const LONG_DATA: Shape = Shape {
-        lanes: 8,
-        slices: 32,
-        subgroup_tiles: false,
-        mu_tables: false,
-    };
     /// GPUs: 32 candidates × 8 slices, reduced in workgroup memory.
     pub const GPU_DEVICE: Shape = Shape {
         lanes: 32,
@@ -74,11 +65,10 @@ impl Shape {
 
     /// Every shape the engine uses (tests run each code path on any device; subgroup
     /// tiles fall back to the plain walk where the device has no subgroups).
-    pub const ALL: [Shape; 4] = [
+    pub const ALL: [Shape; 3] = [
         Shape::CPU_DEVICE,
         Shape::CPU_DEVICE_TILED,
         Shape::GPU_DEVICE,
-        Shape::LONG_DATA,
     ];
 
     /// Candidates per workgroup.
@@ -98,11 +88,6 @@ impl Shape {
     /// `mu_tables` where they do and one thread walks a candidate's records.
     pub fn for_batch(self, every_problem_has_a_mu_table: bool) -> Shape {
         self.with_mu_tables(self.slices == 1 && every_problem_has_a_mu_table)
-    }
-
-    /// The same thread mapping (whatever `mu_tables`).
-    pub fn maps_like(&self, other: Shape) -> bool {
-        self.with_mu_tables(true) == other.with_mu_tables(true)
     }
 }
 
@@ -278,10 +263,10 @@ fn fixed_base(model: &Model) -> bool {
 /// - `eval_record(wi, wo, b)`: the model at the record's CB channels (views b, b + S, …);
 /// - `record_costs(s, y, obs, a)`: the compensated sum s plus the record's loss terms;
 /// - `record_obs(rec)`: the record's channel slots from the records texture;
-/// - `record_index(rec)`, `store_values(row, y, idx)`: the record's original sample
-///   indices and the scatter of its values to a row of `out` (`values` pass);
-/// - under subgroup tiles, `shuffle_obs`/`shuffle_index`: a record's per-channel data
-///   passed round a subgroup.
+/// - `store_values(at, y)`: the record's values to `out[at..at + CB]`, 0 in the slots
+///   that hold no sample (`values` pass);
+/// - under subgroup tiles, `shuffle_obs`: a record's per-channel data passed round a
+///   subgroup.
 pub fn record_source(model: &Model, shape: Shape) -> String {
     let s = model.scalar_count();
     let cb = record_channels(model);
@@ -321,14 +306,13 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
         src += &format!("    t = add_term(t, y[{i}], obs[{i}], a);\n");
     }
     src += "    return t;\n}\n\n";
-    src += &format!(
-        "fn record_index(rec: u32) -> array<u32, CB> {{\n    let i = record_indices(rec);\n    return array<u32, CB>({});\n}}\n\n",
-        list(&|i| format!("i.{}", ["x", "y", "z", "w"][i]))
-    );
-    src += "fn store_values(row: u32, y: array<f32, CB>, idx: array<u32, CB>) {\n";
+    // An empty slot's value may be anything (a channel past the model's evaluates views
+    // of zeros): it is written as 0, so that host reductions see an exact 0 there.
+    src += "fn store_values(at: u32, y: array<f32, CB>) {\n";
     for i in 0..cb {
         src += &format!(
-            "    if (idx[{i}] != NO_SAMPLE) {{\n        out[row + idx[{i}]] = y[{i}];\n    }}\n"
+            "    out[at + {i}u] = select(0.0, y[{i}], (RECORD_SLOTS & {}u) != 0u);\n",
+            1 << i
         );
     }
     src += "}\n";
@@ -342,12 +326,10 @@ pub fn record_source(model: &Model, shape: Shape) -> String {
         list(&|i| format!("t{}.{}", 2 + i / 2, if i % 2 == 0 { "xy" } else { "zw" }))
     );
     if shape.subgroup_tiles {
-        for (name, ty) in [("shuffle_obs", "vec2<f32>"), ("shuffle_index", "u32")] {
-            src += &format!(
-                "\nfn {name}(x: array<{ty}, CB>, j: u32) -> array<{ty}, CB> {{\n    return array<{ty}, CB>({});\n}}\n",
-                list(&|i| format!("subgroupShuffle(x[{i}], j)"))
-            );
-        }
+        src += &format!(
+            "\nfn shuffle_obs(x: array<vec2<f32>, CB>, j: u32) -> array<vec2<f32>, CB> {{\n    return array<vec2<f32>, CB>({});\n}}\n",
+            list(&|i| format!("subgroupShuffle(x[{i}], j)"))
+        );
     }
     src
 }
@@ -401,6 +383,7 @@ pub fn compose(model: &Model, term: Term, shape: Shape) -> String {
         (p + 1).div_ceil(normal_lanes(p, shape) as usize),
         (s * padded_groups(model)).max(1)
     );
+    src += &super::gpu::bindings::wgsl_declarations();
     src += COMMON;
     src += all_accessors();
     let prepared = prepared_nodes(model);

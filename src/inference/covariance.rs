@@ -16,10 +16,11 @@
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
-use crate::engine::loss::{Loss, Metric, Term};
+use crate::engine::loss::{Loss, Metric, Term, NO_SAMPLE};
 use crate::engine::Evaluator;
 use crate::inference::constraints::Constraints;
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 
 #[derive(Clone, Debug, Default)]
 pub struct Covariance {
@@ -34,51 +35,94 @@ const DU: f64 = 1e-4;
 /// Relative singular-value threshold of the pseudo-inverse.
 const RCOND: f64 = 1e-10;
 
-/// Weighted residual vectors of a batch, with each sample's w_k σ_k² (see module doc)
-/// and the χ² of the first point.
-fn residual_rows(
+/// The Jacobian's sums over the data rows, streamed over the evaluator's value windows
+/// (nothing of length samples × parameters is held): B = JᵀJ and M = Jᵀ diag(w σ²) J of
+/// the weighted residuals (see the module doc) by central differences, from a batch of
+/// the point and its (+, −) neighbours along each of p free parameters whose physical
+/// steps are `steps`, and the point's χ².
+fn jacobian_sums(
     data: &Dataset,
     loss: Loss,
     eval: &mut dyn Evaluator,
     batch: &[f64],
-) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>, f64)> {
-    let values = eval.values(batch)?;
-    let k = data.len();
+    steps: &[f64],
+) -> anyhow::Result<(DMatrix<f64>, DMatrix<f64>, f64)> {
+    let p = steps.len();
     let use_loss = loss.is_sum_of_squares() && loss.metric != Metric::Chi2;
-    let terms = loss.terms(data);
-    let rows = values
-        .chunks(k)
-        .map(|row| {
-            row.iter()
-                .enumerate()
-                .map(|(j, &v)| {
-                    if use_loss {
-                        terms.residual(j, v)
-                    } else {
-                        let s = &data.samples[j];
-                        (v - s.value) / s.uncertainty
+    let mut jtj = DMatrix::<f64>::zeros(p, p);
+    let mut meat = DMatrix::<f64>::zeros(p, p);
+    let mut chi2 = 0.0;
+    let owners = vec![0; 2 * p + 1];
+    eval.value_windows(&owners, batch, &mut |w| {
+        let parts = w.parts;
+        if parts.is_empty() {
+            return Ok(());
+        }
+        let rows = &w.rows[parts[0].problem];
+        let t = &rows.terms;
+        let values: Vec<_> = parts.iter().map(|part| w.values_of(part)).collect();
+        let range = parts[0].rows.clone();
+        // Each chunk of rows in parallel, then the chunks' sums in order.
+        let starts: Vec<usize> = (range.start..range.end).step_by(1024).collect();
+        let partial: Vec<(DMatrix<f64>, DMatrix<f64>, f64)> = starts
+            .par_iter()
+            .map(|&from| {
+                let mut b = DMatrix::<f64>::zeros(p, p);
+                let mut m = DMatrix::<f64>::zeros(p, p);
+                let mut c2 = 0.0;
+                let mut row = vec![0.0; p];
+                for r in from..(from + 1024).min(range.end) {
+                    let k = rows.sample[r];
+                    if k == NO_SAMPLE {
+                        continue;
                     }
-                })
-                .collect()
-        })
-        .collect();
-    let w_sigma2 = data
-        .samples
-        .iter()
-        .enumerate()
-        .map(|(j, s)| {
-            if !use_loss {
-                return 1.0; // w = 1/u², σ = u
-            }
-            let slope = match terms.term {
-                Term::LogSquare => terms.a[j] / (1.0 + terms.a[j] * s.value),
-                _ => terms.a[j],
-            };
-            terms.w[j] * (slope * s.uncertainty).powi(2)
-        })
-        .collect();
-    let chi2 = crate::engine::loss::chi2(data, &values[..k]);
-    Ok((rows, w_sigma2, chi2))
+                    let s = &data.samples[k as usize];
+                    let i = r - range.start;
+                    let residual = |v: f64| {
+                        if use_loss {
+                            t.residual(r, v)
+                        } else {
+                            (v - s.value) / s.uncertainty
+                        }
+                    };
+                    for (c, j) in row.iter_mut().enumerate() {
+                        *j = if steps[c] != 0.0 {
+                            (residual(values[1 + 2 * c].at(i)) - residual(values[2 + 2 * c].at(i)))
+                                / steps[c]
+                        } else {
+                            0.0
+                        };
+                    }
+                    let ws = if use_loss {
+                        let slope = match t.term {
+                            Term::LogSquare => t.a[r] / (1.0 + t.a[r] * s.value),
+                            _ => t.a[r],
+                        };
+                        t.w[r] * (slope * s.uncertainty).powi(2)
+                    } else {
+                        1.0 // w = 1/u², σ = u
+                    };
+                    for a in 0..p {
+                        for bb in 0..p {
+                            let x = row[a] * row[bb];
+                            b[(a, bb)] += x;
+                            m[(a, bb)] += ws * x;
+                        }
+                    }
+                    let z = (values[0].at(i) - s.value) / s.uncertainty;
+                    c2 += z * z;
+                }
+                (b, m, c2)
+            })
+            .collect();
+        for (b, m, c2) in partial {
+            jtj += b;
+            meat += m;
+            chi2 += c2;
+        }
+        Ok(())
+    })?;
+    Ok((jtj, meat, chi2))
 }
 
 /// Covariance of the fitted parameters of `space` at `flat` (fixed parameters get none;
@@ -110,34 +154,18 @@ pub fn covariance(
         batch.extend(plus);
         batch.extend(minus);
     }
-    let (rows, mut w_sigma2, chi2) = residual_rows(data, loss, eval, &batch)?;
-    let mut jac = DMatrix::<f64>::zeros(k, p);
-    for c in 0..p {
-        let (plus, minus) = (&rows[1 + 2 * c], &rows[2 + 2 * c]);
-        for i in 0..data.len() {
-            jac[(i, c)] = if steps[c] != 0.0 {
-                (plus[i] - minus[i]) / steps[c]
-            } else {
-                0.0
-            };
-        }
-    }
-    // Prior rows: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd.
-    for (q, prior) in space.priors.iter().enumerate() {
+    let (mut jtj, mut meat, chi2) = jacobian_sums(data, loss, eval, &batch, &steps)?;
+    // Prior rows: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd, with unit variance.
+    for prior in &space.priors {
         if let Some(c) = free.iter().position(|&j| j == prior.index) {
-            jac[(data.len() + q, c)] = 1.0 / prior.sd;
+            let d = 1.0 / (prior.sd * prior.sd);
+            jtj[(c, c)] += d;
+            meat[(c, c)] += d;
         }
-        w_sigma2.push(1.0);
     }
     let chi2 = chi2 + space.prior_chi2(flat);
     let dof = (k.saturating_sub(p)).max(1) as f64;
     let birge = (chi2 / dof).max(1.0);
-    let jtj = jac.transpose() * &jac;
-    let mut weighted = jac.clone();
-    for (i, ws) in w_sigma2.iter().enumerate() {
-        weighted.row_mut(i).scale_mut(*ws);
-    }
-    let meat = jac.transpose() * weighted;
     let all_names = model.flat_names();
     let names: Vec<&str> = free.iter().map(|&j| all_names[j].as_str()).collect();
     let free_decls: Vec<_> = free.iter().map(|&j| decls[j]).collect();

@@ -3,7 +3,7 @@
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
-use crate::engine::loss::{chi2, Finish, Loss, Term};
+use crate::engine::loss::{chi2, Finisher, Loss};
 use crate::engine::{Backend, Evaluator, Problem};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::covariance::{covariance, Covariance};
@@ -136,9 +136,8 @@ pub struct UnitBox<'m, 'e> {
     pub model: &'m Model,
     pub space: &'m Constraints,
     pub eval: &'m mut (dyn Evaluator + 'e),
-    /// Each problem's loss constants (sum-of-squares losses: residuals need them; empty
-    /// otherwise).
-    pub loss_terms: Vec<crate::engine::loss::LossTerms>,
+    /// How each problem's sums of terms become its loss (term shape, finish, K).
+    pub finishers: Vec<Finisher>,
     /// The problem of each start; empty when every start belongs to problem 0.
     pub start_problem: Vec<usize>,
 }
@@ -176,30 +175,35 @@ impl UnitBox<'_, '_> {
     }
 
     /// Residual rows (data, then priors) of physical points, `problems[i]` the problem of
-    /// point i; the rows one after the other.
+    /// point i; the rows one after the other, each point's data residuals in its
+    /// evaluator's row order. Holds points × samples: for tests and small batches only
+    /// (the optimizers use the streamed sums of [`Self::normal_equations_of`]).
     fn problem_residuals(
         &mut self,
         problems: &[usize],
         phys: &[f64],
     ) -> anyhow::Result<Vec<Vec<f64>>> {
-        anyhow::ensure!(!self.loss_terms.is_empty(), "residuals need loss terms");
-        let values = self.eval.values_of(problems, phys)?;
-        let mut at = 0;
-        Ok(problems
+        let mut rows: Vec<Vec<f64>> = problems
             .iter()
-            .zip(phys.chunks(self.model.dim))
-            .map(|(&q, flat)| {
-                let t = &self.loss_terms[q];
-                let k = t.y.len();
-                let row = &values[at..at + k];
-                at += k;
-                row.iter()
-                    .enumerate()
-                    .map(|(j, &v)| t.residual(j, v))
-                    .chain(self.space.prior_residuals(flat))
-                    .collect()
-            })
-            .collect())
+            .map(|&q| Vec::with_capacity(self.eval.samples_of(q) + self.space.priors.len()))
+            .collect();
+        self.eval.value_windows(problems, phys, &mut |w| {
+            for part in w.parts {
+                let t = &w.rows[part.problem];
+                let v = w.values_of(part);
+                let row = &mut rows[part.candidate];
+                for (i, r) in part.rows.clone().enumerate() {
+                    if t.sample[r] != crate::engine::loss::NO_SAMPLE {
+                        row.push(t.terms.residual(r, v.at(i)));
+                    }
+                }
+            }
+            Ok(())
+        })?;
+        for (row, flat) in rows.iter_mut().zip(phys.chunks(self.model.dim)) {
+            row.extend(self.space.prior_residuals(flat));
+        }
+        Ok(rows)
     }
 }
 
@@ -224,7 +228,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
         Ok(self.problem_residuals(&vec![0; n], &phys)?.concat())
     }
     fn residual_count(&self) -> usize {
-        self.loss_terms.first().map(|t| t.y.len()).unwrap_or(0) + self.space.priors.len()
+        self.eval.samples_of(0) + self.space.priors.len()
     }
     fn normal_equations(
         &mut self,
@@ -235,6 +239,9 @@ impl BatchResiduals for UnitBox<'_, '_> {
         let every: Vec<usize> = vec![0; n];
         self.normal_equations_of(&every, points, steps)
     }
+    /// Reduced by the backend where it evaluates the model, over the free parameters
+    /// (the moved points move free parameters only); each prior adds one residual row,
+    /// whose share is added here.
     fn normal_equations_of(
         &mut self,
         owners: &[usize],
@@ -245,33 +252,29 @@ impl BatchResiduals for UnitBox<'_, '_> {
         let problems = self.problems_of(owners);
         let unit = crate::optim::difference_points(points, steps, p);
         let phys = self.to_physical(&unit);
-        if self.space.dim() == self.model.dim && self.space.priors.is_empty() {
-            // The backend reduces them where it evaluates the model.
-            return self.eval.normal_equations_of(&problems, &phys, steps);
+        let mut normal = self.eval.normal_equations_of(&problems, &phys, steps)?;
+        if !self.space.priors.is_empty() {
+            let dim = self.model.dim;
+            for ((ne, group), h) in normal
+                .iter_mut()
+                .zip(phys.chunks(dim * (p + 1)))
+                .zip(steps.chunks(p))
+            {
+                let rows: Vec<Vec<f64>> = group
+                    .chunks(dim)
+                    .map(|flat| self.space.prior_residuals(flat).collect())
+                    .collect();
+                ne.add_rows(&rows[0], &rows[1..], h);
+            }
         }
-        // The backend's reduction knows neither fixed parameters nor prior rows.
-        let expanded: Vec<usize> = problems
-            .iter()
-            .flat_map(|&q| std::iter::repeat_n(q, p + 1))
-            .collect();
-        let rows = self.problem_residuals(&expanded, &phys)?;
-        Ok(rows
-            .chunks(p + 1)
-            .zip(steps.chunks(p))
-            .map(|(group, h)| {
-                let k = group[0].len();
-                crate::optim::NormalEquations::from_residuals(&group.concat(), h, k)
-            })
-            .collect())
+        Ok(normal)
     }
     fn sum_squares_of(&mut self, owners: &[usize], points: &[f64]) -> anyhow::Result<Vec<f64>> {
         let problems = self.problems_of(owners);
         let phys = self.to_physical(points);
-        let squares = !self.loss_terms.is_empty()
-            && self
-                .loss_terms
-                .iter()
-                .all(|t| matches!(t.term, Term::Square | Term::LogSquare));
+        let squares = problems
+            .iter()
+            .all(|&q| self.finishers.get(q).is_some_and(|f| f.is_sum_of_squares()));
         if !squares {
             return Ok(self
                 .problem_residuals(&problems, &phys)?
@@ -289,13 +292,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
             .zip(&problems)
             .zip(phys.chunks(self.model.dim))
             .map(|((&c, &q), flat)| {
-                let t = &self.loss_terms[q];
-                let k = t.y.len().max(1) as f64;
-                let data = match t.finish {
-                    Finish::Sum => c,
-                    Finish::Mean => c * k,
-                    Finish::SqrtMean => c * c * k,
-                };
+                let data = self.finishers[q].sum_of(c);
                 crate::optim::sanitize(data + self.space.prior_chi2(flat))
             })
             .collect())
@@ -340,26 +337,26 @@ fn screened_starts(
     let owners: Vec<usize> = (0..problems)
         .flat_map(|q| std::iter::repeat_n(q, pool.len()))
         .collect();
-    let costs = if matches!(opts.optimizer, Optimizer::Lm) && !obj.loss_terms.is_empty() {
+    let lm = matches!(opts.optimizer, Optimizer::Lm)
+        && obj.finishers.iter().all(|f| f.is_sum_of_squares());
+    let costs = if lm {
         // Ranked by Σr² (the loss up to its monotone finish) of the model values after
-        // their best rescaling within SCREEN_MAX_SCALE (`rescaled_sum_squares`: the
-        // shape, not the level, which LM corrects easily), plus the priors'. From the
-        // model values: LM itself uses only the values (and normal-equation) kernels, so
+        // their best rescaling within SCREEN_MAX_SCALE (`reduce::rescaled_sum_squares`:
+        // the shape, not the level, which LM corrects easily), plus the priors'. From the
+        // value windows: LM itself uses only the values (and normal-equation) kernels, so
         // a GPU engine then never compiles its costs kernel for the fit (on lavapipe
         // 0.05–0.3 s per model and loss shape, ≈ 6 % of the default sweep's thread time).
         let phys = obj.to_physical(&points);
-        let values = obj.eval.values_of(&owners, &phys)?;
-        let mut at = 0;
-        owners
+        let ranks = crate::engine::reduce::rescaled_sum_squares(
+            obj.eval,
+            &owners,
+            &phys,
+            SCREEN_MAX_SCALE,
+        )?;
+        ranks
             .iter()
             .zip(phys.chunks(obj.model.dim))
-            .map(|(&q, flat)| {
-                let terms = &obj.loss_terms[q];
-                let row = &values[at..at + terms.y.len()];
-                at += terms.y.len();
-                let priors: f64 = obj.space.prior_residuals(flat).map(|r| r * r).sum();
-                terms.rescaled_sum_squares(row, SCREEN_MAX_SCALE) + priors
-            })
+            .map(|(&r, flat)| r + obj.space.prior_chi2(flat))
             .collect()
     } else {
         obj.problem_costs(&owners, &points)?
@@ -527,64 +524,78 @@ pub fn fit_many(
                 loss: losses[q],
             })
             .collect();
+        let finishers: Vec<Finisher> = problems.iter().map(|p| p.loss.finisher(p.data)).collect();
         let clock = Instant::now();
         let mut eval = backend.prepare_many(&problems)?;
         stats.phases.setup += clock.elapsed().as_secs_f64();
         let n = problems.len();
-        // Each problem's polished restart and the polish's evaluations (empty: none).
-        let mut polished: Vec<(usize, u64)> = Vec::new();
         let per = opts.initial_points.len()
             + usize::from(!opts.problem_points.is_empty())
             + opts.restarts;
-        let results: Vec<RestartResult> = {
-            let terms: Vec<_> = problems
-                .iter()
-                .filter(|p| p.loss.is_sum_of_squares())
-                .map(|p| p.loss.terms(p.data))
-                .collect();
+        let mut results: Vec<RestartResult> = {
             let mut obj = UnitBox {
                 model,
                 space: &space,
                 eval: eval.as_mut(),
-                loss_terms: terms,
+                finishers: finishers.clone(),
                 start_problem: (0..n).flat_map(|q| std::iter::repeat_n(q, per)).collect(),
             };
             let clock = Instant::now();
             let starts = screened_starts(&mut obj, range.clone(), opts)?;
             stats.phases.screening += clock.elapsed().as_secs_f64();
             let clock = Instant::now();
-            match opts.optimizer {
+            let results = match opts.optimizer {
                 Optimizer::Compass => {
-                    let results = compass::minimize(&mut obj, &starts, &opts.compass, progress)?;
-                    stats.phases.search += clock.elapsed().as_secs_f64();
-                    results
+                    compass::minimize(&mut obj, &starts, &opts.compass, progress)?
                 }
                 Optimizer::Lm => {
-                    let finish = obj.loss_terms.clone();
                     let lm_opts = search_options(&opts.lm, opts.polish, backend.unit_roundoff());
-                    let mut results = lm::minimize(
+                    lm::minimize(
                         &mut obj,
                         &starts,
                         &lm_opts,
-                        &|start, s| finish[start / per].finish_sum(s),
+                        &|start, s| finishers[start / per].finish_sum(s),
                         progress,
-                    )?;
-                    stats.phases.search += clock.elapsed().as_secs_f64();
-                    if opts.polish {
-                        let clock = Instant::now();
-                        polished =
-                            polish_in_f64(&problems, &space, &finish, &mut results, per, &opts.lm)?;
-                        stats.phases.polish += clock.elapsed().as_secs_f64();
-                    }
-                    results
+                    )?
                 }
-            }
+            };
+            stats.phases.search += clock.elapsed().as_secs_f64();
+            results
         };
+        let mut evaluations: Vec<u64> = (0..n).map(|q| eval.evaluations_of(q)).collect();
+        // Each problem's polished restart (empty: none).
+        let mut polished: Vec<usize> = Vec::new();
+        if opts.optimizer == Optimizer::Lm && opts.polish {
+            let clock = Instant::now();
+            // The CPU reference polishes with the search's own evaluator; a device's is
+            // dropped first, so that the two never hold the data at once.
+            let cpu = crate::engine::cpu::CpuBackend::new();
+            let mut polisher = if backend.id() == "cpu" {
+                eval
+            } else {
+                drop(eval);
+                cpu.prepare_many(&problems)?
+            };
+            let before: Vec<u64> = (0..n).map(|q| polisher.evaluations_of(q)).collect();
+            polished = polish_in_f64(
+                polisher.as_mut(),
+                model,
+                &space,
+                &finishers,
+                &mut results,
+                per,
+                &opts.lm,
+            )?;
+            for (q, e) in evaluations.iter_mut().enumerate() {
+                *e += polisher.evaluations_of(q) - before[q];
+            }
+            stats.phases.polish += clock.elapsed().as_secs_f64();
+        }
         for (q, restarts) in results.chunks(per).enumerate() {
             // A polished restart is the best: it was the best of the search, and the
             // polish only lowered its cost.
             let best = match polished.get(q) {
-                Some(&(i, _)) => &restarts[i],
+                Some(&i) => &restarts[i],
                 None => restarts
                     .iter()
                     .min_by(|a, b| a.cost.total_cmp(&b.cost))
@@ -598,10 +609,10 @@ pub fn fit_many(
                     .iter()
                     .filter(|r| r.cost <= best.cost + tol)
                     .count(),
-                evaluations: eval.evaluations_of(q) + polished.get(q).map_or(0, |p| p.1),
+                evaluations: evaluations[q],
             });
         }
-        stats.evaluations += eval.evaluations() + polished.iter().map(|p| p.1).sum::<u64>();
+        stats.evaluations += evaluations.iter().sum::<u64>();
         stats.batches += 1;
     }
     Ok((optima, space, stats))
@@ -651,10 +662,10 @@ fn search_options(lm: &lm::LmOptions, polish: bool, u: f64) -> lm::LmOptions {
 }
 
 /// Continue the best restart of each problem (`per` consecutive restarts each) with
-/// Levenberg–Marquardt in f64 on the CPU reference, from where the search stopped, with
-/// f64's forward-difference step and tolerance (an f64 run never ends above its start).
-/// Returns, per problem, the polished restart (index within the problem) and the
-/// polish's evaluations.
+/// Levenberg–Marquardt in f64 on the CPU reference (`eval`, holding every problem), from
+/// where the search stopped, with f64's forward-difference step and tolerance (an f64
+/// run never ends above its start). Returns, per problem, the polished restart (index
+/// within the problem).
 ///
 /// Why: the search's forward differences use unit-box steps of ≈ 1e-3 (all f32 allows),
 /// whose truncation error tilts the Gauss–Newton step; in a long, narrow valley (strongly
@@ -664,15 +675,14 @@ fn search_options(lm: &lm::LmOptions, polish: bool, u: f64) -> lm::LmOptions {
 /// search's evaluations (a fifth of a GPU sweep's time, whose polish is the CPU's
 /// work), and makes every backend's optima f64 optima.
 fn polish_in_f64(
-    problems: &[Problem],
+    eval: &mut dyn Evaluator,
+    model: &Model,
     space: &Constraints,
-    finish: &[crate::engine::loss::LossTerms],
+    finishers: &[Finisher],
     results: &mut [RestartResult],
     per: usize,
     lm_opts: &lm::LmOptions,
-) -> anyhow::Result<Vec<(usize, u64)>> {
-    let cpu = crate::engine::cpu::CpuBackend::new();
-    let mut eval = cpu.prepare_many(problems)?;
+) -> anyhow::Result<Vec<usize>> {
     let best: Vec<usize> = results
         .chunks(per)
         .enumerate()
@@ -685,17 +695,17 @@ fn polish_in_f64(
         .collect();
     let starts: Vec<Vec<f64>> = best.iter().map(|&i| results[i].x.clone()).collect();
     let mut obj = UnitBox {
-        model: problems[0].model,
+        model,
         space,
-        eval: eval.as_mut(),
-        loss_terms: finish.to_vec(),
-        start_problem: (0..problems.len()).collect(),
+        eval,
+        finishers: finishers.to_vec(),
+        start_problem: (0..finishers.len()).collect(),
     };
     let out = lm::minimize(
         &mut obj,
         &starts,
         lm_opts,
-        &|q, s| finish[q].finish_sum(s),
+        &|q, s| finishers[q].finish_sum(s),
         &mut |_| {},
     )?;
     for (&i, r) in best.iter().zip(out) {
@@ -705,11 +715,7 @@ fn polish_in_f64(
             results[i].cost = r.cost;
         }
     }
-    Ok(best
-        .iter()
-        .enumerate()
-        .map(|(q, &i)| (i - q * per, eval.evaluations_of(q)))
-        .collect())
+    Ok(best.iter().enumerate().map(|(q, &i)| i - q * per).collect())
 }
 
 /// What a fit found, before it is dressed as a [`FitReport`].
@@ -760,7 +766,13 @@ pub fn fit_outcome(
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<FitOutcome> {
     let t0 = Instant::now();
-    let (optima, space, _) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
+    let (optima, space, stats) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
+    if std::env::var_os("BSDFIT_TRACE").is_some() {
+        eprintln!(
+            "trace: {:?}, {} evaluations",
+            stats.phases, stats.evaluations
+        );
+    }
     let best = optima.into_iter().next().expect("one problem, one optimum");
     let mut o = conclude(model, data, loss, best, space)?;
     o.seconds = t0.elapsed().as_secs_f64();

@@ -9,6 +9,7 @@
 pub mod compass;
 pub mod lm;
 
+use crate::math::dot;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -156,24 +157,23 @@ impl NormalEquations {
             ss: sanitize(r0.iter().map(|v| v * v).sum()),
         }
     }
-}
 
-/// Σ aᵢbᵢ in eight interleaved partial sums (vectorisable; an in-order sum is not).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            acc[i] += x[i] * y[i];
+    /// Add further residual rows: `r0` their values at the point, `moved[j]` at the point
+    /// moved by the signed step `steps[j]` (e.g. the priors' rows, known on the host).
+    pub fn add_rows(&mut self, r0: &[f64], moved: &[Vec<f64>], steps: &[f64]) {
+        let p = steps.len();
+        let d: Vec<Vec<f64>> = moved
+            .iter()
+            .map(|m| m.iter().zip(r0).map(|(a, b)| a - b).collect())
+            .collect();
+        for a in 0..p {
+            self.jtr[a] += dot(&d[a], r0) / steps[a];
+            for b in 0..p {
+                self.jtj[a * p + b] += dot(&d[a], &d[b]) / (steps[a] * steps[b]);
+            }
         }
+        self.ss = sanitize(self.ss + r0.iter().map(|v| v * v).sum::<f64>());
     }
-    acc.iter().sum::<f64>() + tail
 }
 
 /// Outcome of one restart.

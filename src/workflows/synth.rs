@@ -25,6 +25,8 @@ pub const GEOMETRIES: &[Geometry] = &[
     Geometry { name: "ptb1", kind: Kind::Btdf, doc: "normal incidence, θt −20…20° in 1° steps on φt = 0 and 90° (PTB, anisotropic samples A, D)" },
     Geometry { name: "csic", kind: Kind::Btdf, doc: "normal incidence, θt 0…80° in 10° steps (CSIC set 2)" },
     Geometry { name: "oblique", kind: Kind::Btdf, doc: "θi 0, 30, 60°; θt −80…80° in 2.5° steps, in plane" },
+    Geometry { name: "grid", kind: Kind::Brdf, doc: "dense isotropic grid: θi and θo 0…85° and φo 0…180° (φi = 0) in steps of 5°, or of STEP° as grid:STEP (grid:2.5: 89,000 directions)" },
+    Geometry { name: "merl", kind: Kind::Brdf, doc: "every cell centre of a full MERL table (90 θh × 90 θd × 180 φd) with both directions above the horizon: 1.1 million directions" },
 ];
 
 fn steps(from: f64, to: f64, step: f64) -> Vec<f64> {
@@ -32,8 +34,20 @@ fn steps(from: f64, to: f64, step: f64) -> Vec<f64> {
     (0..=n).map(|i| from + i as f64 * step).collect()
 }
 
-/// The rows of a named geometry.
+/// The rows of a named geometry (`grid` may name its step: `grid:2.5`).
 pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
+    let (name, step) = match name.split_once(':') {
+        Some(("grid", step)) => {
+            let step: f64 = step
+                .trim()
+                .parse()
+                .ok()
+                .filter(|s: &f64| (0.25..=45.0).contains(s))
+                .ok_or_else(|| format!("grid:{step}: a step in degrees in [0.25, 45]"))?;
+            ("grid", step)
+        }
+        _ => (name, 5.0),
+    };
     let g = GEOMETRIES.iter().find(|g| g.name == name).ok_or_else(|| {
         format!(
             "unknown geometry '{name}' (known: {})",
@@ -127,9 +141,50 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                 );
             }
         }
+        "grid" => {
+            let polar = steps(0.0, 85.0, step);
+            for &ti in &polar {
+                for &to in &polar {
+                    // At θo = 0 every azimuth is one direction: keep it once.
+                    let azimuths = if to == 0.0 {
+                        vec![0.0]
+                    } else {
+                        steps(0.0, 180.0, step)
+                    };
+                    for po in azimuths {
+                        // The detector cannot sit on the source.
+                        if po == 0.0 && (to - ti).abs() < 1e-9 {
+                            continue;
+                        }
+                        rows.push([ti, 0.0, to, po]);
+                    }
+                }
+            }
+        }
+        "merl" => rows = merl_rows(),
         _ => unreachable!("every listed geometry has rows"),
     }
     Ok((g.kind, rows))
+}
+
+/// The directions of every MERL cell centre above the horizon, in the table's order, as
+/// (θi, φi, θo, φo) in degrees: a synthetic set shaped like a full measured table.
+fn merl_rows() -> Vec<[f64; 4]> {
+    use crate::data::readers::merl;
+    let deg = |v: glam::DVec3| {
+        let theta = v.z.clamp(-1.0, 1.0).acos().to_degrees();
+        let phi = v.y.atan2(v.x).to_degrees().rem_euclid(360.0);
+        (theta, if theta == 0.0 { 0.0 } else { phi })
+    };
+    (0..merl::CELLS)
+        .filter_map(|idx| {
+            let (th, td, pd) = merl::cell_angles(idx);
+            let (wi, wo) = merl::cell_directions(th, td, pd)?;
+            let ((ti, pi), (to, po)) = (deg(wi), deg(wo));
+            // Reading the rows back must keep both directions above the horizon.
+            (ti < 90.0 && to < 90.0).then_some([ti, pi, to, po])
+        })
+        .collect()
 }
 
 /// Rows of a geometry expression: one name, or names joined by `+` (their union; a

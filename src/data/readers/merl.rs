@@ -307,7 +307,7 @@ pub fn encode_par(f: impl Fn(f64, f64, f64) -> [f64; 3] + Sync) -> Vec<u8> {
 }
 
 /// The file bytes of a table given per cell (`None`: unmeasured, stored as −1).
-fn serialise(cells: &[Option<[f64; 3]>]) -> Vec<u8> {
+pub fn serialise(cells: &[Option<[f64; 3]>]) -> Vec<u8> {
     let mut out = Vec::with_capacity(FILE_BYTES);
     for d in DIMS {
         out.extend_from_slice(&(d as i32).to_le_bytes());

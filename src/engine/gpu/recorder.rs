@@ -1,0 +1,105 @@
+//! The recording layer: one submission's uploads, output resets, compute dispatches and
+//! read-back, then the wait for it. It moves bytes and runs pipelines it is given; it
+//! knows nothing of models, losses or what the bytes mean.
+
+use super::device::Device;
+use anyhow::{anyhow, Result};
+
+/// One dispatch of a compute pass: a pipeline over a grid of workgroups.
+pub struct Dispatch<'a> {
+    pub pipeline: &'a wgpu::ComputePipeline,
+    pub grid: [u32; 3],
+}
+
+/// A submission being recorded.
+pub struct Recorder<'d> {
+    device: &'d Device,
+    encoder: wgpu::CommandEncoder,
+}
+
+impl<'d> Recorder<'d> {
+    pub fn new(device: &'d Device) -> Recorder<'d> {
+        let encoder = device
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("bsdfit"),
+            });
+        Recorder { device, encoder }
+    }
+
+    /// Upload `bytes` to the start of `buffer` (before anything this submission runs).
+    pub fn upload(&mut self, buffer: &wgpu::Buffer, bytes: &[u8]) {
+        if !bytes.is_empty() {
+            self.device.queue.write_buffer(buffer, 0, bytes);
+        }
+    }
+
+    /// Copy the first `bytes` of `from` over `to` (on the device, in order).
+    pub fn copy(&mut self, from: &wgpu::Buffer, to: &wgpu::Buffer, bytes: u64) {
+        if bytes > 0 {
+            self.encoder.copy_buffer_to_buffer(from, 0, to, 0, bytes);
+        }
+    }
+
+    /// One compute pass running `dispatches` in turn with `bind_group` (wgpu orders
+    /// dispatches that write and then read the same buffer with a barrier between them).
+    pub fn compute(&mut self, bind_group: &wgpu::BindGroup, dispatches: &[Dispatch]) {
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("evaluate"),
+                timestamp_writes: None,
+            });
+        pass.set_bind_group(0, bind_group, &[]);
+        for d in dispatches {
+            pass.set_pipeline(d.pipeline);
+            pass.dispatch_workgroups(d.grid[0], d.grid[1], d.grid[2]);
+        }
+    }
+
+    /// Submit, wait, and hand the first `bytes` of `source` to `read`: copied into
+    /// `staging` first, or mapped as they are where `staging` is `None` (a buffer
+    /// created mappable, [`Device::mappable`]).
+    pub fn submit_and_read<R>(
+        mut self,
+        source: &wgpu::Buffer,
+        staging: Option<&wgpu::Buffer>,
+        bytes: u64,
+        read: impl FnOnce(&[u8]) -> R,
+    ) -> Result<R> {
+        let staging = match staging {
+            Some(staging) => {
+                self.encoder
+                    .copy_buffer_to_buffer(source, 0, staging, 0, bytes);
+                staging
+            }
+            None => source,
+        };
+        let q = &self.device.queue;
+        let index = q.submit(Some(self.encoder.finish()));
+        let slice = staging.slice(0..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            tx.send(r).ok();
+        });
+        self.device
+            .device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: None,
+            })
+            .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
+        rx.recv()
+            .map_err(|_| anyhow!("GPU read-back was dropped"))?
+            .map_err(|e| anyhow!("GPU read-back failed: {e}"))?;
+        let out = {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| anyhow!("GPU read-back failed: {e:?}"))?;
+            read(&view)
+        };
+        staging.unmap();
+        self.device.check_errors()?;
+        Ok(out)
+    }
+}
