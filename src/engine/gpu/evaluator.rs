@@ -1,101 +1,23 @@
-//! The GPU evaluator: a batch's passes, planned as submissions over windows of records
-//! and tiles, and the host's f64 reduction of what each submission reads back.
-//!
-//! A pass covers one window of record numbers within one segment (records texture):
-//! every candidate evaluates its problem's records there, tile by tile (workgroup z).
-//! Windows are as long as the outputs' binding allows (`plan_window`): one window holds
-//! the whole of the small data sets fits usually meet (one submission per pass, as
-//! before streaming); a dense data set takes as many as its size needs, and memory stays
-//! one window's outputs. The three passes:
+//! The GPU evaluator: a batch's data uploaded once ([`Records`]), and the three passes
+//! the optimizers ask for, reduced over the samples without ever reading back a value
+//! per candidate and sample for them:
 //! - costs: a partial sum of loss terms per (candidate, tile), summed and finished on
 //!   the host in f64;
-//! - values: the model values at every record slot of the window, read back and handed
-//!   to a host reduction ([`crate::engine::reduce`]) one window at a time;
-//! - normal: values, then the device's reduction of each group of P + 1 candidates to
-//!   its normal-equation sums per tile (normal.wgsl), the only numbers read back.
+//! - value windows: the model values at every record slot of a window, read back and
+//!   handed to a host reduction ([`crate::engine::reduce`]) one window at a time;
+//! - normal equations: on GPUs, the device's reduction of each group of P + 1 candidates
+//!   to its sums per tile (normal.wgsl), the only numbers read back; on CPU devices,
+//!   the host's reduction of the value windows.
 
-use super::bindings::{self, Dim, Dims, Resource};
-use super::pipelines::{Entry, Pipelines};
-use super::recorder::{Dispatch, Recorder};
 use super::records::Records;
-use super::{GpuBackend, MAX_GROUPS_X, MIN_TILE};
-use crate::bsdf::Model;
-use crate::engine::loss::{LossTerms, Term, NO_SAMPLE};
+use super::runner::{Pass, ReadBack, Runner};
+use super::GpuBackend;
+use crate::engine::loss::LossTerms;
 use crate::engine::reduce::{self, GramSums, ValueWindow, Values, WindowPart};
-use crate::engine::wgsl::{self, normal_entries, Shape};
+use crate::engine::wgsl::normal_entries;
 use crate::engine::{Evaluator, Problem};
 use crate::optim::NormalEquations;
-use anyhow::{bail, Result};
-use std::ops::Range;
-use std::sync::Arc;
-
-/// The bits of the NaN that an invocation whose loops were cut short writes instead of
-/// its result (`LOOPS_CUT_SHORT` in shaders/engine/kernel.wgsl).
-const LOOPS_CUT_SHORT: u32 = 0x7fa1_1ed5;
-
-/// A CPU device ended the kernel's loops early (see `LOOPS_CUT_SHORT`).
-#[derive(Debug, thiserror::Error)]
-#[error("the device cut the kernel's loops short")]
-struct LoopsCutShort;
-
-/// What a submission computes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Pass {
-    Costs,
-    Values,
-    /// Values, then the normal-equation sums of `groups` groups of P + 1 candidates.
-    Normal {
-        groups: usize,
-    },
-}
-
-/// The window a submission covered, and how its outputs are laid out.
-struct Layout {
-    n_tiles: usize,
-    /// Per candidate, its problem's records in the window.
-    records: Vec<Range<u32>>,
-    /// Per candidate, where its values start in `out` (values passes).
-    rows: Vec<usize>,
-}
-
-/// What receives a submission's outputs: their layout, the f32 numbers read back, and
-/// the records (whose host side the reductions read).
-type ReadBack<'r> = dyn FnMut(&Layout, &[f32], &Records) -> Result<()> + 'r;
-
-/// Buffers that depend on the batch size, grown on demand, and the bind group of each
-/// segment over them.
-struct Io {
-    params: wgpu::Buffer,
-    owners: wgpu::Buffer,
-    out: wgpu::Buffer,
-    normal: wgpu::Buffer,
-    staging: wgpu::Buffer,
-    /// `LOOPS_CUT_SHORT` NaNs, as many as the larger of `out` and `normal`, written once:
-    /// each submission first copies them over its outputs on the device, so anything the
-    /// kernel fails to write reads as loops cut short.
-    poison: wgpu::Buffer,
-    bind_groups: Vec<wgpu::BindGroup>,
-    /// Bytes of params, owners, out, normal and poison.
-    caps: [u64; 5],
-}
-
-/// What runs the submissions: everything of the evaluator but the records, which the
-/// host reductions read while a submission's outputs are mapped.
-struct Runner<'a> {
-    gpu: &'a GpuBackend,
-    model: &'a Model,
-    term: Term,
-    shape: Shape,
-    /// Records per tile.
-    tile: u32,
-    /// The module of the `values` entry, and the loss's own (`costs`, `normal`), the
-    /// latter composed when first needed (an LM fit on a CPU device uses only `values`).
-    value_pipes: Arc<Pipelines>,
-    loss_pipes: Option<Arc<Pipelines>>,
-    dims: wgpu::Buffer,
-    io: Option<Io>,
-    read_back: u64,
-}
+use anyhow::Result;
 
 pub struct GpuEvaluator<'a> {
     runner: Runner<'a>,
@@ -111,33 +33,15 @@ impl<'a> GpuEvaluator<'a> {
         let records = Records::upload(&gpu.device, model, problems, &terms, gpu.segment_records)?;
         drop(terms);
         let shape = gpu.shape.for_batch(records.mu_tables);
-        let value_pipes = gpu.value_pipelines(model, shape)?;
-        let dims = gpu.device.buffer(
-            "dims",
-            std::mem::size_of::<Dims>() as u64,
-            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        );
-        gpu.device.check_errors()?;
         Ok(GpuEvaluator {
-            runner: Runner {
-                gpu,
-                model,
-                term: problems[0].loss.metric.term(),
-                shape,
-                tile: gpu.tile_for(model),
-                value_pipes,
-                loss_pipes: None,
-                dims,
-                io: None,
-                read_back: 0,
-            },
+            runner: Runner::new(gpu, model, problems[0].loss.metric.term(), shape)?,
             evaluations: vec![0; problems.len()],
             records,
         })
     }
 
     fn check_batch(&self, owners: &[usize], params: &[f64]) -> Result<()> {
-        let p = self.runner.model.dim;
+        let p = self.runner.dim();
         anyhow::ensure!(
             p > 0 && params.len() == owners.len() * p,
             "parameter batch of {} values is not {} candidates of P = {p}",
@@ -154,22 +58,8 @@ impl<'a> GpuEvaluator<'a> {
         Ok(())
     }
 
-    /// Runs of candidates whose parameters and owners fit a binding and a dispatch grid.
-    fn candidate_runs(&self, n: usize, per_run: usize) -> Vec<Range<usize>> {
-        let max = (self.runner.gpu.max_binding() / 4) as usize;
-        let p = self.runner.model.dim;
-        let cap = (max / p.max(2))
-            .min(MAX_GROUPS_X as usize * MAX_GROUPS_X as usize)
-            .max(per_run)
-            / per_run
-            * per_run;
-        (0..n.div_ceil(cap))
-            .map(|i| i * cap..((i + 1) * cap).min(n))
-            .collect()
-    }
-
-    /// Every window of every segment a pass over `problems` needs, `each(layout,
-    /// outputs)` called with what each submission read back.
+    /// Every window of every segment a pass over `problems` needs, `each` called with
+    /// what each submission read back.
     fn for_each_submission(
         &mut self,
         pass: Pass,
@@ -177,337 +67,14 @@ impl<'a> GpuEvaluator<'a> {
         problems: &[usize],
         each: &mut ReadBack,
     ) -> Result<()> {
-        // Only the records of these problems: skip what lies outside them.
-        let lo = problems
-            .iter()
-            .map(|&q| self.records.problem_records[q].start)
-            .min()
-            .unwrap_or(0);
-        let hi = problems
-            .iter()
-            .map(|&q| self.records.problem_records[q].end)
-            .max()
-            .unwrap_or(0);
-        for seg in 0..self.records.segments.len() {
-            let range = self.records.segments[seg].range.clone();
-            let mut start = range.start.max(lo);
-            let end = range.end.min(hi);
-            while start < end {
-                let window = self.runner.submit(
-                    pass,
-                    seg,
-                    start..end,
-                    params,
-                    problems,
-                    &self.records,
-                    each,
-                )?;
-                start = window.end;
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Runner<'_> {
-    /// The loss's own module (`costs`, `normal`): the module `values` uses for square
-    /// terms, so that problems whose losses share a term shape share it.
-    fn loss_pipes(&mut self) -> Result<Arc<Pipelines>> {
-        if let Some(p) = &self.loss_pipes {
-            return Ok(p.clone());
-        }
-        let p = self
-            .gpu
-            .pipelines
-            .get(&self.gpu.device, self.model, self.term, self.shape)?;
-        self.loss_pipes = Some(p.clone());
-        Ok(p)
-    }
-
-    /// The longest window from `start` (within `room`) whose outputs fit a binding: the
-    /// values of every candidate at its records, the costs or normal-equation sums of
-    /// every tile, and at most `MAX_GROUPS_X` tiles.
-    fn plan_window(&self, pass: Pass, room: Range<u32>, candidates: usize) -> Result<Range<u32>> {
-        let max = (self.gpu.max_binding() / 4) as usize;
-        let cb = wgsl::record_channels(self.model);
-        let t = self.tile as usize;
-        let mut w = t * MAX_GROUPS_X as usize;
-        match pass {
-            Pass::Costs => w = w.min(t * (max / candidates.max(1))),
-            Pass::Values | Pass::Normal { .. } => w = w.min(max / (cb * candidates.max(1))),
-        }
-        if let Pass::Normal { groups } = pass {
-            w = w.min(t * (max / (groups.max(1) * normal_entries(self.model.dim))));
-        }
-        anyhow::ensure!(
-            w > 0,
-            "{candidates} candidates are more than one GPU submission holds (at most {} \
-             here); use fewer restarts",
-            max / cb
-        );
-        Ok(room.start..room.end.min(room.start.saturating_add(w as u32)))
-    }
-
-    /// One submission of `pass` over the window from `room.start` (as long as
-    /// [`Self::plan_window`] allows) of segment `seg`; `each` receives its outputs.
-    /// Where a CPU device cut the loops short, the submission runs again with tiles a
-    /// quarter as long. Returns the window covered.
-    #[allow(clippy::too_many_arguments)]
-    fn submit(
-        &mut self,
-        pass: Pass,
-        seg: usize,
-        room: Range<u32>,
-        params: &[f32],
-        problems: &[usize],
-        records: &Records,
-        each: &mut ReadBack,
-    ) -> Result<Range<u32>> {
-        loop {
-            let window = self.plan_window(pass, room.clone(), problems.len())?;
-            match self.submit_once(pass, seg, window.clone(), params, problems, records, each) {
-                Err(e) if e.is::<LoopsCutShort>() => {
-                    if self.tile <= MIN_TILE {
-                        bail!(
-                            "{} cut this evaluation short: it ends every loop of a shader \
-                             invocation after 65,535 iterations in all, and evaluating `{}` \
-                             takes more than that even over {MIN_TILE} records per invocation; \
-                             use --backend cpu",
-                            self.gpu.adapter_name(),
-                            self.model.spec,
-                        );
-                    }
-                    self.tile = (self.tile / 4).max(MIN_TILE);
-                    self.gpu.shorten_tile(self.model, self.tile);
-                }
-                Err(e) => return Err(e),
-                Ok(()) => return Ok(window),
-            }
-        }
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn submit_once(
-        &mut self,
-        pass: Pass,
-        seg: usize,
-        window: Range<u32>,
-        params: &[f32],
-        problems: &[usize],
-        records: &Records,
-        each: &mut ReadBack,
-    ) -> Result<()> {
-        let started = std::time::Instant::now();
-        let p = self.model.dim;
-        let n = problems.len();
-        let cb = records.slots;
-        let in_window: Vec<Range<u32>> = problems
-            .iter()
-            .map(|&q| records.in_window(q, &window))
-            .collect();
-        let longest = in_window.iter().map(|r| r.len()).max().unwrap_or(0);
-        if longest == 0 {
-            return Ok(());
-        }
-        let n_tiles = longest.div_ceil(self.tile as usize);
-        let mut rows = Vec::with_capacity(n);
-        let mut owners = Vec::with_capacity(2 * n);
-        let mut values_len = 0;
-        for (r, &q) in in_window.iter().zip(problems) {
-            rows.push(values_len);
-            owners.extend([q as u32, values_len as u32]);
-            values_len += r.len() * cb;
-        }
-        let (out_len, groups) = match pass {
-            Pass::Costs => (n * n_tiles, 0),
-            Pass::Values => (values_len, 0),
-            Pass::Normal { groups } => (values_len, groups),
-        };
-        let normal_len = groups * n_tiles * normal_entries(p);
-        let poisoned = if pass == Pass::Costs { out_len } else { 0 }.max(normal_len);
-        self.ensure_io(
-            records,
-            [params.len(), owners.len(), out_len, normal_len, poisoned],
-        )?;
-        let evaluate_pipes = match pass {
-            Pass::Costs => self.loss_pipes()?,
-            _ => self.value_pipes.clone(),
-        };
-        let evaluate = self.gpu.pipelines.entry(
-            &self.gpu.device,
-            &evaluate_pipes,
-            if pass == Pass::Costs {
-                Entry::Costs
-            } else {
-                Entry::Values
-            },
-        )?;
-        let normal_pipes = match pass {
-            Pass::Normal { .. } => Some(self.loss_pipes()?),
-            _ => None,
-        };
-        let normal = match &normal_pipes {
-            Some(pipes) => Some(self.gpu.pipelines.entry(
-                &self.gpu.device,
-                pipes,
-                Entry::Normal,
-            )?),
-            None => None,
-        };
-        let grid = |total: u32| {
-            let x = total.clamp(1, MAX_GROUPS_X);
-            (x, total.div_ceil(x))
-        };
-        let (gx, gy) = grid((n as u32).div_ceil(self.shape.candidates_per_workgroup()));
-        let (nx, ny) = grid(groups as u32);
-        let mut dims = Dims::default();
-        dims.set(Dim::NCandidates, n as u32)
-            .set(Dim::NProblems, records.problem_records.len() as u32)
-            .set(Dim::Dim, p as u32)
-            .set(Dim::GroupsX, gx)
-            .set(Dim::NGroups, groups as u32)
-            .set(Dim::NormalGroupsX, nx)
-            .set(Dim::ProbeTrips, 2)
-            .set(Dim::SegFirst, records.segments[seg].range.start)
-            .set(Dim::WinFirst, window.start)
-            .set(Dim::WinEnd, window.end)
-            .set(Dim::Tile, self.tile)
-            .set(Dim::NTiles, n_tiles as u32);
-        let io = self.io.as_ref().expect("io buffers allocated");
-        let mut rec = Recorder::new(&self.gpu.device);
-        rec.upload(&self.dims, bytemuck::bytes_of(&dims));
-        rec.upload(&io.params, bytemuck::cast_slice(params));
-        rec.upload(&io.owners, bytemuck::cast_slice(&owners));
-        // The sums poisoned on the device, from the evaluator's poison buffer (writing them
-        // from the host cost two copies of every output per submission, into wgpu's
-        // staging, then into the buffer: 4 % of the default sweep's CPU time on lavapipe),
-        // so that a sum a workgroup failed to write reads as loops cut short. A values
-        // pass writes every slot of its window (its invocations mark their own cut-short
-        // tiles): a copy of that size per window would cost as much as reading it.
-        if pass == Pass::Costs {
-            rec.copy(&io.poison, &io.out, (out_len * 4) as u64);
-        }
-        rec.copy(&io.poison, &io.normal, (normal_len * 4) as u64);
-        let mut dispatches = vec![Dispatch {
-            pipeline: evaluate,
-            grid: [gx, gy, n_tiles as u32],
-        }];
-        if let Some(normal) = normal {
-            dispatches.push(Dispatch {
-                pipeline: normal,
-                grid: [nx, ny, n_tiles as u32],
-            });
-        }
-        rec.compute(&io.bind_groups[seg], &dispatches);
-        let (source, len) = match pass {
-            Pass::Normal { .. } => (&io.normal, normal_len),
-            _ => (&io.out, out_len),
-        };
-        let layout = Layout {
-            n_tiles,
-            records: in_window,
-            rows,
-        };
-        let bytes = (len * 4) as u64;
-        let staging = (!self.gpu.device.mappable).then_some(&io.staging);
-        let result = rec.submit_and_read(source, staging, bytes, |raw| {
-            let data: &[f32] = bytemuck::cast_slice(raw);
-            if data.iter().any(|v| v.to_bits() == LOOPS_CUT_SHORT) {
-                return Err(LoopsCutShort.into());
-            }
-            each(&layout, data, records)
-        })?;
-        self.read_back += bytes;
-        let evaluations: u64 = layout
-            .records
-            .iter()
-            .zip(problems)
-            .map(|(r, &q)| records.samples_in(q, r))
-            .sum();
-        self.gpu
-            .log_submission(n, evaluations, started.elapsed().as_secs_f32());
-        result
-    }
-
-    /// Grow the buffers to hold `[params, owners, out, normal, poison]` (in 4-byte words).
-    fn ensure_io(&mut self, records: &Records, words: [usize; 5]) -> Result<()> {
-        // wgpu binds no empty buffer: every output exists (4 bytes at least).
-        let want = words.map(|w| (w.max(1) * 4) as u64);
-        if let Some(io) = &self.io {
-            if io.caps.iter().zip(&want).all(|(c, w)| c >= w) {
-                return Ok(());
-            }
-        }
-        let caps = match &self.io {
-            Some(io) => [0, 1, 2, 3, 4].map(|i| io.caps[i].max(want[i])),
-            None => want,
-        };
-        let dev = &self.gpu.device;
-        use wgpu::BufferUsages as U;
-        let params = dev.buffer("params", caps[0], U::STORAGE | U::COPY_DST);
-        let owners = dev.buffer("owners", caps[1], U::STORAGE | U::COPY_DST);
-        // Outputs are read back through a staging buffer, or mapped as they are on CPU
-        // devices (no staging buffer then).
-        let (output, staging_bytes) = if dev.mappable {
-            (U::STORAGE | U::MAP_READ | U::COPY_DST, 4)
-        } else {
-            (U::STORAGE | U::COPY_SRC | U::COPY_DST, caps[2].max(caps[3]))
-        };
-        let out = dev.buffer("out", caps[2], output);
-        let normal = dev.buffer("normal", caps[3], output);
-        let staging = dev.buffer("staging", staging_bytes, U::MAP_READ | U::COPY_DST);
-        let poison = dev.filled_buffer("poison", (caps[4] / 4) as usize, LOOPS_CUT_SHORT)?;
-        let bind_groups = records
-            .segments
-            .iter()
-            .map(|s| {
-                bindings::bind_group(
-                    &dev.device,
-                    self.gpu.pipelines.layout(),
-                    &[
-                        ("dims", Resource::Buffer(&self.dims)),
-                        ("records", Resource::Texture(&s.view)),
-                        ("tables", Resource::Buffer(&records.tables)),
-                        ("params", Resource::Buffer(&params)),
-                        ("out", Resource::Buffer(&out)),
-                        ("LUT", Resource::Texture(&records.lut)),
-                        ("owners", Resource::Buffer(&owners)),
-                        ("normal_out", Resource::Buffer(&normal)),
-                    ],
-                )
-            })
-            .collect::<Result<Vec<_>>>()?;
-        dev.check_errors()?;
-        self.io = Some(Io {
-            params,
-            owners,
-            out,
-            normal,
-            staging,
-            poison,
-            bind_groups,
-            caps,
-        });
-        Ok(())
-    }
-}
-
-impl Records {
-    /// How many samples problem q has in its records `r` (slots that hold one).
-    fn samples_in(&self, q: usize, r: &Range<u32>) -> u64 {
-        let first = self.problem_records[q].start;
-        let cb = self.slots;
-        let rows = (r.start - first) as usize * cb..(r.end - first) as usize * cb;
-        self.rows[q].sample[rows]
-            .iter()
-            .filter(|&&k| k != NO_SAMPLE)
-            .count() as u64
+        self.runner
+            .for_each_submission(&self.records, pass, params, problems, each)
     }
 }
 
 impl Evaluator for GpuEvaluator<'_> {
     fn dim(&self) -> usize {
-        self.runner.model.dim
+        self.runner.dim()
     }
 
     fn problems(&self) -> usize {
@@ -522,15 +89,19 @@ impl Evaluator for GpuEvaluator<'_> {
         self.check_batch(owners, params)?;
         let p = self.dim();
         let mut sums = vec![0.0f64; owners.len()];
-        for run in self.candidate_runs(owners.len(), 1) {
+        for run in self.runner.candidate_runs(owners.len(), 1) {
             let host: Vec<f32> = params[run.start * p..run.end * p]
                 .iter()
                 .map(|&v| v as f32)
                 .collect();
             let first = run.start;
             self.for_each_submission(Pass::Costs, &host, &owners[run], &mut |layout, out, _| {
+                // Tile after tile into one f64 sum per candidate, in record order, so
+                // that the sum does not depend on how the records fall into windows.
                 for (c, tiles) in out.chunks(layout.n_tiles).enumerate() {
-                    sums[first + c] += tiles.iter().map(|&v| v as f64).sum::<f64>();
+                    for &v in tiles {
+                        sums[first + c] += v as f64;
+                    }
                 }
                 Ok(())
             })?;
@@ -552,7 +123,9 @@ impl Evaluator for GpuEvaluator<'_> {
         visit: &mut dyn FnMut(&ValueWindow) -> Result<()>,
     ) -> Result<()> {
         self.check_batch(owners, params)?;
-        let runs = self.candidate_runs(owners.len(), owners.len().max(1));
+        let runs = self
+            .runner
+            .candidate_runs(owners.len(), owners.len().max(1));
         anyhow::ensure!(
             runs.len() <= 1,
             "{} candidates are more than one GPU submission holds; use fewer restarts",
@@ -597,7 +170,7 @@ impl Evaluator for GpuEvaluator<'_> {
     ) -> Result<Vec<NormalEquations>> {
         let p = self.dim();
         let m = reduce::check_groups(owners, params, steps, p)?;
-        if !self.runner.gpu.device_normal || m != p {
+        if !self.runner.device_normal() || m != p {
             return reduce::normal_equations(self, owners, params, steps);
         }
         anyhow::ensure!(
@@ -641,6 +214,6 @@ impl Evaluator for GpuEvaluator<'_> {
     }
 
     fn read_back_bytes(&self) -> u64 {
-        self.runner.read_back
+        self.runner.read_back()
     }
 }

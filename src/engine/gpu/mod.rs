@@ -40,6 +40,7 @@ mod evaluator;
 pub mod pipelines;
 mod recorder;
 pub mod records;
+mod runner;
 
 use super::wgsl::Shape;
 use super::{Backend, Evaluator, Problem};
