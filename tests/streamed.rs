@@ -21,6 +21,7 @@
 //!   normal equations against one unsplit submission's of the same path (the device's
 //!   reduction, or the host's of the values read back), within 1e-5 of √(S_aa S_bb)
 //!   (compensated f32 partial sums per tile, added in f64).
+//!
 //! NaN passes only where both sides are NaN.
 
 use bsdfit::bsdf::{every_spec, Model};
