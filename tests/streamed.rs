@@ -367,7 +367,7 @@ fn records_split_over_several_textures_give_the_unsplit_result() {
                     .with_shape(shape)
                     .with_tile(128)
                     .with_device_normal(device_normal)
-                    .with_segment_records(512);
+                    .with_segment_records(1024);
                 let (mut a, mut b) = (
                     one.prepare(problem).unwrap(),
                     split.prepare(problem).unwrap(),
@@ -399,7 +399,7 @@ fn records_split_over_several_textures_give_the_unsplit_result() {
                 }
                 // The split really happened: a submission per segment.
                 let count = |g: &GpuBackend| g.submissions().unwrap().submissions;
-                assert!(count(&split) >= 5 * count(&one), "{label}: submissions");
+                assert!(count(&split) >= 3 * count(&one), "{label}: submissions");
             }
         }
     }

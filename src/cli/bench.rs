@@ -61,6 +61,29 @@ pub struct BenchArgs {
     /// against which the GPU's differences should be read. Costs one more CPU sweep.
     #[arg(long, requires = "sweep", value_parser = super::parse_seed)]
     pub sweep_reference_seed: Option<u64>,
+    /// Measure how cost grows with the data instead: for random isotropic data sets of
+    /// each size of --scale-sizes, the throughput of a fit's two batches (LM's normal
+    /// equations of 16 restarts, the costs of 128 screened points) and the process's peak
+    /// resident memory, for the models of --models (default: lambert, fa(eon),
+    /// btdf(gg)), on each backend in one run, with the GPU/CPU ratio.
+    #[arg(long, conflicts_with_all = ["data", "sweep"])]
+    pub scale: bool,
+    /// With --scale: the data sizes (samples), comma-separated; 1e6 and 1_000_000 both
+    /// read.
+    #[arg(long, value_delimiter = ',', requires = "scale", value_parser = parse_size)]
+    pub scale_sizes: Option<Vec<usize>>,
+}
+
+/// A sample count: an integer, or a power of ten written 1e6.
+fn parse_size(s: &str) -> Result<usize, String> {
+    let t = s.trim().replace('_', "");
+    let v: f64 = t
+        .parse()
+        .map_err(|_| format!("'{s}' is not a sample count"))?;
+    if !(v >= 1.0 && v <= 1e9 && v.fract() == 0.0) {
+        return Err(format!("'{s}': a sample count from 1 to 1e9"));
+    }
+    Ok(v as usize)
 }
 
 /// The seed of `bench --sweep`'s sweeps (`sweep`'s default).
@@ -156,6 +179,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
         "--seconds must be in (0, 3600], got {}",
         a.seconds
     );
+    if a.scale {
+        return scale_bench(&a);
+    }
     let file = match &a.data {
         Some(path) => Some(a.data_args.read(path).context("--data")?),
         None => None,
@@ -192,19 +218,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             None => std::borrow::Cow::Owned(bench_dataset(spec, kind)?),
         })
     };
-    let mut backends: Vec<Box<dyn engine::Backend>> = Vec::new();
-    if a.backend.backend != BackendChoice::Gpu {
-        backends.push(Box::new(engine::cpu::CpuBackend::new()));
-    }
-    if a.backend.backend != BackendChoice::Cpu {
-        match engine::gpu::GpuBackend::new() {
-            Ok(g) => backends.push(Box::new(g)),
-            Err(e) if a.backend.backend == BackendChoice::Auto => {
-                eprintln!("no GPU ({e}); measuring the CPU only")
-            }
-            Err(e) => return Err(e.context("--backend gpu")),
-        }
-    }
+    let backends = backends_for(a.backend.backend)?;
     // Every batch must fit in memory: checked for all models before measuring any.
     for (kind, spec) in &specs {
         if let Ok(data) = data_for(spec, *kind) {
@@ -493,4 +507,75 @@ fn print_comparison(
             format!("NOT within {tolerance}")
         }
     );
+}
+
+/// `--scale`: every model at every size on every backend.
+fn scale_bench(a: &BenchArgs) -> Result<()> {
+    use crate::workflows::scale::{
+        measure_scale, scale_dataset, table, DEFAULT_MODELS, DEFAULT_SIZES,
+    };
+    let specs: Vec<(Kind, String)> = match &a.models {
+        Some(list) => list.iter().map(|s| s.trim().to_string()).collect(),
+        None => DEFAULT_MODELS
+            .iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>(),
+    }
+    .into_iter()
+    .map(|s| Ok((bsdf::spec_kind(&s).context("--models")?, s)))
+    .collect::<Result<_>>()?;
+    let sizes = a.scale_sizes.clone().unwrap_or(DEFAULT_SIZES.to_vec());
+    let backends = backends_for(a.backend.backend)?;
+    for b in &backends {
+        eprintln!("backend: {}", b.name());
+    }
+    let mut progress = Progress::new(
+        "bench --scale",
+        (specs.len() * sizes.len() * backends.len()) as u64,
+        "measurements",
+    );
+    let mut rows = Vec::new();
+    for &size in &sizes {
+        for (kind, spec) in &specs {
+            progress.set_message(format!("{spec}, {size} samples: data"));
+            let data = scale_dataset(spec, *kind, size, 1)?;
+            for b in &backends {
+                progress.set_message(format!("{spec}, {size} samples, {}", b.id()));
+                match measure_scale(spec, &data, b.as_ref(), a.seconds) {
+                    Ok(r) => rows.push(r),
+                    Err(e) => {
+                        progress.println(format!("skipping {spec} at {size} on {}: {e:#}", b.id()))
+                    }
+                }
+                progress.inc(1);
+            }
+        }
+    }
+    progress.finish();
+    print!("{}", table(&rows));
+    if let Some(path) = &a.json {
+        let text = serde_json::to_string_pretty(&rows)? + "\n";
+        crate::output::files::write_result(path, &text, true)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The backends `--backend` asks to measure: the CPU reference, the GPU engine, or both
+/// (auto: the GPU where an adapter exists).
+fn backends_for(choice: BackendChoice) -> Result<Vec<Box<dyn engine::Backend>>> {
+    let mut backends: Vec<Box<dyn engine::Backend>> = Vec::new();
+    if choice != BackendChoice::Gpu {
+        backends.push(Box::new(engine::cpu::CpuBackend::new()));
+    }
+    if choice != BackendChoice::Cpu {
+        match engine::gpu::GpuBackend::new() {
+            Ok(g) => backends.push(Box::new(g)),
+            Err(e) if choice == BackendChoice::Auto => {
+                eprintln!("no GPU ({e}); measuring the CPU only")
+            }
+            Err(e) => return Err(e.context("--backend gpu")),
+        }
+    }
+    Ok(backends)
 }

@@ -3,5 +3,6 @@
 pub mod bench;
 pub mod diagnose;
 pub mod export;
+pub mod scale;
 pub mod sweep;
 pub mod synth;

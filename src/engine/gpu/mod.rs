@@ -53,8 +53,12 @@ use pipelines::{Entry, PipelineCache};
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-/// Largest buffer the engine allocates for one binding (bytes).
-const MAX_CHUNK_BYTES: u64 = 64 << 20;
+/// Largest buffer the engine allocates for one binding (bytes), on CPU devices, whose
+/// buffers are the host's memory (a value window of this size is read and reduced by the
+/// host while still in its caches' reach), and on GPUs, where a window of model values
+/// stays on the device and longer windows mean fewer submissions.
+const CPU_DEVICE_CHUNK_BYTES: u64 = 64 << 20;
+const GPU_CHUNK_BYTES: u64 = 1 << 30;
 /// Workgroups per dispatch dimension (WebGPU's guaranteed minimum of the limit).
 pub(crate) const MAX_GROUPS_X: u32 = 65535;
 /// The shortest tile the engine shrinks to after loops cut short.
@@ -103,7 +107,11 @@ impl GpuBackend {
             pipelines: PipelineCache::new(&device),
             shape,
             tiles: Mutex::default(),
-            chunk_bytes: MAX_CHUNK_BYTES,
+            chunk_bytes: if device.is_cpu() {
+                CPU_DEVICE_CHUNK_BYTES
+            } else {
+                GPU_CHUNK_BYTES
+            },
             segment_records: usize::MAX,
             first_tile: None,
             device_normal: !device.is_cpu(),
@@ -115,7 +123,7 @@ impl GpuBackend {
     /// Lower the largest binding the engine allocates (tests of the paths that split a
     /// batch into several windows and submissions).
     pub fn with_max_binding(mut self, bytes: u64) -> Self {
-        self.chunk_bytes = bytes.clamp(256, MAX_CHUNK_BYTES);
+        self.chunk_bytes = bytes.clamp(256, self.chunk_bytes);
         self
     }
 

@@ -130,23 +130,42 @@ impl Records {
             tables.push(table.len() as u32);
             tables.extend(table.iter().map(|m| m.to_bits()));
         }
-        // Segments: whole rows of a texture each.
+        // Segments: whole rows of a texture each (but the last), cut from the records in
+        // place: the records are padded to whole rows once, so no segment is copied.
         let rows_max = device.limits.max_texture_dimension_2d as usize;
-        let per_segment = segment_records.min(rows_max * wgsl::RECORDS_PER_ROW).max(1);
+        let per_segment = if n_records <= wgsl::RECORDS_PER_ROW {
+            n_records.max(1)
+        } else {
+            let rows = segment_records
+                .div_ceil(wgsl::RECORDS_PER_ROW)
+                .clamp(1, rows_max);
+            rows * wgsl::RECORDS_PER_ROW
+        };
+        let padded = if n_records <= wgsl::RECORDS_PER_ROW {
+            n_records.max(1)
+        } else {
+            n_records.next_multiple_of(wgsl::RECORDS_PER_ROW)
+        };
+        records.resize(padded * floats, 0.0);
         let mut segments = Vec::new();
         let mut start = 0;
         loop {
-            let end = (start + per_segment).min(n_records);
-            let chunk = &records[start * floats..end * floats];
+            let end = (start + per_segment).min(padded);
             segments.push(Segment {
-                range: start as u32..end as u32,
-                view: texture(device, cb, chunk, end - start),
+                range: start as u32..(end.min(n_records)) as u32,
+                view: texture(
+                    device,
+                    cb,
+                    &records[start * floats..end * floats],
+                    end - start,
+                ),
             });
             start = end;
             if start >= n_records {
                 break;
             }
         }
+        drop(records);
         let mut lut: Vec<f32> = model
             .nodes()
             .iter()
@@ -187,21 +206,19 @@ impl Records {
     }
 }
 
-/// The records of `n` records (`chunk`, `floats` per record) as an RGBA32F texture of
-/// `wgsl::RECORDS_PER_ROW` records per row (fewer where there are fewer), padded to
-/// whole rows.
+/// `n` records (`chunk`, whole rows of `wgsl::RECORDS_PER_ROW` records, or fewer records
+/// than one row) as an RGBA32F texture.
 fn texture(device: &Device, cb: usize, chunk: &[f32], n: usize) -> wgpu::TextureView {
     let texels = wgsl::record_texels(cb);
     let width = n.clamp(1, wgsl::RECORDS_PER_ROW) * texels;
     let height = n.div_ceil(wgsl::RECORDS_PER_ROW).max(1);
-    let mut data = chunk.to_vec();
-    data.resize(width * height * 4, 0.0);
+    debug_assert_eq!(chunk.len(), width * height * 4);
     device.texture(
         "records",
         width,
         height,
         wgpu::TextureFormat::Rgba32Float,
-        bytemuck::cast_slice(&data),
+        bytemuck::cast_slice(chunk),
     )
 }
 
