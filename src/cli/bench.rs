@@ -80,7 +80,7 @@ fn parse_size(s: &str) -> Result<usize, String> {
     let v: f64 = t
         .parse()
         .map_err(|_| format!("'{s}' is not a sample count"))?;
-    if !(v >= 1.0 && v <= 1e9 && v.fract() == 0.0) {
+    if !((1.0..=1e9).contains(&v) && v.fract() == 0.0) {
         return Err(format!("'{s}': a sample count from 1 to 1e9"));
     }
     Ok(v as usize)
