@@ -142,7 +142,8 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
             }
         }
         "grid" => {
-            let polar = steps(0.0, 85.0, step);
+            // Polar angles up to 85°: the last multiple of the step there.
+            let polar = steps(0.0, (85.0 / step).floor() * step, step);
             for &ti in &polar {
                 for &to in &polar {
                     // At θo = 0 every azimuth is one direction: keep it once.
