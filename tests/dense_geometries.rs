@@ -85,7 +85,7 @@ fn synth_writes_a_merl_table_that_reads_back() {
     // channels come back in order: R (650 nm) holds the reddest albedo.
     let (_, rows) = geometry("grid:10").unwrap();
     assert!(
-        data.len() % 3 == 0 && data.len() / 3 > rows.len() * 9 / 10,
+        data.len().is_multiple_of(3) && data.len() / 3 > rows.len() * 9 / 10,
         "{}",
         data.len()
     );
