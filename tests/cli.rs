@@ -672,3 +672,159 @@ fn bench_measures_on_a_data_file() {
     ]);
     assert_clear_error(&out, &["--models", "btdf(tr)", "brdf"]);
 }
+
+/// Real ALTA files often come without `#PARAM_OUT` (issue "Real files as they come"):
+/// `--alta-values brdf|brdf-cos` says what their values are. On the tape-shaped fixture
+/// (tests/fixtures/, values BRDF × cos θo, no `#PARAM_OUT`): `fit` refuses it naming the
+/// option, fits it with the option and prints the reader's notice, and `--help` lists the
+/// values with their meaning. Every command that reads data takes the option and hands it
+/// to the reader: with `#PARAM_OUT INV_STERADIAN_COSINE_FACTOR` put back, `--alta-values
+/// brdf` is refused by each of them, naming both.
+#[test]
+fn alta_values_option_reads_files_without_param_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let file =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/alta_tape_no_param_out.dat");
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit",
+            p(&file),
+            "--model",
+            "lambert",
+            "--assume-uncertainty",
+            "0.03,0.001",
+            "--backend",
+            "cpu",
+            "--restarts",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        bsdfit(&args)
+    };
+    let out = fit(&[]);
+    assert_clear_error(
+        &out,
+        &[
+            "alta_tape_no_param_out.dat: missing #PARAM_OUT line",
+            "--alta-values brdf (the BRDF, sr⁻¹)",
+            "--alta-values brdf-cos (BRDF × cos θo)",
+        ],
+    );
+    let json = dir.path().join("fit.json");
+    let out = fit(&["--alta-values", "brdf-cos", "--json", p(&json)]);
+    assert_ok(&out, "fit --alta-values brdf-cos");
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("value kind taken from --alta-values brdf-cos")
+            && err.contains("divided by cos θo"),
+        "{err}"
+    );
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(r["model"], "lambert", "{r:#}");
+    // A value the option does not know is a usage error that lists the two it knows.
+    let out = fit(&["--alta-values", "cos"]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("brdf-cos") && !err.contains("panicked"),
+        "{err}"
+    );
+
+    let help = text(&bsdfit(&["fit", "--help"]).stdout);
+    assert!(
+        help.contains("--alta-values")
+            && help.contains("brdf:")
+            && help.contains("brdf-cos:")
+            && help.contains("INV_STERADIAN_COSINE_FACTOR"),
+        "{help}"
+    );
+
+    // Every data command hands the option to the reader.
+    let header = dir.path().join("tape-header.dat");
+    let text_with = std::fs::read_to_string(&file).unwrap().replace(
+        "#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n",
+        "#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n#PARAM_OUT INV_STERADIAN_COSINE_FACTOR\n",
+    );
+    std::fs::write(&header, text_with).unwrap();
+    let h = p(&header);
+    let (csv, out_dir) = (dir.path().join("out.csv"), dir.path().join("out"));
+    let (csv, out_dir) = (p(&csv), p(&out_dir));
+    // (command, its arguments, whether it takes --backend)
+    let commands: [(&str, Vec<&str>, bool); 7] = [
+        ("fit", vec!["fit", h, "--model", "lambert"], true),
+        ("diagnose", vec!["diagnose", h, "--model", "lambert"], true),
+        ("convert", vec!["convert", h, "--out", csv], false),
+        (
+            "sweep",
+            vec!["sweep", h, "--models", "lambert", "--out", out_dir],
+            true,
+        ),
+        (
+            "eval",
+            vec!["eval", p(&json), "--at", h, "--out", csv],
+            false,
+        ),
+        (
+            "bench",
+            vec!["bench", "--data", h, "--models", "lambert"],
+            true,
+        ),
+        (
+            "render",
+            vec![
+                "render", h, "--model", "lambert", "--params", "rho=0.5", "--out", out_dir,
+            ],
+            false,
+        ),
+    ];
+    for (name, mut args, backend) in commands {
+        let help = text(&bsdfit(&[name, "--help"]).stdout);
+        assert!(help.contains("--alta-values"), "{name} --help:\n{help}");
+        if backend {
+            args.extend(["--backend", "cpu"]);
+        }
+        args.extend([
+            "--assume-uncertainty",
+            "0.03,0.001",
+            "--alta-values",
+            "brdf",
+        ]);
+        let out = bsdfit(&args);
+        assert_clear_error(
+            &out,
+            &[
+                "tape-header.dat:6: #PARAM_OUT INV_STERADIAN_COSINE_FACTOR (BRDF × cos θo)",
+                "disagrees with --alta-values brdf (the BRDF, sr⁻¹)",
+            ],
+        );
+    }
+    // With the agreeing value, convert reads the header file and the header-less one alike.
+    let a = dir.path().join("a.csv");
+    let b = dir.path().join("b.csv");
+    for (input, out) in [(h, &a), (p(&file), &b)] {
+        let o = bsdfit(&[
+            "convert",
+            input,
+            "--out",
+            p(out),
+            "--assume-uncertainty",
+            "0.03,0.001",
+            "--alta-values",
+            "brdf-cos",
+        ]);
+        assert_ok(&o, "convert --alta-values brdf-cos");
+    }
+    let rows = |f: &Path| -> Vec<String> {
+        std::fs::read_to_string(f)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(String::from)
+            .collect()
+    };
+    assert_eq!(rows(&a), rows(&b));
+    assert_eq!(rows(&b).len(), 1 + 27, "header + 27 samples");
+    assert!(std::fs::read_to_string(&b)
+        .unwrap()
+        .contains("from --alta-values brdf-cos"));
+}

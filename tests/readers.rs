@@ -323,6 +323,201 @@ fn alta_without_intervals_is_refused_unless_assumed() {
 }
 
 // ---------------------------------------------------------------------------------------
+// ALTA without #PARAM_OUT: --alta-values (ReadOptions::alta_values)
+
+/// A small synthetic file shaped like the retroreflective tape measurements of
+/// data/real/README.md (the real header, `ISOTROPIC_TL_TV_PROJ_DPHI`, `#VS 0`, θi = 15°,
+/// 30°, 60°, ten outgoing directions each, values BRDF × cos θo, one row per incidence
+/// at θo = 90°) with its `#PARAM_OUT` line removed, as real files often come.
+const TAPE_NO_PARAM_OUT: &str = include_str!("fixtures/alta_tape_no_param_out.dat");
+
+fn tape_fixture_path() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/alta_tape_no_param_out.dat")
+}
+
+/// The tape fixture with `#PARAM_OUT <out>` put back after `#PARAM_IN` (line 6).
+fn tape_with_param_out(out: &str) -> String {
+    let param_in = "#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n";
+    assert!(TAPE_NO_PARAM_OUT.contains(param_in));
+    TAPE_NO_PARAM_OUT.replace(param_in, &format!("{param_in}#PARAM_OUT {out}\n"))
+}
+
+fn assumed_with(values: Option<alta::AltaValues>) -> ReadOptions {
+    ReadOptions {
+        alta_values: values,
+        ..with_assumed()
+    }
+}
+
+/// The same samples, sample for sample (all but the line number, which the removed
+/// header line shifts).
+fn assert_same_samples(a: &Dataset, b: &Dataset, what: &str) {
+    assert_eq!(a.len(), b.len(), "{what}");
+    assert_eq!(a.channels, b.channels, "{what}");
+    assert_eq!(a.material, b.material, "{what}");
+    assert_eq!(a.assumed_uncertainty, b.assumed_uncertainty, "{what}");
+    for (s, t) in a.samples.iter().zip(&b.samples) {
+        let key = |s: &Sample| {
+            (
+                s.theta_i,
+                s.phi_i,
+                s.theta_o,
+                s.phi_o,
+                s.wavelength_nm,
+                s.value,
+                s.uncertainty,
+                s.channel,
+                s.axis,
+                s.transmitted,
+            )
+        };
+        assert_eq!(key(s), key(t), "{what}: line {} vs line {}", s.line, t.line);
+    }
+}
+
+#[test]
+fn alta_values_reads_files_without_param_out() {
+    use alta::AltaValues::{Brdf, BrdfCos};
+    let path = tape_fixture_path();
+    assert!(!TAPE_NO_PARAM_OUT.contains("#PARAM_OUT"));
+    assert_eq!(readers::detect(&path).unwrap(), Format::AltaText);
+    let file = path.display().to_string();
+
+    // Without the option: refused, naming the file and the option's two values.
+    let e = err_of(readers::load(&path, &with_assumed()));
+    assert!(
+        e.starts_with(&format!("{file}: missing #PARAM_OUT line"))
+            && e.contains("--alta-values brdf (the BRDF")
+            && e.contains("--alta-values brdf-cos (BRDF × cos θo)"),
+        "{e}"
+    );
+
+    // brdf-cos: as #PARAM_OUT INV_STERADIAN_COSINE_FACTOR, sample for sample (the three
+    // grazing rows dropped), and the notices say where the value kind came from.
+    let cos = readers::load(&path, &assumed_with(Some(BrdfCos))).unwrap();
+    let header = tape_with_param_out("INV_STERADIAN_COSINE_FACTOR");
+    let want = alta::parse(&header, "tape.dat", &with_assumed()).unwrap();
+    assert_eq!(want.len(), 27);
+    assert_same_samples(&cos, &want, "brdf-cos");
+    let notes = cos.notices.join("\n");
+    assert!(
+        notes.contains("value kind taken from --alta-values brdf-cos")
+            && notes.contains("divided by cos θo")
+            && notes.contains("3 rows at grazing"),
+        "{notes}"
+    );
+    assert!(
+        cos.meta["source_format"].contains("from --alta-values brdf-cos"),
+        "{:?}",
+        cos.meta
+    );
+    // The division itself: the normal-view row of θi = 15° (file value 0.635511).
+    let s = &cos.samples[0];
+    assert!(
+        s.theta_o.abs() < 1e-9 && (s.value - 0.635511).abs() < 1e-12,
+        "{s:?}"
+    );
+    let s = &cos.samples[3]; // θo = 60° (1.047198 rad in the file): 0.175 / cos θo
+    assert!(
+        (s.theta_o.to_degrees() - 60.0).abs() < 1e-4
+            && (s.value * s.theta_o.cos() - 0.175).abs() < 1e-12,
+        "{s:?}"
+    );
+
+    // brdf: as #PARAM_OUT INV_STERADIAN, every row kept.
+    let plain = readers::load(&path, &assumed_with(Some(Brdf))).unwrap();
+    let want_plain = alta::parse(
+        &tape_with_param_out("INV_STERADIAN"),
+        "tape.dat",
+        &with_assumed(),
+    )
+    .unwrap();
+    assert_eq!(want_plain.len(), 30);
+    assert_same_samples(&plain, &want_plain, "brdf");
+    let notes = plain.notices.join("\n");
+    assert!(
+        notes.contains("value kind taken from --alta-values brdf (the BRDF")
+            && !notes.contains("divided by cos θo"),
+        "{notes}"
+    );
+
+    // A header that agrees with the option: read as usual, no notice about the option.
+    for (out, v, n) in [
+        ("INV_STERADIAN_COSINE_FACTOR", BrdfCos, 27),
+        ("INV_STERADIAN", Brdf, 30),
+    ] {
+        let d = alta::parse(
+            &tape_with_param_out(out),
+            "tape.dat",
+            &assumed_with(Some(v)),
+        )
+        .unwrap_or_else(|e| panic!("{out} with {v}: {e}"));
+        assert_eq!(d.len(), n);
+        assert!(
+            !d.notices.iter().any(|m| m.contains("--alta-values")),
+            "{:?}",
+            d.notices
+        );
+    }
+
+    // ALTA's own UNKNOWN_OUTPUT says no more than a missing line.
+    let unknown = tape_with_param_out("UNKNOWN_OUTPUT");
+    let e = err_of(alta::parse(&unknown, "tape.dat", &with_assumed()));
+    assert!(
+        e.starts_with("tape.dat:6: #PARAM_OUT UNKNOWN_OUTPUT") && e.contains("--alta-values"),
+        "{e}"
+    );
+    let d = alta::parse(&unknown, "tape.dat", &assumed_with(Some(BrdfCos))).unwrap();
+    assert_same_samples(&d, &want, "UNKNOWN_OUTPUT with brdf-cos");
+
+    // Other readers ignore the option.
+    let csv = want.to_csv();
+    let a = Dataset::parse(&csv, "t.csv", &ReadOptions::default()).unwrap();
+    let b = Dataset::parse(&csv, "t.csv", &assumed_with(Some(Brdf))).unwrap();
+    assert_same_samples(&a, &b, "v1 CSV");
+}
+
+#[test]
+fn alta_values_disagreeing_with_param_out_is_refused() {
+    use alta::AltaValues::{Brdf, BrdfCos};
+    for (out, v, meaning) in [
+        ("INV_STERADIAN", BrdfCos, "(the BRDF, sr⁻¹)"),
+        ("INV_STERADIAN_COSINE_FACTOR", Brdf, "(BRDF × cos θo)"),
+        ("RGB_COLOR", Brdf, "(R, G, B BRDF values)"),
+        ("RGB_COLOR", BrdfCos, "(R, G, B BRDF values)"),
+    ] {
+        let text = tape_with_param_out(out);
+        let e = err_of(alta::parse(&text, "tape.dat", &assumed_with(Some(v))));
+        let want = format!(
+            "tape.dat:6: #PARAM_OUT {out} {meaning} disagrees with --alta-values {} ({})",
+            v.name(),
+            v.meaning()
+        );
+        assert_eq!(e, want);
+    }
+    // The option describes one output: a three-output file without #PARAM_OUT is refused
+    // with or without it, saying what the header needs.
+    let three = "#DIM 3 3\n#VS 0\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n0.2 0.3 0.1 0.5 0.5 0.5\n";
+    for v in [None, Some(Brdf), Some(BrdfCos)] {
+        let e = err_of(alta::parse(three, "rgb.dat", &assumed_with(v)));
+        assert!(
+            e.starts_with("rgb.dat: missing #PARAM_OUT line")
+                && e.contains("3 outputs")
+                && e.contains("#PARAM_OUT RGB_COLOR"),
+            "{e}"
+        );
+    }
+    // A header that is not read at all stays an error naming it, option or not.
+    let e = err_of(alta::parse(
+        &tape_with_param_out("XYZ_COLOR"),
+        "tape.dat",
+        &assumed_with(Some(Brdf)),
+    ));
+    assert!(e.starts_with("tape.dat:6: #PARAM_OUT XYZ_COLOR"), "{e}");
+}
+
+// ---------------------------------------------------------------------------------------
 // ALTA: malformed input, each error naming file and line
 
 fn alta_err(text: &str) -> String {
@@ -365,11 +560,7 @@ fn alta_malformed_headers() {
         ),
         (
             format!("#DIM 3 1\n{ok_in}{body}"),
-            vec![
-                "bad.alta:",
-                "missing #PARAM_OUT",
-                "INV_STERADIAN_COSINE_FACTOR",
-            ],
+            vec!["bad.alta:", "missing #PARAM_OUT", "--alta-values brdf-cos"],
         ),
         (
             format!("#DIM 3 1\n{ok_in}#PARAM_OUT XYZ_COLOR\n{body}"),

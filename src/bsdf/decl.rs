@@ -27,6 +27,20 @@ pub enum Scale {
     Logit,
 }
 
+/// What a parameter is to a lobe of its model: its angular width, its amplitude, or
+/// neither. `diagnose` seeds a new lobe's width and amplitude from the residuals it is
+/// meant to explain (a misfit within 5° of the retro direction seeds a lobe about that
+/// wide), besides the random restarts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LobePart {
+    Other,
+    /// A GGX-like roughness α: the lobe's angular half-width at half maximum is about
+    /// 1.3 α radians (measured from its axis to the direction it scatters to).
+    Width,
+    /// A scale the lobe is proportional to.
+    Amplitude,
+}
+
 /// One parameter, declared once by the model that owns it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamDecl {
@@ -45,6 +59,8 @@ pub struct ParamDecl {
     pub neutral: Option<f64>,
     /// A roughness that gets one value per measured φ plane under `+peraxis`.
     pub per_axis: bool,
+    /// What the parameter is to a lobe ([`LobePart`]).
+    pub lobe: LobePart,
 }
 
 impl ParamDecl {
@@ -65,6 +81,7 @@ impl ParamDecl {
             doc,
             neutral: None,
             per_axis: false,
+            lobe: LobePart::Other,
         }
     }
     /// One value per channel.
@@ -125,6 +142,20 @@ impl ParamDecl {
     pub const fn per_axis(self) -> Self {
         ParamDecl {
             per_axis: true,
+            ..self
+        }
+    }
+    /// A lobe's width ([`LobePart::Width`]).
+    pub const fn lobe_width(self) -> Self {
+        ParamDecl {
+            lobe: LobePart::Width,
+            ..self
+        }
+    }
+    /// A lobe's amplitude ([`LobePart::Amplitude`]).
+    pub const fn lobe_amplitude(self) -> Self {
+        ParamDecl {
+            lobe: LobePart::Amplitude,
             ..self
         }
     }

@@ -68,8 +68,12 @@ impl GgxLobe {
 }
 
 /// Parameters of a GGX lobe (also the `lobe.*` parameters of `fa`).
-pub const KS: ParamDecl = ParamDecl::rgb("ks", 0.0, 1.0, 0.5, "specular scale").neutral_at(0.0);
-pub const ALPHA: ParamDecl = ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "GGX roughness").log();
+pub const KS: ParamDecl = ParamDecl::rgb("ks", 0.0, 1.0, 0.5, "specular scale")
+    .neutral_at(0.0)
+    .lobe_amplitude();
+pub const ALPHA: ParamDecl = ParamDecl::shared("alpha", 1e-3, 1.0, 0.2, "GGX roughness")
+    .log()
+    .lobe_width();
 pub const ETA: ParamDecl = ParamDecl::shared("eta", 1.0, 5.0, 1.5, "refractive index")
     // η = 1: no Fresnel reflection, so the lobe vanishes (and fa's base is unattenuated).
     .neutral_at(1.0);

@@ -9,7 +9,7 @@
 //! that the node functions read — the same layout on the CPU and the GPU.
 
 use crate::data::Kind;
-pub use decl::{Builder, Entry, InCatalogue, ParamDecl, Role, Scale};
+pub use decl::{Builder, Entry, InCatalogue, LobePart, ParamDecl, Role, Scale};
 use glam::DVec3;
 pub use registry::{
     base_arg, bases_of, build, catalogue, catalogue_for, every_spec, no_arg, spec_kind,
@@ -45,6 +45,7 @@ models! {
     rmg => [ENTRY],
     fa => [ENTRY],
     retro => [ENTRY],
+    coat => [ENTRY],
     mrm => [ENTRY, F82_ENTRY],
     falloff => [ENTRY],
     btdf => [ENTRY, SCALE_ENTRY, ABSORB_ENTRY, DIFFUSE_ENTRY],

@@ -114,10 +114,14 @@ fn mrm_parts(
 
 /// The lobe's scale (the paper's colour multiplier ρ): the lobe vanishes at k_r = 0.
 pub const KR: ParamDecl =
-    ParamDecl::rgb("kr", 0.0, 10.0, 0.5, "retro lobe scale").neutral_at(0.0);
+    ParamDecl::rgb("kr", 0.0, 10.0, 0.5, "retro lobe scale")
+        .neutral_at(0.0)
+        .lobe_amplitude();
 /// GGX roughness of the lobe (the paper's roughness r is √α: r = 0.23 is α = 0.053).
 pub const ALPHA_R: ParamDecl =
-    ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness").log();
+    ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness")
+        .log()
+        .lobe_width();
 pub const ETA_R: ParamDecl = ParamDecl::shared(
     "eta_r",
     1.0,
@@ -128,7 +132,9 @@ pub const ETA_R: ParamDecl = ParamDecl::shared(
 /// The scale of `+mrm82`: the paper's colour multiplier ρ, bounded by 1 so that the lobe's
 /// albedo (≤ k_r · max F ≤ k_r) never exceeds 1.
 pub const KR82: ParamDecl =
-    ParamDecl::rgb("kr", 0.0, 1.0, 0.5, "retro lobe scale (albedo-like)").neutral_at(0.0);
+    ParamDecl::rgb("kr", 0.0, 1.0, 0.5, "retro lobe scale (albedo-like)")
+        .neutral_at(0.0)
+        .lobe_amplitude();
 /// F0 of the F82-tint Fresnel. Not a scale: Schlick's S(μ) → 1 at grazing for any F0, so
 /// the lobe vanishes only at k_r = 0.
 pub const F0: ParamDecl = ParamDecl::shared(

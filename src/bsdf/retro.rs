@@ -40,8 +40,12 @@ impl Bsdf for Retro {
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
-            ParamDecl::rgb("kr", 0.0, 10.0, 0.1, "retroreflective lobe scale").neutral_at(0.0),
-            ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness").log(),
+            ParamDecl::rgb("kr", 0.0, 10.0, 0.1, "retroreflective lobe scale")
+                .neutral_at(0.0)
+                .lobe_amplitude(),
+            ParamDecl::shared("alpha_r", 1e-3, 1.0, 0.1, "retro lobe GGX roughness")
+                .log()
+                .lobe_width(),
         ]
     }
     fn child_roles(&self) -> &'static [&'static str] {

@@ -73,6 +73,12 @@ pub struct DiagnoseArgs {
     /// software device such as lavapipe, or the CPU backend, it only adds contention).
     #[arg(long)]
     pub parallel: bool,
+    /// Dense data: with more than N samples (and a quarter), search the path on a
+    /// stratified subsample of N samples, then refit its models on all the data and keep
+    /// the steps the full data confirm (F test and BIC again there). 0: always search on
+    /// all the data.
+    #[arg(long, value_name = "N", default_value_t = 8000)]
+    pub explore: usize,
 }
 
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
@@ -129,6 +135,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
             seed: a.seed,
         },
         constraints,
+        explore: a.explore,
         ..Default::default()
     };
     println!(

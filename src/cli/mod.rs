@@ -3,6 +3,7 @@
 //! backend) are declared once here and flattened into each command, so every command
 //! accepts the same spelling of the same option.
 
+use crate::data::readers::alta::AltaValues;
 use crate::data::readers::{self, merl, parse_assume_arg};
 use crate::data::{Dataset, ReadOptions};
 use crate::engine::BackendChoice;
@@ -122,6 +123,11 @@ pub struct DataArgs {
     /// has about 1.5 million; 0 keeps all).
     #[arg(long, value_name = "N", default_value_t = merl::DEFAULT_MAX_SAMPLES)]
     pub max_samples: usize,
+    /// ALTA files without a #PARAM_OUT line: what their values are (such files are
+    /// refused without it). A file whose #PARAM_OUT disagrees is refused; other formats
+    /// ignore the option.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub alta_values: Option<AltaValues>,
 }
 
 impl DataArgs {
@@ -138,6 +144,7 @@ impl DataArgs {
                 .map_err(|e| anyhow::anyhow!("--assume-uncertainty: {e}"))?,
             band_nm: self.band,
             max_samples: Some(self.max_samples),
+            alta_values: self.alta_values,
         })
     }
 

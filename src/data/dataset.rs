@@ -200,6 +200,11 @@ pub struct ReadOptions {
     /// MERL tables: keep at most this many measured cells, a deterministic subsample;
     /// `None` is [`crate::data::readers::merl::DEFAULT_MAX_SAMPLES`], `Some(0)` keeps all.
     pub max_samples: Option<usize>,
+    /// ALTA text files without `#PARAM_OUT`: what their values are (the BRDF, or BRDF ×
+    /// cos θo). Without it such files are refused; a file whose `#PARAM_OUT` disagrees is
+    /// refused, naming both. Other formats ignore it
+    /// ([`crate::data::readers::alta`]).
+    pub alta_values: Option<crate::data::readers::alta::AltaValues>,
 }
 
 pub const COLUMNS: [&str; 7] = [

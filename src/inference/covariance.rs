@@ -28,6 +28,58 @@ pub struct Covariance {
     pub std: Vec<Option<f64>>,
     pub correlation: Vec<Vec<Option<f64>>>,
     pub warnings: Vec<String>,
+    /// The directions of parameter space along which the data constrain the fit weakly
+    /// (a ridge of the loss): each a unit vector in the parameters' unit boxes, as (flat
+    /// index, component) for its components of at least 0.2 in size, with its standard
+    /// uncertainty in the unit box (at least [`RIDGE_UNIT_STD`]; infinite where the data
+    /// do not constrain it at all). Weakest first.
+    pub ridges: Vec<Ridge>,
+}
+
+/// One weakly determined direction ([`Covariance::ridges`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ridge {
+    pub components: Vec<(usize, f64)>,
+    pub unit_std: f64,
+}
+
+/// A direction whose standard uncertainty in the unit box exceeds this is a ridge: the
+/// data locate the fit along it to no better than a tenth of the parameters' ranges.
+pub const RIDGE_UNIT_STD: f64 = 0.1;
+
+impl Ridge {
+    /// "+0.71 lobe.eta − 0.70 base.rho[0]".
+    pub fn words(&self, names: &[String]) -> String {
+        let mut s = String::new();
+        for (k, &(j, c)) in self.components.iter().enumerate() {
+            let sign = if c < 0.0 { '−' } else { '+' };
+            if k == 0 {
+                s += &format!(
+                    "{}{:.2} {}",
+                    if c < 0.0 { "−" } else { "" },
+                    c.abs(),
+                    names[j]
+                );
+            } else {
+                s += &format!(" {sign} {:.2} {}", c.abs(), names[j]);
+            }
+        }
+        s
+    }
+}
+
+/// The derivative of a parameter's physical value with respect to its unit-box
+/// coordinate at `value` (central differences, one-sided at the box's edges).
+pub fn unit_slope(decl: &crate::bsdf::ParamDecl, value: f64) -> f64 {
+    let u = decl.to_unit(value);
+    let (lo, hi) = ((u - 1e-4).max(0.0), (u + 1e-4).min(1.0));
+    (decl.from_unit(hi) - decl.from_unit(lo)) / (hi - lo)
+}
+
+/// A standard uncertainty in the parameter's unit box (its share of the declared range,
+/// as the optimizers see it).
+pub fn unit_std(decl: &crate::bsdf::ParamDecl, value: f64, std: f64) -> f64 {
+    std / unit_slope(decl, value).abs().max(1e-300)
 }
 
 /// Unit-box step of the finite differences.
@@ -173,6 +225,7 @@ pub fn covariance(
         std: vec![None; p],
         correlation: vec![vec![None; p]; p],
         warnings: vec![],
+        ridges: vec![],
     };
     if jtj.iter().any(|v| !v.is_finite()) {
         out.warnings
@@ -201,6 +254,7 @@ pub fn covariance(
         }
     }
     let cov = &inv * meat * &inv * birge;
+    out.ridges = ridges(&jtj, birge, free, flat, decls);
     for j in 0..p {
         let v = cov[(j, j)];
         if !undetermined[j] && v.is_finite() && v >= 0.0 {
@@ -285,6 +339,54 @@ pub fn covariance(
     Ok(expand(out, free, model.dim))
 }
 
+/// The weak directions of the normal matrix `jtj` (free parameters, physical units) in
+/// the parameters' unit boxes: the eigenvectors of D·JᵀJ·D (D the unit-box slopes) whose
+/// standard uncertainty √(birge/λ) exceeds [`RIDGE_UNIT_STD`], mapped to flat indices.
+fn ridges(
+    jtj: &DMatrix<f64>,
+    birge: f64,
+    free: &[usize],
+    flat: &[f64],
+    decls: &[crate::bsdf::ParamDecl],
+) -> Vec<Ridge> {
+    let p = free.len();
+    let d: Vec<f64> = free
+        .iter()
+        .map(|&j| unit_slope(&decls[j], flat[j]))
+        .collect();
+    let scaled = DMatrix::from_fn(p, p, |a, b| jtj[(a, b)] * d[a] * d[b]);
+    if scaled.iter().any(|v| !v.is_finite()) {
+        return vec![];
+    }
+    let eig = scaled.symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    let mut out: Vec<Ridge> = (0..p)
+        .filter_map(|m| {
+            let l = eig.eigenvalues[m];
+            let unit_std = if l > RCOND * lmax && l > 0.0 {
+                (birge / l).sqrt()
+            } else {
+                f64::INFINITY
+            };
+            if unit_std < RIDGE_UNIT_STD {
+                return None;
+            }
+            let v = eig.eigenvectors.column(m);
+            let mut components: Vec<(usize, f64)> = (0..p)
+                .filter(|&a| v[a].abs() >= 0.2)
+                .map(|a| (free[a], v[a]))
+                .collect();
+            components.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+            Some(Ridge {
+                components,
+                unit_std,
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| b.unit_std.total_cmp(&a.unit_std));
+    out
+}
+
 /// The covariance of the free parameters laid out over the model's whole flat vector
 /// (fixed parameters: no standard uncertainty, no correlation).
 fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
@@ -292,6 +394,7 @@ fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
         std: vec![None; dim],
         correlation: vec![vec![None; dim]; dim],
         warnings: free_cov.warnings,
+        ridges: free_cov.ridges,
     };
     for (a, &ja) in free.iter().enumerate() {
         out.std[ja] = free_cov.std[a];

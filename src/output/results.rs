@@ -242,6 +242,7 @@ impl DataFile {
                 && !opts.allow_zero_uncertainty
                 && opts.assume_uncertainty.is_none()
                 && opts.band_nm.is_none()
+                && opts.alta_values.is_none()
             {
                 content_hash(&bytes)
             } else {

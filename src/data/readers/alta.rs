@@ -79,8 +79,16 @@
 //!   usual 450/550/650 channel set).
 //!
 //! A file with one output gives no wavelength; its channel is labelled
-//! [`NOMINAL_MONO_NM`] = 550 nm, and a notice says so. `#PARAM_OUT` is required: a file
-//! without it (`UNKNOWN_OUTPUT` for ALTA) could hold BRDF or BRDF × cos θo values.
+//! [`NOMINAL_MONO_NM`] = 550 nm, and a notice says so.
+//!
+//! **Files without `#PARAM_OUT`** (or with `#PARAM_OUT UNKNOWN_OUTPUT`, ALTA's name for
+//! it) could hold BRDF or BRDF × cos θo values, and real files often lack the line. The
+//! user says which with [`ReadOptions::alta_values`] (`--alta-values brdf|brdf-cos`,
+//! [`AltaValues`]): `brdf` reads them as `INV_STERADIAN`, `brdf-cos` as
+//! `INV_STERADIAN_COSINE_FACTOR` (divided by cos θo), and a notice says the value kind
+//! came from the option. Without it such a file is refused with an error naming the
+//! option. A file whose `#PARAM_OUT` disagrees with the option is refused, naming both;
+//! one that agrees is read as usual.
 
 use super::{mark_assumed, require_assumption, Progress};
 use crate::data::{
@@ -295,12 +303,64 @@ impl ParamOut {
             _ => 1,
         }
     }
+
+    /// What the values are, in words (for messages).
+    pub fn meaning(self) -> &'static str {
+        match self {
+            ParamOut::InvSteradian => "the BRDF, sr⁻¹",
+            ParamOut::InvSteradianCosineFactor => "BRDF × cos θo",
+            ParamOut::RgbColor => "R, G, B BRDF values",
+        }
+    }
+}
+
+/// What the values of an ALTA file without `#PARAM_OUT` are (`--alta-values`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AltaValues {
+    /// The values are the BRDF in sr⁻¹ (what `#PARAM_OUT INV_STERADIAN` says).
+    Brdf,
+    /// The values are BRDF × cos θo, θo the outgoing (view) direction's polar angle; they
+    /// are divided by cos θo, rows at grazing θo dropped (what `#PARAM_OUT
+    /// INV_STERADIAN_COSINE_FACTOR` says).
+    BrdfCos,
+}
+
+impl AltaValues {
+    /// The option's spelling of the value.
+    pub fn name(self) -> &'static str {
+        match self {
+            AltaValues::Brdf => "brdf",
+            AltaValues::BrdfCos => "brdf-cos",
+        }
+    }
+
+    /// What the values are, in words.
+    pub fn meaning(self) -> &'static str {
+        ParamOut::from(self).meaning()
+    }
+}
+
+impl From<AltaValues> for ParamOut {
+    fn from(v: AltaValues) -> ParamOut {
+        match v {
+            AltaValues::Brdf => ParamOut::InvSteradian,
+            AltaValues::BrdfCos => ParamOut::InvSteradianCosineFactor,
+        }
+    }
+}
+
+impl std::fmt::Display for AltaValues {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// The validated header.
 struct Header {
     param_in: ParamIn,
     param_out: ParamOut,
+    /// `Some` when the file has no `#PARAM_OUT` and the output kind came from the option.
+    from_option: Option<AltaValues>,
     /// Interval columns per output (0, 1 or 2).
     vs: Vec<usize>,
     /// (key, value) of the other header lines.
@@ -394,7 +454,7 @@ pub fn parse_reader<R: BufRead>(
             continue;
         }
         if state.is_none() {
-            let header = parse_header(&keys, &order, file)?;
+            let header = parse_header(&keys, &order, file, opts)?;
             let assumed = if header.vs.contains(&0) {
                 Some(require_assumption(
                     file,
@@ -421,7 +481,7 @@ pub fn parse_reader<R: BufRead>(
     }
     let Some((h, mut b, assumed)) = state else {
         // No data line: say what is wrong with the header first, if anything.
-        parse_header(&keys, &order, file)?;
+        parse_header(&keys, &order, file, opts)?;
         return Err(ferr("no data rows".into()));
     };
     progress(Progress {
@@ -432,9 +492,13 @@ pub fn parse_reader<R: BufRead>(
     meta.insert(
         "source_format".to_string(),
         format!(
-            "ALTA text, #PARAM_IN {} #PARAM_OUT {}",
+            "ALTA text, #PARAM_IN {} #PARAM_OUT {}{}",
             h.param_in.name(),
-            h.param_out.name()
+            h.param_out.name(),
+            match h.from_option {
+                Some(v) => format!(" (not in the file: from --alta-values {v})"),
+                None => String::new(),
+            }
         ),
     );
     let mut material = Path::new(file)
@@ -457,6 +521,13 @@ pub fn parse_reader<R: BufRead>(
             ""
         }
     )];
+    if let Some(v) = h.from_option {
+        notes.push(format!(
+            "{file}: #PARAM_OUT not given: value kind taken from --alta-values {v} ({}; read as #PARAM_OUT {})",
+            v.meaning(),
+            h.param_out.name()
+        ));
+    }
     match h.param_out {
         ParamOut::InvSteradianCosineFactor => notes.push(format!(
             "{file}: INV_STERADIAN_COSINE_FACTOR values divided by cos θo (the view direction's) to give the BRDF"
@@ -501,6 +572,7 @@ fn parse_header(
     keys: &BTreeMap<String, (usize, String)>,
     order: &[String],
     file: &str,
+    opts: &ReadOptions,
 ) -> Result<Header, DataError> {
     let ferr = |msg: String| DataError::File {
         file: file.into(),
@@ -566,19 +638,7 @@ fn parse_header(
             ),
         ));
     }
-    let Some((out_line, pout)) = keys.get("PARAM_OUT") else {
-        return Err(ferr(
-            "missing #PARAM_OUT line: say whether the values are INV_STERADIAN (the BRDF), INV_STERADIAN_COSINE_FACTOR (BRDF × cos θo) or RGB_COLOR".into(),
-        ));
-    };
-    let param_out = ParamOut::parse(pout.trim()).ok_or_else(|| {
-        lerr(
-            *out_line,
-            format!(
-                "#PARAM_OUT {pout} is not read here (supported: INV_STERADIAN, INV_STERADIAN_COSINE_FACTOR, RGB_COLOR)"
-            ),
-        )
-    })?;
+    let (param_out, from_option) = param_out(keys, file, n_out, opts.alta_values)?;
     if n_out != param_out.dim() {
         return Err(lerr(
             *dim_line,
@@ -623,9 +683,73 @@ fn parse_header(
     Ok(Header {
         param_in,
         param_out,
+        from_option,
         vs,
         other,
     })
+}
+
+/// The output kind from `#PARAM_OUT` and `--alta-values` ([`ReadOptions::alta_values`]):
+/// `(kind, Some(option))` when the file does not say and the option does.
+fn param_out(
+    keys: &BTreeMap<String, (usize, String)>,
+    file: &str,
+    n_out: usize,
+    option: Option<AltaValues>,
+) -> Result<(ParamOut, Option<AltaValues>), DataError> {
+    let ferr = |msg: String| DataError::File {
+        file: file.into(),
+        msg,
+    };
+    let lerr = |line: usize, msg: String| DataError::Line {
+        file: file.into(),
+        line,
+        msg,
+    };
+    // ALTA writes UNKNOWN_OUTPUT for a file that does not say: the same as no line.
+    let given = keys
+        .get("PARAM_OUT")
+        .filter(|(_, v)| v.trim() != "UNKNOWN_OUTPUT");
+    let Some((out_line, pout)) = given else {
+        let unknown = keys.get("PARAM_OUT").map(|(line, _)| *line);
+        let err = |msg: String| match unknown {
+            Some(line) => lerr(line, format!("#PARAM_OUT UNKNOWN_OUTPUT: {msg}")),
+            None => ferr(format!("missing #PARAM_OUT line: {msg}")),
+        };
+        return match option {
+            _ if n_out != 1 => Err(err(format!(
+                "#DIM gives {n_out} outputs, and --alta-values describes one (brdf or brdf-cos); R, G, B BRDF values need the header line #PARAM_OUT RGB_COLOR"
+            ))),
+            None => Err(err(format!(
+                "say what the values are with --alta-values brdf ({}) or --alta-values brdf-cos ({})",
+                AltaValues::Brdf.meaning(),
+                AltaValues::BrdfCos.meaning()
+            ))),
+            Some(v) => Ok((v.into(), Some(v))),
+        };
+    };
+    let param_out = ParamOut::parse(pout.trim()).ok_or_else(|| {
+        lerr(
+            *out_line,
+            format!(
+                "#PARAM_OUT {pout} is not read here (supported: INV_STERADIAN, INV_STERADIAN_COSINE_FACTOR, RGB_COLOR)"
+            ),
+        )
+    })?;
+    if let Some(v) = option {
+        if ParamOut::from(v) != param_out {
+            return Err(lerr(
+                *out_line,
+                format!(
+                    "#PARAM_OUT {} ({}) disagrees with --alta-values {v} ({})",
+                    param_out.name(),
+                    param_out.meaning(),
+                    v.meaning()
+                ),
+            ));
+        }
+    }
+    Ok((param_out, None))
 }
 
 /// One data line to its rows (one per output), `None` for a grazing cosine-weighted row.

@@ -3,6 +3,7 @@
 //! the current spec. [`super::extensions`] generates the candidates from [`EFFECTS`] and
 //! from nothing else; the effect names are written here only.
 
+use super::regions::Around;
 use crate::data::Kind;
 
 /// A physical effect a model may be missing (docs/diagnose.md; the names are a contract).
@@ -77,6 +78,9 @@ pub struct EffectEntry {
     /// How the extensions that add the effect are made; empty for an effect that is
     /// declared but not generated yet.
     pub rules: &'static [Rule],
+    /// For an effect that adds a lobe: the direction its residual signature is centred
+    /// on, whose flagged regions seed the new lobe's width (`diagnose`'s evidence starts).
+    pub lobe_around: Option<Around>,
 }
 
 const fn rule(kind: Kind, make: Make, nested: bool) -> Rule {
@@ -100,18 +104,33 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::SpecularLobe,
         name: "specular_lobe",
         signature: "excess around the mirror direction",
-        rules: &[rule(
-            Kind::Brdf,
-            Make::Wrap {
-                combinators: &["fa"],
-            },
-            true,
-        )],
+        // A bare diffuse base gets the Fresnel aggregate's lobe; any model, one with a lobe
+        // of its own too, gets a second (coat) lobe: real coated materials show a sharp
+        // reflection off a smooth top film over a broad one.
+        rules: &[
+            rule(
+                Kind::Brdf,
+                Make::Wrap {
+                    combinators: &["fa"],
+                },
+                true,
+            ),
+            rule(
+                Kind::Brdf,
+                Make::Suffix {
+                    name: "coat",
+                    min_planes: 1,
+                },
+                true,
+            ),
+        ],
+        lobe_around: Some(Around::Mirror),
     },
     EffectEntry {
         effect: Effect::LongTail,
@@ -138,6 +157,7 @@ pub const EFFECTS: &[EffectEntry] = &[
                 true,
             ),
         ],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::Scale,
@@ -151,6 +171,7 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::Absorption,
@@ -164,6 +185,7 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::DiffuseFloor,
@@ -187,6 +209,7 @@ pub const EFFECTS: &[EffectEntry] = &[
                 true,
             ),
         ],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::GrazingDecay,
@@ -199,6 +222,7 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
     // The MRM lobe with the F82-tint Fresnel (docs/models.md): k_r = 0 (the declared
     // neutral) is the current model, and F0 = F82 = 1 gives the Fresnel-free back-vector
@@ -228,6 +252,7 @@ pub const EFFECTS: &[EffectEntry] = &[
                 true,
             ),
         ],
+        lobe_around: Some(Around::Retro),
     },
     // The entrance-angle efficiency (μi μo)^q of the retro lobe already in the model (q = 0
     // is the current model). Only a spec with a retro lobe (`+retro`, `+mrm`, `+mrm82`)
@@ -244,6 +269,7 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
     EffectEntry {
         effect: Effect::Anisotropy,
@@ -257,6 +283,7 @@ pub const EFFECTS: &[EffectEntry] = &[
             },
             true,
         )],
+        lobe_around: None,
     },
 ];
 

@@ -46,7 +46,7 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
 ///
 /// BRDF:
 /// - `backscatter`: `lambert` → `on`, `eon`, `vmf` (also inside `fa`, `dmg`, `rmg`);
-/// - `specular_lobe`: a diffuse base B → `fa(B)`;
+/// - `specular_lobe`: a diffuse base B → `fa(B)`; any M → `M+coat` (a second lobe);
 /// - `diffuse_floor`: `ggx` → `fa(lambert)` (a Lambertian term under the lobe);
 /// - `grazing_decay`: a base B → `dmg(B)`, `rmg(B)`;
 /// - `retro_lobe`: M → `M+retro` (back-vector GGX) and `M+mrm82` (the MRM lobe);
@@ -198,6 +198,7 @@ mod tests {
                     ("eon", Backscatter),
                     ("vmf", Backscatter),
                     ("fa(lambert)", SpecularLobe),
+                    ("lambert+coat", SpecularLobe),
                     ("dmg(lambert)", GrazingDecay),
                     ("rmg(lambert)", GrazingDecay),
                     ("lambert+retro", RetroLobe),
@@ -211,6 +212,7 @@ mod tests {
                     ("fa(on)+retro", Backscatter),
                     ("fa(eon)+retro", Backscatter),
                     ("fa(vmf)+retro", Backscatter),
+                    ("fa(lambert)+retro+coat", SpecularLobe),
                     ("fa(lambert)+retro+falloff", RetroFalloff),
                 ],
             ),
@@ -219,6 +221,7 @@ mod tests {
                 &brdf,
                 &[
                     ("fa(eon)+mrm82", SpecularLobe),
+                    ("eon+mrm82+coat", SpecularLobe),
                     ("dmg(eon)+mrm82", GrazingDecay),
                     ("rmg(eon)+mrm82", GrazingDecay),
                     ("eon+mrm82+falloff", RetroFalloff),
@@ -228,6 +231,7 @@ mod tests {
                 "ggx",
                 &brdf,
                 &[
+                    ("ggx+coat", SpecularLobe),
                     ("fa(lambert)", DiffuseFloor),
                     ("dmg(ggx)", GrazingDecay),
                     ("rmg(ggx)", GrazingDecay),

@@ -39,6 +39,7 @@
 //! [`diagnose`] driver), `json` (docs/output.md output), `report` (SVG panels and HTML).
 
 mod effects;
+mod explore;
 mod extensions;
 mod fit;
 mod json;
@@ -50,6 +51,7 @@ mod score;
 mod testdata;
 
 pub use effects::Effect;
+pub use explore::subsample;
 pub use extensions::{embed, extensions, render_spec, Candidate};
 pub use fit::{bootstrap_p, fit_model, FitResult};
 pub use path::diagnose;
@@ -91,6 +93,10 @@ pub struct DiagnoseOptions {
     /// `--fix`, `--bounds`, `--prior`, applied to every model of the path that has the
     /// parameter named (a fixed value stays fixed in every extension).
     pub constraints: crate::inference::constraints::ConstraintSpec,
+    /// Data with more samples than this (and a quarter) are explored on a stratified
+    /// subsample of this many, and the path found is confirmed on all of them
+    /// (`explore`); 0: always on all data.
+    pub explore: usize,
 }
 
 impl Default for DiagnoseOptions {
@@ -108,6 +114,7 @@ impl Default for DiagnoseOptions {
             parallel: false,
             bootstrap: Default::default(),
             constraints: Default::default(),
+            explore: 8000,
         }
     }
 }

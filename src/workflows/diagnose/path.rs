@@ -5,13 +5,17 @@ use super::fit::{calibrate_round, fit_all};
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
 use super::{
-    describe_regions, extensions, fit_model, DiagnoseOptions, Diagnosis, FitResult, Scored, Step,
+    describe_regions, extensions, fit_model, Candidate, DiagnoseOptions, Diagnosis, FitResult,
+    Scored, Step,
 };
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::Backend;
 use crate::inference::stats::{bic, format_p};
 use anyhow::{Context, Result};
+
+/// Every candidate fitted so far in a diagnosis, by spec (a failed fit by its error).
+type FitCache = std::collections::HashMap<String, std::result::Result<FitResult, String>>;
 
 /// Candidates whose share of the flagged misfit removed is within this of the best
 /// candidate's are tied; the BIC breaks ties.
@@ -87,6 +91,17 @@ fn removal_words(best: &Scored, scored: &[Scored]) -> String {
             );
         }
     }
+    // The largest misfit comes first: a step that leaves most of it must say so.
+    let best_there = scored
+        .iter()
+        .filter_map(|c| c.removal.first().map(|r| r.1))
+        .fold(f64::NEG_INFINITY, f64::max);
+    if *share < 0.2 {
+        s += &format!(
+            ". No candidate explains the largest misfit, {region} (the best removes {} of it): this step is adopted for the smaller misfit it does remove, on the numbers above",
+            pct(best_there.max(0.0))
+        );
+    }
     s
 }
 
@@ -150,8 +165,32 @@ fn adopt_step(
     } else {
         format!(" Where the residuals pointed: {removal}.")
     };
+    let mut notes = String::new();
+    if !best.on_bound.is_empty() {
+        notes += &format!(" On a bound: {}.", best.on_bound.join("; "));
+    }
+    if !best.identifiable_note.is_empty() {
+        notes += &format!(" Determined: {}.", best.identifiable_note);
+    }
+    let siblings: Vec<String> = scored
+        .iter()
+        .filter(|s| s.candidate.effect == effect && s.candidate.spec != best.candidate.spec)
+        .map(|s| match &s.fit {
+            Some(f) => format!(
+                "`{}` χ²_red = {:.3}, ΔBIC {:+.1} ({})",
+                s.candidate.spec, f.chi2_red, s.delta_bic, s.verdict
+            ),
+            None => format!("`{}` ({})", s.candidate.spec, s.verdict),
+        })
+        .collect();
+    if !siblings.is_empty() {
+        notes += &format!(
+            " The effect's other models this round: {}.",
+            siblings.join("; ")
+        );
+    }
     let evidence = format!(
-        "{} ({}): {test} (best of {m} candidates{runner}).{removal} Now {text}. {}",
+        "{} ({}): {test} (best of {m} candidates{runner}).{removal}{notes} Now {text}. {}",
         effect,
         effect.signature(),
         capitalize(&regions)
@@ -190,6 +229,7 @@ fn extend_path(
     backend: &dyn Backend,
     opts: &DiagnoseOptions,
     log: &mut dyn FnMut(String),
+    cache: &mut FitCache,
     mut steps: Vec<Step>,
 ) -> Result<(Vec<Step>, bool)> {
     loop {
@@ -225,13 +265,32 @@ fn extend_path(
             current.model.spec,
             backend.id()
         ));
-        let fits = fit_all(&cands, data, backend, opts, &current);
-        let m = cands.len();
         let flagged = flagged_regions(data, &current.z);
+        // A model met again on another path (backtracking) keeps its first fit: each fit
+        // is a multi-start search over the same data, its seeds a small part of it.
+        let todo: Vec<Candidate> = cands
+            .iter()
+            .filter(|c| !cache.contains_key(&c.spec))
+            .cloned()
+            .collect();
+        for (c, f) in todo
+            .iter()
+            .zip(fit_all(&todo, data, backend, opts, &current, &flagged))
+        {
+            cache.insert(c.spec.clone(), f.map_err(|e| format!("{e:#}")));
+        }
+        let fits: Vec<Result<FitResult>> = cands
+            .iter()
+            .map(|c| match &cache[&c.spec] {
+                Ok(f) => Ok(f.clone()),
+                Err(e) => Err(anyhow::anyhow!("{e}")),
+            })
+            .collect();
+        let m = cands.len();
         let mut scored: Vec<Scored> = cands
             .into_iter()
             .zip(fits)
-            .map(|(c, f)| score(data, &current, &flagged, c, f, m, opts.alpha))
+            .map(|(c, f)| score(data, &current, &flagged, c, f, m, opts))
             .collect();
         calibrate_round(&mut scored, data, backend, opts, &current, log);
         log(format!(
@@ -261,9 +320,7 @@ fn extend_path(
         }
         let best = choose(&scored).cloned();
         let Some(best) = best else {
-            let why = if scored.iter().any(|s| s.significant && s.identifiable) {
-                "the only significant extensions need a new parameter on a bound of its range"
-            } else if scored.iter().any(|s| s.significant) {
+            let why = if scored.iter().any(|s| s.significant) {
                 "the only significant extensions add parameters the data does not determine"
             } else {
                 "no extension improves the fit significantly; the remaining misfit is not one of the catalogue's effects, or the geometry cannot separate it"
@@ -300,7 +357,31 @@ fn path_bic(steps: &[Step], k: usize) -> f64 {
 /// whose final model has the lowest BIC is reported — the first that ends consistent, if
 /// any (an effect can mimic another at first, e.g. rough micrograins a coarsely sampled
 /// specular lobe).
+///
+/// Dense data (more than [`DiagnoseOptions::explore`] samples) are explored on a
+/// stratified subsample and the path is confirmed on all of them ([`super::explore`]).
 pub fn diagnose(
+    data: &Dataset,
+    start: &str,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+) -> Result<Diagnosis> {
+    if super::explore::dense(data, opts) {
+        let sub = super::explore::subsample(data, opts.explore);
+        log(format!(
+            "exploring on a stratified subsample of {} of the {} samples",
+            sub.len(),
+            data.len()
+        ));
+        let explored = diagnose_path(&sub, start, backend, opts, log)?;
+        return super::explore::confirm(explored, data, sub.len(), backend, opts, log);
+    }
+    diagnose_path(data, start, backend, opts, log)
+}
+
+/// [`diagnose`] on all of `data`.
+fn diagnose_path(
     data: &Dataset,
     start: &str,
     backend: &dyn Backend,
@@ -328,7 +409,8 @@ pub fn diagnose(
         candidates: vec![],
     };
     log_step(log, 0, &step0, data, opts);
-    let (greedy, ok) = extend_path(data, backend, opts, log, vec![step0])?;
+    let mut cache = FitCache::new();
+    let (greedy, ok) = extend_path(data, backend, opts, log, &mut cache, vec![step0])?;
     let mut best_path = greedy.clone();
     if !ok && opts.backtrack {
         for r in 0..greedy.len().saturating_sub(1) {
@@ -352,7 +434,7 @@ pub fn diagnose(
             let (step, _) = adopt_step(data, &steps[r].fit, alt, scored, opts);
             log_step(log, r + 1, &step, data, opts);
             steps.push(step);
-            let (path, consistent) = extend_path(data, backend, opts, log, steps)?;
+            let (path, consistent) = extend_path(data, backend, opts, log, &mut cache, steps)?;
             if path_bic(&path, data.len()) < path_bic(&best_path, data.len()) {
                 best_path = path;
                 if consistent {

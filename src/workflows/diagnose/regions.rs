@@ -4,11 +4,30 @@
 use crate::data::{Dataset, Kind, Sample};
 use glam::DVec3;
 
+/// The direction a cone-shaped region is centred on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Around {
+    Mirror,
+    Retro,
+    /// A BTDF curve's brightest sample.
+    Peak,
+}
+
+/// A region of the directions within `radius_deg` of a direction (`around`): what seeds
+/// the width of a new lobe meant to explain a misfit there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    pub around: Around,
+    pub radius_deg: f64,
+}
+
 /// Mean and RMS of z over one angular region (optionally restricted in θi).
 #[derive(Clone, Debug)]
 pub struct RegionStat {
     /// The region in words, e.g. "within 15° of the mirror direction for θi ≥ 30°".
     pub words: String,
+    /// The cone it is, where it is one.
+    pub cone: Option<Cone>,
     pub n: usize,
     pub mean: f64,
     pub rms: f64,
@@ -32,7 +51,7 @@ fn angle_deg(a: DVec3, b: DVec3) -> f64 {
         .to_degrees()
 }
 
-fn stat(words: String, mask: Vec<bool>, z: &[f64]) -> Option<RegionStat> {
+fn stat(words: String, cone: Option<Cone>, mask: Vec<bool>, z: &[f64]) -> Option<RegionStat> {
     let zs: Vec<f64> = z
         .iter()
         .zip(&mask)
@@ -48,6 +67,7 @@ fn stat(words: String, mask: Vec<bool>, z: &[f64]) -> Option<RegionStat> {
     let same_sign = zs.iter().filter(|v| v.signum() == mean.signum()).count() as f64 / n as f64;
     Some(RegionStat {
         words,
+        cone,
         n,
         mean,
         rms,
@@ -64,7 +84,8 @@ fn stat(words: String, mask: Vec<bool>, z: &[f64]) -> Option<RegionStat> {
 /// both — everywhere and each φ plane; each also for θi ≥ 30° and θi ≥ 60°.
 pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
     let k = data.len();
-    let mut regions: Vec<(String, Vec<bool>)> = Vec::new();
+    let mut regions: Vec<(String, Option<Cone>, Vec<bool>)> = Vec::new();
+    let cone = |around, radius_deg| Some(Cone { around, radius_deg });
     let by = |f: &dyn Fn(&Sample) -> bool| data.samples.iter().map(f).collect::<Vec<bool>>();
     match data.kind {
         Kind::Brdf => {
@@ -73,30 +94,36 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
             for r in [5.0, 15.0] {
                 regions.push((
                     format!("within {r}° of the mirror direction"),
+                    cone(Around::Mirror, r),
                     by(&|s| mirror(s) <= r + 0.5 && mirror(s) < retro(s)),
                 ));
             }
             for r in [5.0, 15.0] {
                 regions.push((
                     format!("within {r}° of the retro direction"),
+                    cone(Around::Retro, r),
                     by(&|s| retro(s) <= r + 0.5 && retro(s) < mirror(s)),
                 ));
             }
             let side = |s: &Sample| s.wo().x * s.wi().x + s.wo().y * s.wi().y;
             regions.push((
                 "on the source (backscatter) side".into(),
+                None,
                 by(&|s| side(s) > 1e-9),
             ));
             regions.push((
                 "on the forward side away from the mirror direction".into(),
+                None,
                 by(&|s| side(s) < -1e-9 && mirror(s) > 15.5),
             ));
             regions.push((
                 "at grazing θo ≥ 60° away from the mirror direction".into(),
+                None,
                 by(&|s| s.theta_o.to_degrees() >= 59.5 && mirror(s) > 15.5),
             ));
             regions.push((
                 "in the tails more than 30° from the mirror direction".into(),
+                None,
                 by(&|s| mirror(s) > 30.5),
             ));
         }
@@ -122,40 +149,46 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
             for r in [5.0, 15.0] {
                 regions.push((
                     format!("within {r}° of the transmission peak"),
+                    cone(Around::Peak, r),
                     by(&|s| angle_deg(s.wo(), peak(s).wo()) <= r + 0.5),
                 ));
             }
             regions.push((
                 "on the flanks of the peak (5–50 % of its value)".into(),
+                None,
                 by(&|s| (0.05..0.5).contains(&ratio(s))),
             ));
             regions.push((
                 "in the tails (below 5 % of the peak value)".into(),
+                None,
                 by(&|s| ratio(s) < 0.05),
             ));
             regions.push((
                 "at large θt ≥ 50°".into(),
+                None,
                 by(&|s| s.theta_o.to_degrees() >= 49.5),
             ));
             regions.push((
                 "at θt ≥ 70°".into(),
+                None,
                 by(&|s| s.theta_o.to_degrees() >= 69.5),
             ));
         }
     }
-    regions.push(("everywhere".into(), vec![true; k]));
+    regions.push(("everywhere".into(), None, vec![true; k]));
     if data.axes.len() > 1 {
         for (a, phi) in data.axes.iter().enumerate() {
             regions.push((
                 format!("on the φ = {phi}° plane"),
+                None,
                 by(&|s| s.axis == a && s.theta_o > 1e-9),
             ));
         }
     }
     let mut out = Vec::new();
     let ti = |s: &Sample| s.theta_i.to_degrees();
-    for (words, mask) in regions {
-        if let Some(st) = stat(words.clone(), mask.clone(), z) {
+    for (words, cone, mask) in regions {
+        if let Some(st) = stat(words.clone(), cone, mask.clone(), z) {
             out.push(st);
         }
         for lim in [30.0, 60.0] {
@@ -167,7 +200,7 @@ pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
             let n_sub = sub.iter().filter(|&&m| m).count();
             let n_all = mask.iter().filter(|&&m| m).count();
             if n_sub > 0 && n_sub < n_all {
-                if let Some(st) = stat(format!("{words} for θi ≥ {lim}°"), sub, z) {
+                if let Some(st) = stat(format!("{words} for θi ≥ {lim}°"), cone, sub, z) {
                     out.push(st);
                 }
             }

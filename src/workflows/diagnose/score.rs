@@ -3,10 +3,11 @@
 //! new parameters, and the consistency test of a fit.
 
 use super::regions::RegionStat;
-use super::{Candidate, FitResult};
+use super::{Candidate, DiagnoseOptions, FitResult};
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::inference::bootstrap::Calibrated;
+use crate::inference::covariance::Covariance;
 use crate::inference::stats::{self, f_test, format_p};
 use anyhow::Result;
 use serde_json::{json, Value};
@@ -89,8 +90,12 @@ pub struct Scored {
     pub identifiable: bool,
     /// Why not, when not identifiable.
     pub identifiable_why: String,
-    /// New parameters that ended on a bound of their range (a step that needs them there
-    /// is not adopted: the optimum lies outside what the model can express).
+    /// What the identifiability rests on when the new parameters are not all determined
+    /// on their own: the ridges the data leave, and what was held to settle them.
+    pub identifiable_note: String,
+    /// New parameters that ended on a bound of their range, each with what the bound means
+    /// (the data push against what the model can express there). Information, not a veto:
+    /// such a step is adopted when it is the best explanation on offer.
     pub on_bound: Vec<String>,
     /// Share of the current model's χ² removed inside each flagged region (region words,
     /// fraction; negative where the candidate fits that region worse).
@@ -103,9 +108,10 @@ pub struct Scored {
 }
 
 impl Scored {
-    /// Significant, its new parameters determined and inside their ranges.
+    /// Significant, and its new parameters determined by the data. A new parameter on a
+    /// bound of its range does not stop it: the evidence says what the bound means.
     pub fn adoptable(&self) -> bool {
-        self.significant && self.identifiable && self.on_bound.is_empty()
+        self.significant && self.identifiable
     }
 }
 
@@ -151,22 +157,35 @@ pub fn irregular_null(old: &Model, new: &Model) -> Option<String> {
     (!why.is_empty()).then(|| why.join("; "))
 }
 
-/// New parameters within 1e-6 of an edge of their unit box.
+/// New parameters within 1e-6 of an edge of their unit box, each with what the bound
+/// means: "kr[0] = 1 (retro lobe scale (albedo-like)) at the top of its range [0, 1]: the
+/// data ask for more than the model can give there".
 fn new_params_on_bound(old: &Model, fit: &FitResult) -> Vec<String> {
     let names = fit.model.flat_names();
     let decls = fit.model.flat_decls();
     new_param_indices(old, &fit.model)
         .into_iter()
-        .filter(|&j| {
-            let u = decls[j].to_unit(fit.flat[j]);
+        .filter_map(|j| {
+            let d = &decls[j];
+            let u = d.to_unit(fit.flat[j]);
             // Sitting at the neutral value on a bound is the current model, not a new
             // effect held back by the range; that is judged by significance instead.
-            let neutral = decls[j]
+            let neutral = d
                 .neutral
                 .is_some_and(|v| (v - fit.flat[j]).abs() <= 1e-9 * v.abs().max(1.0));
-            !(1e-6..=1.0 - 1e-6).contains(&u) && !neutral
+            if (1e-6..=1.0 - 1e-6).contains(&u) || neutral {
+                return None;
+            }
+            let (end, want) = if u > 0.5 {
+                ("top", "more")
+            } else {
+                ("bottom", "less")
+            };
+            Some(format!(
+                "{} = {:.4} ({}) at the {end} of its range [{}, {}]: the data ask for {want} than the model can give there",
+                names[j], fit.flat[j], d.doc, d.lo, d.hi
+            ))
         })
-        .map(|j| format!("{} = {:.4}", names[j], fit.flat[j]))
         .collect()
 }
 
@@ -206,49 +225,126 @@ fn removal(
     (per, Some(share(b_in, a_in)), Some(share(b_out, a_out)))
 }
 
-/// Whether the extension's new parameters are determined: at least one of them has a
-/// standard uncertainty within its range and a multiple correlation with the others
-/// below 0.999.
-fn new_params_determined(old: &Model, fit: &FitResult) -> (bool, String) {
+/// A new parameter counts as determined when its standard uncertainty, measured in its
+/// unit box (the share of its declared range the optimizers see), is at most this.
+pub const IDENT_UNIT_STD: f64 = crate::inference::covariance::RIDGE_UNIT_STD;
+
+/// Whether the data determine the effect an extension adds: at least one of its new
+/// parameters has a standard uncertainty of at most [`IDENT_UNIT_STD`] of its range.
+/// Correlation is reported, never a veto on its own: a parameter known to 4 % is
+/// determined whatever it correlates with. Where none is determined on its own — a ridge
+/// of the loss, or a singular normal matrix — the parameters along the weak directions
+/// are held at their fitted values, one new parameter left free at a time, and the
+/// effect counts as determined if that parameter then is; the note says which were held
+/// and the ridge. Returns (determined, why not, note).
+fn new_params_determined(
+    old: &Model,
+    fit: &FitResult,
+    data: &Dataset,
+    opts: &DiagnoseOptions,
+) -> (bool, String, String) {
     let names = fit.model.flat_names();
     let decls = fit.model.flat_decls();
     let new_idx = new_param_indices(old, &fit.model);
     if new_idx.is_empty() {
-        return (true, String::new());
+        return (true, String::new(), String::new());
     }
-    let p = names.len();
-    let det: Vec<usize> = (0..p)
-        .filter(|&j| fit.cov.std[j].is_some_and(|s| s > 0.0))
+    let unit = |cov: &Covariance, j: usize| {
+        cov.std[j].map(|s| crate::inference::covariance::unit_std(&decls[j], fit.flat[j], s))
+    };
+    let determined = |cov: &Covariance, j: usize| unit(cov, j).is_some_and(|u| u <= IDENT_UNIT_STD);
+    let ridges = |cov: &Covariance| -> String {
+        cov.ridges
+            .iter()
+            .filter(|r| r.components.iter().any(|(j, _)| new_idx.contains(j)))
+            .map(|r| {
+                let std = if r.unit_std.is_finite() {
+                    format!("± {:.2} of the range", r.unit_std)
+                } else {
+                    "not at all".into()
+                };
+                format!("{} (constrained {std})", r.words(&names))
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    let cov = &fit.cov;
+    if new_idx.iter().any(|&j| determined(cov, j)) {
+        let loose: Vec<String> = new_idx
+            .iter()
+            .filter(|&&j| !determined(cov, j))
+            .map(|&j| names[j].clone())
+            .collect();
+        let note = if loose.is_empty() {
+            String::new()
+        } else {
+            let r = ridges(cov);
+            format!(
+                "{} not determined on {} own{}",
+                loose.join(", "),
+                if loose.len() == 1 { "its" } else { "their" },
+                if r.is_empty() {
+                    String::new()
+                } else {
+                    format!(": the data constrain only {r}")
+                }
+            )
+        };
+        return (true, String::new(), note);
+    }
+    // No new parameter determined on its own: hold the weak ones and look again.
+    let weak: Vec<usize> = (0..names.len())
+        .filter(|&j| fit.cov.std[j].is_none() || !determined(cov, j))
+        .filter(|&j| fit.cov.std[j] != Some(0.0))
         .collect();
-    let c = nalgebra::DMatrix::from_fn(det.len(), det.len(), |a, b| {
-        fit.cov.correlation[det[a]][det[b]].unwrap_or(0.0)
-    });
-    let ci = c.try_inverse();
-    let mut bad = Vec::new();
-    let mut ok = false;
-    for &j in &new_idx {
-        let Some(s) = fit.cov.std[j] else {
-            bad.push(format!("{} undetermined", names[j]));
-            continue;
-        };
-        if s > decls[j].hi - decls[j].lo {
-            bad.push(format!("{} ± {s:.2e} exceeds its range", names[j]));
+    for &free in &new_idx {
+        let hold: Vec<usize> = weak.iter().copied().filter(|&j| j != free).collect();
+        if hold.is_empty() {
             continue;
         }
-        let r = match (&ci, det.iter().position(|&d| d == j)) {
-            (Some(ci), Some(a)) if ci[(a, a)] > 1.0 => (1.0 - 1.0 / ci[(a, a)]).sqrt(),
-            _ => 0.0,
-        };
-        if r > 0.999 {
-            bad.push(format!(
-                "{} not separable from the other parameters (multiple correlation {r:.4})",
-                names[j]
-            ));
-            continue;
+        if let Ok(c) = super::fit::conditional_covariance(fit, data, opts, &hold) {
+            if determined(&c, free) {
+                let held: Vec<&str> = hold.iter().map(|&j| names[j].as_str()).collect();
+                let r = ridges(cov);
+                return (
+                    true,
+                    String::new(),
+                    format!(
+                        "{} is determined (± {:.2} of its range) with {} held at the fitted values{}",
+                        names[free],
+                        unit(&c, free).unwrap_or(f64::NAN),
+                        held.join(", "),
+                        if r.is_empty() {
+                            String::new()
+                        } else {
+                            format!(": the data constrain only {r}")
+                        }
+                    ),
+                );
+            }
         }
-        ok = true;
     }
-    (ok, bad.join(", "))
+    let why: Vec<String> = new_idx
+        .iter()
+        .map(|&j| match unit(cov, j) {
+            Some(u) => format!("{} ± {u:.2} of its range", names[j]),
+            None => format!("{} undetermined", names[j]),
+        })
+        .collect();
+    let r = ridges(cov);
+    (
+        false,
+        format!(
+            "{}{}",
+            why.join(", "),
+            if r.is_empty() {
+                String::new()
+            } else {
+                format!(" (the data constrain only {r})")
+            }
+        ),
+        String::new(),
+    )
 }
 
 pub(super) fn score(
@@ -258,10 +354,10 @@ pub(super) fn score(
     candidate: Candidate,
     fit: Result<FitResult>,
     m: usize,
-    alpha: f64,
+    opts: &DiagnoseOptions,
 ) -> Scored {
     let k = data.len();
-    let level = alpha / m.max(1) as f64;
+    let level = opts.alpha / m.max(1) as f64;
     let fit = match fit {
         Ok(f) => f,
         Err(e) => {
@@ -281,6 +377,7 @@ pub(super) fn score(
                 significant: false,
                 identifiable: false,
                 identifiable_why: String::new(),
+                identifiable_note: String::new(),
                 on_bound: vec![],
                 removal: vec![],
                 removal_flagged: None,
@@ -310,7 +407,7 @@ pub(super) fn score(
         // Replaced by the bootstrap where the verdict depends on it (path.rs).
         (true, Some(_)) => PTest::FNominal("the bootstrap was not run".into()),
     };
-    let (identifiable, why) = new_params_determined(&current.model, &fit);
+    let (identifiable, why, note) = new_params_determined(&current.model, &fit, data, opts);
     let on_bound = new_params_on_bound(&current.model, &fit);
     let (removal, removal_flagged, removal_outside) = removal(flagged, current, &fit);
     let mut scored = Scored {
@@ -329,6 +426,7 @@ pub(super) fn score(
         significant: false,
         identifiable,
         identifiable_why: why,
+        identifiable_note: note,
         on_bound,
         removal,
         removal_flagged,
@@ -369,10 +467,16 @@ impl Scored {
             PTest::None | PTest::F => String::new(),
             t => format!(" [{}]", t.label()),
         };
+        let retried = self
+            .fit
+            .as_ref()
+            .and_then(|f| f.note.as_ref())
+            .map(|n| format!("; {n}"))
+            .unwrap_or_default();
         self.verdict = if !self.significant {
             match self.p {
                 Some(p) => format!(
-                    "not significant ({}{test}, need < {level:.1e}; scaled ΔBIC {:+.1})",
+                    "not significant ({}{test}, need < {level:.1e}; scaled ΔBIC {:+.1}){retried}",
                     format_p(p),
                     self.delta_bic_scaled
                 ),
@@ -388,8 +492,12 @@ impl Scored {
             )
         } else if !self.on_bound.is_empty() {
             format!(
-                "significant but a new parameter ends on a bound: {}",
-                self.on_bound.join(", ")
+                "significant; a new parameter ends on a bound: {}",
+                self.on_bound
+                    .iter()
+                    .map(|b| b.split(" (").next().unwrap_or(b))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )
         } else {
             "significant".into()
