@@ -11,6 +11,7 @@ use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 use std::path::Path;
 
+mod battery;
 mod bench;
 pub mod checks;
 mod convert;
@@ -77,6 +78,11 @@ enum Command {
     /// Find where a model and the measurement disagree, name the missing effect, add it,
     /// and repeat while the improvement is significant.
     Diagnose(diagnose::DiagnoseArgs),
+    /// The diagnosis's randomized battery: hide each effect of the effect table in random
+    /// truths (geometry, channels, 200–20,000 samples, 1–5 % noise, parameters drawn from
+    /// their ranges), add null cases, run `diagnose` on each, and print the detection and
+    /// false-effect rates by signal-to-noise.
+    Battery(battery::BatteryArgs),
     /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
     /// bsdfit v1 CSV, applying the data-selection options.
     Convert(convert::ConvertArgs),
@@ -211,6 +217,7 @@ pub fn main() -> i32 {
         Command::Merge(a) => sweep::run_merge(&a),
         Command::Render(a) => render::run(&a),
         Command::Diagnose(a) => diagnose::run(&a),
+        Command::Battery(a) => battery::run(&a),
         Command::Convert(a) => convert::run(&a),
         Command::Eval(a) => eval::run(&a),
         Command::Export(a) => export::run(&a),

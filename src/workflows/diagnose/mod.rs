@@ -38,6 +38,7 @@
 //! identifiability, consistency), `path` (adoption, greedy path, backtracking: the
 //! [`diagnose`] driver), `json` (docs/output.md output), `report` (SVG panels and HTML).
 
+pub mod battery;
 mod effects;
 mod explore;
 mod extensions;

@@ -1,0 +1,137 @@
+//! `bsdfit battery`.
+
+use super::progress::Progress;
+use super::BackendArgs;
+use crate::engine;
+use crate::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions};
+use crate::workflows::diagnose::{DiagnoseOptions, Effect};
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct BatteryArgs {
+    /// Cases per hidden effect.
+    #[arg(long, default_value_t = 20)]
+    pub cases: usize,
+    /// Cases with no hidden effect (the truth is the start model).
+    #[arg(long, default_value_t = 40)]
+    pub nulls: usize,
+    /// Seed of the cases (a non-negative integer): the same seed draws the same battery.
+    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
+    pub seed: u64,
+    /// The effects to hide, comma-separated (default: every effect of the table; `bsdfit
+    /// diagnose --help` and docs/diagnose.md list them).
+    #[arg(long, value_delimiter = ',')]
+    pub effects: Option<Vec<String>>,
+    /// The range the hidden effect's size is drawn from, log-uniform: the RMS of
+    /// (truth − start)/u over the samples before any fit.
+    #[arg(long, value_name = "LO,HI", default_value = "1,30")]
+    pub signal: String,
+    /// The range of sample counts, log-uniform.
+    #[arg(long, value_name = "LO,HI", default_value = "200,20000")]
+    pub samples: String,
+    /// Random restarts per fit of each diagnosis.
+    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    pub restarts: usize,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    /// Write every case and its outcome as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the rates table (markdown) here.
+    #[arg(long)]
+    pub markdown: Option<PathBuf>,
+}
+
+fn pair<T: std::str::FromStr>(text: &str, option: &str) -> Result<(T, T)> {
+    let (a, b) = text
+        .split_once(',')
+        .ok_or_else(|| anyhow::anyhow!("{option}: expected LO,HI, got '{text}'"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<T>()
+            .map_err(|_| anyhow::anyhow!("{option}: '{v}' is not a number"))
+    };
+    Ok((parse(a)?, parse(b)?))
+}
+
+pub fn run(a: &BatteryArgs) -> Result<()> {
+    for p in [&a.json, &a.markdown].into_iter().flatten() {
+        crate::output::check_writable_file(p, "--json/--markdown")?;
+    }
+    let signal: (f64, f64) = pair(&a.signal, "--signal")?;
+    anyhow::ensure!(
+        signal.0 > 0.0 && signal.1 >= signal.0,
+        "--signal {}: 0 < LO ≤ HI",
+        a.signal
+    );
+    let samples: (usize, usize) = pair(&a.samples, "--samples")?;
+    anyhow::ensure!(
+        samples.0 >= 20 && samples.1 >= samples.0,
+        "--samples {}: 20 ≤ LO ≤ HI",
+        a.samples
+    );
+    let effects: Vec<Effect> = match &a.effects {
+        None => Effect::all().collect(),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                Effect::from_name(n.trim()).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--effects: unknown effect '{n}' (known: {})",
+                        Effect::all()
+                            .map(|e| e.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                })
+            })
+            .collect::<Result<_>>()?,
+    };
+    let opts = BatteryOptions {
+        cases: a.cases,
+        nulls: a.nulls,
+        seed: a.seed,
+        effects,
+        signal,
+        samples,
+        diagnose: DiagnoseOptions {
+            restarts: a.restarts,
+            seed: a.seed,
+            ..Default::default()
+        },
+    };
+    let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
+    let total = opts.effects.len() * opts.cases + opts.nulls;
+    let progress = Progress::new("battery", total as u64, "cases");
+    let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
+        progress.println(format!(
+            "case {:>4} {:<16} {:<28} → {:<34} SNR {:>5.1}  χ²_red {:>9.3} → {:>7.3}  named [{}]{}{}{}",
+            o.case.id,
+            o.case.hidden.as_deref().unwrap_or("none"),
+            o.case.start,
+            o.final_model,
+            o.snr,
+            o.chi2_red_start,
+            o.chi2_red_final,
+            o.named.join(", "),
+            if o.detected { "  detected" } else { "" },
+            if o.false_effect { "  FALSE EFFECT" } else { "" },
+            o.error.as_ref().map(|e| format!("  error: {e}")).unwrap_or_default()
+        ));
+        progress.inc(1);
+    });
+    drop(progress);
+    let table = rates_table(&outcomes);
+    println!("{table}");
+    if let Some(p) = &a.markdown {
+        std::fs::write(p, &table).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    if let Some(p) = &a.json {
+        let text = serde_json::to_string_pretty(&outcomes)? + "\n";
+        crate::output::files::write_result(p, &text, true)?;
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}

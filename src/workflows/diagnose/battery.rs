@@ -1,0 +1,584 @@
+//! The randomized battery (`bsdfit battery`): how often `diagnose` names an effect hidden
+//! in data nobody chose by hand, and how often it names one that is not there.
+//!
+//! Each case draws a random truth. For a hidden effect E: a geometry (in-plane, two
+//! planes, or the hemisphere, with points near the mirror and retro directions; normal
+//! and oblique incidence for a BTDF), one or three channels, 200–20,000 samples, noise of
+//! 1–5 % with a floor; a start model S0 from the catalogue that E can extend, and a truth
+//! S1 among S0's extensions that add E ([`super::extensions`], so the battery follows the
+//! effect table: a new effect or rule is tested without new code); S0's parameters drawn
+//! from their declared ranges (one of them on a bound in some cases, as fitted real data
+//! show), S1's new parameters drawn too (a narrow lobe of 1–5° in some cases), then
+//! scaled towards their neutral values until the effect's signal has a drawn size (the
+//! RMS over the samples of (S1 − S0)/u before any fit). A null case synthesizes S0 itself.
+//!
+//! `diagnose` then runs from S0. A hidden effect is **detected** when it is named and the
+//! final fit is consistent with the uncertainties; a case has a **false effect** when a
+//! null case gets any effect, or a hidden case gets another effect named first or named
+//! besides E. Rates are reported against the signal-to-noise the start model actually
+//! shows, SNR = √(χ²_red − 1) of its fit (the RMS misfit beyond the noise, in units of the
+//! stated uncertainties).
+
+use super::extensions::{embed, extensions};
+use super::score::new_param_indices;
+use super::{diagnose, DiagnoseOptions, Effect};
+use crate::bsdf::{every_spec, LobePart, Model};
+use crate::data::{Dataset, Kind};
+use crate::engine::Backend;
+use crate::workflows::synth::{synthesize, Noise};
+use anyhow::{anyhow, Result};
+use rand::seq::IndexedRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// What a battery runs.
+#[derive(Clone, Debug)]
+pub struct BatteryOptions {
+    /// Cases per hidden effect.
+    pub cases: usize,
+    /// Cases with nothing hidden.
+    pub nulls: usize,
+    pub seed: u64,
+    /// The effects to hide (default: every effect of the table).
+    pub effects: Vec<Effect>,
+    /// The range the effect's pre-fit signal is drawn from (log-uniform).
+    pub signal: (f64, f64),
+    /// The range of sample counts (log-uniform).
+    pub samples: (usize, usize),
+    /// The diagnosis's options.
+    pub diagnose: DiagnoseOptions,
+}
+
+impl Default for BatteryOptions {
+    fn default() -> Self {
+        BatteryOptions {
+            cases: 20,
+            nulls: 40,
+            seed: 1,
+            effects: Effect::all().collect(),
+            signal: (1.0, 30.0),
+            samples: (200, 20_000),
+            diagnose: DiagnoseOptions::default(),
+        }
+    }
+}
+
+/// One generated case.
+#[derive(Clone, Debug, Serialize)]
+pub struct Case {
+    pub id: usize,
+    /// The hidden effect (None: a null case).
+    pub hidden: Option<String>,
+    pub start: String,
+    pub truth: String,
+    /// The truth's flat parameters (physical).
+    pub truth_params: Vec<f64>,
+    pub geometry: String,
+    pub samples: usize,
+    pub channels: usize,
+    pub noise_rel: f64,
+    /// RMS of (S1 − S0)/u before any fit, where S0 is the truth with the new parameters at
+    /// their neutral values (nested) or at the drawn start (swaps).
+    pub signal: f64,
+    pub seed: u64,
+}
+
+/// One case's diagnosis and verdicts.
+#[derive(Clone, Debug, Serialize)]
+pub struct Outcome {
+    pub case: Case,
+    pub named: Vec<String>,
+    pub final_model: String,
+    pub chi2_red_start: f64,
+    pub chi2_red_final: f64,
+    /// √(χ²_red − 1) of the start fit (0 below 1).
+    pub snr: f64,
+    pub consistent: bool,
+    pub detected: bool,
+    pub false_effect: bool,
+    pub seconds: f64,
+    /// Set when the diagnosis failed.
+    pub error: Option<String>,
+}
+
+/// The geometry families a case draws from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Family {
+    InPlane,
+    TwoPlane,
+    Hemisphere,
+}
+
+/// Rows (θi, φi, θo, φo in degrees) of `family` for `kind`, about `count` of them.
+fn rows(kind: Kind, family: Family, count: usize, rng: &mut ChaCha8Rng) -> (String, Vec<[f64; 4]>) {
+    let phi: f64 = [0.0, 30.0, 45.0, 90.0][rng.random_range(0..4)];
+    let planes: Vec<f64> = match family {
+        Family::TwoPlane => vec![phi, phi + 90.0],
+        _ => vec![phi],
+    };
+    let mut out: Vec<[f64; 4]> = Vec::new();
+    let mut near: Vec<[f64; 4]> = Vec::new();
+    match kind {
+        Kind::Brdf => {
+            let n_inc = rng.random_range(3..=7);
+            let mut incidences: Vec<f64> = (0..n_inc)
+                .map(|_| 5.0 * rng.random_range(0..=15) as f64)
+                .collect();
+            incidences.sort_by(f64::total_cmp);
+            incidences.dedup();
+            for &ti in &incidences {
+                match family {
+                    Family::Hemisphere => {
+                        let per = (count / incidences.len()).max(20);
+                        for _ in 0..per {
+                            let to = rng.random::<f64>().sqrt().asin().to_degrees().min(85.0);
+                            let po = rng.random_range(0.0..360.0);
+                            out.push([ti, phi, to, po]);
+                        }
+                    }
+                    _ => {
+                        let per = (count / (incidences.len() * planes.len())).max(17);
+                        let step = (170.0 / per as f64).max(0.5);
+                        for &p in &planes {
+                            let mut to: f64 = -85.0;
+                            while to <= 85.0 {
+                                out.push([ti, phi, to, p]);
+                                to += step;
+                            }
+                        }
+                    }
+                }
+                // Near the mirror and the retro direction, in the incidence plane.
+                for d in [1.0, 2.0, 3.0, 5.0] {
+                    for s in [-1.0, 1.0] {
+                        near.push([ti, phi, -ti + s * d, phi]);
+                        near.push([ti, phi, ti + s * d, phi]);
+                    }
+                }
+            }
+        }
+        Kind::Btdf => {
+            let incidences: Vec<f64> = if rng.random::<f64>() < 0.5 {
+                vec![0.0]
+            } else {
+                vec![0.0, 30.0, 60.0]
+            };
+            let per = (count / (incidences.len() * planes.len())).max(17);
+            let step = (160.0 / per as f64).max(0.25);
+            for &ti in &incidences {
+                for (k, &p) in planes.iter().enumerate() {
+                    let mut t: f64 = -80.0;
+                    while t <= 80.0 {
+                        if !(k > 0 && t.abs() < 1e-9) {
+                            out.push([ti, 0.0, t, p]);
+                        }
+                        t += step;
+                    }
+                }
+            }
+        }
+    }
+    // Keep the rows above the horizon and off the source; then the count asked for.
+    let ok = |r: &[f64; 4]| {
+        r[2].abs() <= 88.0 && !((r[3] - r[1]).abs() < 1e-9 && (r[2] - r[0]).abs() < 0.5)
+    };
+    near.retain(|r| ok(r) || kind == Kind::Btdf);
+    out.retain(|r| kind == Kind::Btdf || ok(r));
+    while out.len() + near.len() > count && out.len() > 10 {
+        let i = rng.random_range(0..out.len());
+        out.swap_remove(i);
+    }
+    out.extend(near);
+    let name = match family {
+        Family::InPlane => format!("in-plane φ = {phi}°"),
+        Family::TwoPlane => format!("two planes φ = {phi}°, {}°", phi + 90.0),
+        Family::Hemisphere => "hemisphere".to_string(),
+    };
+    (name, out)
+}
+
+/// The value of `model` at every sample of `data` (its own rows and channels).
+fn values(model: &Model, flat: &[f64], data: &Dataset) -> Vec<f64> {
+    data.samples
+        .iter()
+        .map(|s| model.eval(flat, model.group_of(s), s.wi(), s.wo()))
+        .collect()
+}
+
+/// RMS of (a − b)/u over the samples, u = √((rel·a)² + abs²).
+fn signal(a: &[f64], b: &[f64], noise: Noise) -> f64 {
+    let s: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| {
+            let u = ((noise.rel * x).powi(2) + noise.abs.powi(2)).sqrt();
+            ((x - y) / u).powi(2)
+        })
+        .sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
+/// Draw one case: `hidden` in a random truth, or nothing (null).
+pub fn generate(
+    hidden: Option<Effect>,
+    id: usize,
+    opts: &BatteryOptions,
+) -> Result<(Case, Dataset)> {
+    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for _attempt in 0..200 {
+        // The kinds the effect has rules for (any kind for a null case).
+        let kinds: Vec<Kind> = match hidden {
+            Some(e) => {
+                let mut k: Vec<Kind> = e.entry().rules.iter().map(|r| r.kind).collect();
+                k.dedup();
+                k
+            }
+            None => vec![Kind::Brdf, Kind::Btdf],
+        };
+        let kind = *kinds.choose(&mut rng).ok_or_else(|| anyhow!("no rule"))?;
+        let min_planes = hidden.map_or(1, |e| {
+            e.entry()
+                .rules
+                .iter()
+                .filter(|r| r.kind == kind)
+                .map(|r| match r.make {
+                    super::effects::Make::Suffix { min_planes, .. } => min_planes,
+                    _ => 1,
+                })
+                .min()
+                .unwrap_or(1)
+        });
+        let family = match (kind, min_planes) {
+            (_, 2) => Family::TwoPlane,
+            (Kind::Btdf, _) => [Family::InPlane, Family::TwoPlane][rng.random_range(0..2)],
+            _ => [Family::InPlane, Family::TwoPlane, Family::Hemisphere][rng.random_range(0..3)],
+        };
+        let channels = match kind {
+            Kind::Brdf if rng.random::<f64>() < 0.5 => 3,
+            _ => 1,
+        };
+        let wavelengths: Vec<f64> = if channels == 3 {
+            vec![450.0, 550.0, 650.0]
+        } else {
+            vec![550.0]
+        };
+        let (lo, hi) = (opts.samples.0.max(20) as f64, opts.samples.1.max(20) as f64);
+        let target = (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp() as usize;
+        let (geometry, rows) = rows(kind, family, target / channels, &mut rng);
+        let noise = Noise {
+            rel: rng.random_range(0.01..0.05),
+            abs: rng.random_range(1e-4..1e-3),
+        };
+        // A data set on these rows, to see which models parse and extend here.
+        let probe_spec = if kind == Kind::Brdf {
+            "lambert"
+        } else {
+            "btdf(tr)"
+        };
+        let probe_model = Model::parse(probe_spec, channels)?;
+        let probe = synthesize(
+            &probe_model,
+            &probe_model.defaults(),
+            &rows,
+            &wavelengths,
+            noise,
+            seed,
+            "probe",
+        )
+        .map_err(|e| anyhow!(e))?;
+        // The start S0 and the truth S1.
+        let mut pairs: Vec<(String, String)> = Vec::new();
+        for s0 in every_spec(kind) {
+            if Model::for_data(&s0, &probe).is_err() {
+                continue;
+            }
+            match hidden {
+                None => pairs.push((s0.clone(), s0)),
+                Some(e) => {
+                    for c in extensions(&s0, &probe).unwrap_or_default() {
+                        if c.effect == e {
+                            pairs.push((s0.clone(), c.spec));
+                        }
+                    }
+                }
+            }
+        }
+        let Some((start, truth)) = pairs.choose(&mut rng).cloned() else {
+            continue;
+        };
+        let m0 = Model::for_data(&start, &probe)?;
+        let m1 = Model::for_data(&truth, &probe)?;
+        // S0's parameters: inside their ranges, one on a bound in some cases.
+        let mut u0: Vec<f64> = (0..m0.dim).map(|_| rng.random_range(0.1..0.9)).collect();
+        if rng.random::<f64>() < 0.15 {
+            let j = rng.random_range(0..m0.dim);
+            u0[j] = if rng.random::<bool>() { 0.0 } else { 1.0 };
+        }
+        let p0 = m0.from_unit(&u0);
+        let base = embed(&m0, &p0, &m1);
+        let decls = m1.flat_decls();
+        let fresh = new_param_indices(&m0, &m1);
+        let narrow = rng.random::<f64>() < 0.3;
+        let mut drawn = base.clone();
+        for &j in &fresh {
+            let d = &decls[j];
+            drawn[j] = match d.lobe {
+                LobePart::Width if narrow => {
+                    (rng.random_range(1.0f64..5.0).to_radians() / 1.3).clamp(d.lo, d.hi)
+                }
+                _ => d.from_unit(rng.random_range(0.2..0.9)),
+            };
+        }
+        // Scale the new parameters towards their neutral values (the embedding) until the
+        // effect's signal has the drawn size.
+        let v0 = values(&m0, &p0, &probe);
+        let at = |t: f64| -> Vec<f64> {
+            let mut x = base.clone();
+            for &j in &fresh {
+                let (a, b) = (decls[j].to_unit(base[j]), decls[j].to_unit(drawn[j]));
+                x[j] = decls[j].from_unit(a + t * (b - a));
+            }
+            x
+        };
+        let sig = |t: f64| signal(&values(&m1, &at(t), &probe), &v0, noise);
+        let want = (opts.signal.0.ln()
+            + rng.random::<f64>() * (opts.signal.1.ln() - opts.signal.0.ln()))
+        .exp();
+        let truth_params = match hidden {
+            None => p0.clone(),
+            Some(_) if sig(1.0) <= want || fresh.is_empty() => at(1.0),
+            Some(_) => {
+                let (mut lo, mut hi) = (0.0, 1.0);
+                for _ in 0..30 {
+                    let mid = 0.5 * (lo + hi);
+                    if sig(mid) < want {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                at(hi)
+            }
+        };
+        let achieved = if hidden.is_some() {
+            signal(&values(&m1, &truth_params, &probe), &v0, noise)
+        } else {
+            0.0
+        };
+        if hidden.is_some() && !(achieved > 0.0) {
+            continue; // the effect does not show on these rows
+        }
+        let truth_model = if hidden.is_some() { &m1 } else { &m0 };
+        let mut data = synthesize(
+            truth_model,
+            &truth_params,
+            &rows,
+            &wavelengths,
+            noise,
+            seed ^ 0x5eed,
+            &format!("battery case {id}"),
+        )
+        .map_err(|e| anyhow!(e))?;
+        data.material = format!("battery case {id}");
+        let case = Case {
+            id,
+            hidden: hidden.map(|e| e.name().to_string()),
+            start,
+            truth: truth_model.spec.clone(),
+            truth_params,
+            geometry,
+            samples: data.len(),
+            channels,
+            noise_rel: noise.rel,
+            signal: achieved,
+            seed,
+        };
+        return Ok((case, data));
+    }
+    Err(anyhow!("no case could be drawn for {hidden:?}"))
+}
+
+/// Diagnose one case and judge it.
+pub fn run_case(
+    case: Case,
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &BatteryOptions,
+) -> Outcome {
+    let t0 = std::time::Instant::now();
+    let d = diagnose(data, &case.start, backend, &opts.diagnose, &mut |_| {});
+    let seconds = t0.elapsed().as_secs_f64();
+    match d {
+        Ok(d) => {
+            let named: Vec<String> = d.effects.iter().map(|e| e.name().to_string()).collect();
+            let first = d.steps.first().map(|s| s.chi2_red).unwrap_or(f64::NAN);
+            let last = d.steps.last().expect("a step");
+            let consistent = last.fit.p_consistent() >= opts.diagnose.alpha;
+            let (detected, false_effect) = match &case.hidden {
+                None => (false, !named.is_empty()),
+                Some(h) => (
+                    named.contains(h) && consistent,
+                    named.first().is_some_and(|n| n != h) || named.iter().any(|n| n != h),
+                ),
+            };
+            Outcome {
+                named,
+                final_model: d.final_model.clone(),
+                chi2_red_start: first,
+                chi2_red_final: last.chi2_red,
+                snr: (first - 1.0).max(0.0).sqrt(),
+                consistent,
+                detected,
+                false_effect,
+                seconds,
+                error: None,
+                case,
+            }
+        }
+        Err(e) => Outcome {
+            named: vec![],
+            final_model: String::new(),
+            chi2_red_start: f64::NAN,
+            chi2_red_final: f64::NAN,
+            snr: f64::NAN,
+            consistent: false,
+            detected: false,
+            false_effect: false,
+            seconds,
+            error: Some(format!("{e:#}")),
+            case,
+        },
+    }
+}
+
+/// Every case of the battery: `cases` per effect of `opts.effects`, then `nulls` null
+/// cases, each drawn and diagnosed in turn; `progress` receives each outcome.
+pub fn run_battery(
+    opts: &BatteryOptions,
+    backend: &dyn Backend,
+    progress: &mut dyn FnMut(&Outcome),
+) -> Vec<Outcome> {
+    let mut plan: Vec<Option<Effect>> = Vec::new();
+    for &e in &opts.effects {
+        plan.extend(std::iter::repeat_n(Some(e), opts.cases));
+    }
+    plan.extend(std::iter::repeat_n(None, opts.nulls));
+    let mut out = Vec::with_capacity(plan.len());
+    for (id, hidden) in plan.into_iter().enumerate() {
+        let outcome = match generate(hidden, id, opts) {
+            Ok((case, data)) => run_case(case, &data, backend, opts),
+            Err(e) => Outcome {
+                case: Case {
+                    id,
+                    hidden: hidden.map(|e| e.name().to_string()),
+                    start: String::new(),
+                    truth: String::new(),
+                    truth_params: vec![],
+                    geometry: String::new(),
+                    samples: 0,
+                    channels: 0,
+                    noise_rel: 0.0,
+                    signal: 0.0,
+                    seed: 0,
+                },
+                named: vec![],
+                final_model: String::new(),
+                chi2_red_start: f64::NAN,
+                chi2_red_final: f64::NAN,
+                snr: f64::NAN,
+                consistent: false,
+                detected: false,
+                false_effect: false,
+                seconds: 0.0,
+                error: Some(format!("{e:#}")),
+            },
+        };
+        progress(&outcome);
+        out.push(outcome);
+    }
+    out
+}
+
+/// The SNR bins of the rates table: [lo, hi).
+pub const SNR_BINS: [(f64, f64); 5] = [
+    (0.0, 1.0),
+    (1.0, 2.0),
+    (2.0, 4.0),
+    (4.0, 8.0),
+    (8.0, f64::INFINITY),
+];
+
+/// "k/n" with the share, or "–" for no case.
+fn rate(k: usize, n: usize) -> String {
+    if n == 0 {
+        "–".into()
+    } else {
+        format!("{k}/{n} ({:.0} %)", 100.0 * k as f64 / n as f64)
+    }
+}
+
+/// The rates as a markdown table: per hidden effect, detection in each SNR bin and in
+/// all, false effects; then the null cases; then false effects over every case.
+pub fn rates_table(outcomes: &[Outcome]) -> String {
+    let mut s = String::from("| hidden effect |");
+    for (lo, hi) in SNR_BINS {
+        if hi.is_finite() {
+            s += &format!(" SNR {lo}–{hi} |");
+        } else {
+            s += &format!(" SNR ≥ {lo} |");
+        }
+    }
+    s += " all | false effects |\n|---|";
+    s += &"---|".repeat(SNR_BINS.len() + 2);
+    s += "\n";
+    let mut names: Vec<String> = Vec::new();
+    for o in outcomes {
+        if let Some(h) = &o.case.hidden {
+            if !names.contains(h) {
+                names.push(h.clone());
+            }
+        }
+    }
+    for name in &names {
+        let cases: Vec<&Outcome> = outcomes
+            .iter()
+            .filter(|o| o.case.hidden.as_ref() == Some(name) && o.error.is_none())
+            .collect();
+        s += &format!("| `{name}` |");
+        for (lo, hi) in SNR_BINS {
+            let bin: Vec<&&Outcome> = cases.iter().filter(|o| o.snr >= lo && o.snr < hi).collect();
+            s += &format!(
+                " {} |",
+                rate(bin.iter().filter(|o| o.detected).count(), bin.len())
+            );
+        }
+        s += &format!(
+            " {} | {} |\n",
+            rate(cases.iter().filter(|o| o.detected).count(), cases.len()),
+            rate(cases.iter().filter(|o| o.false_effect).count(), cases.len())
+        );
+    }
+    let nulls: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.case.hidden.is_none() && o.error.is_none())
+        .collect();
+    s += &format!(
+        "| none (null cases) |{} – | {} |\n",
+        " |".repeat(SNR_BINS.len()),
+        rate(nulls.iter().filter(|o| o.false_effect).count(), nulls.len())
+    );
+    let done: Vec<&Outcome> = outcomes.iter().filter(|o| o.error.is_none()).collect();
+    let failed = outcomes.len() - done.len();
+    s += &format!(
+        "\nFalse effects over every case: {}.{}\n",
+        rate(done.iter().filter(|o| o.false_effect).count(), done.len()),
+        if failed > 0 {
+            format!(" {failed} case(s) could not be drawn or diagnosed (listed in the JSON).")
+        } else {
+            String::new()
+        }
+    );
+    s
+}

@@ -1,0 +1,75 @@
+//! A fixed-seed subset of the diagnosis's randomized battery (`bsdfit battery`, the full
+//! rates in docs/diagnose.md): one random truth per effect of the effect table (drawn by
+//! the battery from the table itself, so a new effect is tested here without new code)
+//! and four null cases, with effects large enough to be seen (a pre-fit signal of 8–30
+//! uncertainties RMS) on 200–1,500 samples.
+//!
+//! Rate bounds: at least 90 % of the hidden effects detected (named, and the final fit
+//! consistent with the uncertainties), no effect named on a null case, and at most one
+//! hidden case with a false effect (another effect named first, or besides). A failure
+//! prints every case.
+
+use bsdfit::engine::{self, BackendChoice};
+use bsdfit::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions};
+use bsdfit::workflows::diagnose::{DiagnoseOptions, Effect};
+
+#[test]
+fn one_random_truth_per_effect_and_null_cases() {
+    let backend = engine::select(BackendChoice::Auto, &mut |m| eprintln!("{m}")).unwrap();
+    let effects: Vec<Effect> = Effect::all().collect();
+    let opts = BatteryOptions {
+        cases: 1,
+        nulls: 4,
+        seed: 7,
+        effects: effects.clone(),
+        signal: (8.0, 30.0),
+        samples: (200, 1500),
+        diagnose: DiagnoseOptions {
+            seed: 7,
+            bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
+                replicates: 39,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+    };
+    let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
+        eprintln!(
+            "case {} {:?}: {} → {} named {:?} SNR {:.1} χ²_red {:.2} → {:.2} detected {} false {} {:?}",
+            o.case.id,
+            o.case.hidden,
+            o.case.start,
+            o.final_model,
+            o.named,
+            o.snr,
+            o.chi2_red_start,
+            o.chi2_red_final,
+            o.detected,
+            o.false_effect,
+            o.error
+        )
+    });
+    eprintln!("{}", rates_table(&outcomes));
+    assert_eq!(outcomes.len(), effects.len() + 4);
+    assert!(outcomes.iter().all(|o| o.error.is_none()), "a case failed");
+    let hidden: Vec<_> = outcomes
+        .iter()
+        .filter(|o| o.case.hidden.is_some())
+        .collect();
+    let detected = hidden.iter().filter(|o| o.detected).count();
+    assert!(
+        detected * 10 >= hidden.len() * 9,
+        "{detected} of {} hidden effects detected",
+        hidden.len()
+    );
+    let null_false = outcomes
+        .iter()
+        .filter(|o| o.case.hidden.is_none() && o.false_effect)
+        .count();
+    assert_eq!(null_false, 0, "an effect named on a null case");
+    let hidden_false = hidden.iter().filter(|o| o.false_effect).count();
+    assert!(
+        hidden_false <= 1,
+        "{hidden_false} hidden cases with a false effect"
+    );
+}
