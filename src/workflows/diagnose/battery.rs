@@ -367,7 +367,7 @@ pub fn generate(
         } else {
             0.0
         };
-        if hidden.is_some() && !(achieved > 0.0) {
+        if hidden.is_some() && (achieved.is_nan() || achieved <= 0.0) {
             continue; // the effect does not show on these rows
         }
         let truth_model = if hidden.is_some() { &m1 } else { &m0 };
