@@ -32,6 +32,7 @@ fn one_random_truth_per_effect_and_null_cases() {
             },
             ..Default::default()
         },
+        only: None,
     };
     let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
         eprintln!(

@@ -42,6 +42,10 @@ pub struct BatteryArgs {
     /// Write the rates table (markdown) here.
     #[arg(long)]
     pub markdown: Option<PathBuf>,
+    /// Run only case ID of this battery (the same options draw the same cases), printing
+    /// its truth and its diagnosis's log.
+    #[arg(long, value_name = "ID")]
+    pub case: Option<usize>,
 }
 
 fn pair<T: std::str::FromStr>(text: &str, option: &str) -> Result<(T, T)> {
@@ -101,11 +105,32 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
             seed: a.seed,
             ..Default::default()
         },
+        only: a.case,
     };
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
-    let total = opts.effects.len() * opts.cases + opts.nulls;
+    let total = if opts.only.is_some() {
+        1
+    } else {
+        opts.effects.len() * opts.cases + opts.nulls
+    };
     let progress = Progress::new("battery", total as u64, "cases");
     let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
+        if opts.only.is_some() {
+            progress.println(format!(
+                "case {}: truth {} {:?} on {} ({} samples, {} channel(s), noise {:.1} %), signal {:.2}",
+                o.case.id,
+                o.case.truth,
+                o.case.truth_params,
+                o.case.geometry,
+                o.case.samples,
+                o.case.channels,
+                100.0 * o.case.noise_rel,
+                o.case.signal
+            ));
+            for l in &o.log {
+                progress.println(l);
+            }
+        }
         progress.println(format!(
             "case {:>4} {:<16} {:<28} → {:<34} SNR {:>5.1}  χ²_red {:>9.3} → {:>7.3}  named [{}]{}{}{}",
             o.case.id,

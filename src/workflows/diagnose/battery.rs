@@ -48,6 +48,8 @@ pub struct BatteryOptions {
     pub samples: (usize, usize),
     /// The diagnosis's options.
     pub diagnose: DiagnoseOptions,
+    /// Run only this case (its id in the full battery's order), with its diagnosis log.
+    pub only: Option<usize>,
 }
 
 impl Default for BatteryOptions {
@@ -60,6 +62,7 @@ impl Default for BatteryOptions {
             signal: (1.0, 30.0),
             samples: (200, 20_000),
             diagnose: DiagnoseOptions::default(),
+            only: None,
         }
     }
 }
@@ -100,6 +103,9 @@ pub struct Outcome {
     pub seconds: f64,
     /// Set when the diagnosis failed.
     pub error: Option<String>,
+    /// The diagnosis's log, kept when the battery runs one case only.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub log: Vec<String>,
 }
 
 /// The geometry families a case draws from.
@@ -400,7 +406,8 @@ pub fn generate(
     Err(anyhow!("no case could be drawn for {hidden:?}"))
 }
 
-/// Diagnose one case and judge it.
+/// Diagnose one case and judge it (keeping its diagnosis log when the battery runs one
+/// case only).
 pub fn run_case(
     case: Case,
     data: &Dataset,
@@ -408,7 +415,13 @@ pub fn run_case(
     opts: &BatteryOptions,
 ) -> Outcome {
     let t0 = std::time::Instant::now();
-    let d = diagnose(data, &case.start, backend, &opts.diagnose, &mut |_| {});
+    let verbose = opts.only.is_some();
+    let mut log = Vec::new();
+    let d = diagnose(data, &case.start, backend, &opts.diagnose, &mut |l| {
+        if verbose {
+            log.push(l);
+        }
+    });
     let seconds = t0.elapsed().as_secs_f64();
     match d {
         Ok(d) => {
@@ -434,6 +447,7 @@ pub fn run_case(
                 false_effect,
                 seconds,
                 error: None,
+                log,
                 case,
             }
         }
@@ -448,6 +462,7 @@ pub fn run_case(
             false_effect: false,
             seconds,
             error: Some(format!("{e:#}")),
+            log,
             case,
         },
     }
@@ -467,6 +482,9 @@ pub fn run_battery(
     plan.extend(std::iter::repeat_n(None, opts.nulls));
     let mut out = Vec::with_capacity(plan.len());
     for (id, hidden) in plan.into_iter().enumerate() {
+        if opts.only.is_some_and(|o| o != id) {
+            continue;
+        }
         let outcome = match generate(hidden, id, opts) {
             Ok((case, data)) => run_case(case, &data, backend, opts),
             Err(e) => Outcome {
@@ -493,6 +511,7 @@ pub fn run_battery(
                 false_effect: false,
                 seconds: 0.0,
                 error: Some(format!("{e:#}")),
+                log: vec![],
             },
         };
         progress(&outcome);

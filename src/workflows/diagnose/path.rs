@@ -39,6 +39,21 @@ fn choose(scored: &[Scored]) -> Option<&Scored> {
         .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
 }
 
+/// Two effects whose best candidates' scaled BICs are closer than this are not told
+/// apart: a Bayes factor below e³ ≈ 20 between them (Kass & Raftery's "strong" evidence
+/// starts at 6). Naming either would be a guess.
+pub const AMBIGUOUS_BIC: f64 = 6.0;
+
+/// The best adoptable candidate of another effect than `best`'s whose scaled ΔBIC is
+/// within [`AMBIGUOUS_BIC`] of `best`'s, if any.
+fn rival<'a>(scored: &'a [Scored], best: &Scored) -> Option<&'a Scored> {
+    scored
+        .iter()
+        .filter(|s| s.adoptable() && s.candidate.effect != best.candidate.effect)
+        .min_by(|a, b| a.delta_bic_scaled.total_cmp(&b.delta_bic_scaled))
+        .filter(|s| (s.delta_bic_scaled - best.delta_bic_scaled).abs() < AMBIGUOUS_BIC)
+}
+
 /// "`M` removes 71 % of χ² within 15° of the retro direction (4 % elsewhere); `N`
 /// [effect] removes 12 % there": the adopted candidate against the best of each other
 /// effect, in the region the residuals flagged first.
@@ -331,6 +346,22 @@ fn extend_path(
             last.candidates = scored;
             return Ok((steps, consistency(&current, opts.alpha).0));
         };
+        if let Some(rival) = rival(&scored, &best) {
+            let why = format!(
+                "the data cannot tell two effects apart: `{}` [{}] and `{}` [{}] explain the misfit equally well (scaled ΔBIC {:.1} and {:.1}, within {AMBIGUOUS_BIC}); measure where they differ to decide",
+                best.candidate.spec,
+                best.candidate.effect,
+                rival.candidate.spec,
+                rival.candidate.effect,
+                best.delta_bic_scaled,
+                rival.delta_bic_scaled
+            );
+            log(format!("  → stop: {why}"));
+            let last = steps.last_mut().unwrap();
+            last.evidence.push_str(&format!(". Stopped: {why}"));
+            last.candidates = scored;
+            return Ok((steps, consistency(&current, opts.alpha).0));
+        }
         let (step, _) = adopt_step(data, &current, &best, &scored, opts);
         log(format!(
             "  → adopt {} [{}]",

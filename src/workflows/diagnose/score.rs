@@ -292,13 +292,20 @@ fn new_params_determined(
         };
         return (true, String::new(), note);
     }
-    // No new parameter determined on its own: hold the weak ones and look again.
-    let weak: Vec<usize> = (0..names.len())
-        .filter(|&j| fit.cov.std[j].is_none() || !determined(cov, j))
-        .filter(|&j| fit.cov.std[j] != Some(0.0))
-        .collect();
+    // No new parameter determined on its own: hold what it trades off against — the
+    // other parameters along the weak directions it takes part in, and any parameter the
+    // data do not constrain at all — at their fitted values, and look again.
     for &free in &new_idx {
-        let hold: Vec<usize> = weak.iter().copied().filter(|&j| j != free).collect();
+        let mut hold: Vec<usize> = cov
+            .ridges
+            .iter()
+            .filter(|r| r.components.iter().any(|&(j, _)| j == free))
+            .flat_map(|r| r.components.iter().map(|&(j, _)| j))
+            .chain((0..names.len()).filter(|&j| cov.std[j].is_none()))
+            .filter(|&j| j != free && cov.std[j] != Some(0.0))
+            .collect();
+        hold.sort_unstable();
+        hold.dedup();
         if hold.is_empty() {
             continue;
         }
