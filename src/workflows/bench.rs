@@ -68,6 +68,17 @@ pub fn bench_dataset(model_spec: &str, kind: Kind) -> anyhow::Result<Dataset> {
     .map_err(anyhow::Error::msg)
 }
 
+/// The loss the benchmarks evaluate: RMSE for a BRDF, the plain L2 of f for a BTDF
+/// (uniform weights; every sum-of-squares loss costs the same).
+pub fn bench_loss(kind: Kind) -> Loss {
+    let metric = if kind == Kind::Brdf {
+        Metric::Rmse
+    } else {
+        Metric::F
+    };
+    Loss::new(metric, Weights::Uniform)
+}
+
 /// Measure one model on one backend over `data` (a [`bench_dataset`] or a user's file):
 /// repeat the batch until `min_seconds` have passed.
 pub fn measure(
@@ -85,17 +96,11 @@ pub fn measure(
         model.kind,
         data.kind
     );
-    let kind = data.kind;
     let candidates = restarts * (2 * model.dim + 1);
-    let metric = if kind == Kind::Brdf {
-        Metric::Rmse
-    } else {
-        Metric::F
-    };
     let problem = Problem {
         model: &model,
         data,
-        loss: Loss::new(metric, Weights::Uniform),
+        loss: bench_loss(data.kind),
     };
     let mut eval = backend.prepare(problem)?;
     let starts = crate::optim::random_starts(model.dim, candidates, 7);

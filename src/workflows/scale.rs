@@ -7,7 +7,6 @@
 
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
-use crate::engine::loss::{Loss, Metric, Weights};
 use crate::engine::{Backend, Problem};
 use crate::workflows::synth::{synthesize, Noise};
 use rand::{Rng, SeedableRng};
@@ -98,15 +97,10 @@ pub fn measure_scale(
     min_seconds: f64,
 ) -> anyhow::Result<ScaleRow> {
     let model = Model::for_data(spec, data)?;
-    let metric = if data.kind == Kind::Brdf {
-        Metric::Rmse
-    } else {
-        Metric::F
-    };
     let problem = Problem {
         model: &model,
         data,
-        loss: Loss::new(metric, Weights::Uniform),
+        loss: crate::workflows::bench::bench_loss(data.kind),
     };
     let reset = reset_peak_memory();
     let t0 = Instant::now();

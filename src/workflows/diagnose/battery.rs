@@ -452,6 +452,18 @@ pub fn run_case(
             }
         }
         Err(e) => Outcome {
+            seconds,
+            log,
+            ..Outcome::failed(case, &e)
+        },
+    }
+}
+
+impl Outcome {
+    /// A case that could not be drawn or diagnosed: `error` says why.
+    fn failed(case: Case, error: &anyhow::Error) -> Outcome {
+        Outcome {
+            case,
             named: vec![],
             final_model: String::new(),
             chi2_red_start: f64::NAN,
@@ -460,11 +472,10 @@ pub fn run_case(
             consistent: false,
             detected: false,
             false_effect: false,
-            seconds,
-            error: Some(format!("{e:#}")),
-            log,
-            case,
-        },
+            seconds: 0.0,
+            error: Some(format!("{error:#}")),
+            log: vec![],
+        }
     }
 }
 
@@ -487,8 +498,8 @@ pub fn run_battery(
         }
         let outcome = match generate(hidden, id, opts) {
             Ok((case, data)) => run_case(case, &data, backend, opts),
-            Err(e) => Outcome {
-                case: Case {
+            Err(e) => {
+                let case = Case {
                     id,
                     hidden: hidden.map(|e| e.name().to_string()),
                     start: String::new(),
@@ -500,19 +511,9 @@ pub fn run_battery(
                     noise_rel: 0.0,
                     signal: 0.0,
                     seed: 0,
-                },
-                named: vec![],
-                final_model: String::new(),
-                chi2_red_start: f64::NAN,
-                chi2_red_final: f64::NAN,
-                snr: f64::NAN,
-                consistent: false,
-                detected: false,
-                false_effect: false,
-                seconds: 0.0,
-                error: Some(format!("{e:#}")),
-                log: vec![],
-            },
+                };
+                Outcome::failed(case, &e)
+            }
         };
         progress(&outcome);
         out.push(outcome);

@@ -145,23 +145,12 @@ pub(super) fn confirm(
             candidates: step.candidates,
         });
     }
-    let final_model = steps.last().expect("a step").model.clone();
-    Ok(Diagnosis {
-        start_model: explored.start_model,
-        final_model,
-        effects: steps
-            .iter()
-            .filter_map(|s| s.effect)
-            .fold(Vec::new(), |mut v, e| {
-                if !v.contains(&e) {
-                    v.push(e);
-                }
-                v
-            }),
+    Ok(Diagnosis::of_steps(
+        explored.start_model,
         steps,
-        alpha: explored.alpha,
-        backend: explored.backend,
-    })
+        explored.alpha,
+        explored.backend,
+    ))
 }
 
 /// A step from `before` to `after` judged on all data: F test and scaled BIC for a

@@ -144,3 +144,24 @@ pub struct Diagnosis {
     pub alpha: f64,
     pub backend: String,
 }
+
+impl Diagnosis {
+    /// The diagnosis of a path of steps: its last model, and each effect named once, in
+    /// the order first adopted.
+    fn of_steps(start_model: String, steps: Vec<Step>, alpha: f64, backend: String) -> Diagnosis {
+        let mut effects: Vec<Effect> = Vec::new();
+        for e in steps.iter().filter_map(|s| s.effect) {
+            if !effects.contains(&e) {
+                effects.push(e);
+            }
+        }
+        Diagnosis {
+            start_model,
+            final_model: steps.last().expect("a step").model.clone(),
+            effects,
+            steps,
+            alpha,
+            backend,
+        }
+    }
+}

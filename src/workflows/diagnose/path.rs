@@ -39,19 +39,33 @@ fn choose(scored: &[Scored]) -> Option<&Scored> {
         .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic))
 }
 
-/// Two effects whose best candidates' scaled BICs are closer than this are not told
-/// apart: a Bayes factor below e³ ≈ 20 between them (Kass & Raftery's "strong" evidence
-/// starts at 6). Naming either would be a guess.
+/// Two effects whose candidates' fits (χ²) or BICs are closer than this are not told
+/// apart: a likelihood ratio or Bayes factor below e³ ≈ 20 between them (Kass &
+/// Raftery's "strong" evidence starts at 6). Naming either would be a guess.
 pub const AMBIGUOUS_BIC: f64 = 6.0;
 
-/// The best adoptable candidate of another effect than `best`'s whose scaled ΔBIC is
-/// within [`AMBIGUOUS_BIC`] of `best`'s, if any.
-fn rival<'a>(scored: &'a [Scored], best: &Scored) -> Option<&'a Scored> {
+/// The adoptable candidate of another effect than `best`'s that the data tell apart from
+/// `best` least, if they do not tell them apart: the two fits' χ² (both scaled by one s,
+/// max(1, χ²_red of `best`)) within [`AMBIGUOUS_BIC`] of each other, or their BICs,
+/// (χ²_b − χ²_a)/s + (P_b − P_a) ln K, within it. (Each candidate's own scale would make
+/// two equally good fits look far apart when the misfit is large; and a simpler model
+/// that fits no better than a richer one of another effect is preferred by the BIC, but
+/// the data do not exclude the other effect.)
+fn rival<'a>(scored: &'a [Scored], best: &Scored, samples: usize) -> Option<&'a Scored> {
+    let b = best.fit.as_ref()?;
+    let s = b.chi2_red.max(1.0);
+    let fit =
+        |o: &Scored| (o.fit.as_ref().expect("adoptable candidates have fits").chi2 - b.chi2) / s;
+    let apart = |o: &Scored| -> f64 {
+        let f = o.fit.as_ref().expect("adoptable candidates have fits");
+        let bic = fit(o) + (f.params as f64 - b.params as f64) * (samples as f64).ln();
+        fit(o).abs().min(bic.abs())
+    };
     scored
         .iter()
-        .filter(|s| s.adoptable() && s.candidate.effect != best.candidate.effect)
-        .min_by(|a, b| a.delta_bic_scaled.total_cmp(&b.delta_bic_scaled))
-        .filter(|s| (s.delta_bic_scaled - best.delta_bic_scaled).abs() < AMBIGUOUS_BIC)
+        .filter(|o| o.adoptable() && o.candidate.effect != best.candidate.effect)
+        .min_by(|x, y| apart(x).total_cmp(&apart(y)))
+        .filter(|o| apart(o) < AMBIGUOUS_BIC)
 }
 
 /// "`M` removes 71 % of χ² within 15° of the retro direction (4 % elsewhere); `N`
@@ -346,15 +360,16 @@ fn extend_path(
             last.candidates = scored;
             return Ok((steps, consistency(&current, opts.alpha).0));
         };
-        if let Some(rival) = rival(&scored, &best) {
+        if let Some(rival) = rival(&scored, &best, data.len()) {
+            let chi2 = |s: &Scored| s.fit.as_ref().map_or(f64::NAN, |f| f.chi2_red);
             let why = format!(
-                "the data cannot tell two effects apart: `{}` [{}] and `{}` [{}] explain the misfit equally well (scaled ΔBIC {:.1} and {:.1}, within {AMBIGUOUS_BIC}); measure where they differ to decide",
+                "the data cannot tell two effects apart: `{}` [{}] (χ²_red {:.3}) and `{}` [{}] (χ²_red {:.3}) explain the misfit equally well (their χ² or BICs within {AMBIGUOUS_BIC}); measure where they differ to decide",
                 best.candidate.spec,
                 best.candidate.effect,
+                chi2(&best),
                 rival.candidate.spec,
                 rival.candidate.effect,
-                best.delta_bic_scaled,
-                rival.delta_bic_scaled
+                chi2(rival)
             );
             log(format!("  → stop: {why}"));
             let last = steps.last_mut().unwrap();
@@ -492,24 +507,12 @@ fn diagnose_path(
             best_path.last_mut().unwrap().evidence.push_str(&note);
         }
     }
-    let steps = best_path;
-    Ok(Diagnosis {
-        start_model: model.spec.clone(),
-        final_model: steps.last().unwrap().model.clone(),
-        // Each effect named once, in the order first adopted.
-        effects: steps
-            .iter()
-            .filter_map(|s| s.effect)
-            .fold(Vec::new(), |mut v, e| {
-                if !v.contains(&e) {
-                    v.push(e);
-                }
-                v
-            }),
-        steps,
-        alpha: opts.alpha,
-        backend: backend.name(),
-    })
+    Ok(Diagnosis::of_steps(
+        model.spec.clone(),
+        best_path,
+        opts.alpha,
+        backend.name(),
+    ))
 }
 
 fn capitalize(s: &str) -> String {
