@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The project's test command (README): installs what the tests need on a fresh Debian
 # machine — Mesa's lavapipe software Vulkan device, so the GPU tests really run without a
-# GPU — then checks formatting and lints and runs every test.
+# GPU — then checks formatting and lints and runs every test, then installs the Python
+# module from the repository into a fresh virtual environment, as a user would, and runs
+# its tests there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,6 +18,23 @@ fi
 echo "== cargo fmt --check =="
 cargo fmt --check
 echo "== cargo clippy =="
-cargo clippy --all-targets --quiet -- -D warnings
+cargo clippy --workspace --all-targets --quiet -- -D warnings
 echo "== cargo test =="
 cargo test --all-targets
+
+echo "== Python module: pip install ./python into a fresh venv, then pytest =="
+VENV=target/python-test-venv
+rm -rf "$VENV"
+if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
+    # Debian's python3 ships venv and pip separately.
+    SUDO=""
+    if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv python3-pip >/dev/null
+    rm -rf "$VENV"
+    python3 -m venv "$VENV"
+fi
+"$VENV/bin/pip" install --quiet --upgrade pip
+"$VENV/bin/pip" install --quiet ./python pytest mypy
+# The CLI comparisons use the binary `cargo test` just built.
+BSDFIT_CLI="$PWD/target/debug/bsdfit" "$VENV/bin/python" -m pytest -q python/tests

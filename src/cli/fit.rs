@@ -3,16 +3,12 @@
 use super::checks::{check_batch_memory, nonfinite_message};
 use super::progress::Progress;
 use super::{BackendArgs, ConstraintArgs, DataArgs};
-use crate::bsdf::Model;
-use crate::data::{Dataset, Kind};
-use crate::engine::{
-    self,
-    loss::{Loss, Metric, Weights},
-};
-use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
-use crate::inference::mc::{monte_carlo, McOptions};
+use crate::data::Dataset;
+use crate::engine;
+use crate::inference::fit::{FitReport, Optimizer};
 use crate::output::files::write_result;
-use anyhow::{Context, Result};
+use crate::workflows::fit::{FitOutcome, FitRequest, Stage};
+use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -77,62 +73,30 @@ pub struct FitArgs {
     pub data_args: DataArgs,
 }
 
-/// The loss named by `--loss`/`--weights`, checked against the kind of data.
-pub fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
-    let metric: Metric = loss
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
-    let weights: Weights = weights
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
-    anyhow::ensure!(
-        metric.applies_to(kind),
-        "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)",
-        Metric::for_kind(kind)
-            .iter()
-            .map(|m| m.to_string())
-            .collect::<Vec<_>>()
-    );
-    Ok(Loss::new(metric, weights))
-}
-
-/// The optimizer of `--optimizer`, or the default for the loss: LM where it applies.
-pub fn optimizer_for(given: Option<Optimizer>, loss: Loss) -> Optimizer {
-    given.unwrap_or(if loss.is_sum_of_squares() {
-        Optimizer::Lm
-    } else {
-        Optimizer::Compass
-    })
-}
-
 pub fn run(a: FitArgs) -> Result<()> {
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
-    anyhow::ensure!(
-        a.mc == 0 || a.mc >= 2,
-        "--mc {}: a distribution needs at least 2 replicas (0 turns Monte Carlo off)",
-        a.mc
-    );
-    anyhow::ensure!(
-        a.mc_scale.is_finite() && (0.0..1.0).contains(&a.mc_scale),
-        "--mc-scale {}: a relative uncertainty in [0, 1)",
-        a.mc_scale
-    );
-    anyhow::ensure!(
-        a.mc > 0 || a.mc_scale == 0.0,
-        "--mc-scale needs --mc N (the number of replicas)"
-    );
+    let request = FitRequest {
+        model: a.model.clone(),
+        loss: a.loss.clone(),
+        weights: a.weights.clone(),
+        optimizer: a.optimizer,
+        restarts: a.restarts,
+        seed: a.seed,
+        constraints: a.constraints.spec(false),
+        mc: a.mc,
+        mc_scale: a.mc_scale,
+        mc_restarts: a.mc_restarts,
+    };
+    request.check()?;
     anyhow::ensure!(
         !(a.mc > 0 && a.per_axis),
         "--mc and --per-axis cannot be combined"
     );
     let data = a.data_args.read(&a.data)?;
-    let loss = parse_loss(&a.loss, &a.weights, data.kind)?;
-    let model = Model::for_data(&a.model, &data).context("--model")?;
-    let constraints = a.constraints.spec(false);
-    // Resolve now: a misspelt name fails before any work.
-    crate::inference::constraints::Constraints::resolve(&model, &constraints, false)?;
+    // A misspelt model, loss or parameter name fails before any work.
+    let (model, _, _) = request.prepare(&data)?;
     check_batch_memory(
         a.restarts,
         model.dim,
@@ -141,56 +105,39 @@ pub fn run(a: FitArgs) -> Result<()> {
         &mut |w| eprintln!("{w}"),
     )?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
-    let opts = FitOptions {
-        optimizer: optimizer_for(a.optimizer, loss),
-        restarts: a.restarts,
-        seed: a.seed,
-        constraints,
-        ..Default::default()
-    };
     let mut mc_error = None;
     let mut run = |data: &Dataset| -> Result<FitReport> {
-        let model = Model::for_data(&a.model, data).context("--model")?;
         let mut progress = Progress::new("fit", a.restarts as u64, "restarts converged");
         progress.set_message(format!("fitting {}", model.spec));
-        let mut report = fit(&model, data, loss, backend.as_ref(), &opts, &mut |active| {
-            progress.set_position(a.restarts.saturating_sub(active) as u64)
+        let mut mc_progress: Option<Progress> = None;
+        let total = request.mc_total() as u64;
+        let outcome = request.run(data, backend.as_ref(), &mut |stage, active| match stage {
+            Stage::Fit => progress.set_position(a.restarts.saturating_sub(active) as u64),
+            Stage::MonteCarlo => {
+                let bar = mc_progress.get_or_insert_with(|| {
+                    progress.finish();
+                    let bar = Progress::new("mc", total, "replica restarts converged");
+                    bar.set_message(format!("refitting {} replicas", a.mc));
+                    bar
+                });
+                bar.set_position(total.saturating_sub(active as u64))
+            }
         })?;
         progress.finish();
-        let finite = report.best.chi2_red.is_finite() && report.best.loss.is_finite();
-        if a.mc > 0 && finite {
-            let mc = McOptions {
-                replicas: a.mc,
-                scale_rel: a.mc_scale,
-                seed: a.seed,
-                restarts: a.mc_restarts,
-            };
-            let total = (a.mc * (a.mc_restarts.max(1) + 1)) as u64;
-            let mut progress = Progress::new("mc", total, "replica restarts converged");
-            progress.set_message(format!("refitting {} replicas", a.mc));
-            let outcome = monte_carlo(
-                &model,
-                data,
-                loss,
-                backend.as_ref(),
-                &opts,
-                &report.flat_params,
-                &report.flat_std,
-                &mc,
-                &mut |active| progress.set_position(total.saturating_sub(active as u64)),
-            );
-            progress.finish();
-            match outcome {
-                Ok(summary) => report.monte_carlo = Some(summary),
-                // The fit itself stands: report it, then fail.
-                Err(e) => {
-                    report.warnings.push(format!("--mc failed: {e:#}"));
-                    mc_error = Some(e);
-                }
-            }
+        if let Some(mut bar) = mc_progress {
+            bar.finish();
+        }
+        let FitOutcome {
+            model,
+            loss,
+            report,
+            mc_error: failed,
+        } = outcome;
+        if failed.is_some() {
+            mc_error = failed;
         }
         print!("{}", report.summary());
-        if !finite {
+        if !(report.best.chi2_red.is_finite() && report.best.loss.is_finite()) {
             anyhow::bail!(nonfinite_message(
                 &model,
                 data,

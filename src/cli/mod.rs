@@ -19,14 +19,13 @@ mod diagnose;
 mod eval;
 mod export;
 mod fit;
-mod models;
+pub mod models;
 pub mod progress;
 mod render;
 mod sweep;
 mod synth;
 
-/// Random restarts per fit of `fit`, `diagnose` and `sweep` (one default for all).
-pub const DEFAULT_RESTARTS: usize = 16;
+pub use crate::workflows::fit::DEFAULT_RESTARTS;
 
 /// Value parser of `--seed`: a non-negative integer (clap would otherwise read `-1` as an
 /// option and suggest `-- -1`).
@@ -207,8 +206,31 @@ pub struct BackendArgs {
 
 /// Parse the command line and run the command; the process exit code.
 pub fn main() -> i32 {
-    let cli = Cli::parse();
-    let result = match cli.command {
+    match dispatch(Cli::parse().command) {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}
+
+/// Run one command given as its arguments (without the program name), in this process:
+/// `["sweep", "data", "--out", "results"]` does what `bsdfit sweep data --out results`
+/// does. A bad argument is an error carrying clap's message, never an exit.
+pub fn run_args<I, S>(args: I) -> Result<()>
+where
+    I: IntoIterator<Item = S>,
+    S: Into<std::ffi::OsString> + Clone,
+{
+    let argv =
+        std::iter::once(std::ffi::OsString::from("bsdfit")).chain(args.into_iter().map(Into::into));
+    let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{}", e.render()))?;
+    dispatch(cli.command)
+}
+
+fn dispatch(command: Command) -> Result<()> {
+    match command {
         Command::Fit(a) => fit::run(a),
         Command::Synth(a) => synth::run(a),
         Command::Models => models::run(),
@@ -221,12 +243,5 @@ pub fn main() -> i32 {
         Command::Convert(a) => convert::run(&a),
         Command::Eval(a) => eval::run(&a),
         Command::Export(a) => export::run(&a),
-    };
-    match result {
-        Ok(()) => 0,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            1
-        }
     }
 }

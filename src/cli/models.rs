@@ -7,8 +7,6 @@ use anyhow::Result;
 
 pub fn run() -> Result<()> {
     println!("Models (spec strings; nested parameters are prefixed by role, rgb = one value per channel):");
-    let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
-    examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
     for e in bsdf::REGISTRY {
         let name = match e.role {
             bsdf::Role::Suffix => format!("+{}", e.name),
@@ -19,25 +17,8 @@ pub fn run() -> Result<()> {
             .map(|k| k.to_string())
             .unwrap_or_else(|| "any".into());
         println!("  {name:<8} {kind:<4} {:<13} {}", role_word(e.role), e.doc);
-        if e.catalogue == bsdf::InCatalogue::No {
-            // Models outside the default sweep still appear among the examples.
-            match e.role {
-                // The first spec the registry derives with it (`lambert+retro`, or
-                // `lambert+retro+falloff` for a suffix that follows another).
-                bsdf::Role::Suffix => {
-                    let tail = format!("+{}", e.name);
-                    let kind = e.kind.unwrap_or(Kind::Brdf);
-                    examples.push(
-                        bsdf::every_spec(kind)
-                            .into_iter()
-                            .find(|s| s.ends_with(&tail))
-                            .unwrap_or_else(|| format!("{}{tail}", bsdf::catalogue(kind)[0])),
-                    )
-                }
-                _ => examples.push(e.name.to_string()),
-            }
-        }
     }
+    let examples = listed_specs();
     println!("\nCatalogue:");
     for spec in examples {
         match Model::parse(&spec, 3) {
@@ -67,6 +48,33 @@ pub fn run() -> Result<()> {
         println!("  {:<10} {:<5} {}", g.name, g.kind.to_string(), g.doc);
     }
     Ok(())
+}
+
+/// The specs `bsdfit models` lists: the default catalogue of each kind, then one example
+/// of each model outside it (a suffix with the first spec the registry derives with it).
+pub fn listed_specs() -> Vec<String> {
+    let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
+    examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
+    for e in bsdf::REGISTRY {
+        if e.catalogue == bsdf::InCatalogue::No {
+            match e.role {
+                // The first spec the registry derives with it (`lambert+retro`, or
+                // `lambert+retro+falloff` for a suffix that follows another).
+                bsdf::Role::Suffix => {
+                    let tail = format!("+{}", e.name);
+                    let kind = e.kind.unwrap_or(Kind::Brdf);
+                    examples.push(
+                        bsdf::every_spec(kind)
+                            .into_iter()
+                            .find(|s| s.ends_with(&tail))
+                            .unwrap_or_else(|| format!("{}{tail}", bsdf::catalogue(kind)[0])),
+                    )
+                }
+                _ => examples.push(e.name.to_string()),
+            }
+        }
+    }
+    examples
 }
 
 fn role_word(r: bsdf::Role) -> &'static str {

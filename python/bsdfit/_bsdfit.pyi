@@ -1,0 +1,127 @@
+"""Type stub of ``bsdfit._bsdfit``, the native half of the module (Rust, PyO3).
+
+Use the ``bsdfit`` package instead: it wraps these with keyword arguments, numpy
+broadcasting and the :class:`bsdfit.Fit` object. Every function that computes releases
+the GIL; errors are ``OSError`` (a file), ``ValueError`` (bad input, with the command
+line's message) or ``RuntimeError`` (a bug).
+"""
+
+from typing import List, Optional, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class NativeDataset:
+    """A dataset as the library holds it."""
+
+    def __len__(self) -> int: ...
+    @property
+    def kind(self) -> str:
+        """``"brdf"`` or ``"btdf"``."""
+    @property
+    def material(self) -> str: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def channels(self) -> List[float]:
+        """Channel wavelengths (nm), in channel order."""
+    @property
+    def planes(self) -> List[float]:
+        """Measurement planes (φ, degrees)."""
+    @property
+    def notices(self) -> List[str]: ...
+    @property
+    def assumed_uncertainty(self) -> Optional[Tuple[float, float]]: ...
+    def column(self, name: str) -> npt.NDArray[np.float64]:
+        """One column as a new float64 array (angles in degrees)."""
+    def write_csv(self, path: str) -> None:
+        """Write as bsdfit v1 CSV."""
+
+def read_dataset(
+    path: str,
+    wavelengths: Optional[List[float]],
+    band: Optional[float],
+    max_samples: Optional[int],
+    assume_uncertainty: Optional[str],
+    allow_zero_uncertainty: bool,
+    alta_values: Optional[str],
+) -> NativeDataset:
+    """Read any data file the command line reads, with its selection options."""
+
+def dataset_from_arrays(
+    kind: str,
+    theta_i: npt.NDArray[np.float64],
+    phi_i: npt.NDArray[np.float64],
+    theta_o: npt.NDArray[np.float64],
+    phi_o: npt.NDArray[np.float64],
+    wavelength_nm: npt.NDArray[np.float64],
+    value: npt.NDArray[np.float64],
+    uncertainty: npt.NDArray[np.float64],
+    material: str,
+    wavelengths: Optional[List[float]],
+    band: Optional[float],
+    allow_zero_uncertainty: bool,
+) -> NativeDataset:
+    """A dataset from contiguous float64 columns of one length (degrees, nm, sr⁻¹)."""
+
+def fit_json(
+    dataset: NativeDataset,
+    model: str,
+    loss: str,
+    weights: str,
+    optimizer: Optional[str],
+    restarts: int,
+    seed: int,
+    backend: str,
+    fix: List[str],
+    bounds: List[str],
+    prior: List[str],
+    mc: int,
+    mc_scale: float,
+    mc_restarts: int,
+) -> Tuple[str, Optional[str]]:
+    """Fit one model: the report as ``bsdfit fit --json`` writes it, and the Monte Carlo
+    error if the replicas failed (the fit itself stands)."""
+
+def eval_fit(
+    fit_text: str,
+    theta_i: npt.NDArray[np.float64],
+    phi_i: npt.NDArray[np.float64],
+    theta_o: npt.NDArray[np.float64],
+    phi_o: npt.NDArray[np.float64],
+    wavelength_nm: npt.NDArray[np.float64],
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], List[str]]:
+    """A fit's values and propagated standard uncertainties at these geometries, in order,
+    with the warnings ``bsdfit eval`` prints."""
+
+def diagnose_json(
+    dataset: NativeDataset,
+    model: str,
+    loss: str,
+    weights: str,
+    optimizer: str,
+    restarts: int,
+    seed: int,
+    alpha: float,
+    max_steps: int,
+    bootstrap: int,
+    bootstrap_restarts: int,
+    backend: str,
+    fix: List[str],
+    bounds: List[str],
+    prior: List[str],
+    backtrack: bool,
+    explore: int,
+) -> str:
+    """The diagnosis as ``bsdfit diagnose --json`` writes it."""
+
+def run_cli(args: List[str]) -> None:
+    """Run a command of the command line in this process (``["sweep", …]``)."""
+
+def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
+    """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""
+
+def gpu_adapter() -> Tuple[bool, str]:
+    """Whether a Vulkan adapter can be opened: (True, its name) or (False, why not)."""

@@ -1,0 +1,530 @@
+//! `bsdfit._bsdfit`: the native half of the Python module. It calls the library the way the
+//! command line does (the same request types, defaults and checks), so the same data and
+//! seed give the same numbers. The Pythonic surface (keyword arguments, numpy broadcasting,
+//! the `Fit` object) lives in `bsdfit/__init__.py`; this file only moves data across.
+//!
+//! Every call that computes releases the GIL, and every error comes back as a Python
+//! exception carrying the command line's message: `OSError` when a file cannot be read,
+//! `ValueError` for bad input, `RuntimeError` for a bug (a panic is caught here and never
+//! crosses into Python).
+
+// Each function takes the keyword arguments of its Python call, one Rust argument each.
+#![allow(clippy::too_many_arguments)]
+
+use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
+use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::engine::{self, BackendChoice};
+use bsdfit::inference::constraints::{ConstraintSpec, Constraints};
+use bsdfit::inference::fit::Optimizer;
+use bsdfit::inference::saved::FitFile;
+use bsdfit::workflows::{diagnose, export, fit};
+use clap_value::parse_choice;
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Parse a command-line choice (`lm`, `brdf-cos`, …) with clap's own spelling rules.
+mod clap_value {
+    pub fn parse_choice<T: clap::ValueEnum>(what: &str, s: &str) -> anyhow::Result<T> {
+        T::from_str(s, true).map_err(|_| {
+            let names: Vec<String> = T::value_variants()
+                .iter()
+                .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
+                .collect();
+            anyhow::anyhow!("{what}: '{s}' is not one of {}", names.join(", "))
+        })
+    }
+}
+
+/// An error as Python sees it: `OSError` when a file could not be read or written,
+/// `ValueError` otherwise, with the whole chain of causes as the command line prints it.
+fn to_py(e: anyhow::Error) -> PyErr {
+    let msg = format!("{e:#}");
+    if e.chain()
+        .any(|c| c.downcast_ref::<std::io::Error>().is_some())
+    {
+        PyOSError::new_err(msg)
+    } else {
+        PyValueError::new_err(msg)
+    }
+}
+
+/// Run `work` without the GIL; a panic becomes a `RuntimeError` naming it as a bug.
+fn compute<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce() -> anyhow::Result<T> + Send,
+) -> PyResult<T> {
+    let outcome = py.detach(|| catch_unwind(AssertUnwindSafe(work)));
+    match outcome {
+        Ok(result) => result.map_err(to_py),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(PyRuntimeError::new_err(format!(
+                "bsdfit internal error (a bug, please report it): {what}"
+            )))
+        }
+    }
+}
+
+/// A dataset as the library holds it (angles in radians inside, degrees across).
+#[pyclass(frozen, module = "bsdfit._bsdfit")]
+struct NativeDataset {
+    data: Arc<Dataset>,
+}
+
+#[pymethods]
+impl NativeDataset {
+    fn __len__(&self) -> usize {
+        self.data.len()
+    }
+
+    #[getter]
+    fn kind(&self) -> String {
+        self.data.kind.to_string()
+    }
+
+    #[getter]
+    fn material(&self) -> String {
+        self.data.material.clone()
+    }
+
+    #[getter]
+    fn source(&self) -> String {
+        self.data.source.display().to_string()
+    }
+
+    #[getter]
+    fn channels(&self) -> Vec<f64> {
+        self.data.channels.clone()
+    }
+
+    #[getter]
+    fn planes(&self) -> Vec<f64> {
+        self.data.axes.clone()
+    }
+
+    #[getter]
+    fn notices(&self) -> Vec<String> {
+        self.data.notices.clone()
+    }
+
+    #[getter]
+    fn assumed_uncertainty(&self) -> Option<(f64, f64)> {
+        self.data.assumed_uncertainty
+    }
+
+    /// One column as a new float64 array: angles in degrees (as normalised on reading:
+    /// θ ≥ 0), wavelength in nm, value and uncertainty in sr⁻¹, channel as an index.
+    fn column<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let s = &self.data.samples;
+        let v: Vec<f64> = match name {
+            "theta_i" => s.iter().map(|s| s.theta_i.to_degrees()).collect(),
+            "phi_i" => s.iter().map(|s| s.phi_i.to_degrees()).collect(),
+            "theta_o" => s.iter().map(|s| s.theta_o.to_degrees()).collect(),
+            "phi_o" => s.iter().map(|s| s.phi_o.to_degrees()).collect(),
+            "wavelength_nm" => s.iter().map(|s| s.wavelength_nm).collect(),
+            "value" => s.iter().map(|s| s.value).collect(),
+            "uncertainty" => s.iter().map(|s| s.uncertainty).collect(),
+            "channel" => s.iter().map(|s| s.channel as f64).collect(),
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "no column '{other}' (theta_i, phi_i, theta_o, phi_o, wavelength_nm, value, uncertainty, channel)"
+                )))
+            }
+        };
+        Ok(PyArray1::from_vec(py, v))
+    }
+
+    /// Write the dataset as bsdfit v1 CSV.
+    fn write_csv(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let data = self.data.clone();
+        compute(py, move || data.write(&path))
+    }
+}
+
+/// Reader options from the keyword arguments shared by `read_dataset` and `from_arrays`.
+fn read_options(
+    wavelengths: Option<Vec<f64>>,
+    band: Option<f64>,
+    max_samples: Option<usize>,
+    assume_uncertainty: Option<String>,
+    allow_zero_uncertainty: bool,
+    alta_values: Option<String>,
+) -> anyhow::Result<ReadOptions> {
+    Ok(ReadOptions {
+        allow_zero_uncertainty,
+        wavelengths,
+        band_nm: band,
+        assume_uncertainty: assume_uncertainty
+            .as_deref()
+            .map(parse_assume_arg)
+            .transpose()
+            .map_err(|e| anyhow::anyhow!("assume_uncertainty: {e}"))?,
+        max_samples: Some(max_samples.unwrap_or(readers::merl::DEFAULT_MAX_SAMPLES)),
+        alta_values: alta_values
+            .map(|s| parse_choice::<AltaValues>("alta_values", &s))
+            .transpose()?,
+    })
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, wavelengths, band, max_samples, assume_uncertainty, allow_zero_uncertainty, alta_values))]
+fn read_dataset(
+    py: Python<'_>,
+    path: PathBuf,
+    wavelengths: Option<Vec<f64>>,
+    band: Option<f64>,
+    max_samples: Option<usize>,
+    assume_uncertainty: Option<String>,
+    allow_zero_uncertainty: bool,
+    alta_values: Option<String>,
+) -> PyResult<NativeDataset> {
+    let data = compute(py, move || {
+        // Name the file in an OSError before any reader sees it.
+        std::fs::File::open(&path).map_err(|e| {
+            anyhow::Error::new(std::io::Error::new(
+                e.kind(),
+                format!("{}: {e}", path.display()),
+            ))
+        })?;
+        let opts = read_options(
+            wavelengths,
+            band,
+            max_samples,
+            assume_uncertainty,
+            allow_zero_uncertainty,
+            alta_values,
+        )?;
+        Ok(readers::load(&path, &opts)?)
+    })?;
+    Ok(NativeDataset {
+        data: Arc::new(data),
+    })
+}
+
+/// The slice of a float64 array (the Python side makes them contiguous).
+fn slice<'a>(name: &str, a: &'a PyReadonlyArray1<'_, f64>) -> PyResult<&'a [f64]> {
+    a.as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name}: not a contiguous float64 array")))
+}
+
+/// Rows of the seven columns (degrees), each tagged with its 1-based row number.
+fn rows(
+    theta_i: &[f64],
+    phi_i: &[f64],
+    theta_o: &[f64],
+    phi_o: &[f64],
+    wavelength_nm: &[f64],
+    value: &[f64],
+    uncertainty: &[f64],
+) -> PyResult<Vec<(usize, RawRow)>> {
+    let n = theta_i.len();
+    let cols = [phi_i, theta_o, phi_o, wavelength_nm, value, uncertainty];
+    if cols.iter().any(|c| c.len() != n) {
+        return Err(PyValueError::new_err(format!(
+            "the columns have different lengths ({n}, {})",
+            cols.iter()
+                .map(|c| c.len().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    Ok((0..n)
+        .map(|k| {
+            (
+                k + 1,
+                RawRow {
+                    theta_i: theta_i[k],
+                    phi_i: phi_i[k],
+                    theta_o: theta_o[k],
+                    phi_o: phi_o[k],
+                    wavelength_nm: wavelength_nm[k],
+                    value: value[k],
+                    uncertainty: uncertainty[k],
+                },
+            )
+        })
+        .collect())
+}
+
+#[pyfunction]
+#[pyo3(signature = (kind, theta_i, phi_i, theta_o, phi_o, wavelength_nm, value, uncertainty, material, wavelengths, band, allow_zero_uncertainty))]
+fn dataset_from_arrays(
+    py: Python<'_>,
+    kind: &str,
+    theta_i: PyReadonlyArray1<'_, f64>,
+    phi_i: PyReadonlyArray1<'_, f64>,
+    theta_o: PyReadonlyArray1<'_, f64>,
+    phi_o: PyReadonlyArray1<'_, f64>,
+    wavelength_nm: PyReadonlyArray1<'_, f64>,
+    value: PyReadonlyArray1<'_, f64>,
+    uncertainty: PyReadonlyArray1<'_, f64>,
+    material: String,
+    wavelengths: Option<Vec<f64>>,
+    band: Option<f64>,
+    allow_zero_uncertainty: bool,
+) -> PyResult<NativeDataset> {
+    let kind: Kind = kind
+        .parse()
+        .map_err(|e: String| PyValueError::new_err(format!("kind: {e}")))?;
+    let raw = rows(
+        slice("theta_i", &theta_i)?,
+        slice("phi_i", &phi_i)?,
+        slice("theta_o", &theta_o)?,
+        slice("phi_o", &phi_o)?,
+        slice("wavelength_nm", &wavelength_nm)?,
+        slice("value", &value)?,
+        slice("uncertainty", &uncertainty)?,
+    )?;
+    let data = compute(py, move || {
+        let opts = read_options(wavelengths, band, None, None, allow_zero_uncertainty, None)?;
+        // Messages name a bad row as `arrays:ROW` (1-based).
+        Ok(Dataset::from_rows(kind, &material, &raw, "arrays", &opts)?)
+    })?;
+    Ok(NativeDataset {
+        data: Arc::new(data),
+    })
+}
+
+fn constraint_spec(
+    fix: Vec<String>,
+    bounds: Vec<String>,
+    prior: Vec<String>,
+    lenient: bool,
+) -> ConstraintSpec {
+    ConstraintSpec {
+        fix,
+        bounds,
+        priors: prior,
+        lenient,
+    }
+}
+
+fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
+    parse_choice("backend", s)
+}
+
+/// Fit one model; the report as the JSON text `bsdfit fit --json` writes.
+#[pyfunction]
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts))]
+fn fit_json(
+    py: Python<'_>,
+    dataset: &NativeDataset,
+    model: String,
+    loss: String,
+    weights: String,
+    optimizer: Option<String>,
+    restarts: usize,
+    seed: u64,
+    backend: String,
+    fix: Vec<String>,
+    bounds: Vec<String>,
+    prior: Vec<String>,
+    mc: usize,
+    mc_scale: f64,
+    mc_restarts: usize,
+) -> PyResult<(String, Option<String>)> {
+    let data = dataset.data.clone();
+    compute(py, move || {
+        let request = fit::FitRequest {
+            model,
+            loss,
+            weights,
+            optimizer: optimizer
+                .map(|s| parse_choice::<Optimizer>("optimizer", &s))
+                .transpose()?,
+            restarts,
+            seed,
+            constraints: constraint_spec(fix, bounds, prior, false),
+            mc,
+            mc_scale,
+            mc_restarts,
+        };
+        // Every check runs before the backend starts.
+        request.prepare(&data)?;
+        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
+        let outcome = request.run(&data, backend.as_ref(), &mut |_, _| {})?;
+        let report = outcome.report;
+        anyhow::ensure!(
+            report.best.chi2_red.is_finite() && report.best.loss.is_finite(),
+            "{} on {}: the best fit's χ²_red is {} and its loss {} (the model gives no finite value there; try another loss or bounds)",
+            report.model,
+            data.label(),
+            report.best.chi2_red,
+            report.best.loss
+        );
+        let mc_error = outcome.mc_error.map(|e| format!("{e:#}"));
+        Ok((serde_json::to_string(&report)?, mc_error))
+    })
+}
+
+/// Evaluate a fit (its JSON text) at the given geometries: values and their propagated
+/// standard uncertainties, in the order given, and the warnings `bsdfit eval` prints.
+#[pyfunction]
+#[pyo3(signature = (fit_text, theta_i, phi_i, theta_o, phi_o, wavelength_nm))]
+#[allow(clippy::type_complexity)]
+fn eval_fit<'py>(
+    py: Python<'py>,
+    fit_text: String,
+    theta_i: PyReadonlyArray1<'py, f64>,
+    phi_i: PyReadonlyArray1<'py, f64>,
+    theta_o: PyReadonlyArray1<'py, f64>,
+    phi_o: PyReadonlyArray1<'py, f64>,
+    wavelength_nm: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Vec<String>,
+)> {
+    let n = theta_i.len()?;
+    let zeros = vec![0.0; n];
+    let ones = vec![1.0; n];
+    let raw = rows(
+        slice("theta_i", &theta_i)?,
+        slice("phi_i", &phi_i)?,
+        slice("theta_o", &theta_o)?,
+        slice("phi_o", &phi_o)?,
+        slice("wavelength_nm", &wavelength_nm)?,
+        &zeros,
+        &ones,
+    )?;
+    let (values, uncertainties, warnings) = compute(py, move || {
+        let file = FitFile::parse(&fit_text, "the fit")?;
+        let kind = match &file {
+            FitFile::Single(f) => f.model.kind,
+            FitFile::PerAxis(v) => v[0].1.model.kind,
+        };
+        let opts = ReadOptions {
+            allow_zero_uncertainty: true,
+            ..Default::default()
+        };
+        let at = Dataset::from_rows(kind, "eval", &raw, "eval", &opts)?;
+        let p = export::predict(&file, "the fit", &at, "eval")?;
+        // Back to the caller's order: each sample keeps its row number.
+        let mut values = vec![f64::NAN; n];
+        let mut uncertainties = vec![f64::NAN; n];
+        for s in &p.data.samples {
+            values[s.line as usize - 1] = s.value;
+            uncertainties[s.line as usize - 1] = s.uncertainty;
+        }
+        Ok((values, uncertainties, p.warnings))
+    })?;
+    Ok((
+        PyArray1::from_vec(py, values),
+        PyArray1::from_vec(py, uncertainties),
+        warnings,
+    ))
+}
+
+/// Diagnose a dataset from a start model; the JSON text `bsdfit diagnose --json` writes.
+#[pyfunction]
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_restarts, backend, fix, bounds, prior, backtrack, explore))]
+fn diagnose_json(
+    py: Python<'_>,
+    dataset: &NativeDataset,
+    model: String,
+    loss: String,
+    weights: String,
+    optimizer: String,
+    restarts: usize,
+    seed: u64,
+    alpha: f64,
+    max_steps: usize,
+    bootstrap: usize,
+    bootstrap_restarts: usize,
+    backend: String,
+    fix: Vec<String>,
+    bounds: Vec<String>,
+    prior: Vec<String>,
+    backtrack: bool,
+    explore: usize,
+) -> PyResult<String> {
+    let data = dataset.data.clone();
+    compute(py, move || {
+        let loss = fit::parse_loss(&loss, &weights, data.kind)?;
+        anyhow::ensure!(
+            alpha > 0.0 && alpha < 1.0,
+            "alpha must be in (0, 1), got {alpha}"
+        );
+        anyhow::ensure!(restarts >= 1, "restarts must be at least 1");
+        let start = bsdfit::bsdf::Model::for_data(&model, &data)
+            .map_err(|e| anyhow::anyhow!("model: {e}"))?;
+        // Every name must be a parameter of the start model (extensions keep its names).
+        let strict = constraint_spec(fix.clone(), bounds.clone(), prior.clone(), false);
+        Constraints::resolve(&start, &strict, false)?;
+        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
+        let opts = diagnose::DiagnoseOptions {
+            loss,
+            optimizer: parse_choice("optimizer", &optimizer)?,
+            restarts,
+            seed,
+            alpha,
+            max_steps,
+            backtrack,
+            bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
+                replicates: bootstrap,
+                restarts: bootstrap_restarts,
+                seed,
+            },
+            constraints: constraint_spec(fix, bounds, prior, true),
+            explore,
+            ..Default::default()
+        };
+        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &opts, &mut |_| {})?;
+        Ok(serde_json::to_string(&d.to_json())?)
+    })
+}
+
+/// Run a command of the command line in this process (`["sweep", …]`).
+#[pyfunction]
+fn run_cli(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
+    compute(py, move || bsdfit::cli::run_args(args))
+}
+
+/// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn catalogue() -> PyResult<Vec<(String, String, Vec<(String, bool, f64, f64)>)>> {
+    let mut out = Vec::new();
+    for spec in bsdfit::cli::models::listed_specs() {
+        let model = bsdfit::bsdf::Model::parse(&spec, 1).map_err(|e| to_py(e.into()))?;
+        let params = model
+            .params
+            .iter()
+            .map(|p| (p.name.clone(), p.decl.rgb, p.decl.lo, p.decl.hi))
+            .collect();
+        out.push((spec, model.kind.to_string(), params));
+    }
+    Ok(out)
+}
+
+/// Whether a Vulkan adapter (a GPU, or lavapipe) can be opened, and its name or why not.
+#[pyfunction]
+fn gpu_adapter(py: Python<'_>) -> (bool, String) {
+    py.detach(|| match engine::gpu::GpuBackend::new() {
+        Ok(g) => (true, engine::Backend::name(&g)),
+        Err(e) => (false, e.to_string()),
+    })
+}
+
+#[pymodule]
+fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<NativeDataset>()?;
+    m.add_function(wrap_pyfunction!(read_dataset, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_json, m)?)?;
+    m.add_function(wrap_pyfunction!(eval_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
+    m.add_function(wrap_pyfunction!(run_cli, m)?)?;
+    m.add_function(wrap_pyfunction!(catalogue, m)?)?;
+    m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,195 @@
+//! One fit as `bsdfit fit` runs it, for every caller (the command line, the Python module):
+//! the same defaults, the same checks before any work, the same options handed to
+//! [`crate::inference::fit::fit`], so the same data and seed give the same parameters
+//! whoever asks.
+
+use crate::bsdf::Model;
+use crate::data::{Dataset, Kind};
+use crate::engine::loss::{Loss, Metric, Weights};
+use crate::engine::Backend;
+use crate::inference::constraints::{ConstraintSpec, Constraints};
+use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
+use crate::inference::mc::{monte_carlo, McOptions};
+use anyhow::{Context, Result};
+
+/// Random restarts per fit of `fit`, `diagnose` and `sweep` (one default for all).
+pub const DEFAULT_RESTARTS: usize = 16;
+
+/// What one fit is asked to do, with the command line's defaults.
+#[derive(Clone, Debug)]
+pub struct FitRequest {
+    /// Model spec, e.g. `fa(eon)`.
+    pub model: String,
+    /// Loss name (`chi2`, or one of the paper's losses for the data's kind).
+    pub loss: String,
+    /// Weighting name (`uniform`, `relunc`, `invunc`).
+    pub weights: String,
+    /// None: LM for sum-of-squares losses, compass search for smape.
+    pub optimizer: Option<Optimizer>,
+    pub restarts: usize,
+    pub seed: u64,
+    pub constraints: ConstraintSpec,
+    /// Monte Carlo replicas (0: off), the correlated relative scale uncertainty, and the
+    /// random restarts per replica.
+    pub mc: usize,
+    pub mc_scale: f64,
+    pub mc_restarts: usize,
+}
+
+impl Default for FitRequest {
+    fn default() -> Self {
+        FitRequest {
+            model: String::new(),
+            loss: "chi2".into(),
+            weights: "uniform".into(),
+            optimizer: None,
+            restarts: DEFAULT_RESTARTS,
+            seed: 1,
+            constraints: ConstraintSpec::default(),
+            mc: 0,
+            mc_scale: 0.0,
+            mc_restarts: 3,
+        }
+    }
+}
+
+/// The loss named by a loss and a weighting, checked against the kind of data.
+pub fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
+    let metric: Metric = loss
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+    let weights: Weights = weights
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
+    anyhow::ensure!(
+        metric.applies_to(kind),
+        "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)",
+        Metric::for_kind(kind)
+            .iter()
+            .map(|m| m.to_string())
+            .collect::<Vec<_>>()
+    );
+    Ok(Loss::new(metric, weights))
+}
+
+/// The optimizer asked for, or the default for the loss: LM where it applies.
+pub fn optimizer_for(given: Option<Optimizer>, loss: Loss) -> Optimizer {
+    given.unwrap_or(if loss.is_sum_of_squares() {
+        Optimizer::Lm
+    } else {
+        Optimizer::Compass
+    })
+}
+
+/// Which stage a progress count belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// The fit's restarts still active.
+    Fit,
+    /// The Monte Carlo replica restarts still active (of [`FitRequest::mc_total`]).
+    MonteCarlo,
+}
+
+/// A fit and, where Monte Carlo was asked for and failed, why (the fit itself stands).
+pub struct FitOutcome {
+    pub model: Model,
+    pub loss: Loss,
+    pub report: FitReport,
+    pub mc_error: Option<anyhow::Error>,
+}
+
+impl FitRequest {
+    /// The checks that need no data: Monte Carlo options.
+    pub fn check(&self) -> Result<()> {
+        anyhow::ensure!(
+            self.restarts >= 1,
+            "--restarts takes a positive integer, got {}",
+            self.restarts
+        );
+        anyhow::ensure!(
+            self.mc == 0 || self.mc >= 2,
+            "--mc {}: a distribution needs at least 2 replicas (0 turns Monte Carlo off)",
+            self.mc
+        );
+        anyhow::ensure!(
+            self.mc_scale.is_finite() && (0.0..1.0).contains(&self.mc_scale),
+            "--mc-scale {}: a relative uncertainty in [0, 1)",
+            self.mc_scale
+        );
+        anyhow::ensure!(
+            self.mc > 0 || self.mc_scale == 0.0,
+            "--mc-scale needs --mc N (the number of replicas)"
+        );
+        Ok(())
+    }
+
+    /// Replica restarts Monte Carlo steps in all (for a progress bar).
+    pub fn mc_total(&self) -> usize {
+        self.mc * (self.mc_restarts.max(1) + 1)
+    }
+
+    /// The model, loss and fit options for `data`; a misspelt model, loss or parameter
+    /// name fails here, before any work.
+    pub fn prepare(&self, data: &Dataset) -> Result<(Model, Loss, FitOptions)> {
+        self.check()?;
+        let loss = parse_loss(&self.loss, &self.weights, data.kind)?;
+        let model = Model::for_data(&self.model, data).context("--model")?;
+        Constraints::resolve(&model, &self.constraints, false)?;
+        let opts = FitOptions {
+            optimizer: optimizer_for(self.optimizer, loss),
+            restarts: self.restarts,
+            seed: self.seed,
+            constraints: self.constraints.clone(),
+            ..Default::default()
+        };
+        Ok((model, loss, opts))
+    }
+
+    /// Fit `data` on `backend`, then (with `mc`) refit its replicas. `progress` gets the
+    /// number of restarts still active in each stage.
+    pub fn run(
+        &self,
+        data: &Dataset,
+        backend: &dyn Backend,
+        progress: &mut dyn FnMut(Stage, usize),
+    ) -> Result<FitOutcome> {
+        let (model, loss, opts) = self.prepare(data)?;
+        let mut report = fit(&model, data, loss, backend, &opts, &mut |active| {
+            progress(Stage::Fit, active)
+        })?;
+        let finite = report.best.chi2_red.is_finite() && report.best.loss.is_finite();
+        let mut mc_error = None;
+        if self.mc > 0 && finite {
+            let mc = McOptions {
+                replicas: self.mc,
+                scale_rel: self.mc_scale,
+                seed: self.seed,
+                restarts: self.mc_restarts,
+            };
+            let outcome = monte_carlo(
+                &model,
+                data,
+                loss,
+                backend,
+                &opts,
+                &report.flat_params,
+                &report.flat_std,
+                &mc,
+                &mut |active| progress(Stage::MonteCarlo, active),
+            );
+            match outcome {
+                Ok(summary) => report.monte_carlo = Some(summary),
+                Err(e) => {
+                    report.warnings.push(format!("--mc failed: {e:#}"));
+                    mc_error = Some(e);
+                }
+            }
+        }
+        Ok(FitOutcome {
+            model,
+            loss,
+            report,
+            mc_error,
+        })
+    }
+}
