@@ -3,7 +3,7 @@
 # machine — Mesa's lavapipe software Vulkan device, so the GPU tests really run without a
 # GPU — then checks formatting and lints and runs every test, then installs the Python
 # module from the repository into a fresh virtual environment, as a user would, and runs
-# its tests there.
+# its tests there, and runs a sharded sweep on a real single-node Slurm cluster.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -38,3 +38,6 @@ fi
 "$VENV/bin/pip" install --quiet ./python pytest mypy
 # The CLI comparisons use the binary `cargo test` just built.
 BSDFIT_CLI="$PWD/target/debug/bsdfit" "$VENV/bin/python" -m pytest -q python/tests
+
+echo "== Slurm: a sharded sweep on a single-node cluster =="
+bash scripts/test-slurm.sh "$PWD/target/debug/bsdfit"

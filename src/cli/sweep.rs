@@ -14,6 +14,7 @@ use crate::output::results::{
     Key, Row, Skipped, DEFAULT_OUT, RESULTS_CSV, SKIPPED_JSON,
 };
 use crate::workflows::sweep::lock::DirLock;
+use crate::workflows::sweep::slurm;
 use crate::workflows::sweep::{
     expand_data, parse_shard, skipped_entry, tasks, write_skipped, Selection, Task,
 };
@@ -70,9 +71,21 @@ pub struct SweepArgs {
     pub out: PathBuf,
     /// Run only shard I of N (1-based), e.g. 2/4. Shards that run at the same time must
     /// each write to their own --out folder (e.g. --out run-1, --out run-2); combine them
-    /// afterwards with `bsdfit merge run-1 run-2 --out DIR`.
-    #[arg(long)]
+    /// afterwards with `bsdfit merge run-1 run-2 --out DIR`. `auto`: the shard of this
+    /// Slurm job-array task (SLURM_ARRAY_TASK_ID, _MIN, _MAX, _STEP, _COUNT), written into
+    /// DIR/shards/I-of-N/ with the sweep's plan in DIR/plan.json; combine them with
+    /// `bsdfit merge --shards --out DIR` (docs/cluster.md).
+    #[arg(long, value_name = "I/N|auto")]
     pub shard: Option<String>,
+    /// Write Slurm job scripts for this sweep into DIR/slurm/ instead of running it: an
+    /// array of TASKS tasks (`--shard auto` each; `--gres=gpu:1` with --backend gpu), a
+    /// merge job that runs when every task has ended, and submit.sh that submits both.
+    #[arg(long, value_name = "TASKS")]
+    pub emit_slurm: Option<usize>,
+    /// With --emit-slurm: CPUs per array task (`--cpus-per-task`; the CPU reference uses
+    /// SLURM_CPUS_PER_TASK threads).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub slurm_cpus: usize,
     /// Skip the plots, renders and report.html (results files only).
     #[arg(long)]
     pub no_pictures: bool,
@@ -85,8 +98,13 @@ pub struct SweepArgs {
 #[derive(Args, Debug, Clone)]
 pub struct MergeArgs {
     /// Shard output directories (or their results.csv files).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "shards")]
     pub inputs: Vec<PathBuf>,
+    /// Merge the shard folders a `sweep --shard auto` wrote into OUT/shards/, and check
+    /// them against OUT/plan.json: the cells no shard wrote are listed, and merge then
+    /// fails (after writing what it has), so a lost task is never silent.
+    #[arg(long)]
+    pub shards: bool,
     /// Output directory; rows already in its results.csv are kept. Locked while merge runs
     /// (DIR/.bsdfit.lock), like a sweep's.
     #[arg(long, default_value = DEFAULT_OUT)]
@@ -127,7 +145,21 @@ pub struct SweepStats {
 /// Run a sweep.
 pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
     let t0 = Instant::now();
-    let shard = args.shard.as_deref().map(parse_shard).transpose()?;
+    if let Some(tasks) = args.emit_slurm {
+        emit_slurm(args, tasks)?;
+        return Ok(SweepStats::default());
+    }
+    let auto = args.shard.as_deref().map(str::trim) == Some("auto");
+    let shard = if auto {
+        Some(slurm::shard_from_env(&|k| std::env::var(k).ok())?)
+    } else {
+        args.shard.as_deref().map(parse_shard).transpose()?
+    };
+    // `--shard auto`: this shard's own folder inside --out (no two tasks write one file).
+    let out = match shard {
+        Some(s) if auto => slurm::shard_dir(&args.out, s),
+        _ => args.out.clone(),
+    };
     let paths = expand_data(&args.data)?;
     let mut files = Vec::new();
     for p in &paths {
@@ -151,12 +183,16 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
     let _lock = if args.dry_run {
         None
     } else {
-        check_writable_dir(&args.out, "--out")?;
-        Some(DirLock::acquire(&args.out, "sweep", &mut |m| {
+        if auto {
+            std::fs::create_dir_all(&out)
+                .with_context(|| format!("--out: cannot create {}", out.display()))?;
+        }
+        check_writable_dir(&out, "--out")?;
+        Some(DirLock::acquire(&out, "sweep", &mut |m| {
             eprintln!("note: {m}")
         })?)
     };
-    let csv_path = args.out.join(RESULTS_CSV);
+    let csv_path = out.join(RESULTS_CSV);
     let mut rows = read_results(&csv_path, !args.dry_run, &mut |m| eprintln!("note: {m}"))?;
     let constraints = args.constraints.spec(true);
     let constraints_text = constraints_text(&constraints);
@@ -168,7 +204,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
             describe_constraints(&constraints_text)
         );
     }
-    let done: BTreeSet<Key> = rows.iter().map(Row::key).collect();
+    let mut done: BTreeSet<Key> = rows.iter().map(Row::key).collect();
     let key_of = |t: &Task| Key {
         data_hash: files[t.data].hash.clone(),
         model: t.model.clone(),
@@ -178,6 +214,27 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
         restarts: args.restarts,
         seed: args.seed,
     };
+    if let (true, Some((_, n)), false) = (auto, shard, args.dry_run) {
+        let plan = slurm::Plan {
+            shards: n,
+            constraints: constraints_text.clone(),
+            cells: all
+                .iter()
+                .enumerate()
+                .map(|(i, t)| plan_cell(&files, t, &key_of(t), i % n + 1))
+                .collect(),
+        };
+        plan.record(&args.out)?;
+        // Cells another shard (of this or an earlier submission) already wrote are done.
+        for dir in slurm::shard_dirs(&args.out)?
+            .into_iter()
+            .chain(std::iter::once(args.out.clone()))
+            .filter(|d| *d != out)
+        {
+            let other = read_results(&dir.join(RESULTS_CSV), false, &mut |_| {})?;
+            done.extend(other.iter().map(Row::key));
+        }
+    }
     let todo: Vec<&Task> = mine
         .iter()
         .map(|(_, t)| *t)
@@ -434,8 +491,8 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
             csv_path.display()
         )
     })?;
-    write_summaries(&args.out, &rows)?;
-    write_skipped(&args.out, &skipped, &rows, &files)?;
+    write_summaries(&out, &rows)?;
+    write_skipped(&out, &skipped, &rows, &files)?;
     eprintln!(
         "{}, {} in {}, {} skipped/failed, {:.1} s",
         plural_with(new_rows, "new fit", "new fits"),
@@ -444,7 +501,12 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
         skipped.len(),
         t0.elapsed().as_secs_f64()
     );
-    if shard.is_some() {
+    if auto {
+        eprintln!(
+            "shard done; when every shard has, combine them with `bsdfit merge --shards --out {}`",
+            args.out.display()
+        );
+    } else if shard.is_some() {
         eprintln!("shard done; combine the shards with `bsdfit merge DIR... --out DIR` (it writes the pictures and report)");
     } else if !args.no_pictures {
         let run = RunInfo {
@@ -452,7 +514,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
             wall_seconds: fit_wall,
             workers,
         };
-        crate::output::report::publish(&args.out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
+        crate::output::report::publish(&out, &rows, Some(&run), &mut |m| eprintln!("{m}"))?;
     }
     Ok(SweepStats {
         submissions,
@@ -492,7 +554,22 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let mut by_key: BTreeMap<Key, usize> =
         rows.iter().enumerate().map(|(i, r)| (r.key(), i)).collect();
     let mut skipped: Vec<Skipped> = Vec::new();
-    for input in &args.inputs {
+    let mut inputs = args.inputs.clone();
+    let plan = if args.shards {
+        let plan = slurm::Plan::read(&args.out)?.with_context(|| {
+            format!(
+                "--shards: {} has no {} (no `sweep --shard auto --out {}` has started there)",
+                args.out.display(),
+                slurm::PLAN_JSON,
+                args.out.display()
+            )
+        })?;
+        inputs.extend(slurm::shard_dirs(&args.out)?);
+        Some(plan)
+    } else {
+        None
+    };
+    for input in &inputs {
         let (csv, dir) = if input.is_dir() {
             (input.join(RESULTS_CSV), input.clone())
         } else {
@@ -578,5 +655,202 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     if !args.no_pictures {
         crate::output::report::publish(&args.out, &rows, None, &mut |m| eprintln!("{m}"))?;
     }
+    if let Some(plan) = plan {
+        let have: BTreeSet<Key> = rows.iter().map(Row::key).collect();
+        let missing = plan.missing(&have);
+        // A fit that ran and failed is in skipped.json, as in a single-process sweep.
+        let failed: BTreeSet<FitKey> = skipped.iter().map(Skipped::fit_key).collect();
+        let (failed_cells, lost): (Vec<_>, Vec<_>) = missing.into_iter().partition(|c| {
+            failed.contains(&(
+                c.data.clone(),
+                c.model.clone(),
+                c.loss.clone(),
+                c.weights.clone(),
+                c.optimizer.clone(),
+            ))
+        });
+        if !failed_cells.is_empty() {
+            eprintln!(
+                "{} of the plan ran and failed (listed in {})",
+                plural(failed_cells.len(), "fit"),
+                args.out.join(SKIPPED_JSON).display()
+            );
+        }
+        if !lost.is_empty() {
+            for c in &lost {
+                eprintln!("missing: {}", c.describe());
+            }
+            let shards: BTreeSet<usize> = lost.iter().map(|c| c.shard).collect();
+            anyhow::bail!(
+                "{} of the plan's {} cells are in no shard's results (shards {} of {}: a task failed, was cancelled or has not run yet). Re-submit the array (only missing cells run), then merge again",
+                lost.len(),
+                plan.cells.len(),
+                shards.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", "),
+                plan.shards,
+            );
+        }
+        eprintln!("all {} cells of the plan are merged", plan.cells.len());
+    }
     Ok(())
+}
+
+/// A task as a cell of the plan of a sharded sweep.
+fn plan_cell(files: &[DataFile], t: &Task, key: &Key, shard: usize) -> slurm::PlanCell {
+    slurm::PlanCell {
+        data: files[t.data].name.clone(),
+        data_hash: key.data_hash.clone(),
+        model: key.model.clone(),
+        loss: key.loss.clone(),
+        weights: key.weights.clone(),
+        optimizer: key.optimizer.clone(),
+        restarts: key.restarts,
+        seed: key.seed,
+        shard,
+    }
+}
+
+/// `sweep --emit-slurm TASKS`: the job scripts of this sweep, in OUT/slurm/.
+fn emit_slurm(args: &SweepArgs, array_tasks: usize) -> Result<()> {
+    anyhow::ensure!(
+        array_tasks >= 1,
+        "--emit-slurm {array_tasks}: the array needs at least one task"
+    );
+    anyhow::ensure!(
+        args.slurm_cpus >= 1,
+        "--slurm-cpus {}: at least one CPU per task",
+        args.slurm_cpus
+    );
+    anyhow::ensure!(
+        args.shard.is_none(),
+        "--emit-slurm writes an array whose tasks use --shard auto; leave --shard out"
+    );
+    // Fail now, not on the cluster: the data must read and the selection be valid.
+    let paths = expand_data(&args.data)?;
+    let mut files = Vec::new();
+    for p in &paths {
+        files.push(DataFile::read(p, &args.data_args.read_options()?)?);
+    }
+    let all = tasks(
+        &files,
+        &Selection {
+            models: args.models.clone(),
+            losses: args.losses.clone(),
+            weights: args.weights.clone(),
+            optimizer: args.optimizer.clone(),
+        },
+    )?;
+    let workdir = std::env::current_dir().context("cannot read the current folder")?;
+    let out = workdir.join(&args.out);
+    let dir = out.join("slurm");
+    std::fs::create_dir_all(dir.join("logs"))
+        .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
+    let binary = std::env::current_exe()
+        .context("cannot find the bsdfit binary")?
+        .canonicalize()
+        .context("cannot find the bsdfit binary")?;
+    // Running from the Python module, the "binary" is Python: name bsdfit's instead.
+    let binary = if binary
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with("bsdfit"))
+    {
+        binary
+    } else {
+        PathBuf::from("bsdfit")
+    };
+    let scripts = slurm::JobScripts {
+        binary: &binary,
+        workdir: &workdir,
+        out: &out,
+        sweep_args: &sweep_argv(args),
+        tasks: array_tasks,
+        cpus_per_task: args.slurm_cpus,
+        gpu: args.backend.backend == engine::BackendChoice::Gpu,
+        pictures: !args.no_pictures,
+    };
+    for (name, text, executable) in scripts.files() {
+        let path = dir.join(name);
+        crate::output::files::write_result(&path, &text, false)?;
+        #[cfg(unix)]
+        if executable {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+                .with_context(|| format!("cannot make {} executable", path.display()))?;
+        }
+        #[cfg(not(unix))]
+        let _ = executable;
+    }
+    eprintln!(
+        "wrote {0}/array.sbatch ({array_tasks} tasks for {1}), {0}/merge.sbatch and {0}/submit.sh; submit with: sh {0}/submit.sh",
+        dir.display(),
+        plural(all.len(), "cell"),
+    );
+    if array_tasks > all.len() {
+        eprintln!(
+            "note: {array_tasks} tasks for {}: {} of them will have nothing to do",
+            plural(all.len(), "cell"),
+            array_tasks - all.len()
+        );
+    }
+    Ok(())
+}
+
+/// The arguments that make a sweep's task list, as `bsdfit sweep` takes them (without
+/// --out, --shard, --emit-slurm, --dry-run and --no-pictures, which the job scripts set).
+pub fn sweep_argv(a: &SweepArgs) -> Vec<String> {
+    let mut v: Vec<String> = a.data.iter().map(|p| p.display().to_string()).collect();
+    let mut opt = |name: &str, value: String| {
+        v.push(format!("--{name}"));
+        v.push(value);
+    };
+    for (name, list) in [
+        ("models", &a.models),
+        ("losses", &a.losses),
+        ("weights", &a.weights),
+    ] {
+        if let Some(list) = list {
+            opt(name, list.join(","));
+        }
+    }
+    opt("optimizer", a.optimizer.join(","));
+    opt("restarts", a.restarts.to_string());
+    opt("seed", a.seed.to_string());
+    opt(
+        "backend",
+        clap::ValueEnum::to_possible_value(&a.backend.backend)
+            .map(|p| p.get_name().to_string())
+            .unwrap_or_else(|| "auto".into()),
+    );
+    for f in &a.constraints.fix {
+        opt("fix", f.clone());
+    }
+    for b in &a.constraints.bounds {
+        opt("bounds", b.clone());
+    }
+    for p in &a.constraints.prior {
+        opt("prior", p.clone());
+    }
+    let d = &a.data_args;
+    if let Some(w) = &d.wavelengths {
+        opt(
+            "wavelengths",
+            w.iter()
+                .map(|x| x.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
+    }
+    if let Some(u) = &d.assume_uncertainty {
+        opt("assume-uncertainty", u.clone());
+    }
+    if let Some(b) = d.band {
+        opt("band", b.to_string());
+    }
+    opt("max-samples", d.max_samples.to_string());
+    if let Some(k) = d.alta_values {
+        opt("alta-values", k.name().to_string());
+    }
+    if d.allow_zero_uncertainty {
+        v.push("--allow-zero-uncertainty".into());
+    }
+    v
 }

@@ -29,6 +29,9 @@ pub struct Holder {
     pub token: String,
     /// Start time of the process (Linux: clock ticks since boot), to tell a reused pid.
     pub proc_start: Option<u64>,
+    /// The Slurm job of the holder (`SLURM_JOB_ID`), so that a task on another node can
+    /// ask Slurm whether it still runs.
+    pub slurm_job: Option<String>,
 }
 
 impl Holder {
@@ -44,6 +47,9 @@ impl Holder {
             command: command.to_string(),
             token: format!("{pid}-{}", now.as_nanos()),
             proc_start: process_start(pid),
+            slurm_job: std::env::var("SLURM_JOB_ID")
+                .ok()
+                .filter(|j| !j.trim().is_empty()),
         }
     }
 
@@ -59,6 +65,9 @@ impl Holder {
         );
         if let Some(t) = self.proc_start {
             s += &format!("proc_start: {t}\n");
+        }
+        if let Some(j) = &self.slurm_job {
+            s += &format!("slurm_job: {j}\n");
         }
         s
     }
@@ -88,6 +97,7 @@ impl Holder {
                 "command" => h.command = v.to_string(),
                 "token" => h.token = v.to_string(),
                 "proc_start" => h.proc_start = v.parse().ok(),
+                "slurm_job" => h.slurm_job = Some(v.to_string()).filter(|j| !j.is_empty()),
                 _ => {}
             }
         }
@@ -117,10 +127,11 @@ impl Holder {
         )
     }
 
-    /// Is the holder still running? None when this host cannot tell (another host).
+    /// Is the holder still running? None when this host cannot tell (another host, and
+    /// no Slurm job to ask about).
     fn alive(&self) -> Option<bool> {
         if self.host != host_name() {
-            return None;
+            return self.slurm_job.as_deref().and_then(slurm_job_running);
         }
         let alive = process_exists(self.pid);
         if !alive {
@@ -154,6 +165,36 @@ pub fn host_name() -> String {
                 .filter(|s| !s.is_empty())
         })
         .unwrap_or_else(|| "unknown-host".into())
+}
+
+/// Does Slurm still run (or hold) job `job`? None when `squeue` cannot say (not on a
+/// cluster, or the controller is unreachable).
+fn slurm_job_running(job: &str) -> Option<bool> {
+    let out = std::process::Command::new("squeue")
+        .args(["-h", "-j", job, "-o", "%T"])
+        .output()
+        .ok()?;
+    if out.status.success() {
+        // Ended jobs stay listed for a while (MinJobAge) in a final state.
+        const ENDED: [&str; 10] = [
+            "COMPLETED",
+            "FAILED",
+            "CANCELLED",
+            "TIMEOUT",
+            "NODE_FAIL",
+            "PREEMPTED",
+            "OUT_OF_MEMORY",
+            "BOOT_FAIL",
+            "DEADLINE",
+            "",
+        ];
+        let text = String::from_utf8_lossy(&out.stdout);
+        Some(text.lines().any(|l| !ENDED.contains(&l.trim())))
+    } else if String::from_utf8_lossy(&out.stderr).contains("Invalid job id") {
+        Some(false)
+    } else {
+        None
+    }
 }
 
 /// Does a process with this pid exist on this host?
@@ -234,6 +275,17 @@ fn try_create(path: &Path, me: &Holder) -> std::io::Result<Attempt> {
             if let Err(e) = written {
                 let _ = std::fs::remove_file(path);
                 return Err(e);
+            }
+            drop(f);
+            // Exclusive creation is atomic on local file systems, NFSv3+ and Lustre. Where
+            // it is not, another process may have created the same file at the same time:
+            // read it back, and fail loudly rather than share the folder silently.
+            let back = std::fs::read_to_string(path).unwrap_or_default();
+            if Holder::parse(&back).map(|h| h.token) != Some(me.token.clone()) {
+                return Err(std::io::Error::other(format!(
+                    "the lock file was changed by another process right after this one created it exclusively: this file system does not make exclusive creation atomic (e.g. NFS v2), so it cannot hold the lock; use a folder on a local, NFSv3+ or Lustre file system ({})",
+                    Holder::parse(&back).map(|h| h.describe()).unwrap_or_else(|| "unreadable".into())
+                )));
             }
             Ok(Attempt::Taken(DirLock {
                 path: path.to_path_buf(),
@@ -426,7 +478,10 @@ mod tests {
             command: "sweep".into(),
             token: "x".into(),
             proc_start: None,
+            slurm_job: Some("4242".into()),
         };
+        // The Slurm job survives the file, so another node can ask Slurm about it.
+        assert_eq!(Holder::parse(&stale.to_text()), Some(stale.clone()));
         std::fs::write(d.path().join(LOCK_FILE), stale.to_text()).unwrap();
         let mut notes = Vec::new();
         let l = DirLock::acquire(d.path(), "sweep", &mut |m| notes.push(m)).unwrap();
@@ -434,6 +489,8 @@ mod tests {
         drop(l);
         let foreign = Holder {
             host: "elsewhere.example".into(),
+            // Without a Slurm job nothing can tell whether it still runs.
+            slurm_job: None,
             ..stale
         };
         std::fs::write(d.path().join(LOCK_FILE), foreign.to_text()).unwrap();

@@ -13,6 +13,7 @@
 //! `report.html` ([`crate::output::report`]).
 
 pub mod lock;
+pub mod slurm;
 
 use crate::bsdf;
 use crate::data::Kind;

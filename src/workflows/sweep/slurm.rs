@@ -1,0 +1,308 @@
+//! Sweeps on a Slurm cluster (docs/cluster.md): the shard of a job-array task read from
+//! Slurm's environment, one folder per shard inside the sweep's folder, the plan that lets
+//! a merge name the cells no shard wrote, and the job scripts `sweep --emit-slurm` writes.
+//!
+//! Layout of `--out OUT` for `--shard auto`:
+//! - `OUT/shards/I-of-N/`: shard I's own results folder (its own lock, resumable);
+//! - `OUT/plan.json`: every cell of the sweep, written by the first shard to start;
+//! - `OUT/results.csv`, report…: written by `bsdfit merge --shards --out OUT`.
+//!
+//! No two processes write one file: shards write their own folders, the plan is written
+//! to a temporary and renamed into place (the same content from every shard), and the
+//! merge holds `OUT`'s lock.
+
+use crate::output::results::Key;
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// The folder of the shard folders inside a sweep's `--out`.
+pub const SHARDS_DIR: &str = "shards";
+/// The sweep's plan inside its `--out`.
+pub const PLAN_JSON: &str = "plan.json";
+
+/// The variables `--shard auto` reads, in the order the error message lists them.
+const ARRAY_VARS: [&str; 5] = [
+    "SLURM_ARRAY_TASK_ID",
+    "SLURM_ARRAY_TASK_MIN",
+    "SLURM_ARRAY_TASK_MAX",
+    "SLURM_ARRAY_TASK_STEP",
+    "SLURM_ARRAY_TASK_COUNT",
+];
+
+/// The shard (I of N, 1-based) of this Slurm job-array task, from its environment
+/// (`get` reads a variable). Any index base and step Slurm allows (`--array=0-9`,
+/// `--array=1-99:2`, `--array=5-5`): task ID maps to I = (ID − MIN)/STEP + 1 of
+/// N = COUNT (or (MAX − MIN)/STEP + 1). A list of indices that is not such a range
+/// (`--array=1,4,5`) cannot be numbered from the variables and is refused.
+pub fn shard_from_env(get: &dyn Fn(&str) -> Option<String>) -> Result<(usize, usize)> {
+    let num = |name: &str| -> Result<Option<u64>> {
+        match get(name) {
+            None => Ok(None),
+            Some(v) if v.trim().is_empty() => Ok(None),
+            Some(v) => v
+                .trim()
+                .parse::<u64>()
+                .map(Some)
+                .with_context(|| format!("--shard auto: {name}={v} is not an index")),
+        }
+    };
+    let Some(id) = num("SLURM_ARRAY_TASK_ID")? else {
+        anyhow::bail!(
+            "--shard auto: SLURM_ARRAY_TASK_ID is not set, so this is not a task of a Slurm job array (--shard auto reads {}). Submit with `sbatch --array=1-N`, or give --shard I/N",
+            ARRAY_VARS.join(", ")
+        );
+    };
+    let min = num("SLURM_ARRAY_TASK_MIN")?
+        .context("--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MIN is not")?;
+    let max = num("SLURM_ARRAY_TASK_MAX")?
+        .context("--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MAX is not")?;
+    let step = num("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
+    anyhow::ensure!(
+        min <= id && id <= max,
+        "--shard auto: SLURM_ARRAY_TASK_ID={id} is outside SLURM_ARRAY_TASK_MIN..MAX = {min}..{max}"
+    );
+    let span = (max - min) / step + 1;
+    let count = num("SLURM_ARRAY_TASK_COUNT")?.unwrap_or(span);
+    anyhow::ensure!(
+        (max - min) % step == 0 && count == span && (id - min) % step == 0,
+        "--shard auto: the array's indices ({min}..{max}, step {step}, {count} tasks) are not one range MIN-MAX[:STEP], so task {id} cannot be numbered; submit with --array=1-{count} (or give --shard I/N)"
+    );
+    Ok((((id - min) / step + 1) as usize, count as usize))
+}
+
+/// Shard I of N's own folder inside the sweep's `out`.
+pub fn shard_dir(out: &Path, (i, n): (usize, usize)) -> PathBuf {
+    out.join(SHARDS_DIR).join(format!("{i}-of-{n}"))
+}
+
+/// The shard folders present in `out` (sorted).
+pub fn shard_dirs(out: &Path) -> Result<Vec<PathBuf>> {
+    let dir = out.join(SHARDS_DIR);
+    if !dir.exists() {
+        return Ok(Vec::new());
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    dirs.sort();
+    Ok(dirs)
+}
+
+/// One cell of a sweep: its key, and its data set's label for messages.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct PlanCell {
+    pub data: String,
+    pub data_hash: String,
+    pub model: String,
+    pub loss: String,
+    pub weights: String,
+    pub optimizer: String,
+    pub restarts: usize,
+    pub seed: u64,
+    /// The shard (1-based) that runs it.
+    pub shard: usize,
+}
+
+impl PlanCell {
+    pub fn key(&self) -> Key {
+        Key {
+            data_hash: self.data_hash.clone(),
+            model: self.model.clone(),
+            loss: self.loss.clone(),
+            weights: self.weights.clone(),
+            optimizer: self.optimizer.clone(),
+            restarts: self.restarts,
+            seed: self.seed,
+        }
+    }
+
+    /// `data · model · loss/weights (optimizer), shard I`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} · {} · {}/{} ({}), shard {}",
+            self.data, self.model, self.loss, self.weights, self.optimizer, self.shard
+        )
+    }
+}
+
+/// Every cell of a sharded sweep, and its number of shards.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Plan {
+    pub shards: usize,
+    pub constraints: String,
+    pub cells: Vec<PlanCell>,
+}
+
+impl Plan {
+    fn same_work(&self, other: &Plan) -> bool {
+        let keys = |p: &Plan| p.cells.iter().map(PlanCell::key).collect::<BTreeSet<_>>();
+        self.constraints == other.constraints && keys(self) == keys(other)
+    }
+
+    /// Write the plan into `out`, or check that the plan already there asks for the same
+    /// cells (a re-submitted array may use another number of shards: the plan is then
+    /// rewritten with the new numbering).
+    pub fn record(&self, out: &Path) -> Result<()> {
+        let path = out.join(PLAN_JSON);
+        if let Some(old) = Plan::read(out)? {
+            anyhow::ensure!(
+                old.same_work(self),
+                "{} holds the plan of another sweep ({} cells{}) than this one ({} cells{}): other data, models, losses, restarts, seed or constraints; use another --out folder",
+                path.display(),
+                old.cells.len(),
+                describe_constraints(&old.constraints),
+                self.cells.len(),
+                describe_constraints(&self.constraints),
+            );
+            if old == *self {
+                return Ok(());
+            }
+        }
+        // Several shards start at once: each writes its own temporary and renames it
+        // into place; the contents are the same, so whichever lands last is right.
+        let tmp = out.join(format!(".{PLAN_JSON}.{}.tmp", std::process::id()));
+        std::fs::write(&tmp, serde_json::to_string_pretty(self)? + "\n")
+            .with_context(|| format!("cannot write {}", tmp.display()))?;
+        std::fs::rename(&tmp, &path)
+            .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
+        Ok(())
+    }
+
+    /// The plan in `out`, if a sharded sweep wrote one.
+    pub fn read(out: &Path) -> Result<Option<Plan>> {
+        let path = out.join(PLAN_JSON);
+        match std::fs::read_to_string(&path) {
+            Ok(text) => {
+                Ok(Some(serde_json::from_str(&text).with_context(|| {
+                    format!("{} is not a sweep plan", path.display())
+                })?))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e).with_context(|| format!("cannot read {}", path.display())),
+        }
+    }
+
+    /// The cells whose key is not in `have`.
+    pub fn missing(&self, have: &BTreeSet<Key>) -> Vec<&PlanCell> {
+        self.cells
+            .iter()
+            .filter(|c| !have.contains(&c.key()))
+            .collect()
+    }
+}
+
+fn describe_constraints(c: &str) -> String {
+    if c.is_empty() {
+        String::new()
+    } else {
+        format!(", constraints {c}")
+    }
+}
+
+/// A word as one shell word (single quotes, `'` written as `'\''`).
+pub fn shell_quote(s: &str) -> String {
+    if !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c))
+    {
+        return s.to_string();
+    }
+    format!("'{}'", s.replace('\'', r"'\''"))
+}
+
+/// What `sweep --emit-slurm` needs to write the job scripts.
+pub struct JobScripts<'a> {
+    /// The bsdfit binary (absolute).
+    pub binary: &'a Path,
+    /// The folder the jobs run in (relative paths in the arguments are relative to it).
+    pub workdir: &'a Path,
+    /// The sweep's folder (absolute).
+    pub out: &'a Path,
+    /// `sweep`'s arguments without `--out`, `--shard` and `--emit-slurm`.
+    pub sweep_args: &'a [String],
+    pub tasks: usize,
+    pub cpus_per_task: usize,
+    /// Ask each task for one GPU (`--gres=gpu:1`).
+    pub gpu: bool,
+    pub pictures: bool,
+}
+
+impl JobScripts<'_> {
+    /// (file name, content, executable) of `array.sbatch`, `merge.sbatch`, `submit.sh`.
+    pub fn files(&self) -> Vec<(&'static str, String, bool)> {
+        let q = |p: &Path| shell_quote(&p.display().to_string());
+        let logs = self.out.join("slurm").join("logs");
+        let args: Vec<String> = self.sweep_args.iter().map(|a| shell_quote(a)).collect();
+        let gres = if self.gpu {
+            "#SBATCH --gres=gpu:1\n"
+        } else {
+            ""
+        };
+        let array = format!(
+            "#!/bin/bash
+# bsdfit sweep as a Slurm job array: task I of {n} fits shard I/{n} into
+# {out}/shards/I-of-{n}/ (written by `bsdfit sweep --emit-slurm`; edit the #SBATCH lines
+# freely, keep the array a range). Re-submitting resumes: only missing cells run.
+#SBATCH --job-name=bsdfit-sweep
+#SBATCH --array=1-{n}
+#SBATCH --cpus-per-task={cpus}
+{gres}#SBATCH --chdir={wd}
+#SBATCH --output={logs}/sweep-%A_%a.out
+set -euo pipefail
+# The CPU reference uses the CPUs Slurm gave the task.
+export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-1}}\"
+exec {bin} sweep {args} --out {outq} --shard auto
+",
+            n = self.tasks,
+            out = self.out.display(),
+            cpus = self.cpus_per_task,
+            wd = q(self.workdir),
+            logs = q(&logs),
+            bin = q(self.binary),
+            args = args.join(" "),
+            outq = q(self.out),
+        );
+        let merge = format!(
+            "#!/bin/bash
+# Merges the shards of {out} once every task of the array has ended (successfully or
+# not): it lists the cells no shard wrote and then fails, so a lost task is never silent.
+#SBATCH --job-name=bsdfit-merge
+#SBATCH --cpus-per-task=1
+#SBATCH --chdir={wd}
+#SBATCH --output={logs}/merge-%j.out
+set -euo pipefail
+exec {bin} merge --shards --out {outq}{pictures}
+",
+            out = self.out.display(),
+            wd = q(self.workdir),
+            logs = q(&logs),
+            bin = q(self.binary),
+            outq = q(self.out),
+            pictures = if self.pictures { "" } else { " --no-pictures" },
+        );
+        let submit = format!(
+            "#!/bin/sh
+# Submit the sweep's job array, then the merge, which waits for every task to end
+# (afterany: a failed task leaves cells missing, and the merge says which).
+set -eu
+dir=$(dirname \"$0\")
+array=$(sbatch --parsable \"$dir/array.sbatch\")
+array=${{array%%;*}}
+merge=$(sbatch --parsable --dependency=afterany:\"$array\" \"$dir/merge.sbatch\")
+merge=${{merge%%;*}}
+echo \"submitted array job $array ({n} tasks) and merge job $merge; results in {out}\"
+",
+            n = self.tasks,
+            out = self.out.display(),
+        );
+        vec![
+            ("array.sbatch", array, false),
+            ("merge.sbatch", merge, false),
+            ("submit.sh", submit, true),
+        ]
+    }
+}
