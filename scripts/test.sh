@@ -35,7 +35,7 @@ if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
     python3 -m venv "$VENV"
 fi
 "$VENV/bin/pip" install --quiet --upgrade pip
-"$VENV/bin/pip" install --quiet ./python pytest mypy
+"$VENV/bin/pip" install --quiet ./python pytest mypy matplotlib
 # The CLI comparisons use the binary `cargo test` just built.
 BSDFIT_CLI="$PWD/target/debug/bsdfit" "$VENV/bin/python" -m pytest -q python/tests
 

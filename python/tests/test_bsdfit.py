@@ -306,8 +306,8 @@ def test_sweep_writes_the_cli_folder(tmp_path):
 
 
 def test_the_documented_example_runs_and_type_checks(tmp_path):
-    """docs/python.md's example runs on a bundled file, and `mypy --strict` accepts it and
-    the package (the stubs make the native part typed)."""
+    """docs/python.md's example runs on a bundled file and plots, and `mypy --strict`
+    accepts it and the package (the stubs make the native part typed)."""
     import sys
 
     example = REPO / "python" / "examples" / "compare_two_models.py"
@@ -315,7 +315,9 @@ def test_the_documented_example_runs_and_type_checks(tmp_path):
                          capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "better: on" in out.stdout, out.stdout
-    check = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--no-incremental", str(example), "-p", "bsdfit"],
-                           capture_output=True, text=True, cwd=tmp_path)
-    assert "No module named mypy" not in check.stderr, "install mypy in the test environment (scripts/test.sh does)"
-    assert check.returncode == 0, check.stdout + check.stderr
+    assert (tmp_path / "p.png").stat().st_size > 10_000, "the plot (matplotlib is in the test environment)"
+    for target in ([str(example)], ["-p", "bsdfit"]):
+        check = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--no-incremental", *target],
+                               capture_output=True, text=True, cwd=tmp_path)
+        assert "No module named mypy" not in check.stderr, "install mypy in the test environment (scripts/test.sh does)"
+        assert check.returncode == 0, check.stdout + check.stderr
