@@ -301,6 +301,13 @@ class Fit:
     def channels(self) -> List[float]:
         return list(self.report["channels"])
 
+    @property
+    def monte_carlo(self) -> Optional[Dict[str, Any]]:
+        """With ``mc=N``: the parameters' distribution over N refitted replicas (mean, σ,
+        95 % interval and correlations per parameter, as in ``fit --mc``); else None."""
+        mc = self.report.get("monte_carlo")
+        return dict(mc) if isinstance(mc, dict) else None
+
     def _flat(self, key: str) -> np.ndarray:
         return np.array(
             [np.nan if v is None else float(v) for v in self.report[key]], dtype=np.float64

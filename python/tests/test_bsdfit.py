@@ -321,3 +321,42 @@ def test_the_documented_example_runs_and_type_checks(tmp_path):
                                capture_output=True, text=True, cwd=tmp_path)
         assert "No module named mypy" not in check.stderr, "install mypy in the test environment (scripts/test.sh does)"
         assert check.returncode == 0, check.stdout + check.stderr
+
+
+def test_monte_carlo_and_threads():
+    """mc=N adds the replicas' distribution; a long fit releases the GIL, so Python code
+    runs in another thread meanwhile (a fit holding the GIL would leave the count at 0)."""
+    import threading
+
+    data = bsdfit.Dataset.read(DATA / "red-brick.csv", wavelengths=[550])
+    fit = bsdfit.fit(data, "on", backend="cpu", restarts=4, mc=4)
+    mc = fit.monte_carlo
+    assert mc is not None and mc["replicas"] == 4
+    assert bsdfit.fit(data, "on", backend="cpu", restarts=2).monte_carlo is None
+
+    rng = np.random.default_rng(5)
+    ti, pi, to, po = random_geometry(rng, 20000)
+    f = oren_nayar(0.4, 0.5, ti, pi, to, po)
+    big = bsdfit.Dataset.from_arrays("brdf", ti, pi, to, po, 550.0, f * (1 + 0.02 * rng.normal(size=f.shape)), 0.02 * f)
+    import time
+
+    def turns_while(target):
+        """Turns of a busy loop in this thread while `target` runs in another, and seconds."""
+        worker = threading.Thread(target=target)
+        count, start = 0, time.perf_counter()
+        worker.start()
+        while worker.is_alive():
+            count += 1
+        return count, time.perf_counter() - start
+
+    # The loop's rate beside a thread that surely releases the GIL (sleep).
+    idle, idle_seconds = turns_while(lambda: time.sleep(0.2))
+    rate = idle / idle_seconds
+    done = []
+    count, seconds = turns_while(lambda: done.append(bsdfit.fit(big, "fa(on)", backend="cpu", restarts=16)))
+    assert done and np.isfinite(done[0].chi2_red)
+    # With the GIL held, this thread would run only between Python's switch intervals
+    # (5 ms) before the fit enters Rust: a few per cent of a fit that lasts ~1 s.
+    assert seconds > 0.2, f"the fit took {seconds:.3f} s: too short to tell"
+    assert count > 0.25 * rate * seconds, (count, rate, seconds)
+    print(f"main thread ran at {count / (rate * seconds):.0%} of its idle rate during the fit")
