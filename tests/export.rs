@@ -783,3 +783,141 @@ fn two_plane_btdf_recovers_both_widths_with_the_normal_point_in_each_scan() {
         assert!((v - t).abs() < 4.0 * s, "{name} = {v} ± {s}, truth {t}");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// rgl
+
+/// The fields of a tensor file: name → (dtype, shape, bytes), read by the published layout.
+fn tensor_fields(bytes: &[u8]) -> std::collections::BTreeMap<String, (u8, Vec<u64>, Vec<u8>)> {
+    assert_eq!(&bytes[..12], b"tensor_file\0");
+    assert_eq!(&bytes[12..14], &[1, 0]);
+    let u16_at = |i: usize| u16::from_le_bytes([bytes[i], bytes[i + 1]]) as usize;
+    let u64_at = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap());
+    let n = u32::from_le_bytes(bytes[14..18].try_into().unwrap());
+    let mut at = 18;
+    let mut out = std::collections::BTreeMap::new();
+    for _ in 0..n {
+        let len = u16_at(at);
+        let name = String::from_utf8(bytes[at + 2..at + 2 + len].to_vec()).unwrap();
+        at += 2 + len;
+        let ndim = u16_at(at);
+        let dtype = bytes[at + 2];
+        let offset = u64_at(at + 3) as usize;
+        let shape: Vec<u64> = (0..ndim).map(|k| u64_at(at + 11 + 8 * k)).collect();
+        at += 11 + 8 * ndim;
+        let count: u64 = shape.iter().product();
+        let size = count as usize * if dtype == 10 { 4 } else { 1 };
+        assert_eq!(offset % 8, 0, "{name} is not aligned");
+        out.insert(name, (dtype, shape, bytes[offset..offset + size].to_vec()));
+    }
+    out
+}
+
+#[test]
+fn rgl_export_tabulates_f_cos_on_the_half_vector_grid_and_refuses_what_it_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, json) = synth_and_fit(
+        dir.path(),
+        "lam",
+        "lambert",
+        "rho=0.2:0.5:0.8",
+        "hemi",
+        "450,550,650",
+    );
+    let out = dir.path().join("lam.bsdf");
+    assert_ok(
+        &bsdfit(&["export", p(&json), "--format", "rgl", "--out", p(&out)]),
+        "export rgl",
+    );
+    let fields = tensor_fields(&std::fs::read(&out).unwrap());
+    for name in [
+        "description",
+        "jacobian",
+        "theta_i",
+        "phi_i",
+        "ndf",
+        "sigma",
+        "vndf",
+        "luminance",
+        "rgb",
+    ] {
+        assert!(fields.contains_key(name), "{name} missing");
+    }
+    let f32s = |b: &[u8]| -> Vec<f32> {
+        b.chunks(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect()
+    };
+    let (_, shape, rgb) = &fields["rgb"];
+    let theta_i = f32s(&fields["theta_i"].2);
+    let nt = theta_i.len();
+    let nn = bsdfit::workflows::rgl::THETA_M_NODES;
+    assert_eq!(shape, &vec![1, nt as u64, 3, nn as u64, nn as u64]);
+    assert_eq!(fields["jacobian"].2, vec![0]);
+    assert_eq!(
+        fields["luminance"].1,
+        vec![1, nt as u64, nn as u64, nn as u64]
+    );
+    let rgb = f32s(rgb);
+    // Lambert: every cell holds ρ/π · cos θo of the direction its half vector gives; R is
+    // the longest wavelength (ρ = 0.8 in the data).
+    let fit = saved(&json);
+    let rho_r = fit.flat[2];
+    let mut checked = 0;
+    for (k, &ti) in theta_i.iter().enumerate().step_by(17) {
+        let wi = glam::DVec3::new((ti as f64).sin(), 0.0, (ti as f64).cos());
+        for (y, x) in [(64, 20), (10, 100), (100, 60), (127, 127), (0, 0)] {
+            let (ux, uy) = (x as f64 / (nn - 1) as f64, y as f64 / (nn - 1) as f64);
+            let (tm, pm) = (
+                bsdfit::workflows::rgl::u_to_theta(ux),
+                bsdfit::workflows::rgl::u_to_phi(uy),
+            );
+            let m = glam::DVec3::new(tm.sin() * pm.cos(), tm.sin() * pm.sin(), tm.cos());
+            let wo = 2.0 * wi.dot(m) * m - wi;
+            let want = if wo.z > 1e-9 && wi.dot(m) > 0.0 {
+                rho_r / std::f64::consts::PI * wo.z
+            } else {
+                0.0
+            };
+            let got = rgb[((k * 3) * nn + y) * nn + x] as f64;
+            assert!(
+                (got - want).abs() <= 1e-6 * want.max(1e-3),
+                "θi node {k}, cell ({x}, {y}): {got} vs {want}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 20);
+
+    // BTDF and per-plane fits: a clear error that names the alternative.
+    let (_, btdf) = synth_and_fit(
+        dir.path(),
+        "tr",
+        "btdf(tr)",
+        "alpha=0.3,eta=1.5",
+        "ptb5",
+        "633",
+    );
+    let o = bsdfit(&[
+        "export",
+        p(&btdf),
+        "--format",
+        "rgl",
+        "--out",
+        p(&dir.path().join("tr.bsdf")),
+    ]);
+    assert_clear_error(&o, &["BTDF", "reflection only", "--format tabulated"]);
+    assert!(!dir.path().join("tr.bsdf").exists());
+    let o = bsdfit(&[
+        "export",
+        p(&json),
+        "--format",
+        "rgl",
+        "--spectral",
+        "--rgb",
+        "650,550,450",
+        "--out",
+        p(&dir.path().join("x.bsdf")),
+    ]);
+    assert_clear_error(&o, &["--rgb", "--spectral"]);
+}

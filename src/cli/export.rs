@@ -17,6 +17,10 @@ pub enum Format {
     /// A Mitsuba 3 `<bsdf>` XML element, for the models with an exact counterpart
     /// (lambert → diffuse, ggx → roughconductor with k = 0).
     Mitsuba,
+    /// An RGL measured-material `.bsdf` file (Dupuy & Jakob 2018), which Mitsuba 3's
+    /// `measured` plugin and pbrt-v4's `measured` material render: any isotropic BRDF
+    /// fit; RGB (R, G, B as for merl) or, with --spectral, every channel at its wavelength.
+    Rgl,
 }
 
 #[derive(Args)]
@@ -39,6 +43,10 @@ pub struct ExportArgs {
     /// gives its longest wavelength to R and its shortest to B; other fits need this.
     #[arg(long, value_name = "R_NM,G_NM,B_NM", value_delimiter = ',')]
     pub rgb: Option<Vec<f64>>,
+    /// rgl: write the spectral variant (a `spectra` table at the fit's wavelengths, for
+    /// Mitsuba's spectral variants) instead of `rgb`.
+    #[arg(long)]
+    pub spectral: bool,
     /// tabulated: step of θi and θo (θt), degrees; θ = 0, step, 2·step, … ≤ --theta-max.
     #[arg(long, default_value_t = Grid::default().theta_step, value_name = "DEG")]
     pub theta_step: f64,
@@ -64,7 +72,42 @@ pub fn run(a: &ExportArgs) -> Result<()> {
             anyhow::ensure!(!v, "{name} applies to --format tabulated only");
         }
     }
+    anyhow::ensure!(
+        !a.spectral || a.format == Format::Rgl,
+        "--spectral applies to --format rgl only"
+    );
     match a.format {
+        Format::Rgl => {
+            let fit = file.select(a.plane, &fit_path)?;
+            let channels = if a.spectral {
+                anyhow::ensure!(a.rgb.is_none(), "--rgb and --spectral exclude each other");
+                crate::workflows::rgl::Channels::Spectral
+            } else {
+                crate::workflows::rgl::Channels::Rgb(export::rgb_channels(&fit, a.rgb.as_deref())?)
+            };
+            let description = format!(
+                "bsdfit fit of {} to {}: {}",
+                fit.model.spec,
+                fit.material,
+                fit.params_text()
+            );
+            let bytes = crate::workflows::rgl::rgl_file(&fit, channels, &description)?;
+            write_atomic(&a.out, &bytes)?;
+            eprintln!(
+                "wrote {} (RGL .bsdf of {}, {} incidence angles × {} × {} half-vector cells, {})",
+                a.out.display(),
+                fit.model.spec,
+                crate::workflows::rgl::theta_i_nodes().len(),
+                crate::workflows::rgl::PHI_M_NODES,
+                crate::workflows::rgl::THETA_M_NODES,
+                if a.spectral {
+                    format!("spectral at {:?} nm", fit.channels)
+                } else {
+                    "RGB".into()
+                }
+            );
+            note_fit_warnings(&fit.warnings);
+        }
         Format::Tabulated => {
             anyhow::ensure!(
                 a.rgb.is_none(),

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod diagnose;
 pub mod export;
 pub mod fit;
+pub mod rgl;
 pub mod scale;
 pub mod sweep;
 pub mod synth;
