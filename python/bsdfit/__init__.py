@@ -92,15 +92,19 @@ class Dataset:
         assume_uncertainty: Optional[Union[str, Tuple[float, float]]] = None,
         allow_zero_uncertainty: bool = False,
         alta_values: Optional[str] = None,
+        sample_geometry: Optional[str] = None,
     ) -> "Dataset":
-        """Read a data file: bsdfit v1 CSV, ALTA text or a MERL binary table (by content).
+        """Read a data file: bsdfit v1 CSV, ALTA text, a MERL binary table or an RGL .bsdf
+        material (by content).
 
         The keywords are the command line's data options: ``wavelengths`` keeps the channels
         nearest these wavelengths (nm), ``band`` averages ±band nm around each,
         ``max_samples`` caps a MERL table (0 keeps all), ``assume_uncertainty=(rel, abs)``
         gives u = sqrt((rel·|value|)² + abs²) to files without uncertainties,
         ``allow_zero_uncertainty`` floors zero uncertainties instead of refusing them, and
-        ``alta_values="brdf"|"brdf-cos"`` says what an ALTA file without #PARAM_OUT holds.
+        ``alta_values="brdf"|"brdf-cos"`` says what an ALTA file without #PARAM_OUT holds,
+        and ``sample_geometry`` names the geometry an RGL .bsdf material is sampled at
+        (default ``"grid:10"``).
 
         Raises OSError when the file cannot be read, ValueError when its content is bad.
         """
@@ -112,6 +116,7 @@ class Dataset:
             _assume(assume_uncertainty),
             bool(allow_zero_uncertainty),
             alta_values,
+            sample_geometry,
         )
         return cls(native)
 

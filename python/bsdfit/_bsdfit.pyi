@@ -47,6 +47,7 @@ def read_dataset(
     assume_uncertainty: Optional[str],
     allow_zero_uncertainty: bool,
     alta_values: Optional[str],
+    sample_geometry: Optional[str],
 ) -> NativeDataset:
     """Read any data file the command line reads, with its selection options."""
 

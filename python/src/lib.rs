@@ -157,6 +157,7 @@ fn read_options(
     assume_uncertainty: Option<String>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
+    sample_geometry: Option<String>,
 ) -> anyhow::Result<ReadOptions> {
     Ok(ReadOptions {
         allow_zero_uncertainty,
@@ -171,11 +172,12 @@ fn read_options(
         alta_values: alta_values
             .map(|s| parse_choice::<AltaValues>("alta_values", &s))
             .transpose()?,
+        sample_geometry,
     })
 }
 
 #[pyfunction]
-#[pyo3(signature = (path, wavelengths, band, max_samples, assume_uncertainty, allow_zero_uncertainty, alta_values))]
+#[pyo3(signature = (path, wavelengths, band, max_samples, assume_uncertainty, allow_zero_uncertainty, alta_values, sample_geometry))]
 fn read_dataset(
     py: Python<'_>,
     path: PathBuf,
@@ -185,6 +187,7 @@ fn read_dataset(
     assume_uncertainty: Option<String>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
+    sample_geometry: Option<String>,
 ) -> PyResult<NativeDataset> {
     let data = compute(py, move || {
         // Name the file in an OSError before any reader sees it.
@@ -201,6 +204,7 @@ fn read_dataset(
             assume_uncertainty,
             allow_zero_uncertainty,
             alta_values,
+            sample_geometry,
         )?;
         Ok(readers::load(&path, &opts)?)
     })?;
@@ -284,7 +288,15 @@ fn dataset_from_arrays(
         slice("uncertainty", &uncertainty)?,
     )?;
     let data = compute(py, move || {
-        let opts = read_options(wavelengths, band, None, None, allow_zero_uncertainty, None)?;
+        let opts = read_options(
+            wavelengths,
+            band,
+            None,
+            None,
+            allow_zero_uncertainty,
+            None,
+            None,
+        )?;
         // Messages name a bad row as `arrays:ROW` (1-based).
         Ok(Dataset::from_rows(kind, &material, &raw, "arrays", &opts)?)
     })?;

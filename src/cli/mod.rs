@@ -133,6 +133,11 @@ pub struct DataArgs {
     /// ignore the option.
     #[arg(long, value_enum, value_name = "KIND")]
     pub alta_values: Option<AltaValues>,
+    /// RGL .bsdf materials (which hold a function, not samples): sample them at this named
+    /// geometry (`bsdfit models` lists them; e.g. hemi, grid:5). Default: grid:10. Other
+    /// formats ignore the option.
+    #[arg(long, value_name = "NAME")]
+    pub sample_geometry: Option<String>,
 }
 
 impl DataArgs {
@@ -150,6 +155,7 @@ impl DataArgs {
             band_nm: self.band,
             max_samples: Some(self.max_samples),
             alta_values: self.alta_values,
+            sample_geometry: self.sample_geometry.clone(),
         })
     }
 

@@ -849,6 +849,9 @@ pub fn sweep_argv(a: &SweepArgs) -> Vec<String> {
     if let Some(k) = d.alta_values {
         opt("alta-values", k.name().to_string());
     }
+    if let Some(g) = &d.sample_geometry {
+        opt("sample-geometry", g.clone());
+    }
     if d.allow_zero_uncertainty {
         v.push("--allow-zero-uncertainty".into());
     }

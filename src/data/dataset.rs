@@ -205,6 +205,10 @@ pub struct ReadOptions {
     /// refused, naming both. Other formats ignore it
     /// ([`crate::data::readers::alta`]).
     pub alta_values: Option<crate::data::readers::alta::AltaValues>,
+    /// Files that hold a material rather than samples (RGL `.bsdf`): the named geometry
+    /// (`bsdfit models` lists them; names joined by `+`) to sample it at; `None` is
+    /// [`crate::data::readers::rgl::DEFAULT_GEOMETRY`]. Other formats ignore it.
+    pub sample_geometry: Option<String>,
 }
 
 pub const COLUMNS: [&str; 7] = [

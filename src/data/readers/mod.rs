@@ -5,6 +5,7 @@
 //! | bsdfit v1 CSV (docs/conventions.md) | a `# bsdfit dataset v1` line or a header naming `theta_i` | [`Dataset::parse_reader`] |
 //! | ALTA text | a leading `#DIM`, `#PARAM_IN`, `#PARAM_OUT`, `#VS` or `#ALTA` line | [`alta`] |
 //! | MERL binary | three little-endian int32 dimensions (90, 90, 180), or dimensions whose table of doubles has exactly the file's size | [`merl`] |
+//! | RGL `.bsdf` measured material | the tensor file header `tensor_file\0` | [`rgl`] (sampled at `--sample-geometry`) |
 //!
 //! Content decides, not the extension; only when nothing matches does the extension
 //! (`.binary` → MERL) pick the reader whose error will explain the problem, v1 otherwise.
@@ -23,6 +24,7 @@
 
 pub mod alta;
 pub mod merl;
+pub mod rgl;
 
 use crate::data::{DataError, Dataset, ReadOptions};
 use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
@@ -44,6 +46,7 @@ pub enum Format {
     V1Csv,
     AltaText,
     MerlBinary,
+    RglBsdf,
 }
 
 impl std::fmt::Display for Format {
@@ -52,6 +55,7 @@ impl std::fmt::Display for Format {
             Format::V1Csv => "bsdfit v1 CSV",
             Format::AltaText => "ALTA text",
             Format::MerlBinary => "MERL binary",
+            Format::RglBsdf => "RGL .bsdf",
         })
     }
 }
@@ -59,6 +63,9 @@ impl std::fmt::Display for Format {
 /// Recognise a format from the first bytes of a file (`head`, a few KiB suffice) and its
 /// total length. `None` when nothing matches.
 pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
+    if rgl::looks_like(head) {
+        return Some(Format::RglBsdf);
+    }
     if merl::looks_like(head, len) {
         return Some(Format::MerlBinary);
     }
@@ -94,6 +101,7 @@ pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
 fn by_extension(path: &Path) -> Format {
     match path.extension().and_then(|e| e.to_str()) {
         Some(e) if e.eq_ignore_ascii_case("binary") => Format::MerlBinary,
+        Some(e) if e.eq_ignore_ascii_case("bsdf") => Format::RglBsdf,
         _ => Format::V1Csv,
     }
 }
@@ -145,6 +153,13 @@ pub fn load_with_progress(
     let Some(format) = sniff(head, len) else {
         // Nothing recognisable: the extension's reader explains what it expected.
         return match by_extension(path) {
+            Format::RglBsdf => {
+                let mut bytes = Vec::new();
+                reader
+                    .read_to_end(&mut bytes)
+                    .map_err(|e| cannot_read(&file, e))?;
+                rgl::parse(&bytes, &file, opts)
+            }
             Format::MerlBinary => {
                 let mut bytes = Vec::new();
                 reader
@@ -167,6 +182,13 @@ pub fn load_with_progress(
             });
             merl::parse(&bytes, &file, opts)
         }
+        Format::RglBsdf => {
+            let mut bytes = Vec::with_capacity(len.min(1 << 27) as usize);
+            reader
+                .read_to_end(&mut bytes)
+                .map_err(|e| cannot_read(&file, e))?;
+            rgl::parse(&bytes, &file, opts)
+        }
         Format::AltaText => alta::parse_reader(reader, &file, opts, progress),
         Format::V1Csv => Dataset::parse_reader(reader, &file, opts, progress),
     }
@@ -177,10 +199,12 @@ pub fn load_with_progress(
 pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
     match sniff(bytes, bytes.len() as u64) {
         Some(Format::MerlBinary) => merl::parse(bytes, file, opts),
+        Some(Format::RglBsdf) => rgl::parse(bytes, file, opts),
         Some(Format::AltaText) => alta::parse_reader(bytes, file, opts, &mut |_| {}),
         Some(Format::V1Csv) => Dataset::parse_reader(bytes, file, opts, &mut |_| {}),
         None => match by_extension(Path::new(file)) {
             Format::MerlBinary => merl::parse(bytes, file, opts),
+            Format::RglBsdf => rgl::parse(bytes, file, opts),
             _ => Dataset::parse_reader(bytes, file, opts, &mut |_| {}).map_err(unrecognised),
         },
     }
