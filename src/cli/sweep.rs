@@ -160,20 +160,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
         Some(s) if auto => slurm::shard_dir(&args.out, s),
         _ => args.out.clone(),
     };
-    let paths = expand_data(&args.data)?;
-    let mut files = Vec::new();
-    for p in &paths {
-        files.push(DataFile::read(p, &args.data_args.read_options()?)?);
-    }
-    let all = tasks(
-        &files,
-        &Selection {
-            models: args.models.clone(),
-            losses: args.losses.clone(),
-            weights: args.weights.clone(),
-            optimizer: args.optimizer.clone(),
-        },
-    )?;
+    let (files, all) = read_cells(args)?;
     let mine: Vec<(usize, &Task)> = all
         .iter()
         .enumerate()
@@ -709,6 +696,25 @@ fn plan_cell(files: &[DataFile], t: &Task, key: &Key, shard: usize) -> slurm::Pl
     }
 }
 
+/// The sweep's data files and its task list (every cell, in order).
+fn read_cells(args: &SweepArgs) -> Result<(Vec<DataFile>, Vec<Task>)> {
+    let paths = expand_data(&args.data)?;
+    let mut files = Vec::new();
+    for p in &paths {
+        files.push(DataFile::read(p, &args.data_args.read_options()?)?);
+    }
+    let all = tasks(
+        &files,
+        &Selection {
+            models: args.models.clone(),
+            losses: args.losses.clone(),
+            weights: args.weights.clone(),
+            optimizer: args.optimizer.clone(),
+        },
+    )?;
+    Ok((files, all))
+}
+
 /// `sweep --emit-slurm TASKS`: the job scripts of this sweep, in OUT/slurm/.
 fn emit_slurm(args: &SweepArgs, array_tasks: usize) -> Result<()> {
     anyhow::ensure!(
@@ -725,20 +731,7 @@ fn emit_slurm(args: &SweepArgs, array_tasks: usize) -> Result<()> {
         "--emit-slurm writes an array whose tasks use --shard auto; leave --shard out"
     );
     // Fail now, not on the cluster: the data must read and the selection be valid.
-    let paths = expand_data(&args.data)?;
-    let mut files = Vec::new();
-    for p in &paths {
-        files.push(DataFile::read(p, &args.data_args.read_options()?)?);
-    }
-    let all = tasks(
-        &files,
-        &Selection {
-            models: args.models.clone(),
-            losses: args.losses.clone(),
-            weights: args.weights.clone(),
-            optimizer: args.optimizer.clone(),
-        },
-    )?;
+    let (_, all) = read_cells(args)?;
     let workdir = std::env::current_dir().context("cannot read the current folder")?;
     let out = workdir.join(&args.out);
     let dir = out.join("slurm");

@@ -94,12 +94,14 @@ fn fields(bytes: &[u8], file: &str) -> Result<BTreeMap<String, Field>, DataError
                 .chunks_exact(8)
                 .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
                 .collect(),
-            t => return Err(bad(
-                file,
-                format!(
+            t => {
+                return Err(bad(
+                    file,
+                    format!(
                     "field {name}: element type {t} is not read (uint8, float32 and float64 are)"
                 ),
-            )),
+                ))
+            }
         };
         out.insert(name, Field { shape, values });
     }
