@@ -169,10 +169,17 @@ struct Featured<'a> {
     suffixes: Vec<&'a Row>,
 }
 
+/// A spec without its suffixes (`btdf(tr)+scale` → `btdf(tr)`): the model family, read
+/// from the spec's syntax rather than guessed from its text.
 fn ndf_family(model: &str) -> String {
-    match model.find(')') {
-        Some(i) if model.starts_with("btdf(") => model[..=i].to_string(),
-        _ => model.to_string(),
+    match crate::bsdf::spec::Ast::parse(model) {
+        Ok(mut ast) => {
+            while let crate::bsdf::spec::Ast::Suffix { inner, .. } = ast {
+                ast = *inner;
+            }
+            crate::bsdf::spec::render_spec(&ast)
+        }
+        Err(_) => model.to_string(),
     }
 }
 
