@@ -125,7 +125,7 @@ pub struct FitReport {
     /// `--mc N`: the parameters' distribution over N refitted replicas of the data
     /// (absent without it).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub monte_carlo: Option<crate::inference::mc::McSummary>,
+    pub monte_carlo: Option<crate::inference::mc_summary::McSummary>,
 }
 
 /// Adapts an evaluator (physical parameters) to the optimizers' unit box.

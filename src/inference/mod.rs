@@ -7,5 +7,6 @@ pub mod constraints;
 pub mod covariance;
 pub mod fit;
 pub mod mc;
+pub mod mc_summary;
 pub mod saved;
 pub mod stats;
