@@ -90,10 +90,10 @@
 //! option. A file whose `#PARAM_OUT` disagrees with the option is refused, naming both;
 //! one that agrees is read as usual.
 
+use super::v1::decode_line;
 use super::{mark_assumed, require_assumption, Progress};
 use crate::data::{
-    count, decode_line, Builder, DataError, Dataset, Kind, RawRow, ReadOptions,
-    PROGRESS_EVERY_LINES,
+    count, Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
 use glam::DVec3;
 use std::collections::BTreeMap;

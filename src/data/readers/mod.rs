@@ -25,6 +25,7 @@
 pub mod alta;
 pub mod merl;
 pub mod rgl;
+pub mod v1;
 
 use crate::data::{DataError, Dataset, ReadOptions};
 use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
