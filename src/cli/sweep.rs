@@ -208,7 +208,11 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
             cells: all
                 .iter()
                 .enumerate()
-                .map(|(i, t)| plan_cell(&files, t, &key_of(t), i % n + 1))
+                .map(|(i, t)| slurm::PlanCell {
+                    data: files[t.data].name.clone(),
+                    key: key_of(t),
+                    shard: i % n + 1,
+                })
                 .collect(),
         };
         plan.record(&args.out)?;
@@ -647,15 +651,9 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         let missing = plan.missing(&have);
         // A fit that ran and failed is in skipped.json, as in a single-process sweep.
         let failed: BTreeSet<FitKey> = skipped.iter().map(Skipped::fit_key).collect();
-        let (failed_cells, lost): (Vec<_>, Vec<_>) = missing.into_iter().partition(|c| {
-            failed.contains(&(
-                c.data.clone(),
-                c.model.clone(),
-                c.loss.clone(),
-                c.weights.clone(),
-                c.optimizer.clone(),
-            ))
-        });
+        let (failed_cells, lost): (Vec<_>, Vec<_>) = missing
+            .into_iter()
+            .partition(|c| failed.contains(&c.fit_key()));
         if !failed_cells.is_empty() {
             eprintln!(
                 "{} of the plan ran and failed (listed in {})",
@@ -679,21 +677,6 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         eprintln!("all {} cells of the plan are merged", plan.cells.len());
     }
     Ok(())
-}
-
-/// A task as a cell of the plan of a sharded sweep.
-fn plan_cell(files: &[DataFile], t: &Task, key: &Key, shard: usize) -> slurm::PlanCell {
-    slurm::PlanCell {
-        data: files[t.data].name.clone(),
-        data_hash: key.data_hash.clone(),
-        model: key.model.clone(),
-        loss: key.loss.clone(),
-        weights: key.weights.clone(),
-        optimizer: key.optimizer.clone(),
-        restarts: key.restarts,
-        seed: key.seed,
-        shard,
-    }
 }
 
 /// The sweep's data files and its task list (every cell, in order).

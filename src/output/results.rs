@@ -63,7 +63,7 @@ pub struct Row {
 }
 
 /// The identity of a fit: resumption and shards depend on it being deterministic.
-#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct Key {
     pub data_hash: String,
     pub model: String,
@@ -270,7 +270,8 @@ pub struct Skipped {
 /// skipped lists are compared (restarts and seed are those of the sweep).
 pub type FitKey = (String, String, String, String, String);
 
-fn fit_key(data: &str, model: &str, loss: &str, weights: &str, optimizer: &str) -> FitKey {
+/// The fit key of a data set's label and a fit's key fields.
+pub fn fit_key(data: &str, model: &str, loss: &str, weights: &str, optimizer: &str) -> FitKey {
     (
         data.into(),
         model.into(),

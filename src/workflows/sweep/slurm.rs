@@ -11,7 +11,7 @@
 //! to a temporary and renamed into place (the same content from every shard), and the
 //! merge holds `OUT`'s lock.
 
-use crate::output::results::Key;
+use crate::output::results::{fit_key, FitKey, Key};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -92,39 +92,30 @@ pub fn shard_dirs(out: &Path) -> Result<Vec<PathBuf>> {
     Ok(dirs)
 }
 
-/// One cell of a sweep: its key, and its data set's label for messages.
+/// One cell of a sweep: its key, its data set's label for messages, and its shard. In
+/// plan.json the key's fields sit beside `data` and `shard`.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct PlanCell {
     pub data: String,
-    pub data_hash: String,
-    pub model: String,
-    pub loss: String,
-    pub weights: String,
-    pub optimizer: String,
-    pub restarts: usize,
-    pub seed: u64,
+    #[serde(flatten)]
+    pub key: Key,
     /// The shard (1-based) that runs it.
     pub shard: usize,
 }
 
 impl PlanCell {
-    pub fn key(&self) -> Key {
-        Key {
-            data_hash: self.data_hash.clone(),
-            model: self.model.clone(),
-            loss: self.loss.clone(),
-            weights: self.weights.clone(),
-            optimizer: self.optimizer.clone(),
-            restarts: self.restarts,
-            seed: self.seed,
-        }
+    /// The key a failed fit of this cell has in skipped.json.
+    pub fn fit_key(&self) -> FitKey {
+        let k = &self.key;
+        fit_key(&self.data, &k.model, &k.loss, &k.weights, &k.optimizer)
     }
 
     /// `data · model · loss/weights (optimizer), shard I`.
     pub fn describe(&self) -> String {
+        let k = &self.key;
         format!(
             "{} · {} · {}/{} ({}), shard {}",
-            self.data, self.model, self.loss, self.weights, self.optimizer, self.shard
+            self.data, k.model, k.loss, k.weights, k.optimizer, self.shard
         )
     }
 }
@@ -139,7 +130,9 @@ pub struct Plan {
 
 impl Plan {
     fn same_work(&self, other: &Plan) -> bool {
-        let keys = |p: &Plan| p.cells.iter().map(PlanCell::key).collect::<BTreeSet<_>>();
+        fn keys(p: &Plan) -> BTreeSet<&Key> {
+            p.cells.iter().map(|c| &c.key).collect()
+        }
         self.constraints == other.constraints && keys(self) == keys(other)
     }
 
@@ -190,7 +183,7 @@ impl Plan {
     pub fn missing(&self, have: &BTreeSet<Key>) -> Vec<&PlanCell> {
         self.cells
             .iter()
-            .filter(|c| !have.contains(&c.key()))
+            .filter(|c| !have.contains(&c.key))
             .collect()
     }
 }
