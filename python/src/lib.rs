@@ -14,7 +14,7 @@
 use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
 use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
 use bsdfit::engine::{self, BackendChoice};
-use bsdfit::inference::constraints::{ConstraintSpec, Constraints};
+use bsdfit::inference::constraints::ConstraintSpec;
 use bsdfit::inference::fit::Optimizer;
 use bsdfit::inference::saved::FitFile;
 use bsdfit::workflows::{diagnose, export, fit};
@@ -363,17 +363,22 @@ fn fit_json(
         request.prepare(&data)?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let outcome = request.run(&data, backend.as_ref(), &mut |_, _| {})?;
-        let report = outcome.report;
+        let report = &outcome.report;
         anyhow::ensure!(
             report.best.chi2_red.is_finite() && report.best.loss.is_finite(),
-            "{} on {}: the best fit's χ²_red is {} and its loss {} (the model gives no finite value there; try another loss or bounds)",
-            report.model,
-            data.label(),
-            report.best.chi2_red,
-            report.best.loss
+            "{}",
+            bsdfit::cli::checks::nonfinite_message(
+                &outcome.model,
+                &data,
+                outcome.loss,
+                &report.flat_params,
+                report.best.chi2_red,
+                report.best.loss,
+                backend.as_ref(),
+            )
         );
         let mc_error = outcome.mc_error.map(|e| format!("{e:#}"));
-        Ok((serde_json::to_string(&report)?, mc_error))
+        Ok((serde_json::to_string(&outcome.report)?, mc_error))
     })
 }
 
@@ -460,17 +465,9 @@ fn diagnose_json(
 ) -> PyResult<String> {
     let data = dataset.data.clone();
     compute(py, move || {
-        let loss = fit::parse_loss(&loss, &weights, data.kind)?;
-        anyhow::ensure!(
-            alpha > 0.0 && alpha < 1.0,
-            "alpha must be in (0, 1), got {alpha}"
-        );
         anyhow::ensure!(restarts >= 1, "restarts must be at least 1");
-        let start = bsdfit::bsdf::Model::for_data(&model, &data)
-            .map_err(|e| anyhow::anyhow!("model: {e}"))?;
-        // Every name must be a parameter of the start model (extensions keep its names).
-        let strict = constraint_spec(fix.clone(), bounds.clone(), prior.clone(), false);
-        Constraints::resolve(&start, &strict, false)?;
+        let constraints = constraint_spec(fix, bounds, prior, true);
+        let (loss, _) = diagnose::check_start(&data, &model, &loss, &weights, alpha, &constraints)?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let opts = diagnose::DiagnoseOptions {
             loss,
@@ -485,7 +482,7 @@ fn diagnose_json(
                 restarts: bootstrap_restarts,
                 seed,
             },
-            constraints: constraint_spec(fix, bounds, prior, true),
+            constraints,
             explore,
             ..Default::default()
         };

@@ -3,13 +3,10 @@
 use super::checks::check_batch_memory;
 use super::progress::{plural, Progress};
 use super::{BackendArgs, ConstraintArgs, DataArgs};
-use crate::engine::{
-    self,
-    loss::{Loss, Metric, Weights},
-};
+use crate::engine;
 use crate::inference::fit::Optimizer;
-use crate::workflows::diagnose::{diagnose, write_report, DiagnoseOptions};
-use anyhow::{Context, Result};
+use crate::workflows::diagnose::{check_start, diagnose, write_report, DiagnoseOptions};
+use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -89,28 +86,8 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         crate::output::check_writable_dir(dir, "--report")?;
     }
     let data = a.data_args.read(&a.data)?;
-    let metric: Metric = a
-        .loss
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
-    let weights: Weights = a
-        .weights
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
-    anyhow::ensure!(
-        metric.applies_to(data.kind),
-        "--loss {metric} is not defined for {} data",
-        data.kind
-    );
-    anyhow::ensure!(
-        a.alpha > 0.0 && a.alpha < 1.0,
-        "--alpha must be in (0, 1), got {}",
-        a.alpha
-    );
-    let start = crate::bsdf::Model::for_data(&a.model, &data).context("--model")?;
-    // Every name must be a parameter of the start model (extensions keep its names).
     let constraints = a.constraints.spec(true);
-    crate::inference::constraints::Constraints::resolve(&start, &a.constraints.spec(false), false)?;
+    let (loss, start) = check_start(&data, &a.model, &a.loss, &a.weights, a.alpha, &constraints)?;
     // Extensions add a few parameters to the start model: estimate with three more.
     check_batch_memory(
         a.restarts + 1,
@@ -121,7 +98,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     )?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
     let opts = DiagnoseOptions {
-        loss: Loss::new(metric, weights),
+        loss,
         optimizer: a.optimizer,
         restarts: a.restarts,
         seed: a.seed,

@@ -165,3 +165,30 @@ impl Diagnosis {
         }
     }
 }
+
+/// The checks `diagnose` makes before any fit, for every caller (the command line, the
+/// Python module): the loss for the data's kind, the significance level, the start
+/// model, and every constrained name a parameter of the start model (extensions keep its
+/// names). Returns the loss and the start model.
+pub fn check_start(
+    data: &crate::data::Dataset,
+    model: &str,
+    loss: &str,
+    weights: &str,
+    alpha: f64,
+    constraints: &crate::inference::constraints::ConstraintSpec,
+) -> anyhow::Result<(Loss, crate::bsdf::Model)> {
+    let loss = crate::workflows::fit::parse_loss(loss, weights, data.kind)?;
+    anyhow::ensure!(
+        alpha > 0.0 && alpha < 1.0,
+        "--alpha must be in (0, 1), got {alpha}"
+    );
+    let start =
+        crate::bsdf::Model::for_data(model, data).map_err(|e| anyhow::anyhow!("--model: {e}"))?;
+    let strict = crate::inference::constraints::ConstraintSpec {
+        lenient: false,
+        ..constraints.clone()
+    };
+    crate::inference::constraints::Constraints::resolve(&start, &strict, false)?;
+    Ok((loss, start))
+}
