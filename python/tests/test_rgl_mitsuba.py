@@ -180,8 +180,8 @@ def write_tensor_file(path, fields):
 
 
 def test_bsdfit_reads_a_general_rgl_file_as_mitsuba_evaluates_it(variant, tmp_path):
-    """A material with a non-uniform VNDF warp, jacobian = 1 (values divided by the NDF
-    term) and random tables, written here as the RGL tools would: bsdfit's reader gives
+    """An isotropic material with a non-uniform VNDF warp, jacobian = 1 (values divided by
+    the NDF term) and random tables, written here as the RGL tools would: bsdfit's reader gives
     Mitsuba's values at the directions it samples."""
     rng = np.random.default_rng(2)
     n_theta, n = 6, 16
@@ -193,14 +193,20 @@ def test_bsdfit_reads_a_general_rgl_file_as_mitsuba_evaluates_it(variant, tmp_pa
         t[..., -1, :] = t[..., 0, :]
         return t
 
+    def isotropic(h, w):
+        """An NDF or projected-area table of an isotropic material: the same along φ
+        (rows), random along θ. (Mitsuba 3.9.1 may turn ωi by 180° about the normal in its
+        isotropic path, through a flag it leaves unset: harmless for such tables.)"""
+        return np.tile((1.0 + 0.8 * rng.random(w)).astype(np.float32), (h, 1))
+
     path = tmp_path / "random.bsdf"
     write_tensor_file(path, {
         "description": np.frombuffer(b"random test material", dtype=np.uint8),
         "jacobian": np.array([1], dtype=np.uint8),
         "theta_i": np.linspace(0.0, 1.5, n_theta).astype(np.float32),
         "phi_i": np.array([0.0], dtype=np.float32),
-        "ndf": smooth(n, n),
-        "sigma": smooth(8, 8),
+        "ndf": isotropic(n, n),
+        "sigma": isotropic(8, 8),
         "vndf": smooth(1, n_theta, n, n),
         "luminance": smooth(1, n_theta, n, n),
         "rgb": smooth(1, n_theta, 3, n, n),
