@@ -49,13 +49,7 @@ pub fn theta_i_nodes() -> Vec<f64> {
     v
 }
 
-/// u → θ (radians) and φ (radians) of the format's unit square.
-pub fn u_to_theta(u: f64) -> f64 {
-    u * u * (PI / 2.0)
-}
-pub fn u_to_phi(u: f64) -> f64 {
-    (2.0 * u - 1.0) * PI
-}
+pub use crate::data::readers::rgl::{u_to_phi, u_to_theta};
 
 /// The outgoing direction whose half vector with `wi` is the u-space point (ux, uy)
 /// (φm relative to φi), or None below the horizon.
@@ -103,7 +97,7 @@ enum FieldData {
 /// The bytes of a tensor file (little endian; data aligned to 8 bytes).
 fn tensor_file(fields: &[Field]) -> Vec<u8> {
     let mut head = Vec::new();
-    head.extend_from_slice(b"tensor_file\0");
+    head.extend_from_slice(crate::data::readers::rgl::MAGIC);
     head.extend_from_slice(&[1, 0]);
     head.extend_from_slice(&(fields.len() as u32).to_le_bytes());
     let header_len: usize = head.len()

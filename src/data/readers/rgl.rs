@@ -262,12 +262,19 @@ fn lerp(a: f64, b: f64, t: f64) -> f64 {
     a + (b - a) * t
 }
 
-fn theta_to_u(theta: f64) -> f64 {
+/// The format's unit square: θ (radians, 0…π/2) ↔ u = √(2θ/π), dense near the pole
+/// where highlights are; φ (radians, −π…π) ↔ u = (φ + π)/2π. Writer and reader share them.
+pub fn theta_to_u(theta: f64) -> f64 {
     (theta * (2.0 / PI)).max(0.0).sqrt()
 }
-
-fn phi_to_u(phi: f64) -> f64 {
+pub fn phi_to_u(phi: f64) -> f64 {
     (phi + PI) / (2.0 * PI)
+}
+pub fn u_to_theta(u: f64) -> f64 {
+    u * u * (PI / 2.0)
+}
+pub fn u_to_phi(u: f64) -> f64 {
+    (2.0 * u - 1.0) * PI
 }
 
 /// A measured material, ready to evaluate.
