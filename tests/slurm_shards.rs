@@ -172,16 +172,21 @@ fn rows(csv: &Path) -> Vec<Row> {
     v
 }
 
+/// The rows of the same sweep run in one process, outside any array.
+fn unsharded_rows(dir: &Path, base: &[&str]) -> Vec<Row> {
+    let one = dir.join("one");
+    let mut args = base.to_vec();
+    args.extend(["--out", one.to_str().unwrap()]);
+    ok(bsdfit_env(&args, &[]), "unsharded sweep");
+    rows(&one.join("results.csv"))
+}
+
 #[test]
 fn shards_from_array_variables_merge_to_the_unsharded_rows() {
     let tmp = tempfile::tempdir().unwrap();
     let (a, b) = synth(tmp.path());
     let base = sweep_args(&a, &b);
-    let one = tmp.path().join("one");
-    let mut args = base.clone();
-    args.extend(["--out", one.to_str().unwrap()]);
-    ok(bsdfit_env(&args, &[]), "unsharded sweep");
-    let reference = rows(&one.join("results.csv"));
+    let reference = unsharded_rows(tmp.path(), &base);
     assert_eq!(
         reference.len(),
         18,
@@ -266,10 +271,7 @@ fn emitted_job_scripts_run_the_same_sweep() {
     let tmp = tempfile::tempdir().unwrap();
     let (a, b) = synth(tmp.path());
     let base = sweep_args(&a, &b);
-    let one = tmp.path().join("one");
-    let mut args = base.clone();
-    args.extend(["--out", one.to_str().unwrap()]);
-    ok(bsdfit_env(&args, &[]), "unsharded sweep");
+    let reference = unsharded_rows(tmp.path(), &base);
 
     let out = tmp.path().join("cluster");
     let mut args = base.clone();
@@ -303,10 +305,7 @@ fn emitted_job_scripts_run_the_same_sweep() {
         .output()
         .unwrap();
     ok(o, "merge.sbatch");
-    assert_eq!(
-        rows(&out.join("results.csv")),
-        rows(&one.join("results.csv"))
-    );
+    assert_eq!(rows(&out.join("results.csv")), reference);
 
     // A GPU sweep asks each task for one GPU.
     let gpu_out = tmp.path().join("gpu");
