@@ -392,7 +392,7 @@ class Fit:
         return values.reshape(shape), uncertainties.reshape(shape)
 
 
-def _constraint_list(name: str, given: Any) -> List[str]:
+def _constraint_list(given: Any) -> List[str]:
     """``fix``/``bounds``/``prior`` as the command line's NAME=… strings.
 
     Accepts a mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``,
@@ -453,9 +453,9 @@ def fit(
         _positive("restarts", restarts),
         _seed(seed),
         str(backend),
-        _constraint_list("fix", fix),
-        _constraint_list("bounds", bounds),
-        _constraint_list("prior", prior),
+        _constraint_list(fix),
+        _constraint_list(bounds),
+        _constraint_list(prior),
         int(mc),
         float(mc_scale),
         int(mc_restarts),
@@ -562,9 +562,9 @@ def diagnose(
         int(bootstrap),
         int(bootstrap_restarts),
         str(backend),
-        _constraint_list("fix", fix),
-        _constraint_list("bounds", bounds),
-        _constraint_list("prior", prior),
+        _constraint_list(fix),
+        _constraint_list(bounds),
+        _constraint_list(prior),
         bool(backtrack),
         int(explore),
     )
