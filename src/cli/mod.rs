@@ -13,7 +13,6 @@ use std::path::Path;
 
 mod battery;
 mod bench;
-pub mod checks;
 mod convert;
 mod diagnose;
 mod eval;
@@ -25,6 +24,7 @@ mod render;
 mod sweep;
 mod synth;
 
+pub use crate::workflows::checks;
 pub use crate::workflows::fit::DEFAULT_RESTARTS;
 
 /// Value parser of `--seed`: a non-negative integer (clap would otherwise read `-1` as an

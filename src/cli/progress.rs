@@ -4,6 +4,7 @@
 //! its bar, one line every ~10 s, e.g. `sweep: 120/603 fits, 2m10s elapsed, ETA 8m`, so a
 //! log shows the run is alive. `BSDFIT_PROGRESS_SECS` sets that interval (`0`: no lines).
 
+pub use crate::output::text::{plural, plural_with};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -38,25 +39,6 @@ pub fn fmt_duration(d: Duration) -> String {
         format!("{}m{:02}s", s / 60, s % 60)
     } else {
         format!("{}h{:02}m", s / 3600, (s / 60) % 60)
-    }
-}
-
-/// "1 fit", "2 fits": `n` and the noun, plural when n ≠ 1 (nouns ending in s get "es"
-/// only if given; pass the plural form for irregular ones via [`plural_with`]).
-pub fn plural(n: usize, noun: &str) -> String {
-    if n == 1 {
-        format!("1 {noun}")
-    } else {
-        format!("{n} {noun}s")
-    }
-}
-
-/// `n` with the singular or the given plural noun.
-pub fn plural_with(n: usize, one: &str, many: &str) -> String {
-    if n == 1 {
-        format!("1 {one}")
-    } else {
-        format!("{n} {many}")
     }
 }
 

@@ -1,6 +1,7 @@
 //! What a user runs: the benchmark sweep, the discrepancy workflow, throughput benchmarks,
 //! synthetic data, and a fit used elsewhere (eval, export).
 pub mod bench;
+pub mod checks;
 pub mod diagnose;
 pub mod export;
 pub mod fit;

@@ -1,5 +1,6 @@
-//! Checks the command line makes around fits: whether a request fits in memory before it
-//! starts, and, when a fit ends with a non-finite χ²_red or loss, which samples caused it.
+//! Checks made around fits (by the command line, the sweep and the Python module): whether
+//! a request fits in memory before it starts, and, when a fit ends with a non-finite
+//! χ²_red or loss, which samples caused it.
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
