@@ -590,20 +590,25 @@ def sweep(
     Returns the path of ``out``."""
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
-    args = ["sweep", *(os.fspath(p) for p in paths), "--out", os.fspath(out)]
-    for flag, given in (("--models", models), ("--losses", losses), ("--weights", weights)):
-        if given is not None:
-            items = [given] if isinstance(given, str) else list(given)
-            args += [flag, ",".join(items)]
-    args += ["--restarts", str(_positive("restarts", restarts)), "--seed", str(_seed(seed))]
-    args += ["--backend", str(backend)]
-    if not pictures:
-        args.append("--no-pictures")
-    if shard is not None:
-        args += ["--shard", str(shard)]
-    if assume_uncertainty is not None:
-        args += ["--assume-uncertainty", _assume(assume_uncertainty) or ""]
-    _bsdfit.run_cli(args)
+
+    def listed(given: Optional[Sequence[str]]) -> Optional[List[str]]:
+        if given is None:
+            return None
+        return [given] if isinstance(given, str) else list(given)
+
+    _bsdfit.sweep(
+        [os.fspath(p) for p in paths],
+        os.fspath(out),
+        listed(models),
+        listed(losses),
+        listed(weights),
+        _positive("restarts", restarts),
+        _seed(seed),
+        str(backend),
+        bool(pictures),
+        None if shard is None else str(shard),
+        _assume(assume_uncertainty),
+    )
     return os.fspath(out)
 
 

@@ -121,6 +121,21 @@ def diagnose_json(
 def run_cli(args: List[str]) -> None:
     """Run a command of the command line in this process (``["sweep", …]``)."""
 
+def sweep(
+    paths: List[str],
+    out: str,
+    models: Optional[List[str]],
+    losses: Optional[List[str]],
+    weights: Optional[List[str]],
+    restarts: int,
+    seed: int,
+    backend: str,
+    pictures: bool,
+    shard: Optional[str],
+    assume_uncertainty: Optional[str],
+) -> int:
+    """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added."""
+
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""
 

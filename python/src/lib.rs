@@ -497,6 +497,50 @@ fn run_cli(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
     compute(py, move || bsdfit::cli::run_args(args))
 }
 
+/// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does, with its
+/// progress on stderr); the number of fits it added.
+#[pyfunction]
+#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty))]
+#[allow(clippy::too_many_arguments)]
+fn sweep(
+    py: Python<'_>,
+    paths: Vec<PathBuf>,
+    out: PathBuf,
+    models: Option<Vec<String>>,
+    losses: Option<Vec<String>>,
+    weights: Option<Vec<String>>,
+    restarts: usize,
+    seed: u64,
+    backend: String,
+    pictures: bool,
+    shard: Option<String>,
+    assume_uncertainty: Option<String>,
+) -> PyResult<usize> {
+    use bsdfit::workflows::sweep::{self, Selection, Shard, SweepConfig};
+    compute(py, move || {
+        let defaults = SweepConfig::default();
+        let cfg = SweepConfig {
+            data: paths,
+            read: read_options(None, None, None, assume_uncertainty, false, None, None)?,
+            selection: Selection {
+                models,
+                losses,
+                weights,
+                ..defaults.selection.clone()
+            },
+            restarts,
+            seed,
+            backend: backend_choice(&backend)?,
+            out,
+            shard: shard.as_deref().map(Shard::parse).transpose()?,
+            pictures,
+            ..defaults
+        };
+        let mut console = bsdfit::cli::progress::ConsoleObserver::new("sweep");
+        Ok(sweep::run(&cfg, &mut console)?.new_fits)
+    })
+}
+
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
@@ -532,6 +576,7 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eval_fit, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(run_cli, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

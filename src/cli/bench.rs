@@ -1,7 +1,7 @@
 //! `bsdfit bench`.
 
 use super::checks::batch_memory;
-use super::progress::Progress;
+use super::progress::{ConsoleObserver, Progress};
 use super::BackendArgs;
 use crate::bsdf;
 use crate::data::Kind;
@@ -87,28 +87,22 @@ fn parse_size(s: &str) -> Result<usize, String> {
 }
 
 /// The seed of `bench --sweep`'s sweeps (`sweep`'s default).
-const SWEEP_SEED: u64 = 1;
-
-/// `sweep`'s own argument parser, so `bench --sweep` runs the sweep with exactly the
-/// defaults a user's `bsdfit sweep` gets.
-#[derive(clap::Parser)]
-struct SweepCommand {
-    #[command(flatten)]
-    args: super::sweep::SweepArgs,
-}
+const SWEEP_SEED: u64 = crate::workflows::sweep::run::DEFAULT_SEED;
 
 /// One backend's timed sweep: its rows, wall seconds, and what it measured of itself
 /// (device submissions, time per phase).
 type TimedSweep = (
     Vec<crate::output::results::Row>,
     f64,
-    super::sweep::SweepStats,
+    crate::workflows::sweep::SweepStats,
 );
 
-/// Run the sweep on one backend into a fresh temporary folder.
+/// Run the sweep on one backend into a fresh temporary folder, with the defaults a
+/// user's `bsdfit sweep` gets ([`SweepConfig::default`]).
 fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
-    use clap::Parser;
-    use std::ffi::OsString;
+    use crate::workflows::sweep::{run, Selection, SweepConfig};
+    let choice = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
+        .map_err(|e| anyhow::anyhow!("--sweep: backend {backend}: {e}"))?;
     let dir = std::env::temp_dir().join(format!(
         "bsdfit-bench-sweep-{}-{backend}-{}",
         std::process::id(),
@@ -123,41 +117,35 @@ fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
             dir.display()
         )
     })?;
-    let mut argv: Vec<OsString> = vec!["sweep".into()];
-    argv.extend(a.sweep_data.iter().map(|p| p.clone().into_os_string()));
-    for (k, v) in [
-        ("--backend", backend.to_string()),
-        ("--restarts", a.sweep_restarts.to_string()),
-        ("--seed", seed.to_string()),
-    ] {
-        argv.push(k.into());
-        argv.push(v.into());
-    }
-    argv.push("--out".into());
-    argv.push(dir.clone().into_os_string());
-    argv.push("--no-pictures".into());
-    if let Some(models) = &a.models {
-        argv.push("--models".into());
-        argv.push(models.join(",").into());
-    }
+    let defaults = SweepConfig::default();
+    let cfg = SweepConfig {
+        data: a.sweep_data.clone(),
+        selection: Selection {
+            models: a.models.clone(),
+            ..defaults.selection.clone()
+        },
+        restarts: a.sweep_restarts,
+        seed,
+        backend: choice,
+        out: dir.clone(),
+        pictures: false,
+        ..defaults
+    };
     let result = (|| {
-        let sweep = SweepCommand::try_parse_from(argv)
-            .map_err(|e| anyhow::anyhow!("--sweep: {e}"))?
-            .args;
         eprintln!(
             "bench --sweep: sweep on {backend} (seed {seed}) into {}",
             dir.display()
         );
         let t0 = std::time::Instant::now();
-        let submissions =
-            super::sweep::run_sweep(&sweep).with_context(|| format!("--sweep on {backend}"))?;
+        let stats = run(&cfg, &mut ConsoleObserver::new("sweep"))
+            .with_context(|| format!("--sweep on {backend}"))?;
         let wall = t0.elapsed().as_secs_f64();
         let rows = crate::output::results::read_results(
             &dir.join(crate::output::results::RESULTS_CSV),
             false,
             &mut |m| eprintln!("note: {m}"),
         )?;
-        Ok((rows, wall, submissions))
+        Ok((rows, wall, stats))
     })();
     if let Err(e) = std::fs::remove_dir_all(&dir) {
         eprintln!("note: could not remove {}: {e}", dir.display());

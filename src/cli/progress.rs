@@ -211,6 +211,51 @@ impl Drop for Progress {
     }
 }
 
+/// A sweep's observer on the console: lines on stderr, and a progress bar over the fits
+/// (above which a fit's warnings print).
+pub struct ConsoleObserver {
+    label: String,
+    progress: Option<Progress>,
+}
+
+impl ConsoleObserver {
+    /// An observer whose progress reads `LABEL: 120/603 fits…`.
+    pub fn new(label: &str) -> ConsoleObserver {
+        ConsoleObserver {
+            label: label.to_string(),
+            progress: None,
+        }
+    }
+}
+
+impl crate::workflows::sweep::SweepObserver for ConsoleObserver {
+    fn note(&mut self, line: &str) {
+        match &self.progress {
+            Some(p) => p.println(line),
+            None => eprintln!("{line}"),
+        }
+    }
+    fn begin(&mut self, total: u64, done: u64) {
+        let p = Progress::new(&self.label, total, "fits");
+        p.inc(done);
+        self.progress = Some(p);
+    }
+    fn alert(&mut self, line: &str) {
+        self.note(line);
+    }
+    fn fit_ended(&mut self, what: &str) {
+        if let Some(p) = &self.progress {
+            p.set_message(what);
+            p.inc(1);
+        }
+    }
+    fn end(&mut self) {
+        if let Some(mut p) = self.progress.take() {
+            p.finish();
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

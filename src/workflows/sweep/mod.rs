@@ -13,7 +13,13 @@
 //! `report.html` ([`crate::output::report`]).
 
 pub mod lock;
+pub mod merge;
+pub mod pool;
+pub mod run;
 pub mod slurm;
+
+pub use merge::{merge, MergeConfig};
+pub use run::{run, Shard, SweepConfig, SweepObserver, SweepStats};
 
 use crate::bsdf;
 use crate::data::Kind;

@@ -11,7 +11,10 @@
 //! to a temporary and renamed into place (the same content from every shard), and the
 //! merge holds `OUT`'s lock.
 
+use super::run::{read_cells, SweepConfig, SweepObserver};
+use crate::engine::BackendChoice;
 use crate::output::results::{fit_key, FitKey, Key};
+use crate::output::text::plural;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -298,4 +301,89 @@ echo \"submitted array job $array ({n} tasks) and merge job $merge; results in {
             ("submit.sh", submit, true),
         ]
     }
+}
+
+/// `sweep --emit-slurm TASKS`: the job scripts of the sweep `cfg` in OUT/slurm/, an array
+/// of `tasks` tasks of `cpus_per_task` CPUs each running `bsdfit sweep SWEEP_ARGS --shard
+/// auto`. The data and the selection are read now, so a mistake fails here and not on
+/// the cluster.
+pub fn emit(
+    cfg: &SweepConfig,
+    tasks: usize,
+    cpus_per_task: usize,
+    sweep_args: &[String],
+    obs: &mut dyn SweepObserver,
+) -> Result<()> {
+    anyhow::ensure!(
+        tasks >= 1,
+        "--emit-slurm {tasks}: the array needs at least one task"
+    );
+    anyhow::ensure!(
+        cpus_per_task >= 1,
+        "--slurm-cpus {cpus_per_task}: at least one CPU per task"
+    );
+    anyhow::ensure!(
+        cfg.shard.is_none(),
+        "--emit-slurm writes an array whose tasks use --shard auto; leave --shard out"
+    );
+    let (_, all) = read_cells(cfg)?;
+    let workdir = std::env::current_dir().context("cannot read the current folder")?;
+    let out = workdir.join(&cfg.out);
+    let dir = out.join("slurm");
+    std::fs::create_dir_all(dir.join("logs"))
+        .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
+    let scripts = JobScripts {
+        binary: &bsdfit_binary()?,
+        workdir: &workdir,
+        out: &out,
+        sweep_args,
+        tasks,
+        cpus_per_task,
+        gpu: cfg.backend == BackendChoice::Gpu,
+        pictures: cfg.pictures,
+    };
+    for (name, text, executable) in scripts.files() {
+        let path = dir.join(name);
+        crate::output::files::write_result(&path, &text, false)?;
+        #[cfg(unix)]
+        if executable {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+                .with_context(|| format!("cannot make {} executable", path.display()))?;
+        }
+        #[cfg(not(unix))]
+        let _ = executable;
+    }
+    obs.note(&format!(
+        "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch and {0}/submit.sh; submit with: sh {0}/submit.sh",
+        dir.display(),
+        plural(all.len(), "cell"),
+    ));
+    if tasks > all.len() {
+        obs.note(&format!(
+            "note: {tasks} tasks for {}: {} of them will have nothing to do",
+            plural(all.len(), "cell"),
+            tasks - all.len()
+        ));
+    }
+    Ok(())
+}
+
+/// The bsdfit binary the job scripts run: this process's, or `bsdfit` on the PATH when
+/// this process is not bsdfit (the Python module runs inside Python).
+fn bsdfit_binary() -> Result<PathBuf> {
+    let binary = std::env::current_exe()
+        .context("cannot find the bsdfit binary")?
+        .canonicalize()
+        .context("cannot find the bsdfit binary")?;
+    Ok(
+        if binary
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with("bsdfit"))
+        {
+            binary
+        } else {
+            PathBuf::from("bsdfit")
+        },
+    )
 }
