@@ -27,6 +27,7 @@
 use super::microfacet::{
     gg_lambda_table, Beckmann, Distribution, Gg, Ggx, Gtr, Masking, MICROFACET_WGSL,
 };
+use super::effect::{Adds, Effect};
 use super::{Ast, Bsdf, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use crate::math::fresnel_transmittance;
@@ -328,7 +329,13 @@ pub const ENTRY: Entry = Entry::term(
     "Walter 2007 microfacet transmission: btdf(tr|beckmann|gtr|gg)",
     build,
 )
-.with_variants(&["tr", "beckmann", "gtr", "gg"]);
+.with_variants(&["tr", "beckmann", "gtr", "gg"])
+.adding(&[
+    // TR's tails are longer than Beckmann's and the Generalized Gaussian's: a swap.
+    Adds::variant(Effect::LongTail, &["beckmann", "gg"], "tr").not_nested(),
+    // γ = 2 is TR.
+    Adds::variant(Effect::LongTail, &["tr"], "gtr"),
+]);
 const BTDF: Option<Kind> = Some(Kind::Btdf);
 pub const SCALE_ENTRY: Entry = Entry::suffix(
     "scale",
@@ -336,21 +343,27 @@ pub const SCALE_ENTRY: Entry = Entry::suffix(
     InCatalogue::Yes,
     "multiplies a BTDF by S",
     build_scale,
-);
+)
+// S = 1 is M alone.
+.adding(&[Adds::appended(Effect::Scale)]);
 pub const ABSORB_ENTRY: Entry = Entry::suffix(
     "absorb",
     BTDF,
     InCatalogue::Yes,
     "Beer-Lambert attenuation exp(-tau/mu_t) (BTDF)",
     build_absorb,
-);
+)
+// τ = 0 is M alone.
+.adding(&[Adds::appended(Effect::Absorption)]);
 pub const DIFFUSE_ENTRY: Entry = Entry::suffix(
     "diffuse",
     BTDF,
     InCatalogue::No,
     "adds a Lambertian transmission kd/pi (BTDF)",
     build_diffuse,
-);
+)
+// k_d = 0 is M alone.
+.adding(&[Adds::appended(Effect::DiffuseFloor)]);
 
 const NDF_LIST: &str = "tr, beckmann, gtr, gg";
 

@@ -8,6 +8,7 @@
 //! M's energy bound; k_c = 0 is M (nested). Twin: `shaders/bsdf/coat.wgsl`.
 
 use super::microfacet::{single_wgsl, Ggx};
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -71,7 +72,9 @@ pub const ENTRY: Entry = Entry::suffix(
     InCatalogue::No,
     "blends in a second GGX specular lobe: (1 - kc) M + kc D G/(4 mu_i mu_o), no Fresnel (a smooth coat over M's own lobe)",
     build,
-);
+)
+// k_c = 0 is M alone: a sharp coat lobe over a broad one, as on real coated materials.
+.adding(&[Adds::appended(Effect::SpecularLobe)]);
 
 pub fn build(inner: Node) -> Result<Node, String> {
     if inner.bsdf.kind() != Kind::Brdf {

@@ -3,6 +3,7 @@
 //! `bsdfit models`, the per-plane variants, the kind of a spec and diagnose's extensions
 //! and embeddings are all derived from these declarations (see [`super::registry`]).
 
+use super::effect::Adds;
 use super::spec::Ast;
 use super::Node;
 use crate::data::Kind;
@@ -261,6 +262,7 @@ impl Entry {
             doc,
             build: Builder::Term(build),
             variants: &[],
+            adds: &[],
         }
     }
     /// A term without argument (`lambert`), in the default catalogue.
@@ -312,11 +314,16 @@ impl Entry {
             doc,
             build: Builder::Suffix(build),
             variants: &[],
+            adds: &[],
         }
     }
     /// The term's argument names (`btdf(tr)`), each a catalogue model.
     pub const fn with_variants(self, variants: &'static [&'static str]) -> Entry {
         Entry { variants, ..self }
+    }
+    /// The effects the model adds to others, and how (`diagnose`'s extensions).
+    pub const fn adding(self, adds: &'static [Adds]) -> Entry {
+        Entry { adds, ..self }
     }
 }
 
@@ -335,6 +342,9 @@ pub struct Entry {
     pub build: Builder,
     /// The argument names a term accepts (`btdf(tr)`): its variants. Empty otherwise.
     pub variants: &'static [&'static str],
+    /// The physical effects this model adds to another model, and how the extension is
+    /// made ([`Adds`]); `diagnose` tries them where the data shows the effect missing.
+    pub adds: &'static [Adds],
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 //! `shaders/bsdf/dmg.wgsl` (with `microfacet.wgsl`).
 
 use super::micrograin::{layer, layer_wgsl, weight, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0};
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -73,7 +74,10 @@ pub const ENTRY: Entry = Entry::layer(
     MICROGRAIN_BASES,
     "diffuse micrograin layer over a base B (Lucas et al. 2023): dmg(B)",
     |base| Node::with(DiffuseMicrograin, vec![base]),
-);
+)
+// At the thinnest layer the base shows through unchanged: the grains darken it at grazing
+// angles (Lucas et al. 2023).
+.adding(&[Adds::wrapping(Effect::GrazingDecay)]);
 
 #[cfg(test)]
 mod tests {

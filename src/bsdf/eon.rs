@@ -10,6 +10,7 @@
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
 //! Twin: `shaders/eon.wgsl`.
 
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -127,4 +128,6 @@ pub const ENTRY: Entry = Entry::leaf(
     Role::DiffuseBase,
     "energy-preserving Oren-Nayar (Portsmouth, Kutz, Hill 2025)",
     || Node::leaf(Eon),
-);
+)
+// At r = 0 it is Lambert: roughness adds backscatter to a Lambertian base.
+.adding(&[Adds::generalizing(Effect::Backscatter, super::lambert::ENTRY.name)]);

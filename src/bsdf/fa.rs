@@ -5,6 +5,7 @@
 //! Twin: `shaders/bsdf/fa.wgsl`.
 
 use super::ggx::{ggx_reflect, GgxLobe, ALPHA, ETA, KS};
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Memo, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
@@ -92,4 +93,14 @@ pub const ENTRY: Entry = Entry::layer(
     &[Role::DiffuseBase],
     "Fresnel aggregate: GGX lobe over a diffuse base B: fa(B)",
     |base| Node::with(FresnelAggregate, vec![base]),
-);
+)
+.adding(&[
+    // k_s = 0 is the base alone: the lobe adds a specular highlight.
+    Adds::wrapping(Effect::SpecularLobe),
+    // Over a black Lambertian base it is the GGX lobe alone: the base adds a diffuse floor.
+    Adds::containing(
+        Effect::DiffuseFloor,
+        super::ggx::ENTRY.name,
+        super::lambert::ENTRY.name,
+    ),
+]);

@@ -19,6 +19,7 @@
 //! parameter); `+falloff` puts [`Falloff`] there. The diffuse base and the specular lobe
 //! of M never see E. Twin: `shaders/bsdf/falloff.wgsl`.
 
+use super::effect::{Adds, Effect};
 use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -115,7 +116,10 @@ pub const ENTRY: Entry = Entry::suffix(
     InCatalogue::No,
     "entrance-angle efficiency (mu_i mu_o)^q of the retro lobe before it (+retro, +mrm, +mrm82)",
     build,
-);
+)
+// q = 0 is M alone. Only a spec with a retro lobe accepts it; on others the extension does
+// not build and is not tried.
+.adding(&[Adds::appended(Effect::RetroFalloff)]);
 
 pub fn build(inner: Node) -> Result<Node, String> {
     if !is_retro_lobe(&inner) {

@@ -19,6 +19,7 @@ use std::fmt;
 use std::sync::Arc;
 
 pub mod decl;
+pub mod effect;
 pub mod microfacet;
 pub mod micrograin;
 pub mod registry;

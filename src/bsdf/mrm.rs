@@ -37,6 +37,7 @@
 
 use super::falloff;
 use super::microfacet::{single_wgsl, Distribution, Ggx};
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::{fresnel_dielectric, half_vector};
@@ -228,7 +229,11 @@ pub const F82_ENTRY: Entry = Entry::suffix(
     InCatalogue::No,
     "adds the MRM retroreflective lobe with the F82-tint Fresnel (f0, f82) on the back-vector",
     |inner| build(inner, Fresnel::F82Tint),
-);
+)
+// k_r = 0 is M alone; F0 = F82 = 1 is `+retro` up to the height-correlated G2. On real tapes
+// k_r and F0 trade off and k_r can end on its bound 1; `+retro` (k_r up to 10, no Fresnel)
+// then carries the effect, and the residuals choose between them.
+.adding(&[Adds::appended(Effect::RetroLobe)]);
 
 fn build(inner: Node, fresnel: Fresnel) -> Result<Node, String> {
     let name = match fresnel {

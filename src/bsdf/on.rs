@@ -7,6 +7,7 @@
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
 //! Twin: `shaders/on.wgsl`.
 
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -75,4 +76,6 @@ pub const ENTRY: Entry = Entry::leaf(
     Role::DiffuseBase,
     "Oren-Nayar 1994 qualitative model",
     || Node::leaf(OrenNayar),
-);
+)
+// At σ = 0 it is Lambert: roughness adds backscatter to a Lambertian base.
+.adding(&[Adds::generalizing(Effect::Backscatter, super::lambert::ENTRY.name)]);

@@ -7,6 +7,7 @@
 
 use super::falloff;
 use super::microfacet::{single_wgsl, Ggx};
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -81,7 +82,9 @@ pub const ENTRY: Entry = Entry::suffix(
     InCatalogue::No,
     "adds a back-vector retroreflective GGX lobe (BRDF)",
     build,
-);
+)
+// k_r = 0 is M alone: a lobe around the retro direction.
+.adding(&[Adds::appended(Effect::RetroLobe)]);
 
 pub fn build(inner: Node) -> Result<Node, String> {
     if inner.bsdf.kind() != Kind::Brdf {

@@ -23,6 +23,7 @@ use super::micrograin::{
     layer, layer_wgsl, rough_grain, weight, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G, MICROGRAIN_BASES,
     RHO_G, TAU0,
 };
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -100,7 +101,10 @@ pub const ENTRY: Entry = Entry::layer(
     MICROGRAIN_BASES,
     "rough micrograin layer over a base B (Lucas et al. 2023): rmg(B)",
     |base| Node::with(RoughMicrograin, vec![base]),
-);
+)
+// At the thinnest layer the base shows through unchanged: the grains darken it at grazing
+// angles (Lucas et al. 2023).
+.adding(&[Adds::wrapping(Effect::GrazingDecay)]);
 
 #[cfg(test)]
 mod tests {

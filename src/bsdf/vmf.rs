@@ -52,6 +52,7 @@
 //!
 //! Twin: `shaders/vmf.wgsl`.
 
+use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -457,7 +458,9 @@ pub const ENTRY: Entry = Entry::leaf(
     Role::DiffuseBase,
     "VMF diffuse (d'Eon & Weidlich 2024)",
     || Node::leaf(Vmf),
-);
+)
+// At r = 0 it is Lambert: roughness adds backscatter to a Lambertian base.
+.adding(&[Adds::generalizing(Effect::Backscatter, super::lambert::ENTRY.name)]);
 
 #[cfg(test)]
 mod tests {

@@ -236,26 +236,11 @@ pub fn generate(
     for _attempt in 0..200 {
         // The kinds the effect has rules for (any kind for a null case).
         let kinds: Vec<Kind> = match hidden {
-            Some(e) => {
-                let mut k: Vec<Kind> = e.entry().rules.iter().map(|r| r.kind).collect();
-                k.dedup();
-                k
-            }
+            Some(e) => e.kinds(),
             None => vec![Kind::Brdf, Kind::Btdf],
         };
         let kind = *kinds.choose(&mut rng).ok_or_else(|| anyhow!("no rule"))?;
-        let min_planes = hidden.map_or(1, |e| {
-            e.entry()
-                .rules
-                .iter()
-                .filter(|r| r.kind == kind)
-                .map(|r| match r.make {
-                    super::effects::Make::Suffix { min_planes, .. } => min_planes,
-                    _ => 1,
-                })
-                .min()
-                .unwrap_or(1)
-        });
+        let min_planes = hidden.map_or(1, |e| e.min_planes(kind));
         let family = match (kind, min_planes) {
             (_, 2) => Family::TwoPlane,
             (Kind::Btdf, _) => [Family::InPlane, Family::TwoPlane][rng.random_range(0..2)],

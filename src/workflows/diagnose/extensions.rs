@@ -1,7 +1,7 @@
 //! Candidate extensions of a spec (docs/diagnose.md's effect → extension table) and the
 //! embedding of the current optimum in an extension's parameters.
 
-use super::effects::{Make, EFFECTS};
+use super::effects::{Extend, Rule};
 use super::Effect;
 pub use crate::bsdf::render_spec;
 use crate::bsdf::{bases_of, registry, Ast, Model};
@@ -40,35 +40,35 @@ fn with_suffixes(core: &str, suffixes: &[String]) -> String {
     s
 }
 
-/// Every applicable extension of `spec` for `data`, from the effect catalogue
-/// [`EFFECTS`] (docs/diagnose.md's effect → extension table), each checked to parse for the
-/// data's channels and planes. For a core term M (its suffixes are kept):
+/// Every applicable extension of `spec` for `data`: for each effect (in the order of
+/// [`Effect::ALL`]), each model that declares it adds the effect ([`Effect::rules`], in
+/// registry order), each checked to parse for the data's channels and planes. For a
+/// core term M (its suffixes are kept), a declaration makes:
 ///
-/// BRDF:
-/// - `backscatter`: `lambert` → `on`, `eon`, `vmf` (also inside `fa`, `dmg`, `rmg`);
-/// - `specular_lobe`: a diffuse base B → `fa(B)`; any M → `M+coat` (a second lobe);
-/// - `diffuse_floor`: `ggx` → `fa(lambert)` (a Lambertian term under the lobe);
-/// - `grazing_decay`: a base B → `dmg(B)`, `rmg(B)`;
-/// - `retro_lobe`: M → `M+retro` (back-vector GGX) and `M+mrm82` (the MRM lobe);
-/// - `retro_falloff`: a model with a retro lobe, `M+mrm82` → `M+mrm82+falloff` (only such
-///   specs accept `+falloff`; the others' candidates do not parse and are dropped).
+/// - [`Extend::Generalizes`] `base`: the leaf replaces `base`, bare or as a layer's base
+///   (`lambert` → `on`, `fa(lambert)` → `fa(on)`);
+/// - [`Extend::Wraps`]: a bare base B the layer accepts → `layer(B)`;
+/// - [`Extend::Contains`] `leaf`, `base`: a bare `leaf` → `layer(base)`;
+/// - [`Extend::Appended`]: M → `M+suffix`, where M lacks it and the data has the planes;
+/// - [`Extend::Variant`] `from` → `to`: `term(F)` → `term(to)` for F in `from`.
 ///
-/// BTDF, `btdf(N)` with suffixes: `scale` → `+scale`, `absorption` → `+absorb`,
-/// `diffuse_floor` → `+diffuse`, `anisotropy` → `+peraxis` (only with ≥ 2 φ planes),
-/// `long_tail` → `beckmann`/`gg` → `tr` (a swap, not nested), `tr` → `gtr` (γ = 2 is TR).
+/// docs/diagnose.md tabulates what the catalogue's models declare.
 pub fn extensions(spec: &str, data: &Dataset) -> Result<Vec<Candidate>> {
     let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
     let ast = Ast::parse(&clean)?;
     let (core, suffixes) = peel(&ast);
     let planes = data.axes.len().max(1);
     let mut out: Vec<Candidate> = Vec::new();
-    for entry in EFFECTS {
-        for rule in entry.rules.iter().filter(|r| r.kind == data.kind) {
-            for spec in make(&rule.make, &core, &suffixes, planes) {
+    for effect in Effect::all() {
+        for rule in effect.rules() {
+            if !rule.applies_to(data.kind) || planes < rule.adds.min_planes {
+                continue;
+            }
+            for spec in make(&rule, &core, &suffixes) {
                 out.push(Candidate {
                     spec,
-                    effect: entry.effect,
-                    nested: rule.nested,
+                    effect,
+                    nested: rule.adds.nested,
                 });
             }
         }
@@ -78,9 +78,9 @@ pub fn extensions(spec: &str, data: &Dataset) -> Result<Vec<Candidate>> {
     Ok(out)
 }
 
-/// The specs that `how` makes from the core term `core` with `suffixes`, for data on
-/// `planes` measurement planes (none where the rule does not apply).
-fn make(how: &Make, core: &Ast, suffixes: &[String], planes: usize) -> Vec<String> {
+/// The specs that `rule` makes from the core term `core` with `suffixes` (none where the
+/// rule does not apply).
+fn make(rule: &Rule, core: &Ast, suffixes: &[String]) -> Vec<String> {
     let Ast::Term { name, arg } = core else {
         unreachable!("peel returns a term")
     };
@@ -92,34 +92,33 @@ fn make(how: &Make, core: &Ast, suffixes: &[String], planes: usize) -> Vec<Strin
         _ => None,
     };
     let keep = |c: String| with_suffixes(&c, suffixes);
-    match *how {
-        Make::ReplaceBase { from, to, inside } => {
-            if bare && name == from {
-                to.iter().map(|b| keep(b.to_string())).collect()
-            } else if inside.contains(&name) && arg_name == Some(from) {
-                to.iter().map(|b| keep(format!("{name}({b})"))).collect()
+    let by = rule.by;
+    let is_layer = |n: &str| registry::entry(n, false).is_some_and(|e| !bases_of(e).is_empty());
+    match rule.adds.how {
+        Extend::Generalizes { base } => {
+            if bare && name == base {
+                vec![keep(by.name.to_string())]
+            } else if is_layer(name) && arg_name == Some(base) {
+                vec![keep(format!("{name}({})", by.name))]
             } else {
                 vec![]
             }
         }
-        Make::Wrap { combinators } if bare => combinators
-            .iter()
-            .filter(|c| registry::entry(c, false).is_some_and(|e| bases_of(e).contains(&name)))
-            .map(|c| keep(format!("{c}({name})")))
-            .collect(),
-        Make::Replace { from, to } if bare && name == from => vec![keep(to.to_string())],
-        Make::Suffix {
-            name: sfx,
-            min_planes,
-        } if planes >= min_planes && !suffixes.iter().any(|s| s == sfx) => {
+        Extend::Wraps if bare && bases_of(by).contains(&name) => {
+            vec![keep(format!("{}({name})", by.name))]
+        }
+        Extend::Contains { leaf, base } if bare && name == leaf => {
+            vec![keep(format!("{}({base})", by.name))]
+        }
+        Extend::Appended if !suffixes.iter().any(|s| s == by.name) => {
             let mut more = suffixes.to_vec();
-            more.push(sfx.to_string());
+            more.push(by.name.to_string());
             vec![with_suffixes(&render_spec(core), &more)]
         }
-        Make::SwapNdf { term, from, to }
-            if name == term && arg_name.is_some_and(|a| from.contains(&a)) =>
+        Extend::Variant { from, to }
+            if name == by.name && arg_name.is_some_and(|a| from.contains(&a)) =>
         {
-            vec![keep(format!("{term}({to})"))]
+            vec![keep(format!("{}({to})", by.name))]
         }
         _ => vec![],
     }
