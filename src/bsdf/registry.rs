@@ -7,21 +7,55 @@ use super::decl::{Builder, Entry, InCatalogue, Role};
 use super::spec::Ast;
 use super::{Node, SpecError, REGISTRY};
 use crate::data::Kind;
+use std::sync::RwLock;
 
 fn is_suffix(e: &Entry) -> bool {
     matches!(e.build, Builder::Suffix(_))
 }
 
-/// The entry of a term (`lambert`, `btdf`) or, with `suffix`, of a suffix (`retro`).
-pub fn entry(name: &str, suffix: bool) -> Option<&'static Entry> {
+/// Models registered at run time ([`register`]), after the built-in [`REGISTRY`].
+static REGISTERED: RwLock<Vec<&'static Entry>> = RwLock::new(Vec::new());
+
+/// Every model: the built-in [`REGISTRY`] in its order, then those added by [`register`].
+pub fn all() -> Vec<&'static Entry> {
+    let extra = REGISTERED.read().unwrap_or_else(|e| e.into_inner());
     REGISTRY
         .iter()
         .copied()
+        .chain(extra.iter().copied())
+        .collect()
+}
+
+/// Add a model defined outside this crate (a test's toy model, a program's own model):
+/// from then on it parses, fits on both backends, is swept, listed, diagnosed and
+/// exported like a built-in one, because everything derives from the entries. Its name
+/// must be new among the terms (or among the suffixes, for a suffix); registering the
+/// same entry twice is allowed and does nothing.
+pub fn register(e: &'static Entry) -> Result<(), String> {
+    let mut extra = REGISTERED.write().unwrap_or_else(|e| e.into_inner());
+    match REGISTRY
+        .iter()
+        .chain(extra.iter())
+        .find(|x| x.name == e.name && is_suffix(x) == is_suffix(e))
+    {
+        Some(x) if std::ptr::eq(*x, e) => Ok(()),
+        Some(_) => Err(format!("a model named '{}' is already registered", e.name)),
+        None => {
+            extra.push(e);
+            Ok(())
+        }
+    }
+}
+
+/// The entry of a term (`lambert`, `btdf`) or, with `suffix`, of a suffix (`retro`).
+pub fn entry(name: &str, suffix: bool) -> Option<&'static Entry> {
+    all()
+        .into_iter()
         .find(|e| e.name == name && is_suffix(e) == suffix)
 }
 
 fn known(suffix: bool) -> String {
-    REGISTRY
+    all()
         .iter()
         .filter(|e| is_suffix(e) == suffix)
         .map(|e| {
@@ -95,7 +129,7 @@ pub fn no_arg(name: &str, arg: Option<&Ast>) -> Result<(), String> {
 /// The leaf models (no argument, no children) whose role is one of `roles`, in registry
 /// order: the bases a layer with `Role::Layer { over: roles }` accepts.
 pub fn leaves_with_role(roles: &[Role]) -> Vec<&'static str> {
-    REGISTRY
+    all()
         .iter()
         .filter(|e| roles.contains(&e.role))
         .map(|e| e.name)
@@ -140,7 +174,7 @@ pub fn base_arg(layer: &Entry, arg: Option<&Ast>) -> Result<Node, String> {
 /// the per-plane variants.
 pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
     let mut cores: Vec<String> = Vec::new();
-    for e in REGISTRY.iter().filter(|e| e.kind == Some(kind)) {
+    for e in all().iter().filter(|e| e.kind == Some(kind)) {
         if e.catalogue != InCatalogue::Yes || is_suffix(e) {
             continue;
         }
@@ -157,7 +191,7 @@ pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
             Role::Suffix => {}
         }
     }
-    let suffixes: Vec<&Entry> = REGISTRY
+    let suffixes: Vec<&Entry> = all()
         .iter()
         .copied()
         .filter(|e| is_suffix(e) && e.catalogue == InCatalogue::Yes)
@@ -170,7 +204,7 @@ pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
     }
     if planes > 1 {
         let mut extra = Vec::new();
-        for e in REGISTRY.iter().filter(|e| is_suffix(e)) {
+        for e in all().iter().filter(|e| is_suffix(e)) {
             if let InCatalogue::MultiPlaneAfter(after) = e.catalogue {
                 if e.kind.is_none_or(|k| k == kind) {
                     let tail = format!("+{after}");
@@ -198,7 +232,7 @@ pub fn catalogue(kind: Kind) -> Vec<String> {
 pub fn every_spec(kind: Kind) -> Vec<String> {
     let mut out = catalogue_for(kind, 2);
     let cores: Vec<String> = out.iter().filter(|s| !s.contains('+')).cloned().collect();
-    let extra: Vec<&Entry> = REGISTRY
+    let extra: Vec<&Entry> = all()
         .iter()
         .copied()
         .filter(|e| e.catalogue == InCatalogue::No && e.kind.is_none_or(|k| k == kind))

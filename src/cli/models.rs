@@ -7,7 +7,7 @@ use anyhow::Result;
 
 pub fn run() -> Result<()> {
     println!("Models (spec strings; nested parameters are prefixed by role, rgb = one value per channel):");
-    for e in bsdf::REGISTRY {
+    for e in bsdf::registry::all() {
         let name = match e.role {
             bsdf::Role::Suffix => format!("+{}", e.name),
             _ => e.name.to_string(),
@@ -55,7 +55,7 @@ pub fn run() -> Result<()> {
 pub fn listed_specs() -> Vec<String> {
     let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
     examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
-    for e in bsdf::REGISTRY {
+    for e in bsdf::registry::all() {
         if e.catalogue == bsdf::InCatalogue::No {
             match e.role {
                 // The first spec the registry derives with it (`lambert+retro`, or

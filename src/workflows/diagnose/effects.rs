@@ -4,9 +4,9 @@
 //! ([`crate::bsdf::effect::Adds`] in each registry entry); [`Effect::rules`] collects them.
 
 use super::regions::Around;
-use crate::bsdf::{Entry, REGISTRY};
-use crate::data::Kind;
 pub use crate::bsdf::effect::{Adds, Effect, Extend};
+use crate::bsdf::{registry, Entry};
+use crate::data::Kind;
 
 /// One row of the catalogue.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -105,7 +105,7 @@ impl Effect {
     /// Every model declaration that adds the effect, in registry order (the order of the
     /// candidate table).
     pub fn rules(self) -> Vec<Rule> {
-        REGISTRY
+        registry::all()
             .iter()
             .flat_map(|&by| by.adds.iter().map(move |&adds| Rule { by, adds }))
             .filter(|r| r.adds.effect == self)
