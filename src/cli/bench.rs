@@ -153,6 +153,64 @@ fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
     result
 }
 
+/// The models `bench` measures: `--models`, or the catalogue of the data's kind (of both
+/// kinds without `--data`); a model of the other kind than `--data`'s is an error.
+fn selected_specs(
+    a: &BenchArgs,
+    file: Option<&crate::data::Dataset>,
+) -> Result<Vec<(Kind, String)>> {
+    let specs: Vec<(Kind, String)> = match &a.models {
+        Some(list) => list
+            .iter()
+            .map(|s| {
+                Ok((
+                    bsdf::spec_kind(s).context("--models")?,
+                    s.trim().to_string(),
+                ))
+            })
+            .collect::<Result<_>>()?,
+        None => [Kind::Brdf, Kind::Btdf]
+            .into_iter()
+            .filter(|&k| file.is_none_or(|d| d.kind == k))
+            .flat_map(|k| bsdf::catalogue(k).into_iter().map(move |s| (k, s)))
+            .collect(),
+    };
+    if let Some(d) = file {
+        if let Some((kind, spec)) = specs.iter().find(|(k, _)| *k != d.kind) {
+            anyhow::bail!(
+                "--models: {spec} is a {kind} model but --data {} holds {} data",
+                d.source.display(),
+                d.kind
+            );
+        }
+    }
+    Ok(specs)
+}
+
+/// The throughput table on stdout.
+fn print_table(rows: &[crate::workflows::bench::BenchRow], file: Option<&crate::data::Dataset>) {
+    if let Some(d) = file {
+        println!("data: {} ({} samples)", d.source.display(), d.len());
+    }
+    println!(
+        "{:<24} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12}",
+        "model", "backend", "samples", "candidates", "evals/s", "per thread", "per CPU-s"
+    );
+    let sci = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3e}"));
+    for r in rows {
+        println!(
+            "{:<24} {:>8} {:>8} {:>10} {:>12.3e} {:>12} {:>12}",
+            r.model,
+            r.backend,
+            r.samples,
+            r.candidates,
+            r.evals_per_s,
+            sci(r.threads.map(|t| r.evals_per_s / t.max(1) as f64)),
+            sci(r.evals_per_cpu_s)
+        );
+    }
+}
+
 pub fn run(a: BenchArgs) -> Result<()> {
     use crate::workflows::bench::{bench_dataset, measure, median_speedup};
     if let Some(path) = &a.json {
@@ -174,31 +232,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         Some(path) => Some(a.data_args.read(path).context("--data")?),
         None => None,
     };
-    let specs: Vec<(Kind, String)> = match &a.models {
-        Some(list) => list
-            .iter()
-            .map(|s| {
-                Ok((
-                    bsdf::spec_kind(s).context("--models")?,
-                    s.trim().to_string(),
-                ))
-            })
-            .collect::<Result<_>>()?,
-        None => [Kind::Brdf, Kind::Btdf]
-            .into_iter()
-            .filter(|&k| file.as_ref().is_none_or(|d| d.kind == k))
-            .flat_map(|k| bsdf::catalogue(k).into_iter().map(move |s| (k, s)))
-            .collect(),
-    };
-    if let Some(d) = &file {
-        if let Some((kind, spec)) = specs.iter().find(|(k, _)| *k != d.kind) {
-            anyhow::bail!(
-                "--models: {spec} is a {kind} model but --data {} holds {} data",
-                d.source.display(),
-                d.kind
-            );
-        }
-    }
+    let specs = selected_specs(&a, file.as_ref())?;
     // The data of each model: the file, or the built-in synthetic set of its kind.
     let data_for = |spec: &str, kind: Kind| -> Result<std::borrow::Cow<crate::data::Dataset>> {
         Ok(match &file {
@@ -246,26 +280,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         }
     }
     progress.finish();
-    if let Some(d) = &file {
-        println!("data: {} ({} samples)", d.source.display(), d.len());
-    }
-    println!(
-        "{:<24} {:>8} {:>8} {:>10} {:>12} {:>12} {:>12}",
-        "model", "backend", "samples", "candidates", "evals/s", "per thread", "per CPU-s"
-    );
-    let sci = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3e}"));
-    for r in &rows {
-        println!(
-            "{:<24} {:>8} {:>8} {:>10} {:>12.3e} {:>12} {:>12}",
-            r.model,
-            r.backend,
-            r.samples,
-            r.candidates,
-            r.evals_per_s,
-            sci(r.threads.map(|t| r.evals_per_s / t.max(1) as f64)),
-            sci(r.evals_per_cpu_s)
-        );
-    }
+    print_table(&rows, file.as_ref());
     let median = median_speedup(&rows);
     if let Some(s) = median {
         println!("median GPU/CPU speed-up over models: {s:.2}x");

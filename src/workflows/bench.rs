@@ -441,6 +441,71 @@ fn unit_params(r: &Row) -> Vec<UnitParam> {
     out
 }
 
+/// How the per-group model rankings (data set × loss × weighting, models by best loss)
+/// of two sweeps differ: the number of groups ordered differently, and those whose
+/// difference is more than ties (a pair inverted beyond the loss tolerance, or a model
+/// fitted on one side only).
+fn ranking_differences(cpu: &[Row], gpu: &[Row]) -> (usize, Vec<RankingDifference>) {
+    let (rc, rg) = (rankings(cpu), rankings(gpu));
+    let best_losses = |rows: &[Row]| -> BTreeMap<(String, String, String, String), f64> {
+        rows.iter()
+            .map(|r| {
+                let id = (
+                    r.data.clone(),
+                    r.model.clone(),
+                    r.loss.clone(),
+                    r.weights.clone(),
+                );
+                (id, r.best_loss)
+            })
+            .collect()
+    };
+    let (cpu_loss, gpu_loss) = (best_losses(cpu), best_losses(gpu));
+    let mut reordered = 0;
+    let mut diffs = Vec::new();
+    for (k, order) in &rc {
+        let other = rg.get(k).cloned().unwrap_or_default();
+        if &other == order {
+            continue;
+        }
+        reordered += 1;
+        let group: Vec<(String, f64, f64)> = order
+            .iter()
+            .filter_map(|m| {
+                let id = (k.0.clone(), m.clone(), k.1.clone(), k.2.clone());
+                let (c, g) = (cpu_loss.get(&id)?, gpu_loss.get(&id)?);
+                Some((m.clone(), *c, *g))
+            })
+            .collect();
+        let inverted = inverted_pairs(&group, SWEEP_LOSS_TOL);
+        // A model fitted on one backend only is a difference too.
+        if !inverted.is_empty() || group.len() != order.len() || other.len() != order.len() {
+            diffs.push(RankingDifference {
+                data: k.0.clone(),
+                loss: k.1.clone(),
+                weights: k.2.clone(),
+                cpu: order.clone(),
+                gpu: other,
+                inverted,
+            });
+        }
+    }
+    for (k, order) in &rg {
+        if !rc.contains_key(k) {
+            reordered += 1;
+            diffs.push(RankingDifference {
+                data: k.0.clone(),
+                loss: k.1.clone(),
+                weights: k.2.clone(),
+                cpu: Vec::new(),
+                gpu: order.clone(),
+                inverted: Vec::new(),
+            });
+        }
+    }
+    (reordered, diffs)
+}
+
 /// Compare a CPU and a GPU sweep of the same tasks.
 pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
     let gpu_by: BTreeMap<FitId, &Row> = gpu.iter().map(|r| (fit_id(r), r)).collect();
@@ -506,63 +571,7 @@ pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
             }
         }
     }
-    let (rc, rg) = (rankings(cpu), rankings(gpu));
-    let best_losses = |rows: &[Row]| -> BTreeMap<(String, String, String, String), f64> {
-        rows.iter()
-            .map(|r| {
-                let id = (
-                    r.data.clone(),
-                    r.model.clone(),
-                    r.loss.clone(),
-                    r.weights.clone(),
-                );
-                (id, r.best_loss)
-            })
-            .collect()
-    };
-    let (cpu_loss, gpu_loss) = (best_losses(cpu), best_losses(gpu));
-    let mut reordered = 0;
-    let mut diffs = Vec::new();
-    for (k, order) in &rc {
-        let other = rg.get(k).cloned().unwrap_or_default();
-        if &other == order {
-            continue;
-        }
-        reordered += 1;
-        let group: Vec<(String, f64, f64)> = order
-            .iter()
-            .filter_map(|m| {
-                let id = (k.0.clone(), m.clone(), k.1.clone(), k.2.clone());
-                let (c, g) = (cpu_loss.get(&id)?, gpu_loss.get(&id)?);
-                Some((m.clone(), *c, *g))
-            })
-            .collect();
-        let inverted = inverted_pairs(&group, SWEEP_LOSS_TOL);
-        // A model fitted on one backend only is a difference too.
-        if !inverted.is_empty() || group.len() != order.len() || other.len() != order.len() {
-            diffs.push(RankingDifference {
-                data: k.0.clone(),
-                loss: k.1.clone(),
-                weights: k.2.clone(),
-                cpu: order.clone(),
-                gpu: other,
-                inverted,
-            });
-        }
-    }
-    for (k, order) in &rg {
-        if !rc.contains_key(k) {
-            reordered += 1;
-            diffs.push(RankingDifference {
-                data: k.0.clone(),
-                loss: k.1.clone(),
-                weights: k.2.clone(),
-                cpu: Vec::new(),
-                gpu: order.clone(),
-                inverted: Vec::new(),
-            });
-        }
-    }
+    let (reordered, diffs) = ranking_differences(cpu, gpu);
     let within = param_excess.value <= 1.0;
     SweepComparison {
         fits_compared: compared,

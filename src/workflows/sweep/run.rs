@@ -309,38 +309,12 @@ pub fn run(cfg: &SweepConfig, obs: &mut dyn SweepObserver) -> Result<SweepStats>
         run.fit(&todo, &mut rows, obs)?
     };
     let fit_wall = t_fits.elapsed().as_secs_f64();
-    // Canonical results.csv (unchanged bytes when nothing new ran), then summaries.
-    write_if_changed(&csv_path, &results_csv_text(&rows)?).with_context(|| {
-        format!(
-            "{} still holds every row, as appended during the run (not in canonical order)",
-            csv_path.display()
-        )
-    })?;
-    write_summaries(out, &rows)?;
-    write_skipped(out, &run.skipped, &rows, &files)?;
-    obs.note(&format!(
-        "{}, {} in {}, {} skipped/failed, {:.1} s",
-        plural_with(run.new_rows, "new fit", "new fits"),
-        plural(rows.len(), "row"),
-        csv_path.display(),
-        run.skipped.len(),
-        t0.elapsed().as_secs_f64()
-    ));
-    if place.slurm {
-        obs.note(&format!(
-            "shard done; when every shard has, combine them with `bsdfit merge --shards --out {}`",
-            cfg.out.display()
-        ));
-    } else if place.shard.is_some() {
-        obs.note("shard done; combine the shards with `bsdfit merge DIR... --out DIR` (it writes the pictures and report)");
-    } else if cfg.pictures {
-        let info = RunInfo {
-            new_fits: run.new_rows,
-            wall_seconds: fit_wall,
-            workers,
-        };
-        crate::output::report::publish(out, &rows, Some(&info), &mut |m| obs.note(&m))?;
-    }
+    let info = RunInfo {
+        new_fits: run.new_rows,
+        wall_seconds: fit_wall,
+        workers,
+    };
+    run.write_outputs(&place, &rows, &info, t0, obs)?;
     Ok(SweepStats {
         new_fits: run.new_rows,
         ..stats
@@ -399,6 +373,47 @@ struct FitRun<'a> {
 }
 
 impl FitRun<'_> {
+    /// The files written at the end: results.csv in canonical order (unchanged bytes when
+    /// nothing new ran), the summaries and skipped.json; then, unsharded, the pictures and
+    /// report (a shard leaves them to merge).
+    fn write_outputs(
+        &self,
+        place: &Place,
+        rows: &[Row],
+        info: &RunInfo,
+        t0: Instant,
+        obs: &mut dyn SweepObserver,
+    ) -> Result<()> {
+        let out = &place.out;
+        write_if_changed(self.csv_path, &results_csv_text(rows)?).with_context(|| {
+            format!(
+                "{} still holds every row, as appended during the run (not in canonical order)",
+                self.csv_path.display()
+            )
+        })?;
+        write_summaries(out, rows)?;
+        write_skipped(out, &self.skipped, rows, self.files)?;
+        obs.note(&format!(
+            "{}, {} in {}, {} skipped/failed, {:.1} s",
+            plural_with(self.new_rows, "new fit", "new fits"),
+            plural(rows.len(), "row"),
+            self.csv_path.display(),
+            self.skipped.len(),
+            t0.elapsed().as_secs_f64()
+        ));
+        if place.slurm {
+            obs.note(&format!(
+                "shard done; when every shard has, combine them with `bsdfit merge --shards --out {}`",
+                self.cfg.out.display()
+            ));
+        } else if place.shard.is_some() {
+            obs.note("shard done; combine the shards with `bsdfit merge DIR... --out DIR` (it writes the pictures and report)");
+        } else if self.cfg.pictures {
+            crate::output::report::publish(out, rows, Some(info), &mut |m| obs.note(&m))?;
+        }
+        Ok(())
+    }
+
     /// Fit `todo` on the pool, appending each row to results.csv (and `rows`) as it
     /// ends, so an interrupted run loses at most the stages in flight. Returns what the
     /// backend and pool measured, and the number of workers.
