@@ -520,19 +520,20 @@ pub fn publish(
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
         .unwrap_or_default();
-    let html = html::report_html(
-        rows,
+    let html = html::Page {
+        all: rows,
         run,
-        &cur,
-        &ranks,
-        &datas,
-        &feats,
-        &renders,
-        &baseline_of,
-        &sampling,
-        &skipped,
-        &problems,
-    );
+        cur: &cur,
+        ranks: &ranks,
+        datas: &datas,
+        feats: &feats,
+        renders: &renders,
+        baseline_of: &baseline_of,
+        sampling: &sampling,
+        skipped: &skipped,
+        problems: &problems,
+    }
+    .html();
     write_atomic(&out.join("report.html"), html.as_bytes())?;
     write_atomic(&stamp_path, st.as_bytes())?;
     notice(format!(
