@@ -1,7 +1,9 @@
 //! `report.html`: the page that ties the pictures together, written from the rows and the
 //! render statistics (offline: relative links only).
 
-use super::{esc, plot_rel, render_rel, safe_name, DataInfo, Featured, RunInfo};
+use super::featured::Featured;
+use super::inputs::DataInfo;
+use super::{esc, plot_rel, render_rel, safe_name, RunInfo};
 use crate::data::{Dataset, Kind};
 use crate::output::render::RenderStats;
 use crate::output::results::{self, fmt_num, Row, Skipped};

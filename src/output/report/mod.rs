@@ -13,17 +13,20 @@
 //!   with the most samples, so a fit to in-plane data is judged against the full data;
 //! - `report.html`, tying it together (offline: relative links only).
 
+mod featured;
 mod html;
+mod inputs;
 
-use crate::bsdf::Model;
-use crate::data::{Dataset, Kind};
+use crate::data::Kind;
 use crate::output::files::write_atomic;
 use crate::output::plot::{self, Fitted, Panel};
 use crate::output::render::{self, RenderOptions, RenderStats};
 use crate::output::results::{self, current_rows, fmt_num, rankings, Row, Skipped};
 use anyhow::Result;
+use featured::{featured, Featured};
+use inputs::{compile, load_data, Compiled};
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Bumped when the pictures or report change for the same results.
 const REPORT_VERSION: &str = "report-v5";
@@ -66,69 +69,6 @@ fn safe_name(s: &str) -> String {
         .collect()
 }
 
-/// A data set as the report sees it.
-struct DataInfo {
-    name: String,
-    hash: String,
-    data: Option<Dataset>,
-    note: Option<String>,
-}
-
-fn load_data(rows: &[&Row]) -> BTreeMap<String, DataInfo> {
-    let mut out = BTreeMap::new();
-    for r in rows {
-        if out.contains_key(&r.data) {
-            continue;
-        }
-        let path = PathBuf::from(&r.data_path);
-        let candidates = [
-            path.clone(),
-            crate::data::bundled_data_dir().join(path.file_name().unwrap_or_default()),
-        ];
-        let mut info = DataInfo {
-            name: r.data.clone(),
-            hash: r.data_hash.clone(),
-            data: None,
-            note: None,
-        };
-        for p in candidates.iter() {
-            if let Ok(bytes) = std::fs::read(p) {
-                if results::content_hash(&bytes) != r.data_hash {
-                    info.note = Some(format!(
-                        "{} has changed since the fits; no pictures",
-                        p.display()
-                    ));
-                    continue;
-                }
-                match results::DataFile::read(p, &Default::default()) {
-                    Ok(f) => {
-                        info.data = Some(f.data);
-                        info.note = None;
-                        break;
-                    }
-                    Err(e) => info.note = Some(format!("{e:#}")),
-                }
-            }
-        }
-        if info.data.is_none() && info.note.is_none() {
-            info.note = Some(format!("{} not found; no pictures", r.data_path));
-        }
-        out.insert(r.data.clone(), info);
-    }
-    out
-}
-
-struct Compiled {
-    model: Model,
-    flat: Vec<f64>,
-}
-
-fn compile(r: &Row, data: &Dataset) -> Result<Compiled> {
-    let model = Model::for_data(&r.model, data)?;
-    let flat = results::flat_from_params(&model, &r.params_json())?;
-    Ok(Compiled { model, flat })
-}
-
 fn fit_title(r: &Row) -> String {
     format!(
         "{} — {}/{} ({}), χ²_red = {}",
@@ -138,99 +78,6 @@ fn fit_title(r: &Row) -> String {
         r.optimizer,
         fmt_num(r.chi2_red)
     )
-}
-
-/// Featured fits of one data set.
-#[derive(Default)]
-struct Featured<'a> {
-    /// The best model's fits under uniform and uncertainty weights (same loss, optimizer).
-    weights: Option<(&'a Row, &'a Row)>,
-    /// Models compared side by side / overlaid.
-    models: Vec<&'a Row>,
-    /// BTDF: plain, +scale, +absorb of the best family.
-    suffixes: Vec<&'a Row>,
-}
-
-/// A spec without its suffixes (`btdf(tr)+scale` → `btdf(tr)`): the model family, read
-/// from the spec's syntax rather than guessed from its text.
-fn ndf_family(model: &str) -> String {
-    match crate::bsdf::spec::Ast::parse(model) {
-        Ok(mut ast) => {
-            while let crate::bsdf::spec::Ast::Suffix { inner, .. } = ast {
-                ast = *inner;
-            }
-            crate::bsdf::spec::render_spec(&ast)
-        }
-        Err(_) => model.to_string(),
-    }
-}
-
-fn featured<'a>(rk: &results::Ranking<'a>, kind: Kind) -> Featured<'a> {
-    let mut f = Featured::default();
-    let rows = |m: &str| {
-        rk.models
-            .iter()
-            .find(|x| x.0 == m)
-            .map(|x| x.1.iter().flatten().copied().collect::<Vec<&Row>>())
-            .unwrap_or_default()
-    };
-    // Primary column: the first uniform one (columns sort uniform first within a loss,
-    // and chi2 last).
-    let Some(primary) = rk
-        .columns
-        .iter()
-        .find(|c| c.1 == "uniform")
-        .or(rk.columns.first())
-        .cloned()
-    else {
-        return f;
-    };
-    let in_col = |r: &&Row, c: &(String, String, String)| {
-        r.loss == c.0 && r.weights == c.1 && r.optimizer == c.2
-    };
-    // Best model that has both a uniform and a weighted fit with the same loss/optimizer.
-    'outer: for (m, _, _) in &rk.models {
-        let rs = rows(m);
-        for u in rs.iter().filter(|r| r.weights == "uniform") {
-            if let Some(w) = rs
-                .iter()
-                .find(|r| r.weights != "uniform" && r.loss == u.loss && r.optimizer == u.optimizer)
-            {
-                f.weights = Some((u, w));
-                break 'outer;
-            }
-        }
-    }
-    let prim: Vec<&Row> = rk
-        .models
-        .iter()
-        .filter_map(|(m, _, _)| rows(m).into_iter().find(|r| in_col(r, &primary)))
-        .collect();
-    match kind {
-        Kind::Brdf => f.models = prim.iter().take(2).copied().collect(),
-        Kind::Btdf => {
-            let mut fams = BTreeSet::new();
-            for r in &prim {
-                if fams.insert(ndf_family(&r.model)) {
-                    f.models.push(r);
-                }
-            }
-            f.models.truncate(4);
-            if let Some(best) = prim.first() {
-                let fam = ndf_family(&best.model);
-                for suffix in ["", "+scale", "+absorb"] {
-                    let m = format!("{fam}{suffix}");
-                    if let Some(r) = prim.iter().find(|r| r.model == m) {
-                        f.suffixes.push(r);
-                    }
-                }
-                if f.suffixes.len() < 2 {
-                    f.suffixes.clear();
-                }
-            }
-        }
-    }
-    f
 }
 
 /// Render and plot paths relative to the output directory.
