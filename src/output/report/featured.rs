@@ -1,9 +1,10 @@
 //! Which fits the report features for a data set: the weighting comparison, the top
 //! models (BRDF) or NDF families (BTDF), and the suffix comparison (BTDF).
 
+use super::inputs::DataInfo;
 use crate::data::Kind;
 use crate::output::results::{self, Row};
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Featured fits of one data set.
 #[derive(Default)]
@@ -96,4 +97,57 @@ pub(super) fn featured<'a>(rk: &results::Ranking<'a>, kind: Kind) -> Featured<'a
         }
     }
     f
+}
+
+impl<'a> Featured<'a> {
+    /// The featured fits the page shows renders of: for a BRDF, the weighting pair, then
+    /// the top models; none for a BTDF.
+    pub(super) fn to_render(&self, kind: Kind) -> Vec<&'a Row> {
+        if kind != Kind::Brdf {
+            return Vec::new();
+        }
+        let mut rows: Vec<&'a Row> = self.weights.map(|(u, w)| vec![u, w]).unwrap_or_default();
+        rows.extend(self.models.iter().copied());
+        rows
+    }
+}
+
+/// Sampling geometry (paper Fig. 1): for each BRDF material with more than one data set,
+/// the top models of its baseline (its richest data set) as fitted to each of its data
+/// sets with the same loss, weights and optimizer, all to be rendered against the same
+/// baseline.
+pub(super) fn sampling_sets<'a>(
+    baseline_of: &BTreeMap<String, String>,
+    datas: &BTreeMap<String, DataInfo>,
+    feats: &BTreeMap<String, Featured<'a>>,
+    cur: &[&'a Row],
+) -> Vec<(String, Vec<&'a Row>)> {
+    let mut sampling: Vec<(String, Vec<&Row>)> = Vec::new();
+    for (material, base) in baseline_of {
+        let members: Vec<&String> = datas
+            .values()
+            .filter(|d| d.data.as_ref().is_some_and(|x| &x.material == material))
+            .map(|d| &d.name)
+            .collect();
+        if members.len() < 2 {
+            continue;
+        }
+        let Some(f) = feats.get(base) else { continue };
+        let mut list = Vec::new();
+        for top in f.models.iter() {
+            for m in &members {
+                if let Some(r) = cur.iter().find(|r| {
+                    &&r.data == m
+                        && r.model == top.model
+                        && r.loss == top.loss
+                        && r.weights == top.weights
+                        && r.optimizer == top.optimizer
+                }) {
+                    list.push(*r);
+                }
+            }
+        }
+        sampling.push((material.clone(), list));
+    }
+    sampling
 }

@@ -2,7 +2,7 @@
 //! against their hashes) and each fit's model with its parameters.
 
 use crate::bsdf::Model;
-use crate::data::Dataset;
+use crate::data::{Dataset, Kind};
 use crate::output::results::{self, Row};
 use anyhow::Result;
 use std::collections::BTreeMap;
@@ -73,4 +73,37 @@ pub(super) fn compile(r: &Row, data: &Dataset) -> Result<Compiled> {
     let model = Model::for_data(&r.model, data)?;
     let flat = results::flat_from_params(&model, &r.params_json())?;
     Ok(Compiled { model, flat })
+}
+
+/// The data set called `name`, if it could be read.
+pub(super) fn dataset<'d>(
+    datas: &'d BTreeMap<String, DataInfo>,
+    name: &str,
+) -> Option<&'d Dataset> {
+    datas.get(name).and_then(|d| d.data.as_ref())
+}
+
+/// The baseline of each BRDF material, by material: the name of its data set with the most
+/// samples (the first by name among equals). Renders of the material's fits are judged
+/// against it.
+pub(super) fn baselines(datas: &BTreeMap<String, DataInfo>) -> BTreeMap<String, String> {
+    let mut baseline_of: BTreeMap<String, String> = BTreeMap::new();
+    for d in datas.values() {
+        if let Some(ds) = &d.data {
+            if ds.kind == Kind::Brdf {
+                let e = baseline_of
+                    .entry(ds.material.clone())
+                    .or_insert(d.name.clone());
+                let cur_n = datas[e.as_str()]
+                    .data
+                    .as_ref()
+                    .map(|x| x.len())
+                    .unwrap_or(0);
+                if ds.len() > cur_n {
+                    *e = d.name.clone();
+                }
+            }
+        }
+    }
+    baseline_of
 }

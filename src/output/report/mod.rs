@@ -16,16 +16,14 @@
 mod featured;
 mod html;
 mod inputs;
+mod pictures;
 
-use crate::data::Kind;
 use crate::output::files::write_atomic;
-use crate::output::plot::{self, Fitted, Panel};
-use crate::output::render::{self, RenderOptions, RenderStats};
-use crate::output::results::{self, current_rows, fmt_num, rankings, Row, Skipped};
+use crate::output::results::{self, current_rows, rankings, Row, Skipped};
 use anyhow::Result;
-use featured::{featured, Featured};
-use inputs::{compile, load_data, Compiled};
-use std::collections::{BTreeMap, BTreeSet};
+use featured::{featured, sampling_sets, Featured};
+use inputs::{baselines, dataset, load_data};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Bumped when the pictures or report change for the same results.
@@ -69,17 +67,6 @@ fn safe_name(s: &str) -> String {
         .collect()
 }
 
-fn fit_title(r: &Row) -> String {
-    format!(
-        "{} — {}/{} ({}), χ²_red = {}",
-        r.model,
-        r.loss,
-        r.weights,
-        r.optimizer,
-        fmt_num(r.chi2_red)
-    )
-}
-
 /// Render and plot paths relative to the output directory.
 fn plot_rel(r: &Row) -> String {
     format!("plots/{}/{}.svg", safe_name(&r.data), slug(r))
@@ -98,6 +85,14 @@ fn stamp(out: &Path) -> String {
         results::content_hash(&csv),
         results::content_hash(&sk)
     )
+}
+
+/// The skipped and failed fits of skipped.json (none when it is missing or unreadable).
+fn read_skipped(out: &Path) -> Vec<Skipped> {
+    std::fs::read_to_string(out.join(results::SKIPPED_JSON))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default()
 }
 
 /// What the run that calls [`publish`] did, for the report's header.
@@ -134,239 +129,27 @@ pub fn publish(
     let cur = current_rows(rows);
     let datas = load_data(&cur);
     let ranks = rankings(rows);
-    let ropts = RenderOptions::default();
     let mut problems: Vec<String> = datas.values().filter_map(|d| d.note.clone()).collect();
-    // Baseline of each BRDF material: its data set with the most samples.
-    let mut baseline_of: BTreeMap<String, String> = BTreeMap::new();
-    for d in datas.values() {
-        if let Some(ds) = &d.data {
-            if ds.kind == Kind::Brdf {
-                let e = baseline_of
-                    .entry(ds.material.clone())
-                    .or_insert(d.name.clone());
-                let cur_n = datas[e.as_str()]
-                    .data
-                    .as_ref()
-                    .map(|x| x.len())
-                    .unwrap_or(0);
-                if ds.len() > cur_n {
-                    *e = d.name.clone();
-                }
-            }
-        }
-    }
-    // Per-fit plots.
-    let mut n_plots = 0;
-    for r in &cur {
-        let Some(ds) = datas.get(&r.data).and_then(|d| d.data.as_ref()) else {
-            continue;
-        };
-        match compile(r, ds) {
-            Ok(c) => {
-                let fit = Fitted {
-                    label: r.model.clone(),
-                    model: &c.model,
-                    flat: &c.flat,
-                };
-                let panel = plot::fit_panel(ds, &fit, &fit_title(r));
-                plot::write_svg(&out.join(plot_rel(r)), &[panel], (640, 440))?;
-                n_plots += 1;
-            }
-            Err(e) => problems.push(format!("{} · {}: cannot plot ({e:#})", r.data, r.model)),
-        }
-    }
-    // Featured plots and renders.
+    let baseline_of = baselines(&datas);
+    let n_plots = pictures::fit_plots(out, &cur, &datas, &mut problems)?;
+    // Featured plots, and the fits to render.
     let mut feats: BTreeMap<String, Featured> = BTreeMap::new();
-    let mut renders: BTreeMap<String, RenderStats> = BTreeMap::new(); // slug path → stats
-    let mut to_render: BTreeSet<(String, String)> = BTreeSet::new(); // (data, slug)
     let mut render_rows: Vec<&Row> = Vec::new();
     for rk in &ranks {
-        let Some(ds) = datas.get(&rk.data).and_then(|d| d.data.as_ref()) else {
+        let Some(ds) = dataset(&datas, &rk.data) else {
             continue;
         };
         let f = featured(rk, ds.kind);
-        let dir = out.join("plots").join(safe_name(&rk.data));
-        if let Some((u, w)) = f.weights {
-            let (cu, cw) = (compile(u, ds)?, compile(w, ds)?);
-            let mut panels = vec![
-                plot::fit_panel(
-                    ds,
-                    &Fitted {
-                        label: u.model.clone(),
-                        model: &cu.model,
-                        flat: &cu.flat,
-                    },
-                    &format!("{} — {} uniform", u.model, u.loss),
-                ),
-                plot::fit_panel(
-                    ds,
-                    &Fitted {
-                        label: w.model.clone(),
-                        model: &cw.model,
-                        flat: &cw.flat,
-                    },
-                    &format!("{} — {} {}", w.model, w.loss, w.weights),
-                ),
-            ];
-            plot::common_y(&mut panels);
-            plot::write_svg(&dir.join("weights.svg"), &panels, (600, 430))?;
-            if ds.kind == Kind::Brdf {
-                render_rows.extend([u, w]);
-            }
-        }
-        if !f.models.is_empty() {
-            let cs: Vec<Compiled> = f
-                .models
-                .iter()
-                .map(|r| compile(r, ds))
-                .collect::<Result<_>>()?;
-            match ds.kind {
-                Kind::Brdf => {
-                    let mut panels: Vec<Panel> = f
-                        .models
-                        .iter()
-                        .zip(&cs)
-                        .map(|(r, c)| {
-                            plot::fit_panel(
-                                ds,
-                                &Fitted {
-                                    label: r.model.clone(),
-                                    model: &c.model,
-                                    flat: &c.flat,
-                                },
-                                &format!("{} — {}/{}", r.model, r.loss, r.weights),
-                            )
-                        })
-                        .collect();
-                    plot::common_y(&mut panels);
-                    plot::write_svg(&dir.join("models.svg"), &panels, (600, 430))?;
-                    render_rows.extend(f.models.iter().copied());
-                }
-                Kind::Btdf => {
-                    let fits: Vec<Fitted> = f
-                        .models
-                        .iter()
-                        .zip(&cs)
-                        .map(|(r, c)| Fitted {
-                            label: r.model.clone(),
-                            model: &c.model,
-                            flat: &c.flat,
-                        })
-                        .collect();
-                    let t = format!(
-                        "{} — best of each NDF, {}/{}",
-                        rk.data, f.models[0].loss, f.models[0].weights
-                    );
-                    plot::write_svg(
-                        &dir.join("models.svg"),
-                        &[plot::btdf_panel(ds, &fits, &t)],
-                        (760, 480),
-                    )?;
-                }
-            }
-        }
-        if !f.suffixes.is_empty() {
-            let cs: Vec<Compiled> = f
-                .suffixes
-                .iter()
-                .map(|r| compile(r, ds))
-                .collect::<Result<_>>()?;
-            let fits: Vec<Fitted> = f
-                .suffixes
-                .iter()
-                .zip(&cs)
-                .map(|(r, c)| Fitted {
-                    label: r.model.clone(),
-                    model: &c.model,
-                    flat: &c.flat,
-                })
-                .collect();
-            let t = format!(
-                "{} — scale vs absorption, {}/{}",
-                rk.data, f.suffixes[0].loss, f.suffixes[0].weights
-            );
-            plot::write_svg(
-                &dir.join("suffixes.svg"),
-                &[plot::btdf_panel(ds, &fits, &t)],
-                (760, 480),
-            )?;
-        }
+        pictures::featured_plots(out, &rk.data, ds, &f)?;
+        render_rows.extend(f.to_render(ds.kind));
         feats.insert(rk.data.clone(), f);
     }
-    // Sampling geometry (Fig. 1): the top models of a material's richest data set, fitted
-    // to each of its data sets, all rendered against the same baseline.
-    let mut sampling: Vec<(String, Vec<&Row>)> = Vec::new();
-    for (material, base) in &baseline_of {
-        let members: Vec<&String> = datas
-            .values()
-            .filter(|d| d.data.as_ref().is_some_and(|x| &x.material == material))
-            .map(|d| &d.name)
-            .collect();
-        if members.len() < 2 {
-            continue;
-        }
-        let Some(f) = feats.get(base) else { continue };
-        let mut list = Vec::new();
-        for top in f.models.iter() {
-            for m in &members {
-                if let Some(r) = cur.iter().find(|r| {
-                    &&r.data == m
-                        && r.model == top.model
-                        && r.loss == top.loss
-                        && r.weights == top.weights
-                        && r.optimizer == top.optimizer
-                }) {
-                    list.push(*r);
-                }
-            }
-        }
+    let sampling = sampling_sets(&baseline_of, &datas, &feats, &cur);
+    for (_, list) in &sampling {
         render_rows.extend(list.iter().copied());
-        sampling.push((material.clone(), list));
     }
-    // Renders.
-    for r in render_rows {
-        if !to_render.insert((r.data.clone(), slug(r))) {
-            continue;
-        }
-        let Some(ds) = datas.get(&r.data).and_then(|d| d.data.as_ref()) else {
-            continue;
-        };
-        let base_name = baseline_of
-            .get(&ds.material)
-            .cloned()
-            .unwrap_or(r.data.clone());
-        let Some(base) = datas.get(&base_name).and_then(|d| d.data.as_ref()) else {
-            continue;
-        };
-        let c = compile(r, ds)?;
-        let base_png = out.join(format!("renders/{}/baseline.png", safe_name(&r.data)));
-        let rel = render_rel(r, "");
-        let stats = render::render_fit(
-            &c.model,
-            &c.flat,
-            base,
-            &ropts,
-            Some(&base_png),
-            &out.join(format!("{rel}model.png")),
-            &out.join(format!("{rel}error.png")),
-            &r.data,
-        );
-        match stats {
-            Ok(mut s) => {
-                s.baseline = base_name.clone();
-                write_atomic(
-                    &out.join(format!("{rel}stats.json")),
-                    (serde_json::to_string_pretty(&s)? + "\n").as_bytes(),
-                )?;
-                renders.insert(rel, s);
-            }
-            Err(e) => problems.push(format!("{} · {}: cannot render ({e:#})", r.data, r.model)),
-        }
-    }
-    let skipped: Vec<Skipped> = std::fs::read_to_string(out.join(results::SKIPPED_JSON))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or_default();
+    let renders = pictures::renders(out, &render_rows, &datas, &baseline_of, &mut problems)?;
+    let skipped = read_skipped(out);
     let html = html::Page {
         all: rows,
         run,
