@@ -5,6 +5,14 @@ use super::dataset::sample_key;
 use super::{count, DataError, ReadOptions, Sample, MAX_WAVELENGTH_GAP_NM};
 use std::collections::BTreeSet;
 
+/// Wavelengths for messages: "450, 550, 650".
+fn list(v: &[f64]) -> String {
+    v.iter()
+        .map(|w| w.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Choose the channels: every wavelength, or the ones nearest to `--wavelengths` (each
 /// within [`MAX_WAVELENGTH_GAP_NM`]), optionally averaged over `--band`. Drops the other
 /// samples and sets [`Sample::channel`].
@@ -18,20 +26,7 @@ pub(super) fn select_channels(
         file: file.into(),
         msg,
     };
-    // Wavelengths are positive and finite, so their bit patterns sort as they do.
-    let present: Vec<f64> = samples
-        .iter()
-        .map(|s| s.wavelength_nm.to_bits())
-        .collect::<BTreeSet<u64>>()
-        .into_iter()
-        .map(f64::from_bits)
-        .collect();
-    let list = |v: &[f64]| {
-        v.iter()
-            .map(|w| w.to_string())
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
+    let present = present_wavelengths(samples);
     let Some(wanted) = &opts.wavelengths else {
         if opts.band_nm.is_some() {
             return Err(ferr(
@@ -45,50 +40,7 @@ pub(super) fn select_channels(
         }
         return Ok(present);
     };
-    if wanted.is_empty() {
-        return Err(ferr("--wavelengths selects no channel".into()));
-    }
-    if wanted.len() > present.len() {
-        return Err(ferr(format!(
-            "--wavelengths asks for {} ({} nm) but the file has only {}: {} nm",
-            count(wanted.len(), "channel", "channels"),
-            list(wanted),
-            count(present.len(), "wavelength", "wavelengths"),
-            list(&present)
-        )));
-    }
-    let mut chosen: Vec<f64> = Vec::new();
-    for &w in wanted {
-        if !w.is_finite() || w <= 0.0 {
-            return Err(ferr(format!(
-                "--wavelengths: {w} nm is not a positive wavelength"
-            )));
-        }
-        let nearest = present
-            .iter()
-            .copied()
-            .min_by(|a, b| (a - w).abs().total_cmp(&(b - w).abs()))
-            .unwrap_or(w);
-        if (nearest - w).abs() > MAX_WAVELENGTH_GAP_NM {
-            return Err(ferr(format!(
-                "--wavelengths: no wavelength within {MAX_WAVELENGTH_GAP_NM} nm of {w} nm; the file has only: {} nm",
-                list(&present)
-            )));
-        }
-        if let Some(c) = chosen.iter().position(|&c| c == nearest) {
-            return Err(ferr(format!(
-                "--wavelengths: {} nm and {w} nm would both use the {nearest} nm channel; the file has only these wavelengths: {} nm",
-                wanted[c],
-                list(&present)
-            )));
-        }
-        if nearest != w {
-            notices.push(format!(
-                "{file}: wavelength {w} nm → nearest present {nearest} nm"
-            ));
-        }
-        chosen.push(nearest);
-    }
+    let chosen = nearest_present(wanted, &present, file, notices).map_err(ferr)?;
     let band = match opts.band_nm {
         None => 0.0,
         Some(b) if b.is_finite() && b >= 0.0 => b,
@@ -104,7 +56,103 @@ pub(super) fn select_channels(
         }
         return Ok(chosen);
     }
-    // Bands: every present wavelength within ±band of a chosen centre joins its channel.
+    let member_of = band_members(&chosen, &present, band).map_err(ferr)?;
+    let (n_min, n_max) = average_bands(samples, &member_of, &chosen);
+    for (ch, &c) in chosen.iter().enumerate() {
+        let members: Vec<f64> = member_of
+            .iter()
+            .filter(|m| m.1 == ch)
+            .map(|m| m.0)
+            .collect();
+        notices.push(format!(
+            "{file}: --band ±{band} nm: channel {c} nm averages {} nm",
+            list(&members)
+        ));
+    }
+    if n_max > 0 {
+        notices.push(format!(
+            "{file}: --band: {} per geometry averaged (value = mean, u = sqrt(Σu²)/n)",
+            if n_min == n_max {
+                count(n_min, "sample", "samples")
+            } else {
+                format!("{n_min} to {n_max} samples")
+            }
+        ));
+    }
+    Ok(chosen)
+}
+
+/// The distinct wavelengths of the samples, ascending.
+fn present_wavelengths(samples: &[Sample]) -> Vec<f64> {
+    // Wavelengths are positive and finite, so their bit patterns sort as they do.
+    samples
+        .iter()
+        .map(|s| s.wavelength_nm.to_bits())
+        .collect::<BTreeSet<u64>>()
+        .into_iter()
+        .map(f64::from_bits)
+        .collect()
+}
+
+/// The present wavelength nearest to each wanted one, in the order asked. An error when
+/// none is within [`MAX_WAVELENGTH_GAP_NM`] or two would share one; a notice for each
+/// substitution.
+fn nearest_present(
+    wanted: &[f64],
+    present: &[f64],
+    file: &str,
+    notices: &mut Vec<String>,
+) -> Result<Vec<f64>, String> {
+    if wanted.is_empty() {
+        return Err("--wavelengths selects no channel".into());
+    }
+    if wanted.len() > present.len() {
+        return Err(format!(
+            "--wavelengths asks for {} ({} nm) but the file has only {}: {} nm",
+            count(wanted.len(), "channel", "channels"),
+            list(wanted),
+            count(present.len(), "wavelength", "wavelengths"),
+            list(present)
+        ));
+    }
+    let mut chosen: Vec<f64> = Vec::new();
+    for &w in wanted {
+        if !w.is_finite() || w <= 0.0 {
+            return Err(format!(
+                "--wavelengths: {w} nm is not a positive wavelength"
+            ));
+        }
+        let nearest = present
+            .iter()
+            .copied()
+            .min_by(|a, b| (a - w).abs().total_cmp(&(b - w).abs()))
+            .unwrap_or(w);
+        if (nearest - w).abs() > MAX_WAVELENGTH_GAP_NM {
+            return Err(format!(
+                "--wavelengths: no wavelength within {MAX_WAVELENGTH_GAP_NM} nm of {w} nm; the file has only: {} nm",
+                list(present)
+            ));
+        }
+        if let Some(c) = chosen.iter().position(|&c| c == nearest) {
+            return Err(format!(
+                "--wavelengths: {} nm and {w} nm would both use the {nearest} nm channel; the file has only these wavelengths: {} nm",
+                wanted[c],
+                list(present)
+            ));
+        }
+        if nearest != w {
+            notices.push(format!(
+                "{file}: wavelength {w} nm → nearest present {nearest} nm"
+            ));
+        }
+        chosen.push(nearest);
+    }
+    Ok(chosen)
+}
+
+/// Bands: every present wavelength within ±`band` of a chosen centre joins that channel,
+/// as (wavelength, channel). An error when a wavelength would join two.
+fn band_members(chosen: &[f64], present: &[f64], band: f64) -> Result<Vec<(f64, usize)>, String> {
     let mut member_of: Vec<(f64, usize)> = Vec::new();
     for (ch, &c) in chosen.iter().enumerate() {
         let members: Vec<f64> = present
@@ -114,15 +162,25 @@ pub(super) fn select_channels(
             .collect();
         for &w in &members {
             if let Some(&(_, other)) = member_of.iter().find(|m| m.0 == w) {
-                return Err(ferr(format!(
+                return Err(format!(
                     "--band {band}: {w} nm lies in the bands of both {} nm and {c} nm; narrow the band or space the wavelengths",
                     chosen[other]
-                )));
+                ));
             }
             member_of.push((w, ch));
         }
     }
-    // Group by (channel, geometry) and average.
+    Ok(member_of)
+}
+
+/// Replace the samples by one per (channel, geometry): the mean value, u = sqrt(Σu²)/n,
+/// at the channel's wavelength, in the order of each group's first sample. Samples outside
+/// every band are dropped. Returns the smallest and largest group size.
+fn average_bands(
+    samples: &mut Vec<Sample>,
+    member_of: &[(f64, usize)],
+    chosen: &[f64],
+) -> (usize, usize) {
     let mut groups: Vec<(usize, [i64; 4], usize)> = samples
         .iter()
         .enumerate()
@@ -162,26 +220,5 @@ pub(super) fn select_channels(
     }
     out.sort_unstable_by_key(|(i, _)| *i);
     *samples = out.into_iter().map(|(_, s)| s).collect();
-    for (ch, &c) in chosen.iter().enumerate() {
-        let members: Vec<f64> = member_of
-            .iter()
-            .filter(|m| m.1 == ch)
-            .map(|m| m.0)
-            .collect();
-        notices.push(format!(
-            "{file}: --band ±{band} nm: channel {c} nm averages {} nm",
-            list(&members)
-        ));
-    }
-    if n_max > 0 {
-        notices.push(format!(
-            "{file}: --band: {} per geometry averaged (value = mean, u = sqrt(Σu²)/n)",
-            if n_min == n_max {
-                count(n_min, "sample", "samples")
-            } else {
-                format!("{n_min} to {n_max} samples")
-            }
-        ));
-    }
-    Ok(chosen)
+    (n_min, n_max)
 }
