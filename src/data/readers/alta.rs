@@ -372,6 +372,9 @@ pub fn parse(text: &str, file: &str, opts: &ReadOptions) -> Result<Dataset, Data
     parse_reader(text.as_bytes(), file, opts, &mut |_| {})
 }
 
+/// Once the header is read: it, the builder, and the assumed (REL, ABS) if any.
+type Reading<'a> = (Header, Builder<'a>, Option<(f64, f64)>);
+
 /// Parse ALTA text from a reader, one line at a time (see the module documentation).
 pub fn parse_reader<R: BufRead>(
     mut reader: R,
@@ -388,11 +391,7 @@ pub fn parse_reader<R: BufRead>(
         line,
         msg,
     };
-    let mut keys: BTreeMap<String, (usize, String)> = BTreeMap::new();
-    let mut order: Vec<String> = Vec::new();
-    let mut header_closed = false;
-    // Once the header is read: it, the builder, and the assumed (REL, ABS) if any.
-    type Reading<'a> = (Header, Builder<'a>, Option<(f64, f64)>);
+    let mut header = HeaderLines::default();
     let mut state: Option<Reading> = None;
     let mut buf = Vec::with_capacity(256);
     let (mut line, mut bytes) = (0usize, 0u64);
@@ -428,43 +427,13 @@ pub fn parse_reader<R: BufRead>(
             continue;
         }
         if let Some(rest) = t.strip_prefix('#') {
-            if state.is_some()
-                || header_closed
-                || rest.is_empty()
-                || rest.starts_with(char::is_whitespace)
-                || rest.starts_with('#')
-            {
-                continue; // a comment
+            if state.is_none() {
+                header.take(rest, line, file)?;
             }
-            let (key, value) = match rest.split_once(char::is_whitespace) {
-                Some((k, v)) => (k, v.trim()),
-                None => (rest, ""),
-            };
-            if key == "ALTA" {
-                if value.split_ascii_whitespace().any(|w| w == "END") {
-                    header_closed = true;
-                }
-                continue;
-            }
-            if keys.contains_key(key) {
-                return Err(lerr(line, format!("#{key} is given twice")));
-            }
-            order.push(key.to_string());
-            keys.insert(key.to_string(), (line, value.to_string()));
             continue;
         }
         if state.is_none() {
-            let header = parse_header(&keys, &order, file, opts)?;
-            let assumed = if header.vs.contains(&0) {
-                Some(require_assumption(
-                    file,
-                    opts,
-                    "this ALTA file (no #VS intervals)",
-                )?)
-            } else {
-                None
-            };
-            state = Some((header, Builder::new(Kind::Brdf, file, opts), assumed));
+            state = Some(start_reading(&header, file, opts)?);
         }
         let Some((h, b, assumed)) = &mut state else {
             unreachable!("state was just set")
@@ -481,13 +450,96 @@ pub fn parse_reader<R: BufRead>(
     }
     let Some((h, mut b, assumed)) = state else {
         // No data line: say what is wrong with the header first, if anything.
-        parse_header(&keys, &order, file, opts)?;
+        header.parse(file, opts)?;
         return Err(ferr("no data rows".into()));
     };
     progress(Progress {
         bytes,
         rows: b.len(),
     });
+    let (material, meta) = material_and_meta(&h, file);
+    let mut notes = reading_notes(&h, file, opts, assumed, grazing);
+    notes.append(&mut b.notices);
+    b.notices = notes;
+    let mut ds = b.finish(&material, meta)?;
+    if let Some((rel, abs)) = assumed {
+        mark_assumed(&mut ds, rel, abs);
+    }
+    Ok(ds)
+}
+
+/// The header lines read so far: each `#KEY value` with its line, and the keys in file
+/// order.
+#[derive(Default)]
+struct HeaderLines {
+    keys: BTreeMap<String, (usize, String)>,
+    order: Vec<String>,
+    /// `#ALTA END HEADER` (or `#ALTA HEADER END`) was seen: later `#` lines are comments.
+    closed: bool,
+}
+
+impl HeaderLines {
+    /// Take the `#` line `#rest` of the header; comments (`# …`, `##…`, a bare `#`, or any
+    /// line after the header's end) are skipped. A key given twice is an error.
+    fn take(&mut self, rest: &str, line: usize, file: &str) -> Result<(), DataError> {
+        if self.closed
+            || rest.is_empty()
+            || rest.starts_with(char::is_whitespace)
+            || rest.starts_with('#')
+        {
+            return Ok(()); // a comment
+        }
+        let (key, value) = match rest.split_once(char::is_whitespace) {
+            Some((k, v)) => (k, v.trim()),
+            None => (rest, ""),
+        };
+        if key == "ALTA" {
+            if value.split_ascii_whitespace().any(|w| w == "END") {
+                self.closed = true;
+            }
+            return Ok(());
+        }
+        if self.keys.contains_key(key) {
+            return Err(DataError::Line {
+                file: file.into(),
+                line,
+                msg: format!("#{key} is given twice"),
+            });
+        }
+        self.order.push(key.to_string());
+        self.keys.insert(key.to_string(), (line, value.to_string()));
+        Ok(())
+    }
+
+    /// The validated header.
+    fn parse(&self, file: &str, opts: &ReadOptions) -> Result<Header, DataError> {
+        parse_header(&self.keys, &self.order, file, opts)
+    }
+}
+
+/// At the first data line: validate the header, check that the uncertainties are given
+/// or assumed, and start the builder.
+fn start_reading<'a>(
+    header: &HeaderLines,
+    file: &'a str,
+    opts: &'a ReadOptions,
+) -> Result<Reading<'a>, DataError> {
+    let header = header.parse(file, opts)?;
+    let assumed = if header.vs.contains(&0) {
+        Some(require_assumption(
+            file,
+            opts,
+            "this ALTA file (no #VS intervals)",
+        )?)
+    } else {
+        None
+    };
+    Ok((header, Builder::new(Kind::Brdf, file, opts), assumed))
+}
+
+/// The material (`#SAMPLE`, else the file stem) and the metadata: the source format and
+/// the other header lines as `alta_<key>`.
+fn material_and_meta(h: &Header, file: &str) -> (String, BTreeMap<String, String>) {
     let mut meta = BTreeMap::new();
     meta.insert(
         "source_format".to_string(),
@@ -512,6 +564,18 @@ pub fn parse_reader<R: BufRead>(
         }
         meta.insert(format!("alta_{}", k.to_ascii_lowercase()), v);
     }
+    (material, meta)
+}
+
+/// The notices saying how the file was read: the conversion of its parametrization, its
+/// value kind and channels, its intervals, and the grazing rows dropped.
+fn reading_notes(
+    h: &Header,
+    file: &str,
+    opts: &ReadOptions,
+    assumed: Option<(f64, f64)>,
+    grazing: usize,
+) -> Vec<String> {
     let mut notes = vec![format!(
         "{file}: ALTA {} converted to (θi, φi, θo, φo) with ωi = L, ωo = V{}",
         h.param_in.name(),
@@ -559,15 +623,11 @@ pub fn parse_reader<R: BufRead>(
             count(grazing, "row", "rows")
         ));
     }
-    notes.append(&mut b.notices);
-    b.notices = notes;
-    let mut ds = b.finish(&material, meta)?;
-    if let Some((rel, abs)) = assumed {
-        mark_assumed(&mut ds, rel, abs);
-    }
-    Ok(ds)
+    notes
 }
 
+/// Validate the header lines into a [`Header`]: `#FORMAT`, `#DIM` against the
+/// parametrizations' dimensions, `#PARAM_IN`, `#PARAM_OUT` (or `--alta-values`) and `#VS`.
 fn parse_header(
     keys: &BTreeMap<String, (usize, String)>,
     order: &[String],
@@ -583,7 +643,6 @@ fn parse_header(
         line,
         msg,
     };
-    let names = |v: &[&str]| v.join(", ");
     if let Some((line, v)) = keys.get("FORMAT") {
         if !v.eq_ignore_ascii_case("text") {
             return Err(lerr(
@@ -613,21 +672,7 @@ fn parse_header(
             format!("#DIM {dim}: expected two positive integers N P"),
         ));
     };
-    let Some((in_line, pin)) = keys.get("PARAM_IN") else {
-        return Err(ferr(format!(
-            "missing #PARAM_IN line (the input parametrization; read here: {})",
-            names(&ParamIn::ALL.map(|p| p.name()))
-        )));
-    };
-    let param_in = ParamIn::parse(pin.trim()).ok_or_else(|| {
-        lerr(
-            *in_line,
-            format!(
-                "#PARAM_IN {pin} is not read here (supported: {})",
-                names(&ParamIn::ALL.map(|p| p.name()))
-            ),
-        )
-    })?;
+    let param_in = param_in(keys, file)?;
     if n_in != param_in.dim() {
         return Err(lerr(
             *dim_line,
@@ -649,31 +694,7 @@ fn parse_header(
             ),
         ));
     }
-    let vs = match keys.get("VS") {
-        None => vec![0; n_out],
-        Some((line, v)) => {
-            let ks: Vec<usize> = v
-                .split_ascii_whitespace()
-                .map(|s| s.parse::<usize>().ok().filter(|k| *k <= 2))
-                .collect::<Option<_>>()
-                .ok_or_else(|| {
-                    lerr(
-                        *line,
-                        format!("#VS {v}: expected 0, 1 or 2 (once, or once per output)"),
-                    )
-                })?;
-            match ks.len() {
-                1 => vec![ks[0]; n_out],
-                k if k == n_out => ks,
-                _ => {
-                    return Err(lerr(
-                        *line,
-                        format!("#VS {v}: expected one value or {n_out} (one per output)"),
-                    ))
-                }
-            }
-        }
-    };
+    let vs = interval_columns(keys, file, n_out)?;
     let known = ["DIM", "PARAM_IN", "PARAM_OUT", "VS", "FORMAT"];
     let other = order
         .iter()
@@ -687,6 +708,61 @@ fn parse_header(
         vs,
         other,
     })
+}
+
+/// The input parametrization from `#PARAM_IN`.
+fn param_in(keys: &BTreeMap<String, (usize, String)>, file: &str) -> Result<ParamIn, DataError> {
+    let names = |v: &[&str]| v.join(", ");
+    let Some((in_line, pin)) = keys.get("PARAM_IN") else {
+        return Err(DataError::File {
+            file: file.into(),
+            msg: format!(
+                "missing #PARAM_IN line (the input parametrization; read here: {})",
+                names(&ParamIn::ALL.map(|p| p.name()))
+            ),
+        });
+    };
+    ParamIn::parse(pin.trim()).ok_or_else(|| DataError::Line {
+        file: file.into(),
+        line: *in_line,
+        msg: format!(
+            "#PARAM_IN {pin} is not read here (supported: {})",
+            names(&ParamIn::ALL.map(|p| p.name()))
+        ),
+    })
+}
+
+/// The interval columns of each of the `n_out` outputs from `#VS` (0, 1 or 2; none
+/// without the line).
+fn interval_columns(
+    keys: &BTreeMap<String, (usize, String)>,
+    file: &str,
+    n_out: usize,
+) -> Result<Vec<usize>, DataError> {
+    let Some((line, v)) = keys.get("VS") else {
+        return Ok(vec![0; n_out]);
+    };
+    let lerr = |msg: String| DataError::Line {
+        file: file.into(),
+        line: *line,
+        msg,
+    };
+    let ks: Vec<usize> = v
+        .split_ascii_whitespace()
+        .map(|s| s.parse::<usize>().ok().filter(|k| *k <= 2))
+        .collect::<Option<_>>()
+        .ok_or_else(|| {
+            lerr(format!(
+                "#VS {v}: expected 0, 1 or 2 (once, or once per output)"
+            ))
+        })?;
+    match ks.len() {
+        1 => Ok(vec![ks[0]; n_out]),
+        k if k == n_out => Ok(ks),
+        _ => Err(lerr(format!(
+            "#VS {v}: expected one value or {n_out} (one per output)"
+        ))),
+    }
 }
 
 /// The output kind from `#PARAM_OUT` and `--alta-values` ([`ReadOptions::alta_values`]):
