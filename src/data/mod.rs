@@ -1,8 +1,11 @@
 //! Measurements in: the in-memory [`Dataset`], the v1 CSV format and its validation,
 //! channel selection, and [`readers`] for the other formats (ALTA text, MERL binary),
 //! chosen by content.
+mod builder;
+mod channels;
 mod dataset;
 pub mod readers;
+pub(crate) use builder::Builder;
 pub use dataset::*;
 
 /// The bundled data directory: `./data` if present, else the crate's own `data/`.

@@ -147,6 +147,54 @@ fn f64_at(bytes: &[u8], offset: usize) -> f64 {
 
 /// Read a MERL table held in memory (see the module documentation).
 pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
+    check_layout(bytes, file)?;
+    let (rel, abs) = require_assumption(file, opts, "a MERL table")?;
+    let Cells {
+        valid,
+        unmeasured,
+        below,
+    } = measured_cells(bytes, file)?;
+    let keep = match opts.max_samples.unwrap_or(DEFAULT_MAX_SAMPLES) {
+        0 => valid.len(),
+        n => n.min(valid.len()),
+    };
+    let chosen = subsample(&valid, keep);
+    let mut b = Builder::new(Kind::Brdf, file, opts);
+    b.notices.push(format!(
+        "{file}: MERL table: {} of {CELLS} ({unmeasured} unmeasured, {below} below the horizon at the cell centre); {} kept{}",
+        count(valid.len(), "measured cell", "measured cells"),
+        keep,
+        if keep < valid.len() {
+            " (deterministic subsample, --max-samples)"
+        } else {
+            ""
+        }
+    ));
+    b.notices.push(format!(
+        "{file}: MERL channels R, G, B at nominal wavelengths {} nm, {} nm, {} nm; cells read at their centres",
+        NOMINAL_NM[0], NOMINAL_NM[1], NOMINAL_NM[2]
+    ));
+    for &idx in &chosen {
+        push_cell(&mut b, bytes, idx as usize, rel, abs);
+    }
+    let mut meta = BTreeMap::new();
+    meta.insert(
+        "source_format".into(),
+        "MERL binary (90 × 90 × 180 half/difference table; 'line' numbers are cell indices + 1)"
+            .to_string(),
+    );
+    let material = Path::new(file)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut ds = b.finish(&material, meta)?;
+    mark_assumed(&mut ds, rel, abs);
+    Ok(ds)
+}
+
+/// Check the header's dimensions and the file's size, saying where a wrong-sized file
+/// stops or what trails it.
+fn check_layout(bytes: &[u8], file: &str) -> Result<(), DataError> {
     let ferr = |msg: String| DataError::File {
         file: file.into(),
         msg,
@@ -182,8 +230,22 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
         };
         return Err(ferr(msg));
     }
-    let (rel, abs) = require_assumption(file, opts, "a MERL table")?;
-    // Measured cells: all three channels ≥ 0 and both directions above the horizon.
+    Ok(())
+}
+
+/// The measured cells of a table, and how many of the others were not measured or lie
+/// below the horizon.
+struct Cells {
+    /// Flat indices of the cells with all three channels ≥ 0 and both directions above the
+    /// horizon, ascending.
+    valid: Vec<u32>,
+    unmeasured: usize,
+    below: usize,
+}
+
+/// Find the measured cells (all three channels ≥ 0, both directions above the horizon at
+/// the cell centre); a value that is not a number is an error naming its byte offset.
+fn measured_cells(bytes: &[u8], file: &str) -> Result<Cells, DataError> {
     let (mut unmeasured, mut below) = (0usize, 0usize);
     let mut valid: Vec<u32> = Vec::new();
     for idx in 0..CELLS {
@@ -192,9 +254,12 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
             let off = 12 + 8 * (c * CELLS + idx);
             let v = f64_at(bytes, off);
             if !v.is_finite() {
-                return Err(ferr(format!(
-                    "byte offset {off}: cell {idx} of the {block} block holds {v}, not a number"
-                )));
+                return Err(DataError::File {
+                    file: file.into(),
+                    msg: format!(
+                        "byte offset {off}: cell {idx} of the {block} block holds {v}, not a number"
+                    ),
+                });
             }
             any_negative |= v < 0.0;
         }
@@ -209,74 +274,53 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
         }
         valid.push(idx as u32);
     }
-    let keep = match opts.max_samples.unwrap_or(DEFAULT_MAX_SAMPLES) {
-        0 => valid.len(),
-        n => n.min(valid.len()),
-    };
-    let chosen: Vec<u32> = if keep == valid.len() {
-        valid.clone()
-    } else {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(SUBSAMPLE_SEED);
-        let mut picked: Vec<u32> = rand::seq::index::sample(&mut rng, valid.len(), keep)
-            .into_iter()
-            .map(|i| valid[i])
-            .collect();
-        picked.sort_unstable();
-        picked
-    };
-    let mut b = Builder::new(Kind::Brdf, file, opts);
-    b.notices.push(format!(
-        "{file}: MERL table: {} of {CELLS} ({unmeasured} unmeasured, {below} below the horizon at the cell centre); {} kept{}",
-        count(valid.len(), "measured cell", "measured cells"),
-        keep,
-        if keep < valid.len() {
-            " (deterministic subsample, --max-samples)"
-        } else {
-            ""
-        }
-    ));
-    b.notices.push(format!(
-        "{file}: MERL channels R, G, B at nominal wavelengths {} nm, {} nm, {} nm; cells read at their centres",
-        NOMINAL_NM[0], NOMINAL_NM[1], NOMINAL_NM[2]
-    ));
-    for &idx in &chosen {
-        let idx = idx as usize;
-        let (th, td, pd) = cell_angles(idx);
-        let Some((wi, wo)) = cell_directions(th, td, pd) else {
-            continue;
-        };
-        let (ti, pi) = super::alta::angles_deg(wi);
-        let (to, po) = super::alta::angles_deg(wo);
-        for c in 0..3 {
-            let value = f64_at(bytes, 12 + 8 * (c * CELLS + idx)) * SCALE[c];
-            b.push(
-                idx + 1,
-                RawRow {
-                    theta_i: ti,
-                    phi_i: pi,
-                    theta_o: to,
-                    phi_o: po,
-                    wavelength_nm: NOMINAL_NM[c],
-                    value,
-                    uncertainty: super::assumed_uncertainty(value, rel, abs),
-                },
-                None,
-            );
-        }
+    Ok(Cells {
+        valid,
+        unmeasured,
+        below,
+    })
+}
+
+/// `keep` of the `valid` cells, ascending: all of them, or a uniform random subsample from
+/// a fixed-seed stream (the same file always gives the same cells).
+fn subsample(valid: &[u32], keep: usize) -> Vec<u32> {
+    if keep == valid.len() {
+        return valid.to_vec();
     }
-    let mut meta = BTreeMap::new();
-    meta.insert(
-        "source_format".into(),
-        "MERL binary (90 × 90 × 180 half/difference table; 'line' numbers are cell indices + 1)"
-            .to_string(),
-    );
-    let material = Path::new(file)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mut ds = b.finish(&material, meta)?;
-    mark_assumed(&mut ds, rel, abs);
-    Ok(ds)
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(SUBSAMPLE_SEED);
+    let mut picked: Vec<u32> = rand::seq::index::sample(&mut rng, valid.len(), keep)
+        .into_iter()
+        .map(|i| valid[i])
+        .collect();
+    picked.sort_unstable();
+    picked
+}
+
+/// Push the R, G, B samples of cell `idx`, read at its centre, with the assumed
+/// uncertainties; the row number is the cell index + 1.
+fn push_cell(b: &mut Builder, bytes: &[u8], idx: usize, rel: f64, abs: f64) {
+    let (th, td, pd) = cell_angles(idx);
+    let Some((wi, wo)) = cell_directions(th, td, pd) else {
+        return;
+    };
+    let (ti, pi) = super::alta::angles_deg(wi);
+    let (to, po) = super::alta::angles_deg(wo);
+    for c in 0..3 {
+        let value = f64_at(bytes, 12 + 8 * (c * CELLS + idx)) * SCALE[c];
+        b.push(
+            idx + 1,
+            RawRow {
+                theta_i: ti,
+                phi_i: pi,
+                theta_o: to,
+                phi_o: po,
+                wavelength_nm: NOMINAL_NM[c],
+                value,
+                uncertainty: super::assumed_uncertainty(value, rel, abs),
+            },
+            None,
+        );
+    }
 }
 
 /// A MERL table of `f(θh, θd, φd) → [R, G, B]` (BRDF values, sr⁻¹) at every cell centre

@@ -418,50 +418,8 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
     let (rel, abs) = require_assumption(file, opts, "an RGL .bsdf material")?;
     let material = Material::from_fields(fields(bytes, file)?, file)?;
     let spectral = material.wavelengths.len() != 3 || material.wavelengths != [0.0, 1.0, 2.0];
-    let expr = opts
-        .sample_geometry
-        .clone()
-        .unwrap_or_else(|| DEFAULT_GEOMETRY.to_string());
-    let (kind, rows) = crate::workflows::synth::geometry_expr(&expr)
-        .map_err(|e| bad(file, format!("--sample-geometry: {e}")))?;
-    if kind != Kind::Brdf {
-        return Err(bad(
-            file,
-            format!("--sample-geometry {expr} is a {kind} geometry; an RGL material is a BRDF"),
-        ));
-    }
-    // (wavelength written, channel parameter of the table).
-    let channels: Vec<(f64, f64)> = if spectral {
-        let lo = material
-            .wavelengths
-            .iter()
-            .cloned()
-            .fold(f64::INFINITY, f64::min);
-        let hi = material
-            .wavelengths
-            .iter()
-            .cloned()
-            .fold(f64::NEG_INFINITY, f64::max);
-        let wanted = opts
-            .wavelengths
-            .clone()
-            .unwrap_or(vec![450.0, 550.0, 650.0]);
-        for &w in &wanted {
-            if !(lo - 1e-9..=hi + 1e-9).contains(&w) {
-                return Err(bad(
-                    file,
-                    format!("--wavelengths: {w} nm is outside the material's {lo}–{hi} nm"),
-                ));
-            }
-        }
-        wanted.iter().map(|&w| (w, w)).collect()
-    } else {
-        NOMINAL_NM
-            .iter()
-            .enumerate()
-            .map(|(c, &w)| (w, c as f64))
-            .collect()
-    };
+    let (expr, rows) = sample_geometry(file, opts)?;
+    let channels = channels(&material, spectral, file, opts)?;
     let mut b = Builder::new(Kind::Brdf, file, opts);
     b.notices.push(format!(
         "{file}: RGL measured material ({} incidence angles), sampled on geometry {expr} ({} directions){}",
@@ -513,6 +471,80 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     let mut ds = b.finish(&name, meta)?;
+    evaluate(&mut ds, &material, &channels, file, (rel, abs))?;
+    mark_assumed(&mut ds, rel, abs);
+    Ok(ds)
+}
+
+/// The sample geometry (`--sample-geometry`, else [`DEFAULT_GEOMETRY`]): its expression
+/// and its (θi, φi, θo, φo) rows in degrees. It must be a BRDF geometry.
+fn sample_geometry(file: &str, opts: &ReadOptions) -> Result<(String, Vec<[f64; 4]>), DataError> {
+    let expr = opts
+        .sample_geometry
+        .clone()
+        .unwrap_or_else(|| DEFAULT_GEOMETRY.to_string());
+    let (kind, rows) = crate::workflows::synth::geometry_expr(&expr)
+        .map_err(|e| bad(file, format!("--sample-geometry: {e}")))?;
+    if kind != Kind::Brdf {
+        return Err(bad(
+            file,
+            format!("--sample-geometry {expr} is a {kind} geometry; an RGL material is a BRDF"),
+        ));
+    }
+    Ok((expr, rows))
+}
+
+/// The channels as (wavelength written, channel parameter of the value table): R, G, B
+/// at [`NOMINAL_NM`] for an RGB file; for a spectral one the `--wavelengths` (default
+/// 450, 550, 650 nm), each within the file's range.
+fn channels(
+    material: &Material,
+    spectral: bool,
+    file: &str,
+    opts: &ReadOptions,
+) -> Result<Vec<(f64, f64)>, DataError> {
+    if !spectral {
+        return Ok(NOMINAL_NM
+            .iter()
+            .enumerate()
+            .map(|(c, &w)| (w, c as f64))
+            .collect());
+    }
+    let lo = material
+        .wavelengths
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    let hi = material
+        .wavelengths
+        .iter()
+        .cloned()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let wanted = opts
+        .wavelengths
+        .clone()
+        .unwrap_or(vec![450.0, 550.0, 650.0]);
+    for &w in &wanted {
+        if !(lo - 1e-9..=hi + 1e-9).contains(&w) {
+            return Err(bad(
+                file,
+                format!("--wavelengths: {w} nm is outside the material's {lo}–{hi} nm"),
+            ));
+        }
+    }
+    Ok(wanted.iter().map(|&w| (w, w)).collect())
+}
+
+/// Give each sample the material's value at its own (stored) directions and channel, and
+/// the assumed uncertainty `(rel, abs)`; a value that is not a finite BRDF is an error
+/// naming the direction.
+fn evaluate(
+    ds: &mut Dataset,
+    material: &Material,
+    channels: &[(f64, f64)],
+    file: &str,
+    (rel, abs): (f64, f64),
+) -> Result<(), DataError> {
     for s in &mut ds.samples {
         let lambda = channels
             .iter()
@@ -534,6 +566,5 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
         s.value = value;
         s.uncertainty = super::assumed_uncertainty(value, rel, abs);
     }
-    mark_assumed(&mut ds, rel, abs);
-    Ok(ds)
+    Ok(())
 }
