@@ -191,16 +191,11 @@ pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
             Role::Suffix => {}
         }
     }
-    let suffixes: Vec<&Entry> = all()
-        .iter()
-        .copied()
-        .filter(|e| is_suffix(e) && e.catalogue == InCatalogue::Yes)
-        .filter(|e| e.kind.is_none_or(|k| k == kind))
-        .collect();
+    let suffixes = catalogue_suffixes(kind);
     let mut out = Vec::new();
     for c in &cores {
         out.push(c.clone());
-        out.extend(suffixes.iter().map(|s| format!("{c}+{}", s.name)));
+        out.extend(suffixes.iter().map(|s| format!("{c}+{s}")));
     }
     if planes > 1 {
         let mut extra = Vec::new();
@@ -219,6 +214,17 @@ pub fn catalogue_for(kind: Kind, planes: usize) -> Vec<String> {
         out.extend(extra);
     }
     out
+}
+
+/// The suffixes the catalogue appends to each core model of a kind (`scale`, `absorb`
+/// for BTDF), in registry order.
+pub fn catalogue_suffixes(kind: Kind) -> Vec<&'static str> {
+    all()
+        .into_iter()
+        .filter(|e| is_suffix(e) && e.catalogue == InCatalogue::Yes)
+        .filter(|e| e.kind.is_none_or(|k| k == kind))
+        .map(|e| e.name)
+        .collect()
 }
 
 /// The catalogue for data on one plane.

@@ -84,8 +84,11 @@ pub(super) fn featured<'a>(rk: &results::Ranking<'a>, kind: Kind) -> Featured<'a
             f.models.truncate(4);
             if let Some(best) = prim.first() {
                 let fam = ndf_family(&best.model);
-                for suffix in ["", "+scale", "+absorb"] {
-                    let m = format!("{fam}{suffix}");
+                // The family alone, then with each suffix the catalogue gives it.
+                let suffixes = crate::bsdf::registry::catalogue_suffixes(Kind::Btdf);
+                let specs = std::iter::once(fam.clone())
+                    .chain(suffixes.iter().map(|s| format!("{fam}+{s}")));
+                for m in specs {
                     if let Some(r) = prim.iter().find(|r| r.model == m) {
                         f.suffixes.push(r);
                     }
