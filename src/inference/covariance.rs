@@ -191,30 +191,9 @@ pub fn covariance(
     let p = free.len();
     let k = data.len() + space.priors.len();
     let decls = &space.decls;
-    let unit = space.to_unit(flat);
-    // Batch: the point itself, then (+, −) per free parameter.
-    let mut batch = flat.to_vec();
-    let mut steps = Vec::with_capacity(p);
-    for (c, &j) in free.iter().enumerate() {
-        let up = (unit[c] + DU).min(1.0);
-        let dn = (unit[c] - DU).max(0.0);
-        let mut plus = flat.to_vec();
-        let mut minus = flat.to_vec();
-        plus[j] = decls[j].from_unit(up);
-        minus[j] = decls[j].from_unit(dn);
-        steps.push(plus[j] - minus[j]);
-        batch.extend(plus);
-        batch.extend(minus);
-    }
+    let (batch, steps) = central_difference_batch(flat, space);
     let (mut jtj, mut meat, chi2) = jacobian_sums(data, loss, eval, &batch, &steps)?;
-    // Prior rows: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd, with unit variance.
-    for prior in &space.priors {
-        if let Some(c) = free.iter().position(|&j| j == prior.index) {
-            let d = 1.0 / (prior.sd * prior.sd);
-            jtj[(c, c)] += d;
-            meat[(c, c)] += d;
-        }
-    }
+    add_prior_rows(&mut jtj, &mut meat, space);
     let chi2 = chi2 + space.prior_chi2(flat);
     let dof = (k.saturating_sub(p)).max(1) as f64;
     let birge = (chi2 / dof).max(1.0);
@@ -227,16 +206,65 @@ pub fn covariance(
         warnings: vec![],
         ridges: vec![],
     };
+    let (inv, undetermined) = match pseudo_inverse(&jtj) {
+        Ok(found) => found,
+        Err(why) => {
+            out.warnings.push(why.into());
+            return Ok(expand(out, free, model.dim));
+        }
+    };
+    let cov = &inv * meat * &inv * birge;
+    out.ridges = ridges(&jtj, birge, free, flat, decls);
+    set_std_and_correlation(&mut out, &cov, &undetermined);
+    let warnings = determinacy_warnings(&out, &undetermined, &names, &free_decls);
+    out.warnings.extend(warnings);
+    Ok(expand(out, free, model.dim))
+}
+
+/// The batch of the central differences at `flat`: the point itself, then (+, −) per
+/// free parameter, each DU from the point in the unit box (less at its edges); and each
+/// free parameter's physical step between its two neighbours.
+fn central_difference_batch(flat: &[f64], space: &Constraints) -> (Vec<f64>, Vec<f64>) {
+    let free = &space.free;
+    let decls = &space.decls;
+    let unit = space.to_unit(flat);
+    let mut batch = flat.to_vec();
+    let mut steps = Vec::with_capacity(free.len());
+    for (c, &j) in free.iter().enumerate() {
+        let up = (unit[c] + DU).min(1.0);
+        let dn = (unit[c] - DU).max(0.0);
+        let mut plus = flat.to_vec();
+        let mut minus = flat.to_vec();
+        plus[j] = decls[j].from_unit(up);
+        minus[j] = decls[j].from_unit(dn);
+        steps.push(plus[j] - minus[j]);
+        batch.extend(plus);
+        batch.extend(minus);
+    }
+    (batch, steps)
+}
+
+/// The priors' rows in B and M: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd, with unit variance.
+fn add_prior_rows(jtj: &mut DMatrix<f64>, meat: &mut DMatrix<f64>, space: &Constraints) {
+    for prior in &space.priors {
+        if let Some(c) = space.free.iter().position(|&j| j == prior.index) {
+            let d = 1.0 / (prior.sd * prior.sd);
+            jtj[(c, c)] += d;
+            meat[(c, c)] += d;
+        }
+    }
+}
+
+/// B⁺ by SVD, and which parameters lie along a direction the data do not constrain; or
+/// why there are no uncertainties.
+fn pseudo_inverse(jtj: &DMatrix<f64>) -> Result<(DMatrix<f64>, Vec<bool>), &'static str> {
+    let p = jtj.nrows();
     if jtj.iter().any(|v| !v.is_finite()) {
-        out.warnings
-            .push("the Jacobian is not finite at the optimum; no parameter uncertainties".into());
-        return Ok(expand(out, free, model.dim));
+        return Err("the Jacobian is not finite at the optimum; no parameter uncertainties");
     }
     let svd = jtj.clone().svd(true, true);
     let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        out.warnings
-            .push("SVD failed; no parameter uncertainties".into());
-        return Ok(expand(out, free, model.dim));
+        return Err("SVD failed; no parameter uncertainties");
     };
     let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
     let mut inv = DMatrix::<f64>::zeros(p, p);
@@ -253,8 +281,13 @@ pub fn covariance(
             }
         }
     }
-    let cov = &inv * meat * &inv * birge;
-    out.ridges = ridges(&jtj, birge, free, flat, decls);
+    Ok((inv, undetermined))
+}
+
+/// The standard uncertainties (none for undetermined parameters or a variance that is
+/// not a finite non-negative number) and the correlations between those above 0.
+fn set_std_and_correlation(out: &mut Covariance, cov: &DMatrix<f64>, undetermined: &[bool]) {
+    let p = undetermined.len();
     for j in 0..p {
         let v = cov[(j, j)];
         if !undetermined[j] && v.is_finite() && v >= 0.0 {
@@ -270,21 +303,34 @@ pub fn covariance(
             }
         }
     }
+}
+
+/// What the data do not determine: parameters along unconstrained directions, standard
+/// uncertainties beyond a parameter's range, and pairs and groups of parameters
+/// determined only in combination.
+fn determinacy_warnings(
+    out: &Covariance,
+    undetermined: &[bool],
+    names: &[&str],
+    decls: &[crate::bsdf::ParamDecl],
+) -> Vec<String> {
+    let p = names.len();
+    let mut warnings = Vec::new();
     let undetermined_names: Vec<&str> = (0..p)
         .filter(|&j| undetermined[j])
         .map(|j| names[j])
         .collect();
     if !undetermined_names.is_empty() {
-        out.warnings.push(format!(
+        warnings.push(format!(
             "not determined by the data (singular normal matrix): {}",
             undetermined_names.join(", ")
         ));
     }
     for j in 0..p {
         if let Some(s) = out.std[j] {
-            let range = free_decls[j].hi - free_decls[j].lo;
+            let range = decls[j].hi - decls[j].lo;
             if s > range {
-                out.warnings.push(format!(
+                warnings.push(format!(
                     "{} is not determined by the data: std {s:.3e} exceeds its range {range}",
                     names[j]
                 ));
@@ -295,7 +341,7 @@ pub fn covariance(
         for b in a + 1..p {
             if let Some(c) = out.correlation[a][b] {
                 if c.abs() > 0.99 {
-                    out.warnings.push(format!(
+                    warnings.push(format!(
                         "{} and {} are not separately determined (correlation {c:+.4})",
                         names[a], names[b]
                     ));
@@ -303,40 +349,49 @@ pub fn covariance(
             }
         }
     }
-    // A trade-off among three or more parameters can hide behind moderate pairwise
-    // correlations: the multiple correlation R_j of each parameter with all the others,
-    // R_j² = 1 − 1/(C⁻¹)_jj, exposes it (e.g. α, η_t and S at normal incidence).
+    warnings.extend(multiple_correlation_warnings(out, names));
+    warnings
+}
+
+/// A trade-off among three or more parameters can hide behind moderate pairwise
+/// correlations: the multiple correlation R_j of each parameter with all the others,
+/// R_j² = 1 − 1/(C⁻¹)_jj, exposes it (e.g. α, η_t and S at normal incidence). A warning
+/// per parameter with R_j > 0.99 and no pairwise correlation above 0.99.
+fn multiple_correlation_warnings(out: &Covariance, names: &[&str]) -> Vec<String> {
+    let p = names.len();
+    let mut warnings = Vec::new();
     let det: Vec<usize> = (0..p)
         .filter(|&j| out.std[j].is_some_and(|s| s > 0.0))
         .collect();
-    if det.len() > 2 {
-        let c = DMatrix::from_fn(det.len(), det.len(), |a, b| {
-            out.correlation[det[a]][det[b]].unwrap_or(0.0)
-        });
-        if let Some(ci) = c.try_inverse() {
-            for (a, &j) in det.iter().enumerate() {
-                let vif = ci[(a, a)];
-                let r = if vif > 1.0 {
-                    (1.0 - 1.0 / vif).sqrt()
-                } else {
-                    0.0
-                };
-                let pairwise = det
-                    .iter()
-                    .any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
-                if r > 0.99 && !pairwise {
-                    let others: Vec<&str> =
-                        det.iter().filter(|&&o| o != j).map(|&o| names[o]).collect();
-                    out.warnings.push(format!(
-                        "{} is not separately determined from {} (multiple correlation {r:.4}): the data constrain only a combination",
-                        names[j],
-                        others.join(", ")
-                    ));
-                }
-            }
+    if det.len() <= 2 {
+        return warnings;
+    }
+    let c = DMatrix::from_fn(det.len(), det.len(), |a, b| {
+        out.correlation[det[a]][det[b]].unwrap_or(0.0)
+    });
+    let Some(ci) = c.try_inverse() else {
+        return warnings;
+    };
+    for (a, &j) in det.iter().enumerate() {
+        let vif = ci[(a, a)];
+        let r = if vif > 1.0 {
+            (1.0 - 1.0 / vif).sqrt()
+        } else {
+            0.0
+        };
+        let pairwise = det
+            .iter()
+            .any(|&o| o != j && out.correlation[j][o].is_some_and(|c| c.abs() > 0.99));
+        if r > 0.99 && !pairwise {
+            let others: Vec<&str> = det.iter().filter(|&&o| o != j).map(|&o| names[o]).collect();
+            warnings.push(format!(
+                "{} is not separately determined from {} (multiple correlation {r:.4}): the data constrain only a combination",
+                names[j],
+                others.join(", ")
+            ));
         }
     }
-    Ok(expand(out, free, model.dim))
+    warnings
 }
 
 /// The weak directions of the normal matrix `jtj` (free parameters, physical units) in

@@ -126,10 +126,44 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
         first.model.kind,
         at.kind
     );
+    let mut out = at.clone();
+    let counts = evaluate_samples(&resolver, &mut out, what)?;
+    let fits: Vec<&SavedFit> = match file {
+        FitFile::Single(f) => vec![f.as_ref()],
+        FitFile::PerAxis(v) => v.iter().map(|(_, f)| f).collect(),
+    };
+    let warnings = prediction_warnings(&fits, counts, out.len());
+    let material = if first.material.is_empty() {
+        format!("{} fit", first.model.spec)
+    } else {
+        format!("{} ({} fit)", first.material, first.model.spec)
+    };
+    out.meta = prediction_header(file, first, fit_path, at, what, &warnings, &material);
+    out.material = material;
+    out.notices.clear();
+    out.assumed_uncertainty = None;
+    Ok(Predicted {
+        data: out,
+        warnings,
+    })
+}
+
+/// Rows of a prediction that need a word ([`prediction_warnings`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct RowCounts {
+    /// Rows whose uncertainty the reader would refuse as zero.
+    zero_u: usize,
+    /// Rows whose value depends on a parameter the fit did not determine.
+    undetermined: usize,
+}
+
+/// Replace every sample's value and uncertainty in `out` by the model's and its
+/// propagated uncertainty; an error names the first sample (its line, or its geometry
+/// in `what`) that cannot be evaluated or whose prediction is not finite.
+fn evaluate_samples(resolver: &Resolver, out: &mut Dataset, what: &str) -> Result<RowCounts> {
     // One clear message per problem, before any work: the first sample that cannot be
     // evaluated names its line.
-    let mut out = at.clone();
-    let resolved: Vec<(usize, Result<Propagated, String>)> = at
+    let resolved: Vec<(usize, Result<Propagated, String>)> = out
         .samples
         .par_iter()
         .enumerate()
@@ -142,7 +176,7 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
             )
         })
         .collect();
-    let (mut zero_u, mut undetermined_rows) = (0usize, 0usize);
+    let mut counts = RowCounts::default();
     for (k, r) in resolved {
         let s = &mut out.samples[k];
         let where_ = || {
@@ -168,44 +202,46 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
             p.uncertainty
         );
         if !reader_accepts(p.value, p.uncertainty) {
-            zero_u += 1;
+            counts.zero_u += 1;
         }
         if p.depends_on_undetermined {
-            undetermined_rows += 1;
+            counts.undetermined += 1;
         }
         s.value = p.value;
         s.uncertainty = p.uncertainty;
     }
+    Ok(counts)
+}
+
+/// What the user must know about a prediction of `rows` rows from `fits`: parameters
+/// without an uncertainty, zero uncertainties, and the fits' own warnings (each once).
+fn prediction_warnings(fits: &[&SavedFit], counts: RowCounts, rows: usize) -> Vec<String> {
     let mut warnings = Vec::new();
-    let fits: Vec<&SavedFit> = match file {
-        FitFile::Single(f) => vec![f.as_ref()],
-        FitFile::PerAxis(v) => v.iter().map(|(_, f)| f).collect(),
-    };
     let mut undetermined: Vec<String> = Vec::new();
     for n in fits.iter().flat_map(|f| f.undetermined()) {
         if !undetermined.contains(&n) {
             undetermined.push(n);
         }
     }
-    if undetermined_rows > 0 {
+    if counts.undetermined > 0 {
         warnings.push(format!(
             "{} {} no standard uncertainty in the fit (the data did not determine {}): {} taken as 0, so at {} of {} the model depends on {} and the uncertainty is a lower bound",
             undetermined.join(", "),
             if undetermined.len() == 1 { "has" } else { "have" },
             if undetermined.len() == 1 { "it" } else { "them" },
             if undetermined.len() == 1 { "its variance is" } else { "their variances are" },
-            count(undetermined_rows, "row", "rows"),
-            out.len(),
+            count(counts.undetermined, "row", "rows"),
+            rows,
             if undetermined.len() == 1 { "it" } else { "them" },
         ));
     }
-    if zero_u > 0 {
+    if counts.zero_u > 0 {
         warnings.push(format!(
             "{} a zero model uncertainty (the model does not depend on the fitted parameters there, e.g. where it is 0): reading the file back as data needs --allow-zero-uncertainty",
-            count(zero_u, "row has", "rows have")
+            count(counts.zero_u, "row has", "rows have")
         ));
     }
-    for f in &fits {
+    for f in fits {
         for w in &f.warnings {
             let w = format!("the fit says: {w}");
             if !warnings.contains(&w) {
@@ -213,6 +249,20 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
             }
         }
     }
+    warnings
+}
+
+/// The header of a prediction: what it is, from which fit and parameters, how its
+/// uncertainty was made, its warnings and `material`.
+fn prediction_header(
+    file: &FitFile,
+    first: &SavedFit,
+    fit_path: &str,
+    at: &Dataset,
+    what: &str,
+    warnings: &[String],
+    material: &str,
+) -> BTreeMap<String, String> {
     let mut meta = BTreeMap::new();
     meta.insert("kind".to_string(), at.kind.to_string());
     meta.insert(
@@ -240,20 +290,8 @@ pub fn predict(file: &FitFile, fit_path: &str, at: &Dataset, what: &str) -> Resu
     for (k, w) in warnings.iter().enumerate() {
         meta.insert(format!("warning_{}", k + 1), w.clone());
     }
-    let material = if first.material.is_empty() {
-        format!("{} fit", first.model.spec)
-    } else {
-        format!("{} ({} fit)", first.material, first.model.spec)
-    };
-    meta.insert("material".into(), material.clone());
-    out.material = material;
-    out.meta = meta;
-    out.notices.clear();
-    out.assumed_uncertainty = None;
-    Ok(Predicted {
-        data: out,
-        warnings,
-    })
+    meta.insert("material".into(), material.to_string());
+    meta
 }
 
 /// A dataset of the rows (signed θi, φi, θo, φo in degrees) at every one of `channels`,

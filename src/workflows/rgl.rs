@@ -148,15 +148,7 @@ pub enum Channels {
 pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result<Vec<u8>> {
     check_representable(fit)?;
     let m = &fit.model;
-    let (groups, wavelengths): (Vec<usize>, Option<Vec<f64>>) = match channels {
-        Channels::Rgb(rgb) => (rgb.to_vec(), None),
-        Channels::Spectral => {
-            let mut order: Vec<usize> = (0..fit.channels.len()).collect();
-            order.sort_by(|&a, &b| fit.channels[a].total_cmp(&fit.channels[b]));
-            let wl = order.iter().map(|&g| fit.channels[g]).collect();
-            (order, Some(wl))
-        }
-    };
+    let (groups, wavelengths) = channel_groups(fit, channels);
     let views: Vec<Vec<f64>> = groups
         .iter()
         .map(|&g| {
@@ -166,41 +158,12 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         })
         .collect();
     let thetas = theta_i_nodes();
-    let (w, h, nc) = (THETA_M_NODES, PHI_M_NODES, groups.len());
     // One incidence node per task: its value slice (C × H × W) and luminance (H × W).
     let slices: Vec<(Vec<f32>, Vec<f32>)> = thetas
         .par_iter()
-        .map(|&deg| {
-            let ti = deg.to_radians();
-            let wi = DVec3::new(ti.sin(), 0.0, ti.cos());
-            let mut values = vec![0f32; nc * h * w];
-            let mut lum = vec![0f32; h * w];
-            for y in 0..h {
-                for x in 0..w {
-                    let (ux, uy) = (x as f64 / (w - 1) as f64, y as f64 / (h - 1) as f64);
-                    let Some((wo, wi_m)) = outgoing(wi, 0.0, ux, uy) else {
-                        continue;
-                    };
-                    let mut l = 0.0;
-                    for c in 0..nc {
-                        let f = m.root.eval(&views[c], wi, wo) * wo.z;
-                        let f = if f.is_finite() { f.max(0.0) } else { 0.0 };
-                        values[(c * h + y) * w + x] = f as f32;
-                        l += f / nc as f64;
-                    }
-                    // Solid angle of ωo per unit u-area: 2π² u sin θm · 4 (ωi·m).
-                    let jac = 2.0 * PI * PI * ux * u_to_theta(ux).sin() * 4.0 * wi_m;
-                    lum[y * w + x] = (l * jac) as f32;
-                }
-            }
-            // A positive floor: the luminance warp must reach every cell with a value.
-            let peak = lum.iter().cloned().fold(0f32, f32::max);
-            let floor = if peak > 0.0 { peak * 1e-4 } else { 1.0 };
-            lum.iter_mut().for_each(|v| *v = v.max(floor));
-            (values, lum)
-        })
+        .map(|&deg| incidence_slice(fit, &views, deg))
         .collect();
-    let n = thetas.len() as u64;
+    let (w, h, nc) = (THETA_M_NODES, PHI_M_NODES, groups.len());
     let mut values = Vec::with_capacity(slices.len() * nc * h * w);
     let mut luminance = Vec::with_capacity(slices.len() * h * w);
     for (v, l) in &slices {
@@ -212,7 +175,80 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         "{}: the fitted BRDF is zero everywhere; nothing to export",
         m.spec
     );
-    let (hw, wu) = (h as u64, w as u64);
+    let tables = Tables {
+        thetas: &thetas,
+        channels: nc,
+        values,
+        luminance,
+        wavelengths,
+    };
+    Ok(tensor_file(&material_fields(description, tables)))
+}
+
+/// The fit's channels (scalar-view groups) that become the file's, and for a spectral
+/// file their wavelengths (ascending).
+fn channel_groups(fit: &SavedFit, channels: Channels) -> (Vec<usize>, Option<Vec<f64>>) {
+    match channels {
+        Channels::Rgb(rgb) => (rgb.to_vec(), None),
+        Channels::Spectral => {
+            let mut order: Vec<usize> = (0..fit.channels.len()).collect();
+            order.sort_by(|&a, &b| fit.channels[a].total_cmp(&fit.channels[b]));
+            let wl = order.iter().map(|&g| fit.channels[g]).collect();
+            (order, Some(wl))
+        }
+    }
+}
+
+/// The value table (C × H × W, f·cos θo per channel of `views`) and the luminance map
+/// (H × W) of the incidence node at `deg` degrees.
+fn incidence_slice(fit: &SavedFit, views: &[Vec<f64>], deg: f64) -> (Vec<f32>, Vec<f32>) {
+    let m = &fit.model;
+    let (w, h, nc) = (THETA_M_NODES, PHI_M_NODES, views.len());
+    let ti = deg.to_radians();
+    let wi = DVec3::new(ti.sin(), 0.0, ti.cos());
+    let mut values = vec![0f32; nc * h * w];
+    let mut lum = vec![0f32; h * w];
+    for y in 0..h {
+        for x in 0..w {
+            let (ux, uy) = (x as f64 / (w - 1) as f64, y as f64 / (h - 1) as f64);
+            let Some((wo, wi_m)) = outgoing(wi, 0.0, ux, uy) else {
+                continue;
+            };
+            let mut l = 0.0;
+            for c in 0..nc {
+                let f = m.root.eval(&views[c], wi, wo) * wo.z;
+                let f = if f.is_finite() { f.max(0.0) } else { 0.0 };
+                values[(c * h + y) * w + x] = f as f32;
+                l += f / nc as f64;
+            }
+            // Solid angle of ωo per unit u-area: 2π² u sin θm · 4 (ωi·m).
+            let jac = 2.0 * PI * PI * ux * u_to_theta(ux).sin() * 4.0 * wi_m;
+            lum[y * w + x] = (l * jac) as f32;
+        }
+    }
+    // A positive floor: the luminance warp must reach every cell with a value.
+    let peak = lum.iter().cloned().fold(0f32, f32::max);
+    let floor = if peak > 0.0 { peak * 1e-4 } else { 1.0 };
+    lum.iter_mut().for_each(|v| *v = v.max(floor));
+    (values, lum)
+}
+
+/// The tables of a material file, every incidence node's one after the other.
+struct Tables<'a> {
+    /// Incidence nodes (degrees).
+    thetas: &'a [f64],
+    /// C, the value table's channels.
+    channels: usize,
+    values: Vec<f32>,
+    luminance: Vec<f32>,
+    /// The channels' wavelengths for a spectral file; None for RGB.
+    wavelengths: Option<Vec<f64>>,
+}
+
+/// The fields of an isotropic material file (see the module's documentation).
+fn material_fields(description: &str, t: Tables) -> Vec<Field> {
+    let n = t.thetas.len() as u64;
+    let (hw, wu) = (PHI_M_NODES as u64, THETA_M_NODES as u64);
     let mut fields = vec![
         Field {
             name: "description",
@@ -227,7 +263,7 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         Field {
             name: "theta_i",
             shape: vec![n],
-            data: FieldData::F32(thetas.iter().map(|d| d.to_radians() as f32).collect()),
+            data: FieldData::F32(t.thetas.iter().map(|d| d.to_radians() as f32).collect()),
         },
         Field {
             name: "phi_i",
@@ -250,20 +286,20 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         Field {
             name: "vndf",
             shape: vec![1, n, 2, 2],
-            data: FieldData::F32(vec![1.0; thetas.len() * 4]),
+            data: FieldData::F32(vec![1.0; t.thetas.len() * 4]),
         },
         Field {
             name: "luminance",
             shape: vec![1, n, hw, wu],
-            data: FieldData::F32(luminance),
+            data: FieldData::F32(t.luminance),
         },
     ];
-    let table_shape = vec![1, n, nc as u64, hw, wu];
-    match wavelengths {
+    let table_shape = vec![1, n, t.channels as u64, hw, wu];
+    match t.wavelengths {
         None => fields.push(Field {
             name: "rgb",
             shape: table_shape,
-            data: FieldData::F32(values),
+            data: FieldData::F32(t.values),
         }),
         Some(wl) => {
             fields.push(Field {
@@ -274,9 +310,9 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
             fields.push(Field {
                 name: "spectra",
                 shape: table_shape,
-                data: FieldData::F32(values),
+                data: FieldData::F32(t.values),
             });
         }
     }
-    Ok(tensor_file(&fields))
+    fields
 }

@@ -36,18 +36,7 @@ fn steps(from: f64, to: f64, step: f64) -> Vec<f64> {
 
 /// The rows of a named geometry (`grid` may name its step: `grid:2.5`).
 pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
-    let (name, step) = match name.split_once(':') {
-        Some(("grid", step)) => {
-            let step: f64 = step
-                .trim()
-                .parse()
-                .ok()
-                .filter(|s: &f64| (0.25..=45.0).contains(s))
-                .ok_or_else(|| format!("grid:{step}: a step in degrees in [0.25, 45]"))?;
-            ("grid", step)
-        }
-        _ => (name, 5.0),
-    };
+    let (name, step) = geometry_name(name)?;
     let g = GEOMETRIES.iter().find(|g| g.name == name).ok_or_else(|| {
         format!(
             "unknown geometry '{name}' (known: {})",
@@ -58,66 +47,26 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                 .join(", ")
         )
     })?;
-    let mut rows = Vec::new();
-    let inplane = |rows: &mut Vec<[f64; 4]>, to_list: &[f64]| {
-        for ti in steps(0.0, 70.0, 10.0) {
-            for &to in to_list {
-                // The detector cannot sit on the source: omit the exact retro direction.
-                if (to - ti).abs() < 0.5 {
-                    continue;
-                }
-                rows.push([ti, 0.0, to, 0.0]);
-            }
-        }
-    };
-    match g.name {
-        "inplane10" => inplane(&mut rows, &steps(-80.0, 80.0, 10.0)),
-        "inplane5" => inplane(&mut rows, &steps(-85.0, 85.0, 5.0)),
-        "specular" | "retro" => {
-            inplane(&mut rows, &steps(-80.0, 80.0, 10.0));
-            for ti in steps(10.0, 70.0, 10.0) {
-                let offsets: &[f64] = if g.name == "specular" {
-                    &[-5.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 5.0]
-                } else {
-                    &[-3.0, -2.0, -1.0, 1.0, 2.0, 3.0]
-                };
-                for d in offsets {
-                    let to = if g.name == "specular" {
-                        -ti + d
-                    } else {
-                        ti + d
-                    };
-                    if to.abs() <= 89.0 && (to.round() as i64) % 10 != 0 {
-                        rows.push([ti, 0.0, to, 0.0]);
-                    }
-                }
-            }
-        }
-        "hemi" => {
-            for ti in [0.0, 20.0, 40.0, 60.0] {
-                for to in steps(10.0, 80.0, 10.0) {
-                    for po in steps(0.0, 330.0, 30.0) {
-                        if po == 0.0 && (to - ti).abs() < 0.5 {
-                            continue;
-                        }
-                        rows.push([ti, 0.0, to, po]);
-                    }
-                }
-            }
-        }
+    let rows = match g.name {
+        "inplane10" => inplane(&steps(-80.0, 80.0, 10.0)),
+        "inplane5" => inplane(&steps(-85.0, 85.0, 5.0)),
+        "specular" | "retro" => near_mirror_or_source(g.name == "specular"),
+        "hemi" => hemi(),
         "offplane" => {
+            let mut rows = Vec::new();
             for ti in [20.0, 40.0, 60.0] {
                 for to in [20.0, 40.0, 60.0, 80.0] {
                     rows.extend([45.0, 90.0, 135.0].map(|po| [ti, 0.0, to, po]));
                 }
             }
+            rows
         }
-        "ptb5" => rows.extend(
-            steps(-20.0, 20.0, 5.0)
-                .into_iter()
-                .map(|t| [0.0, 0.0, t, 0.0]),
-        ),
+        "ptb5" => steps(-20.0, 20.0, 5.0)
+            .into_iter()
+            .map(|t| [0.0, 0.0, t, 0.0])
+            .collect(),
         "ptb1" => {
+            let mut rows = Vec::new();
             for phi in [0.0, 90.0] {
                 rows.extend(
                     steps(-20.0, 20.0, 1.0)
@@ -126,13 +75,14 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                         .map(|t| [0.0, 0.0, t, phi]),
                 );
             }
+            rows
         }
-        "csic" => rows.extend(
-            steps(0.0, 80.0, 10.0)
-                .into_iter()
-                .map(|t| [0.0, 0.0, t, 0.0]),
-        ),
+        "csic" => steps(0.0, 80.0, 10.0)
+            .into_iter()
+            .map(|t| [0.0, 0.0, t, 0.0])
+            .collect(),
         "oblique" => {
+            let mut rows = Vec::new();
             for ti in [0.0, 30.0, 60.0] {
                 rows.extend(
                     steps(-80.0, 80.0, 2.5)
@@ -140,32 +90,106 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
                         .map(|t| [ti, 0.0, t, 0.0]),
                 );
             }
+            rows
         }
-        "grid" => {
-            // Polar angles up to 85°: the last multiple of the step there.
-            let polar = steps(0.0, (85.0 / step).floor() * step, step);
-            for &ti in &polar {
-                for &to in &polar {
-                    // At θo = 0 every azimuth is one direction: keep it once.
-                    let azimuths = if to == 0.0 {
-                        vec![0.0]
-                    } else {
-                        steps(0.0, 180.0, step)
-                    };
-                    for po in azimuths {
-                        // The detector cannot sit on the source.
-                        if po == 0.0 && (to - ti).abs() < 1e-9 {
-                            continue;
-                        }
-                        rows.push([ti, 0.0, to, po]);
-                    }
-                }
+        "grid" => grid(step),
+        "merl" => merl_rows(),
+        _ => unreachable!("every listed geometry has rows"),
+    };
+    Ok((g.kind, rows))
+}
+
+/// A geometry's name and its step (degrees): `grid:STEP` names the grid's, which must lie
+/// in [0.25, 45]; every other name has 5.
+fn geometry_name(name: &str) -> Result<(&str, f64), String> {
+    match name.split_once(':') {
+        Some(("grid", step)) => {
+            let step: f64 = step
+                .trim()
+                .parse()
+                .ok()
+                .filter(|s: &f64| (0.25..=45.0).contains(s))
+                .ok_or_else(|| format!("grid:{step}: a step in degrees in [0.25, 45]"))?;
+            Ok(("grid", step))
+        }
+        _ => Ok((name, 5.0)),
+    }
+}
+
+/// In-plane rows: θi 0…70° by 10°, θo each of `to_list`, the exact retro direction
+/// omitted (the detector cannot sit on the source).
+fn inplane(to_list: &[f64]) -> Vec<[f64; 4]> {
+    let mut rows = Vec::new();
+    for ti in steps(0.0, 70.0, 10.0) {
+        for &to in to_list {
+            if (to - ti).abs() < 0.5 {
+                continue;
+            }
+            rows.push([ti, 0.0, to, 0.0]);
+        }
+    }
+    rows
+}
+
+/// `inplane10` plus the directions a few degrees from the mirror direction (`specular`)
+/// or from the source (`retro`) that it does not already hold.
+fn near_mirror_or_source(specular: bool) -> Vec<[f64; 4]> {
+    let mut rows = inplane(&steps(-80.0, 80.0, 10.0));
+    for ti in steps(10.0, 70.0, 10.0) {
+        let offsets: &[f64] = if specular {
+            &[-5.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 5.0]
+        } else {
+            &[-3.0, -2.0, -1.0, 1.0, 2.0, 3.0]
+        };
+        for d in offsets {
+            let to = if specular { -ti + d } else { ti + d };
+            if to.abs() <= 89.0 && (to.round() as i64) % 10 != 0 {
+                rows.push([ti, 0.0, to, 0.0]);
             }
         }
-        "merl" => rows = merl_rows(),
-        _ => unreachable!("every listed geometry has rows"),
     }
-    Ok((g.kind, rows))
+    rows
+}
+
+/// Out of plane: θi 0, 20, 40, 60°; θo 10…80° by 10°; φo every 30° (not on the source).
+fn hemi() -> Vec<[f64; 4]> {
+    let mut rows = Vec::new();
+    for ti in [0.0, 20.0, 40.0, 60.0] {
+        for to in steps(10.0, 80.0, 10.0) {
+            for po in steps(0.0, 330.0, 30.0) {
+                if po == 0.0 && (to - ti).abs() < 0.5 {
+                    continue;
+                }
+                rows.push([ti, 0.0, to, po]);
+            }
+        }
+    }
+    rows
+}
+
+/// The dense isotropic grid: θi and θo 0…85° and φo 0…180° (φi = 0) by `step` degrees.
+fn grid(step: f64) -> Vec<[f64; 4]> {
+    let mut rows = Vec::new();
+    // Polar angles up to 85°: the last multiple of the step there.
+    let polar = steps(0.0, (85.0 / step).floor() * step, step);
+    for &ti in &polar {
+        for &to in &polar {
+            // At θo = 0 every azimuth is one direction: keep it once.
+            let azimuths = if to == 0.0 {
+                vec![0.0]
+            } else {
+                steps(0.0, 180.0, step)
+            };
+            for po in azimuths {
+                // The detector cannot sit on the source.
+                if po == 0.0 && (to - ti).abs() < 1e-9 {
+                    continue;
+                }
+                rows.push([ti, 0.0, to, po]);
+            }
+        }
+    }
+    rows
 }
 
 /// The directions of every MERL cell centre above the horizon, in the table's order, as
@@ -246,47 +270,8 @@ pub fn synthesize_angular(
     seed: u64,
     material: &str,
 ) -> Result<Dataset, String> {
-    if !(0.0..10.0).contains(&angle_deg) {
-        return Err(format!(
-            "angular uncertainty {angle_deg}° must be in [0, 10)"
-        ));
-    }
-    if wavelengths.windows(2).any(|w| w[0] >= w[1]) {
-        return Err(
-            "give the wavelengths in ascending order (channels are numbered by wavelength)".into(),
-        );
-    }
-    if wavelengths.len() != model.channels {
-        return Err(format!(
-            "{} wavelengths given for a model compiled for {} channels",
-            wavelengths.len(),
-            model.channels
-        ));
-    }
-    if !(noise.rel >= 0.0 && noise.abs >= 0.0) || noise.rel + noise.abs <= 0.0 {
-        return Err(
-            "--noise needs REL,ABS ≥ 0 with at least one positive (uncertainties must be > 0)"
-                .into(),
-        );
-    }
-    let mut raw = Vec::new();
-    for (i, r) in rows.iter().enumerate() {
-        for (c, &wl) in wavelengths.iter().enumerate() {
-            let _ = c;
-            raw.push((
-                i * wavelengths.len() + c + 1,
-                RawRow {
-                    theta_i: r[0],
-                    phi_i: r[1],
-                    theta_o: r[2],
-                    phi_o: r[3],
-                    wavelength_nm: wl,
-                    value: 0.0,
-                    uncertainty: 1.0,
-                },
-            ));
-        }
-    }
+    check_request(model, wavelengths, noise, angle_deg)?;
+    let raw = placeholder_rows(rows, wavelengths);
     let opts = ReadOptions::default();
     let mut ds = Dataset::from_rows(model.kind, material, &raw, "<synth>", &opts)
         .map_err(|e| e.to_string())?;
@@ -318,27 +303,7 @@ pub fn synthesize_angular(
         }
         let mut u2 = (noise.rel * f).powi(2) + noise.abs.powi(2);
         if angle_deg > 0.0 {
-            let h = 0.05f64.to_radians();
-            let dir = |t: f64, p: f64, below: bool| {
-                let mut d = crate::math::direction(t, p);
-                if below {
-                    d.z = -d.z;
-                }
-                d
-            };
-            let below = model.kind == Kind::Btdf;
-            let at = |ti: f64, to: f64| {
-                model.eval(
-                    flat,
-                    group,
-                    dir(ti, s.phi_i, false),
-                    dir(to, s.phi_o, below),
-                )
-            };
-            let dfo = (at(s.theta_i, s.theta_o + h) - at(s.theta_i, s.theta_o - h)) / (2.0 * h);
-            let dfi = (at(s.theta_i + h, s.theta_o) - at(s.theta_i - h, s.theta_o)) / (2.0 * h);
-            let d = angle_deg.to_radians();
-            let ua2 = (d * dfo).powi(2) + (d * dfi).powi(2);
+            let ua2 = angular_variance(model, flat, group, s, angle_deg);
             if ua2.is_finite() {
                 u2 += ua2;
             }
@@ -356,6 +321,109 @@ pub fn synthesize_angular(
         s.uncertainty = u;
         s.line = 0;
     }
+    describe(&mut ds, model, flat, noise, angle_deg, seed, material);
+    Ok(ds)
+}
+
+/// Why the wavelengths, noise or angular uncertainty cannot make a data set, if they
+/// cannot.
+fn check_request(
+    model: &Model,
+    wavelengths: &[f64],
+    noise: Noise,
+    angle_deg: f64,
+) -> Result<(), String> {
+    if !(0.0..10.0).contains(&angle_deg) {
+        return Err(format!(
+            "angular uncertainty {angle_deg}° must be in [0, 10)"
+        ));
+    }
+    if wavelengths.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(
+            "give the wavelengths in ascending order (channels are numbered by wavelength)".into(),
+        );
+    }
+    if wavelengths.len() != model.channels {
+        return Err(format!(
+            "{} wavelengths given for a model compiled for {} channels",
+            wavelengths.len(),
+            model.channels
+        ));
+    }
+    if !(noise.rel >= 0.0 && noise.abs >= 0.0) || noise.rel + noise.abs <= 0.0 {
+        return Err(
+            "--noise needs REL,ABS ≥ 0 with at least one positive (uncertainties must be > 0)"
+                .into(),
+        );
+    }
+    Ok(())
+}
+
+/// One raw row per geometry row and wavelength (line numbers from 1), with placeholder
+/// values for the noise to replace.
+fn placeholder_rows(rows: &[[f64; 4]], wavelengths: &[f64]) -> Vec<(usize, RawRow)> {
+    let mut raw = Vec::new();
+    for (i, r) in rows.iter().enumerate() {
+        for (c, &wl) in wavelengths.iter().enumerate() {
+            raw.push((
+                i * wavelengths.len() + c + 1,
+                RawRow {
+                    theta_i: r[0],
+                    phi_i: r[1],
+                    theta_o: r[2],
+                    phi_o: r[3],
+                    wavelength_nm: wl,
+                    value: 0.0,
+                    uncertainty: 1.0,
+                },
+            ));
+        }
+    }
+    raw
+}
+
+/// u_θ² = (δ·∂f/∂θi)² + (δ·∂f/∂θo)² at sample `s` (scalar-view group `group`), δ =
+/// `angle_deg`, by central differences of 0.05° (not finite where the model is not).
+fn angular_variance(
+    model: &Model,
+    flat: &[f64],
+    group: usize,
+    s: &crate::data::Sample,
+    angle_deg: f64,
+) -> f64 {
+    let h = 0.05f64.to_radians();
+    let dir = |t: f64, p: f64, below: bool| {
+        let mut d = crate::math::direction(t, p);
+        if below {
+            d.z = -d.z;
+        }
+        d
+    };
+    let below = model.kind == Kind::Btdf;
+    let at = |ti: f64, to: f64| {
+        model.eval(
+            flat,
+            group,
+            dir(ti, s.phi_i, false),
+            dir(to, s.phi_o, below),
+        )
+    };
+    let dfo = (at(s.theta_i, s.theta_o + h) - at(s.theta_i, s.theta_o - h)) / (2.0 * h);
+    let dfi = (at(s.theta_i + h, s.theta_o) - at(s.theta_i - h, s.theta_o)) / (2.0 * h);
+    let d = angle_deg.to_radians();
+    (d * dfo).powi(2) + (d * dfi).powi(2)
+}
+
+/// The synthetic data set's source, material and header: what made it.
+fn describe(
+    ds: &mut Dataset,
+    model: &Model,
+    flat: &[f64],
+    noise: Noise,
+    angle_deg: f64,
+    seed: u64,
+    material: &str,
+) {
     ds.source = std::path::PathBuf::from(material);
     ds.meta.insert("material".into(), material.into());
     ds.meta.insert("kind".into(), model.kind.to_string());
@@ -382,5 +450,4 @@ pub fn synthesize_angular(
         format!("rel={} abs={}{angular}", noise.rel, noise.abs),
     );
     ds.meta.insert("synth_seed".into(), seed.to_string());
-    Ok(ds)
 }

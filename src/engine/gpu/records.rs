@@ -84,24 +84,9 @@ impl Records {
     ) -> Result<Records> {
         let cb = wgsl::record_channels(model);
         let floats = 4 * wgsl::record_texels(cb);
-        let mut records: Vec<f32> = Vec::new();
-        let mut slot_sample: Vec<u32> = Vec::new();
-        let mut problem_records = Vec::with_capacity(problems.len());
-        let mut mu_tables = Vec::with_capacity(problems.len());
-        for (problem, terms) in problems.iter().zip(terms) {
-            let first = (records.len() / floats) as u32;
-            mu_tables.push(write(
-                cb,
-                floats,
-                model,
-                problem.data,
-                terms,
-                &mut records,
-                &mut slot_sample,
-            )?);
-            problem_records.push(first..(records.len() / floats) as u32);
-        }
-        let n_records = records.len() / floats;
+        let laid = lay_out(cb, floats, model, problems, terms)?;
+        let problem_records = laid.problem_records;
+        let n_records = laid.records.len() / floats;
         anyhow::ensure!(
             n_records < u32::MAX as usize / cb,
             "{n_records} GPU records are more than one batch numbers (use --backend cpu)"
@@ -111,75 +96,13 @@ impl Records {
             .zip(terms)
             .map(|(r, t)| {
                 let slots = r.start as usize * cb..r.end as usize * cb;
-                RowTerms::new(t, slot_sample[slots].to_vec())
+                RowTerms::new(t, laid.slot_sample[slots].to_vec())
             })
             .collect();
-        drop(slot_sample);
-        // `tables`: 3 entries per problem, then where each problem's μ table starts; there,
-        // its length, then its values (f32 bits).
-        let mut tables: Vec<u32> = Vec::with_capacity(4 * problems.len());
-        for (r, p) in problem_records.iter().zip(problems) {
-            tables.extend([r.start, r.end, p.data.len() as u32]);
-        }
-        let mut at = tables.len() + problems.len();
-        for table in &mu_tables {
-            tables.push(at as u32);
-            at += 1 + table.len();
-        }
-        for table in &mu_tables {
-            tables.push(table.len() as u32);
-            tables.extend(table.iter().map(|m| m.to_bits()));
-        }
-        // Segments: whole rows of a texture each (but the last), cut from the records in
-        // place: the records are padded to whole rows once, so no segment is copied.
-        let rows_max = device.limits.max_texture_dimension_2d as usize;
-        let per_segment = if n_records <= wgsl::RECORDS_PER_ROW {
-            n_records.max(1)
-        } else {
-            let rows = segment_records
-                .div_ceil(wgsl::RECORDS_PER_ROW)
-                .clamp(1, rows_max);
-            rows * wgsl::RECORDS_PER_ROW
-        };
-        let padded = if n_records <= wgsl::RECORDS_PER_ROW {
-            n_records.max(1)
-        } else {
-            n_records.next_multiple_of(wgsl::RECORDS_PER_ROW)
-        };
-        records.resize(padded * floats, 0.0);
-        let mut segments = Vec::new();
-        let mut start = 0;
-        loop {
-            let end = (start + per_segment).min(padded);
-            segments.push(Segment {
-                range: start as u32..(end.min(n_records)) as u32,
-                view: texture(
-                    device,
-                    cb,
-                    &records[start * floats..end * floats],
-                    end - start,
-                ),
-            });
-            start = end;
-            if start >= n_records {
-                break;
-            }
-        }
-        drop(records);
-        let mut lut: Vec<f32> = model
-            .nodes()
-            .iter()
-            .find_map(|n| n.bsdf.lut())
-            .unwrap_or_else(|| vec![0.0]);
-        let lut_rows = lut.len().div_ceil(LUT_WIDTH).max(1);
-        lut.resize(lut_rows * LUT_WIDTH, 0.0);
-        let lut = device.texture(
-            "lut",
-            LUT_WIDTH,
-            lut_rows,
-            wgpu::TextureFormat::R32Float,
-            bytemuck::cast_slice(&lut),
-        );
+        drop(laid.slot_sample);
+        let tables = table_words(&problem_records, problems, &laid.mu_tables);
+        let segments = segments(device, cb, laid.records, segment_records);
+        let lut = lut_texture(device, model);
         let tables = device.buffer_init(
             "tables",
             bytemuck::cast_slice(&tables),
@@ -191,7 +114,7 @@ impl Records {
             problem_records,
             rows,
             samples: problems.iter().map(|p| p.data.len()).collect(),
-            mu_tables: mu_tables.iter().all(|t| !t.is_empty()),
+            mu_tables: laid.mu_tables.iter().all(|t| !t.is_empty()),
             segments,
             tables,
             lut,
@@ -204,6 +127,141 @@ impl Records {
         let lo = r.start.max(window.start).min(r.end);
         lo..r.end.min(window.end).max(lo)
     }
+}
+
+/// Every problem's records, one after the other, as [`write`] lays them out.
+struct LaidOut {
+    /// The records (`floats` numbers each).
+    records: Vec<f32>,
+    /// Per record slot, the sample it holds (NO_SAMPLE for none).
+    slot_sample: Vec<u32>,
+    /// Per problem, its records.
+    problem_records: Vec<Range<u32>>,
+    /// Per problem, its μ table (empty where it has none).
+    mu_tables: Vec<Vec<f32>>,
+}
+
+/// The records of every problem, in order.
+fn lay_out(
+    cb: usize,
+    floats: usize,
+    model: &Model,
+    problems: &[Problem],
+    terms: &[LossTerms],
+) -> Result<LaidOut> {
+    let mut records: Vec<f32> = Vec::new();
+    let mut slot_sample: Vec<u32> = Vec::new();
+    let mut problem_records = Vec::with_capacity(problems.len());
+    let mut mu_tables = Vec::with_capacity(problems.len());
+    for (problem, terms) in problems.iter().zip(terms) {
+        let first = (records.len() / floats) as u32;
+        mu_tables.push(write(
+            cb,
+            floats,
+            model,
+            problem.data,
+            terms,
+            &mut records,
+            &mut slot_sample,
+        )?);
+        problem_records.push(first..(records.len() / floats) as u32);
+    }
+    Ok(LaidOut {
+        records,
+        slot_sample,
+        problem_records,
+        mu_tables,
+    })
+}
+
+/// `tables`: 3 entries per problem, then where each problem's μ table starts; there,
+/// its length, then its values (f32 bits).
+fn table_words(
+    problem_records: &[Range<u32>],
+    problems: &[Problem],
+    mu_tables: &[Vec<f32>],
+) -> Vec<u32> {
+    let mut tables: Vec<u32> = Vec::with_capacity(4 * problems.len());
+    for (r, p) in problem_records.iter().zip(problems) {
+        tables.extend([r.start, r.end, p.data.len() as u32]);
+    }
+    let mut at = tables.len() + problems.len();
+    for table in mu_tables {
+        tables.push(at as u32);
+        at += 1 + table.len();
+    }
+    for table in mu_tables {
+        tables.push(table.len() as u32);
+        tables.extend(table.iter().map(|m| m.to_bits()));
+    }
+    tables
+}
+
+/// The records (CB channel slots each) as textures of at most `segment_records` records
+/// (and the device's texture limit): whole rows of a texture each (but the last), cut
+/// from the records in place: the records are padded to whole rows once, so no segment
+/// is copied.
+fn segments(
+    device: &Device,
+    cb: usize,
+    mut records: Vec<f32>,
+    segment_records: usize,
+) -> Vec<Segment> {
+    let floats = 4 * wgsl::record_texels(cb);
+    let n_records = records.len() / floats;
+    let rows_max = device.limits.max_texture_dimension_2d as usize;
+    let per_segment = if n_records <= wgsl::RECORDS_PER_ROW {
+        n_records.max(1)
+    } else {
+        let rows = segment_records
+            .div_ceil(wgsl::RECORDS_PER_ROW)
+            .clamp(1, rows_max);
+        rows * wgsl::RECORDS_PER_ROW
+    };
+    let padded = if n_records <= wgsl::RECORDS_PER_ROW {
+        n_records.max(1)
+    } else {
+        n_records.next_multiple_of(wgsl::RECORDS_PER_ROW)
+    };
+    records.resize(padded * floats, 0.0);
+    let mut segments = Vec::new();
+    let mut start = 0;
+    loop {
+        let end = (start + per_segment).min(padded);
+        segments.push(Segment {
+            range: start as u32..(end.min(n_records)) as u32,
+            view: texture(
+                device,
+                cb,
+                &records[start * floats..end * floats],
+                end - start,
+            ),
+        });
+        start = end;
+        if start >= n_records {
+            break;
+        }
+    }
+    segments
+}
+
+/// The model's lookup table (one entry where it has none), as rows of `LUT_WIDTH`
+/// entries of an R32F texture.
+fn lut_texture(device: &Device, model: &Model) -> wgpu::TextureView {
+    let mut lut: Vec<f32> = model
+        .nodes()
+        .iter()
+        .find_map(|n| n.bsdf.lut())
+        .unwrap_or_else(|| vec![0.0]);
+    let lut_rows = lut.len().div_ceil(LUT_WIDTH).max(1);
+    lut.resize(lut_rows * LUT_WIDTH, 0.0);
+    device.texture(
+        "lut",
+        LUT_WIDTH,
+        lut_rows,
+        wgpu::TextureFormat::R32Float,
+        bytemuck::cast_slice(&lut),
+    )
 }
 
 /// `n` records (`chunk`, whole rows of `wgsl::RECORDS_PER_ROW` records, or fewer records

@@ -50,6 +50,24 @@ pub(super) struct Layout {
     pub rows: Vec<usize>,
 }
 
+/// A submission's outputs as planned: their layout, each candidate's (problem, first
+/// value) for the kernels, and the sizes (4-byte words) of `out` and `normal`.
+struct Outputs {
+    layout: Layout,
+    owners: Vec<u32>,
+    /// Costs (candidate × tile) or values.
+    out_len: usize,
+    /// Normal-equation groups (0 but in a normal pass).
+    groups: usize,
+    normal_len: usize,
+}
+
+/// The (x, y) workgroup grid of `total` workgroups: at most `MAX_GROUPS_X` across.
+fn grid(total: u32) -> (u32, u32) {
+    let x = total.clamp(1, MAX_GROUPS_X);
+    (x, total.div_ceil(x))
+}
+
 /// What receives a submission's outputs: their layout, the f32 numbers read back, and
 /// the records (whose host side the reductions read).
 pub(super) type ReadBack<'r> = dyn FnMut(&Layout, &[f32], &Records) -> Result<()> + 'r;
@@ -261,6 +279,8 @@ impl<'a> Runner<'a> {
         }
     }
 
+    /// One submission of `pass` over `window` of segment `seg` (see [`Self::submit`]),
+    /// logged with its size and time.
     #[allow(clippy::too_many_arguments)]
     fn submit_once(
         &mut self,
@@ -273,36 +293,24 @@ impl<'a> Runner<'a> {
         each: &mut ReadBack,
     ) -> Result<()> {
         let started = std::time::Instant::now();
-        let p = self.model.dim;
-        let n = problems.len();
-        let cb = records.slots;
-        let in_window: Vec<Range<u32>> = problems
-            .iter()
-            .map(|&q| records.in_window(q, &window))
-            .collect();
-        let longest = in_window.iter().map(|r| r.len()).max().unwrap_or(0);
-        if longest == 0 {
+        let Some(outputs) = self.plan_outputs(pass, &window, problems, records) else {
             return Ok(());
-        }
-        let n_tiles = longest.div_ceil(self.tile as usize);
-        let mut rows = Vec::with_capacity(n);
-        let mut owners = Vec::with_capacity(2 * n);
-        let mut values_len = 0;
-        for (r, &q) in in_window.iter().zip(problems) {
-            rows.push(values_len);
-            owners.extend([q as u32, values_len as u32]);
-            values_len += r.len() * cb;
-        }
-        let (out_len, groups) = match pass {
-            Pass::Costs => (n * n_tiles, 0),
-            Pass::Values => (values_len, 0),
-            Pass::Normal { groups } => (values_len, groups),
         };
-        let normal_len = groups * n_tiles * normal_entries(p);
-        let poisoned = if pass == Pass::Costs { out_len } else { 0 }.max(normal_len);
+        let poisoned = if pass == Pass::Costs {
+            outputs.out_len
+        } else {
+            0
+        }
+        .max(outputs.normal_len);
         self.ensure_io(
             records,
-            [params.len(), owners.len(), out_len, normal_len, poisoned],
+            [
+                params.len(),
+                outputs.owners.len(),
+                outputs.out_len,
+                outputs.normal_len,
+                poisoned,
+            ],
         )?;
         let evaluate_pipes = match pass {
             Pass::Costs => self.loss_pipes()?,
@@ -329,40 +337,15 @@ impl<'a> Runner<'a> {
             )?),
             None => None,
         };
-        let grid = |total: u32| {
-            let x = total.clamp(1, MAX_GROUPS_X);
-            (x, total.div_ceil(x))
-        };
-        let (gx, gy) = grid((n as u32).div_ceil(self.shape.candidates_per_workgroup()));
-        let (nx, ny) = grid(groups as u32);
-        let mut dims = Dims::default();
-        dims.set(Dim::NCandidates, n as u32)
-            .set(Dim::NProblems, records.problem_records.len() as u32)
-            .set(Dim::Dim, p as u32)
-            .set(Dim::GroupsX, gx)
-            .set(Dim::NGroups, groups as u32)
-            .set(Dim::NormalGroupsX, nx)
-            .set(Dim::ProbeTrips, 2)
-            .set(Dim::SegFirst, records.segments[seg].range.start)
-            .set(Dim::WinFirst, window.start)
-            .set(Dim::WinEnd, window.end)
-            .set(Dim::Tile, self.tile)
-            .set(Dim::NTiles, n_tiles as u32);
-        let io = self.io.as_ref().expect("io buffers allocated");
-        let mut rec = Recorder::new(&self.gpu.device);
-        rec.upload(&self.dims, bytemuck::bytes_of(&dims));
-        rec.upload(&io.params, bytemuck::cast_slice(params));
-        rec.upload(&io.owners, bytemuck::cast_slice(&owners));
-        // The sums poisoned on the device, from the evaluator's poison buffer (writing them
-        // from the host cost two copies of every output per submission, into wgpu's
-        // staging, then into the buffer: 4 % of the default sweep's CPU time on lavapipe),
-        // so that a sum a workgroup failed to write reads as loops cut short. A values
-        // pass writes every slot of its window (its invocations mark their own cut-short
-        // tiles): a copy of that size per window would cost as much as reading it.
-        if pass == Pass::Costs {
-            rec.copy(&io.poison, &io.out, (out_len * 4) as u64);
-        }
-        rec.copy(&io.poison, &io.normal, (normal_len * 4) as u64);
+        let n_tiles = outputs.layout.n_tiles;
+        let (dims, (gx, gy), (nx, ny)) = self.dims(
+            problems.len(),
+            outputs.groups,
+            seg,
+            &window,
+            n_tiles,
+            records,
+        );
         let mut dispatches = vec![Dispatch {
             pipeline: evaluate,
             grid: [gx, gy, n_tiles as u32],
@@ -373,24 +356,21 @@ impl<'a> Runner<'a> {
                 grid: [nx, ny, n_tiles as u32],
             });
         }
-        rec.compute(&io.bind_groups[seg], &dispatches);
+        let io = self.io.as_ref().expect("io buffers allocated");
+        let rec = self.record(io, pass, seg, &dims, params, &outputs, &dispatches);
         let (source, len) = match pass {
-            Pass::Normal { .. } => (&io.normal, normal_len),
-            _ => (&io.out, out_len),
-        };
-        let layout = Layout {
-            n_tiles,
-            records: in_window,
-            rows,
+            Pass::Normal { .. } => (&io.normal, outputs.normal_len),
+            _ => (&io.out, outputs.out_len),
         };
         let bytes = (len * 4) as u64;
         let staging = (!self.gpu.device.mappable).then_some(&io.staging);
+        let layout = &outputs.layout;
         let result = rec.submit_and_read(source, staging, bytes, |raw| {
             let data: &[f32] = bytemuck::cast_slice(raw);
             if data.iter().any(|v| v.to_bits() == LOOPS_CUT_SHORT) {
                 return Err(LoopsCutShort.into());
             }
-            each(&layout, data, records)
+            each(layout, data, records)
         })?;
         self.read_back += bytes;
         let evaluations: u64 = layout
@@ -400,8 +380,116 @@ impl<'a> Runner<'a> {
             .map(|(r, &q)| records.samples_in(q, r))
             .sum();
         self.gpu
-            .log_submission(n, evaluations, started.elapsed().as_secs_f32());
+            .log_submission(problems.len(), evaluations, started.elapsed().as_secs_f32());
         result
+    }
+
+    /// Where each candidate's records and outputs lie in a submission of `pass` over
+    /// `window`, and the outputs' sizes; None where no problem has records there.
+    fn plan_outputs(
+        &self,
+        pass: Pass,
+        window: &Range<u32>,
+        problems: &[usize],
+        records: &Records,
+    ) -> Option<Outputs> {
+        let p = self.model.dim;
+        let n = problems.len();
+        let cb = records.slots;
+        let in_window: Vec<Range<u32>> = problems
+            .iter()
+            .map(|&q| records.in_window(q, window))
+            .collect();
+        let longest = in_window.iter().map(|r| r.len()).max().unwrap_or(0);
+        if longest == 0 {
+            return None;
+        }
+        let n_tiles = longest.div_ceil(self.tile as usize);
+        let mut rows = Vec::with_capacity(n);
+        let mut owners = Vec::with_capacity(2 * n);
+        let mut values_len = 0;
+        for (r, &q) in in_window.iter().zip(problems) {
+            rows.push(values_len);
+            owners.extend([q as u32, values_len as u32]);
+            values_len += r.len() * cb;
+        }
+        let (out_len, groups) = match pass {
+            Pass::Costs => (n * n_tiles, 0),
+            Pass::Values => (values_len, 0),
+            Pass::Normal { groups } => (values_len, groups),
+        };
+        Some(Outputs {
+            layout: Layout {
+                n_tiles,
+                records: in_window,
+                rows,
+            },
+            owners,
+            out_len,
+            groups,
+            normal_len: groups * n_tiles * normal_entries(p),
+        })
+    }
+
+    /// The kernels' dimensions for `n` candidates and `groups` normal-equation groups
+    /// over `window` of segment `seg` in `n_tiles` tiles, with the (x, y) dispatch grids
+    /// of the evaluating and the normal-equation kernels.
+    fn dims(
+        &self,
+        n: usize,
+        groups: usize,
+        seg: usize,
+        window: &Range<u32>,
+        n_tiles: usize,
+        records: &Records,
+    ) -> (Dims, (u32, u32), (u32, u32)) {
+        let (gx, gy) = grid((n as u32).div_ceil(self.shape.candidates_per_workgroup()));
+        let (nx, ny) = grid(groups as u32);
+        let mut dims = Dims::default();
+        dims.set(Dim::NCandidates, n as u32)
+            .set(Dim::NProblems, records.problem_records.len() as u32)
+            .set(Dim::Dim, self.model.dim as u32)
+            .set(Dim::GroupsX, gx)
+            .set(Dim::NGroups, groups as u32)
+            .set(Dim::NormalGroupsX, nx)
+            .set(Dim::ProbeTrips, 2)
+            .set(Dim::SegFirst, records.segments[seg].range.start)
+            .set(Dim::WinFirst, window.start)
+            .set(Dim::WinEnd, window.end)
+            .set(Dim::Tile, self.tile)
+            .set(Dim::NTiles, n_tiles as u32);
+        (dims, (gx, gy), (nx, ny))
+    }
+
+    /// A submission of `pass`: the dims, parameters and owners uploaded, the outputs
+    /// poisoned, and `dispatches` run over segment `seg`'s bind group.
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &self,
+        io: &Io,
+        pass: Pass,
+        seg: usize,
+        dims: &Dims,
+        params: &[f32],
+        outputs: &Outputs,
+        dispatches: &[Dispatch],
+    ) -> Recorder<'a> {
+        let mut rec = Recorder::new(&self.gpu.device);
+        rec.upload(&self.dims, bytemuck::bytes_of(dims));
+        rec.upload(&io.params, bytemuck::cast_slice(params));
+        rec.upload(&io.owners, bytemuck::cast_slice(&outputs.owners));
+        // The sums poisoned on the device, from the evaluator's poison buffer (writing them
+        // from the host cost two copies of every output per submission, into wgpu's
+        // staging, then into the buffer: 4 % of the default sweep's CPU time on lavapipe),
+        // so that a sum a workgroup failed to write reads as loops cut short. A values
+        // pass writes every slot of its window (its invocations mark their own cut-short
+        // tiles): a copy of that size per window would cost as much as reading it.
+        if pass == Pass::Costs {
+            rec.copy(&io.poison, &io.out, (outputs.out_len * 4) as u64);
+        }
+        rec.copy(&io.poison, &io.normal, (outputs.normal_len * 4) as u64);
+        rec.compute(&io.bind_groups[seg], dispatches);
+        rec
     }
 
     /// Grow the buffers to hold `[params, owners, out, normal, poison]` (in 4-byte words).
