@@ -263,6 +263,7 @@ impl Entry {
             build: Builder::Term(build),
             variants: &[],
             adds: &[],
+            mitsuba: None,
         }
     }
     /// A term without argument (`lambert`), in the default catalogue.
@@ -315,11 +316,19 @@ impl Entry {
             build: Builder::Suffix(build),
             variants: &[],
             adds: &[],
+            mitsuba: None,
         }
     }
     /// The term's argument names (`btdf(tr)`), each a catalogue model.
     pub const fn with_variants(self, variants: &'static [&'static str]) -> Entry {
         Entry { variants, ..self }
+    }
+    /// The model's exact Mitsuba 3 counterpart (`export --format mitsuba`).
+    pub const fn with_mitsuba(self, mitsuba: &'static MitsubaBsdf) -> Entry {
+        Entry {
+            mitsuba: Some(mitsuba),
+            ..self
+        }
     }
     /// The effects the model adds to others, and how (`diagnose`'s extensions).
     pub const fn adding(self, adds: &'static [Adds]) -> Entry {
@@ -345,6 +354,44 @@ pub struct Entry {
     /// The physical effects this model adds to another model, and how the extension is
     /// made ([`Adds`]); `diagnose` tries them where the data shows the effect missing.
     pub adds: &'static [Adds],
+    /// A Mitsuba 3 BSDF that evaluates exactly as this model (a leaf), if there is one.
+    pub mitsuba: Option<&'static MitsubaBsdf>,
+}
+
+/// A Mitsuba 3 `<bsdf>` equal to a leaf model: its plugin and its fields, each a fitted
+/// parameter or a constant (`export --format mitsuba` writes it).
+#[derive(Clone, Copy, Debug)]
+pub struct MitsubaBsdf {
+    /// The plugin (`type` attribute).
+    pub plugin: &'static str,
+    /// What it becomes, in a few words (listed by the export's messages).
+    pub summary: &'static str,
+    /// Why it is exact: the lines of the XML comment.
+    pub why: &'static [&'static str],
+    pub fields: &'static [MitsubaField],
+}
+
+/// One field of a [`MitsubaBsdf`].
+#[derive(Clone, Copy, Debug)]
+pub enum MitsubaField {
+    /// `<string name=… value=…/>`.
+    Text {
+        name: &'static str,
+        value: &'static str,
+    },
+    /// `<float name=…/>` from the model's shared parameter `param`.
+    Param {
+        name: &'static str,
+        param: &'static str,
+    },
+    /// `<float name=… value=…/>`, a constant.
+    Constant { name: &'static str, value: f64 },
+    /// `<rgb name=…/>` from the model's per-channel parameter `param` at the R, G, B
+    /// channels.
+    Rgb {
+        name: &'static str,
+        param: &'static str,
+    },
 }
 
 #[cfg(test)]

@@ -5,7 +5,10 @@
 //! Twin: `shaders/bsdf/ggx.wgsl`.
 
 use super::microfacet;
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{
+    each_direction, Bsdf, Channels, Children, Dir, Entry, MitsubaBsdf, MitsubaField, Node,
+    ParamDecl, Role, WgslFn,
+};
 use crate::data::Kind;
 use crate::math::fresnel_dielectric;
 use glam::DVec3;
@@ -112,4 +115,36 @@ pub const ENTRY: Entry = Entry::leaf(
     Role::SpecularLobe,
     "GGX microfacet reflection (Walter et al. 2007)",
     || Node::leaf(Ggx),
-);
+)
+.with_mitsuba(&MitsubaBsdf {
+    plugin: "roughconductor",
+    summary: "roughconductor with a real index (k = 0) and the GGX distribution",
+    why: &[
+        "f = ks F(wi.h; eta) D(h) G1(wi) G1(wo) / (4 cos_i cos_o) with GGX D and separable",
+        "Smith G1 (Walter et al. 2007): Mitsuba's roughconductor with the GGX distribution,",
+        "specular_reflectance ks and a real index (k = 0), whose conductor Fresnel term is",
+        "then exactly the dielectric one.",
+    ],
+    fields: &[
+        MitsubaField::Text {
+            name: "distribution",
+            value: "ggx",
+        },
+        MitsubaField::Param {
+            name: "alpha",
+            param: "alpha",
+        },
+        MitsubaField::Param {
+            name: "eta",
+            param: "eta",
+        },
+        MitsubaField::Constant {
+            name: "k",
+            value: 0.0,
+        },
+        MitsubaField::Rgb {
+            name: "specular_reflectance",
+            param: "ks",
+        },
+    ],
+});

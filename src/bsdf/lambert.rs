@@ -1,6 +1,9 @@
 //! Lambertian reflection: f = ρ/π. Twin: `shaders/lambert.wgsl`.
 
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
+use super::{
+    each_direction, Bsdf, Channels, Children, Dir, Entry, MitsubaBsdf, MitsubaField, Node,
+    ParamDecl, Role, WgslFn,
+};
 use crate::data::Kind;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
@@ -44,4 +47,13 @@ pub const ENTRY: Entry = Entry::leaf(
     Role::DiffuseBase,
     "Lambertian: f = rho/pi",
     || Node::leaf(Lambert),
-);
+)
+.with_mitsuba(&MitsubaBsdf {
+    plugin: "diffuse",
+    summary: "diffuse",
+    why: &["f = rho/pi: Mitsuba's diffuse BSDF with reflectance rho."],
+    fields: &[MitsubaField::Rgb {
+        name: "reflectance",
+        param: "rho",
+    }],
+});

@@ -9,7 +9,9 @@
 //! that the node functions read — the same layout on the CPU and the GPU.
 
 use crate::data::Kind;
-pub use decl::{Builder, Entry, InCatalogue, LobePart, ParamDecl, Role, Scale};
+pub use decl::{
+    Builder, Entry, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role, Scale,
+};
 use glam::DVec3;
 pub use registry::{
     base_arg, bases_of, build, catalogue, catalogue_for, every_spec, no_arg, spec_kind,

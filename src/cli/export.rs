@@ -2,7 +2,7 @@
 
 use crate::inference::saved::FitFile;
 use crate::output::files::{write_atomic, write_result};
-use crate::workflows::export::{self, Grid, MITSUBA_EXACT};
+use crate::workflows::export::{self, Grid};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -185,8 +185,8 @@ pub fn run(a: &ExportArgs) -> Result<()> {
                 "wrote {} (Mitsuba 3 <bsdf> of {}: {})",
                 a.out.display(),
                 fit.model.spec,
-                MITSUBA_EXACT
-                    .iter()
+                export::mitsuba_exact()
+                    .into_iter()
                     .find(|(n, _)| *n == fit.model.root.bsdf.name())
                     .map_or("", |(_, to)| to)
             );

@@ -5,6 +5,7 @@
 //! (`--format mitsuba`). Everything runs on the CPU reference ([`crate::bsdf::Model`] in
 //! f64): no GPU is needed.
 
+use crate::bsdf::MitsubaField;
 use crate::data::readers::merl;
 use crate::data::{count, Dataset, Kind, RawRow, ReadOptions, Sample};
 use crate::inference::saved::{same_plane, FitFile, Propagated, Propagator, SavedFit};
@@ -486,21 +487,21 @@ pub fn merl_table(fit: &SavedFit, rgb: [usize; 3]) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// The models with an exact Mitsuba 3 counterpart, and what they become.
-pub const MITSUBA_EXACT: &[(&str, &str)] = &[
-    ("lambert", "diffuse"),
-    (
-        "ggx",
-        "roughconductor with a real index (k = 0) and the GGX distribution",
-    ),
-];
+/// The models with an exact Mitsuba 3 counterpart (their declarations say so), and what
+/// they become.
+pub fn mitsuba_exact() -> Vec<(&'static str, &'static str)> {
+    crate::bsdf::registry::all()
+        .into_iter()
+        .filter_map(|e| e.mitsuba.map(|m| (e.name, m.summary)))
+        .collect()
+}
 
-/// A Mitsuba 3 `<bsdf>` that evaluates exactly as the fitted model (docs/export.md).
+/// A Mitsuba 3 `<bsdf>` that evaluates exactly as the fitted model (docs/export.md): the
+/// counterpart its declaration names, with the fitted values.
 pub fn mitsuba_xml(fit: &SavedFit, rgb: [usize; 3], fit_path: &str) -> Result<String> {
     let m = &fit.model;
     let leaf = m.root.children.is_empty();
-    let name = m.root.bsdf.name();
-    let exact = MITSUBA_EXACT
+    let exact = mitsuba_exact()
         .iter()
         .map(|(n, to)| format!("{n} (→ {to})"))
         .collect::<Vec<_>>()
@@ -517,9 +518,9 @@ pub fn mitsuba_xml(fit: &SavedFit, rgb: [usize; 3], fit_path: &str) -> Result<St
             "a bsdfit BTDF is the transmission of a slab measured in air; Mitsuba's roughdielectric is one interface into a medium, with a reflection lobe and the η² radiance scaling",
         ));
     }
-    if !leaf || !MITSUBA_EXACT.iter().any(|(n, _)| *n == name) {
+    let Some(target) = m.root.bsdf.entry().mitsuba.filter(|_| leaf) else {
         return Err(refuse("no Mitsuba 3 BSDF has its formula"));
-    }
+    };
     let value = |pname: &str, g: usize| -> f64 {
         let j = m
             .params
@@ -552,34 +553,30 @@ pub fn mitsuba_xml(fit: &SavedFit, rgb: [usize; 3], fit_path: &str) -> Result<St
         m.spec,
         fit_path.replace("--", "- -")
     );
-    match name {
-        "lambert" => {
-            x += "     f = rho/pi: Mitsuba's diffuse BSDF with reflectance rho. -->\n";
-            x += "<bsdf type=\"diffuse\" version=\"3.0.0\">\n";
-            x += &format!(
-                "    <rgb name=\"reflectance\" value=\"{}\"/>\n",
-                rgb_of("rho")
-            );
-        }
-        "ggx" => {
-            x += "     f = ks F(wi.h; eta) D(h) G1(wi) G1(wo) / (4 cos_i cos_o) with GGX D and separable\n";
-            x += "     Smith G1 (Walter et al. 2007): Mitsuba's roughconductor with the GGX distribution,\n";
-            x += "     specular_reflectance ks and a real index (k = 0), whose conductor Fresnel term is\n";
-            x += "     then exactly the dielectric one. -->\n";
-            x += "<bsdf type=\"roughconductor\" version=\"3.0.0\">\n";
-            x += "    <string name=\"distribution\" value=\"ggx\"/>\n";
-            x += &format!(
-                "    <float name=\"alpha\" value=\"{}\"/>\n",
-                value("alpha", 0)
-            );
-            x += &format!("    <float name=\"eta\" value=\"{}\"/>\n", value("eta", 0));
-            x += "    <float name=\"k\" value=\"0\"/>\n";
-            x += &format!(
-                "    <rgb name=\"specular_reflectance\" value=\"{}\"/>\n",
-                rgb_of("ks")
-            );
-        }
-        _ => unreachable!("checked against MITSUBA_EXACT"),
+    let (last, first) = target.why.split_last().unwrap_or((&"", &[]));
+    for line in first {
+        x += &format!("     {line}\n");
+    }
+    x += &format!("     {last} -->\n");
+    x += &format!("<bsdf type=\"{}\" version=\"3.0.0\">\n", target.plugin);
+    for field in target.fields {
+        x += &match *field {
+            MitsubaField::Text { name, value } => {
+                format!("    <string name=\"{name}\" value=\"{value}\"/>\n")
+            }
+            MitsubaField::Param { name, param } => {
+                format!(
+                    "    <float name=\"{name}\" value=\"{}\"/>\n",
+                    value(param, 0)
+                )
+            }
+            MitsubaField::Constant { name, value } => {
+                format!("    <float name=\"{name}\" value=\"{value}\"/>\n")
+            }
+            MitsubaField::Rgb { name, param } => {
+                format!("    <rgb name=\"{name}\" value=\"{}\"/>\n", rgb_of(param))
+            }
+        };
     }
     x += "</bsdf>\n";
     Ok(x)
