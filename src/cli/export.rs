@@ -63,6 +63,18 @@ pub fn run(a: &ExportArgs) -> Result<()> {
     crate::output::check_writable_file(&a.out, "--out")?;
     let fit_path = a.fit.display().to_string();
     let file = FitFile::read(&a.fit)?;
+    check_format_options(a)?;
+    match a.format {
+        Format::Rgl => write_rgl(a, file, &fit_path),
+        Format::Tabulated => write_tabulated(a, file, &fit_path),
+        Format::Merl => write_merl(a, file, &fit_path),
+        Format::Mitsuba => write_mitsuba(a, file, &fit_path),
+    }
+}
+
+/// Refuse the options that the chosen format would silently ignore (the grid options
+/// outside tabulated, --spectral outside rgl): a user who gave them expected an effect.
+fn check_format_options(a: &ExportArgs) -> Result<()> {
     if a.format != Format::Tabulated {
         for (name, v) in [
             ("--theta-step", a.theta_step != Grid::default().theta_step),
@@ -76,123 +88,142 @@ pub fn run(a: &ExportArgs) -> Result<()> {
         !a.spectral || a.format == Format::Rgl,
         "--spectral applies to --format rgl only"
     );
-    match a.format {
-        Format::Rgl => {
-            let fit = file.select(a.plane, &fit_path)?;
-            let channels = if a.spectral {
-                anyhow::ensure!(a.rgb.is_none(), "--rgb and --spectral exclude each other");
-                crate::workflows::rgl::Channels::Spectral
-            } else {
-                crate::workflows::rgl::Channels::Rgb(export::rgb_channels(&fit, a.rgb.as_deref())?)
-            };
-            let description = format!(
-                "bsdfit fit of {} to {}: {}",
-                fit.model.spec,
-                fit.material,
-                fit.params_text()
-            );
-            let bytes = crate::workflows::rgl::rgl_file(&fit, channels, &description)?;
-            write_atomic(&a.out, &bytes)?;
-            eprintln!(
-                "wrote {} (RGL .bsdf of {}, {} incidence angles × {} × {} half-vector cells, {})",
-                a.out.display(),
-                fit.model.spec,
-                crate::workflows::rgl::theta_i_nodes().len(),
-                crate::workflows::rgl::PHI_M_NODES,
-                crate::workflows::rgl::THETA_M_NODES,
-                if a.spectral {
-                    format!("spectral at {:?} nm", fit.channels)
-                } else {
-                    "RGB".into()
-                }
-            );
-            note_fit_warnings(&fit.warnings);
+    Ok(())
+}
+
+/// `--format rgl`: the RGL `.bsdf` file of one fit, RGB or (--spectral) every channel.
+fn write_rgl(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    let fit = file.select(a.plane, fit_path)?;
+    let channels = if a.spectral {
+        anyhow::ensure!(a.rgb.is_none(), "--rgb and --spectral exclude each other");
+        crate::workflows::rgl::Channels::Spectral
+    } else {
+        crate::workflows::rgl::Channels::Rgb(export::rgb_channels(&fit, a.rgb.as_deref())?)
+    };
+    let description = format!(
+        "bsdfit fit of {} to {}: {}",
+        fit.model.spec,
+        fit.material,
+        fit.params_text()
+    );
+    let bytes = crate::workflows::rgl::rgl_file(&fit, channels, &description)?;
+    write_atomic(&a.out, &bytes)?;
+    eprintln!(
+        "wrote {} (RGL .bsdf of {}, {} incidence angles × {} × {} half-vector cells, {})",
+        a.out.display(),
+        fit.model.spec,
+        crate::workflows::rgl::theta_i_nodes().len(),
+        crate::workflows::rgl::PHI_M_NODES,
+        crate::workflows::rgl::THETA_M_NODES,
+        if a.spectral {
+            format!("spectral at {:?} nm", fit.channels)
+        } else {
+            "RGB".into()
         }
-        Format::Tabulated => {
-            anyhow::ensure!(
-                a.rgb.is_none(),
-                "--rgb applies to --format merl and mitsuba"
-            );
-            let file = match a.plane {
-                Some(p) => FitFile::Single(Box::new(file.select(Some(p), &fit_path)?)),
-                None => file,
-            };
-            let grid = Grid {
-                theta_step: a.theta_step,
-                theta_max: a.theta_max,
-                phi_step: a.phi_step,
-            };
-            let channels = export::fit_channels(&file);
-            let planes = export::fit_planes(&file);
-            let rows = grid.rows(planes.as_deref(), channels.len())?;
-            let kind = match &file {
-                FitFile::Single(f) => f.model.kind,
-                FitFile::PerAxis(v) => v[0].1.model.kind,
-            };
-            let grid_text = format!(
-                "θi, θ{} = 0…{}° by {}°, {}",
-                if kind == crate::data::Kind::Btdf {
-                    "t"
-                } else {
-                    "o"
-                },
-                a.theta_max,
-                a.theta_step,
-                match &planes {
-                    Some(p) => format!(
-                        "on the fit's planes φ = {}° (and + 180°)",
-                        p.iter()
-                            .map(|x| x.to_string())
-                            .collect::<Vec<_>>()
-                            .join("°, ")
-                    ),
-                    None => format!("φo = 0…360° by {}°, φi = 0", a.phi_step),
-                }
-            );
-            let what = format!("a grid ({grid_text})");
-            let ds = export::geometry_dataset(kind, &rows, &channels, "grid")?;
-            let mut p = export::predict(&file, &fit_path, &ds, &what)?;
-            p.data.meta.insert("grid".into(), grid_text);
-            for w in &p.warnings {
-                eprintln!("warning: {w}");
-            }
-            write_result(&a.out, &p.data.to_csv(), false)?;
-            eprintln!(
-                "wrote {} ({} on {what})",
-                a.out.display(),
-                crate::data::count(p.data.len(), "sample", "samples"),
-            );
-        }
-        Format::Merl => {
-            let fit = file.select(a.plane, &fit_path)?;
-            let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
-            let bytes = export::merl_table(&fit, rgb)?;
-            write_atomic(&a.out, &bytes)?;
-            eprintln!(
-                "wrote {} (MERL table of {}: R, G, B = fit channels {} nm)",
-                a.out.display(),
-                fit.model.spec,
-                rgb.map(|g| fit.channels[g].to_string()).join(", ")
-            );
-            note_fit_warnings(&fit.warnings);
-        }
-        Format::Mitsuba => {
-            let fit = file.select(a.plane, &fit_path)?;
-            let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
-            let xml = export::mitsuba_xml(&fit, rgb, &fit_path)?;
-            write_result(&a.out, &xml, true)?;
-            eprintln!(
-                "wrote {} (Mitsuba 3 <bsdf> of {}: {})",
-                a.out.display(),
-                fit.model.spec,
-                export::mitsuba_exact()
-                    .into_iter()
-                    .find(|(n, _)| *n == fit.model.root.bsdf.name())
-                    .map_or("", |(_, to)| to)
-            );
-            note_fit_warnings(&fit.warnings);
-        }
+    );
+    note_fit_warnings(&fit.warnings);
+    Ok(())
+}
+
+/// `--format tabulated`: the model and its propagated uncertainty on the grid, as a v1
+/// CSV (a per-plane report whole, or the fit of --plane).
+fn write_tabulated(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    anyhow::ensure!(
+        a.rgb.is_none(),
+        "--rgb applies to --format merl and mitsuba"
+    );
+    let file = match a.plane {
+        Some(p) => FitFile::Single(Box::new(file.select(Some(p), fit_path)?)),
+        None => file,
+    };
+    let grid = Grid {
+        theta_step: a.theta_step,
+        theta_max: a.theta_max,
+        phi_step: a.phi_step,
+    };
+    let channels = export::fit_channels(&file);
+    let planes = export::fit_planes(&file);
+    let rows = grid.rows(planes.as_deref(), channels.len())?;
+    let kind = match &file {
+        FitFile::Single(f) => f.model.kind,
+        FitFile::PerAxis(v) => v[0].1.model.kind,
+    };
+    let grid_text = grid_words(a, kind, planes.as_deref());
+    let what = format!("a grid ({grid_text})");
+    let ds = export::geometry_dataset(kind, &rows, &channels, "grid")?;
+    let mut p = export::predict(&file, fit_path, &ds, &what)?;
+    p.data.meta.insert("grid".into(), grid_text);
+    for w in &p.warnings {
+        eprintln!("warning: {w}");
     }
+    write_result(&a.out, &p.data.to_csv(), false)?;
+    eprintln!(
+        "wrote {} ({} on {what})",
+        a.out.display(),
+        crate::data::count(p.data.len(), "sample", "samples"),
+    );
+    Ok(())
+}
+
+/// The tabulated grid in words, for the file's `grid` header and the closing message:
+/// "θi, θo = 0…85° by 5°, φo = 0…360° by 15°, φi = 0" (θt for a BTDF; the fit's planes
+/// instead of the φo sweep for a per-plane model).
+fn grid_words(a: &ExportArgs, kind: crate::data::Kind, planes: Option<&[f64]>) -> String {
+    format!(
+        "θi, θ{} = 0…{}° by {}°, {}",
+        if kind == crate::data::Kind::Btdf {
+            "t"
+        } else {
+            "o"
+        },
+        a.theta_max,
+        a.theta_step,
+        match planes {
+            Some(p) => format!(
+                "on the fit's planes φ = {}° (and + 180°)",
+                p.iter()
+                    .map(|x| x.to_string())
+                    .collect::<Vec<_>>()
+                    .join("°, ")
+            ),
+            None => format!("φo = 0…360° by {}°, φi = 0", a.phi_step),
+        }
+    )
+}
+
+/// `--format merl`: the MERL binary table of one BRDF fit, R, G, B from its channels.
+fn write_merl(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    let fit = file.select(a.plane, fit_path)?;
+    let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
+    let bytes = export::merl_table(&fit, rgb)?;
+    write_atomic(&a.out, &bytes)?;
+    eprintln!(
+        "wrote {} (MERL table of {}: R, G, B = fit channels {} nm)",
+        a.out.display(),
+        fit.model.spec,
+        rgb.map(|g| fit.channels[g].to_string()).join(", ")
+    );
+    note_fit_warnings(&fit.warnings);
+    Ok(())
+}
+
+/// `--format mitsuba`: the Mitsuba 3 `<bsdf>` of one fit whose model has an exact
+/// counterpart ([`export::mitsuba_exact`]).
+fn write_mitsuba(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    let fit = file.select(a.plane, fit_path)?;
+    let rgb = export::rgb_channels(&fit, a.rgb.as_deref())?;
+    let xml = export::mitsuba_xml(&fit, rgb, fit_path)?;
+    write_result(&a.out, &xml, true)?;
+    eprintln!(
+        "wrote {} (Mitsuba 3 <bsdf> of {}: {})",
+        a.out.display(),
+        fit.model.spec,
+        export::mitsuba_exact()
+            .into_iter()
+            .find(|(n, _)| *n == fit.model.root.bsdf.name())
+            .map_or("", |(_, to)| to)
+    );
+    note_fit_warnings(&fit.warnings);
     Ok(())
 }
 

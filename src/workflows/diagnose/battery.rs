@@ -22,7 +22,7 @@
 use super::extensions::{embed, extensions};
 use super::score::new_param_indices;
 use super::{diagnose, DiagnoseOptions, Effect};
-use crate::bsdf::{every_spec, LobePart, Model};
+use crate::bsdf::{every_spec, LobePart, Model, ParamDecl};
 use crate::data::{Dataset, Kind};
 use crate::engine::Backend;
 use crate::workflows::synth::{synthesize, Noise};
@@ -234,83 +234,196 @@ pub fn generate(
     let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for _attempt in 0..200 {
-        // The kinds the effect has rules for (any kind for a null case).
-        let kinds: Vec<Kind> = match hidden {
-            Some(e) => e.kinds(),
-            None => vec![Kind::Brdf, Kind::Btdf],
-        };
-        let kind = *kinds.choose(&mut rng).ok_or_else(|| anyhow!("no rule"))?;
-        let min_planes = hidden.map_or(1, |e| e.min_planes(kind));
-        let family = match (kind, min_planes) {
-            (_, 2) => Family::TwoPlane,
-            (Kind::Btdf, _) => [Family::InPlane, Family::TwoPlane][rng.random_range(0..2)],
-            _ => [Family::InPlane, Family::TwoPlane, Family::Hemisphere][rng.random_range(0..3)],
-        };
-        let channels = match kind {
-            Kind::Brdf if rng.random::<f64>() < 0.5 => 3,
-            _ => 1,
-        };
-        let wavelengths: Vec<f64> = if channels == 3 {
-            vec![450.0, 550.0, 650.0]
-        } else {
-            vec![550.0]
-        };
-        let (lo, hi) = (opts.samples.0.max(20) as f64, opts.samples.1.max(20) as f64);
-        let target = (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp() as usize;
-        let (geometry, rows) = rows(kind, family, target / channels, &mut rng);
-        let noise = Noise {
-            rel: rng.random_range(0.01..0.05),
-            abs: rng.random_range(1e-4..1e-3),
-        };
-        // A data set on these rows, to see which models parse and extend here.
-        let probe_spec = if kind == Kind::Brdf {
-            "lambert"
-        } else {
-            "btdf(tr)"
-        };
-        let probe_model = Model::parse(probe_spec, channels)?;
-        let probe = synthesize(
-            &probe_model,
-            &probe_model.defaults(),
-            &rows,
-            &wavelengths,
-            noise,
-            seed,
-            "probe",
-        )
-        .map_err(|e| anyhow!(e))?;
-        // The start S0 and the truth S1.
-        let mut pairs: Vec<(String, String)> = Vec::new();
-        for s0 in every_spec(kind) {
-            if Model::for_data(&s0, &probe).is_err() {
-                continue;
-            }
-            match hidden {
-                None => pairs.push((s0.clone(), s0)),
-                Some(e) => {
-                    for c in extensions(&s0, &probe).unwrap_or_default() {
-                        if c.effect == e {
-                            pairs.push((s0.clone(), c.spec));
-                        }
-                    }
-                }
-            }
-        }
+        let m = draw_measurement(hidden, opts, &mut rng)?;
+        let probe = probe_data(&m, seed)?;
+        let pairs = start_truth_pairs(m.kind, hidden, &probe);
         let Some((start, truth)) = pairs.choose(&mut rng).cloned() else {
             continue;
         };
         let m0 = Model::for_data(&start, &probe)?;
         let m1 = Model::for_data(&truth, &probe)?;
-        // S0's parameters: inside their ranges, one on a bound in some cases.
-        let mut u0: Vec<f64> = (0..m0.dim).map(|_| rng.random_range(0.1..0.9)).collect();
-        if rng.random::<f64>() < 0.15 {
-            let j = rng.random_range(0..m0.dim);
-            u0[j] = if rng.random::<bool>() { 0.0 } else { 1.0 };
+        let p0 = draw_start_params(&m0, &mut rng);
+        let blend = Blend::draw(&m0, &p0, &m1, &mut rng);
+        // Scale the new parameters towards their neutral values (the embedding) until the
+        // effect's signal has the drawn size.
+        let v0 = values(&m0, &p0, &probe);
+        let sig = |x: &[f64]| signal(&values(&m1, x, &probe), &v0, m.noise);
+        let want = log_uniform(opts.signal.0, opts.signal.1, &mut rng);
+        let truth_params = match hidden {
+            None => p0.clone(),
+            Some(_) => blend.scaled(sig, want),
+        };
+        let achieved = if hidden.is_some() {
+            sig(&truth_params)
+        } else {
+            0.0
+        };
+        if hidden.is_some() && (achieved.is_nan() || achieved <= 0.0) {
+            continue; // the effect does not show on these rows
         }
-        let p0 = m0.from_unit(&u0);
-        let base = embed(&m0, &p0, &m1);
+        let truth_model = if hidden.is_some() { &m1 } else { &m0 };
+        let data = synthesize_case(truth_model, &truth_params, &m, seed, id)?;
+        let case = Case {
+            id,
+            hidden: hidden.map(|e| e.name().to_string()),
+            start,
+            truth: truth_model.spec.clone(),
+            truth_params,
+            geometry: m.geometry,
+            samples: data.len(),
+            channels: m.channels,
+            noise_rel: m.noise.rel,
+            signal: achieved,
+            seed,
+        };
+        return Ok((case, data));
+    }
+    Err(anyhow!("no case could be drawn for {hidden:?}"))
+}
+
+/// Where and how a case is measured, drawn before any model.
+struct Measurement {
+    kind: Kind,
+    channels: usize,
+    wavelengths: Vec<f64>,
+    /// The geometry in words ([`rows`]).
+    geometry: String,
+    rows: Vec<[f64; 4]>,
+    noise: Noise,
+}
+
+/// A draw from [lo, hi], log-uniform: sample counts and signal sizes span decades.
+fn log_uniform(lo: f64, hi: f64, rng: &mut ChaCha8Rng) -> f64 {
+    (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
+}
+
+/// Draw a case's measurement: a kind the hidden effect has rules for, a geometry family
+/// that can show it, one or three channels (a BTDF one), about a log-uniform number of
+/// samples in `opts.samples`, and the noise.
+fn draw_measurement(
+    hidden: Option<Effect>,
+    opts: &BatteryOptions,
+    rng: &mut ChaCha8Rng,
+) -> Result<Measurement> {
+    let kind = *kinds(hidden)
+        .choose(rng)
+        .ok_or_else(|| anyhow!("no rule"))?;
+    let family = match (kind, min_planes(hidden, kind)) {
+        (_, 2) => Family::TwoPlane,
+        (Kind::Btdf, _) => [Family::InPlane, Family::TwoPlane][rng.random_range(0..2)],
+        _ => [Family::InPlane, Family::TwoPlane, Family::Hemisphere][rng.random_range(0..3)],
+    };
+    let channels = match kind {
+        Kind::Brdf if rng.random::<f64>() < 0.5 => 3,
+        _ => 1,
+    };
+    let wavelengths: Vec<f64> = if channels == 3 {
+        vec![450.0, 550.0, 650.0]
+    } else {
+        vec![550.0]
+    };
+    let (lo, hi) = (opts.samples.0.max(20) as f64, opts.samples.1.max(20) as f64);
+    let target = log_uniform(lo, hi, rng) as usize;
+    let (geometry, rows) = rows(kind, family, target / channels, rng);
+    let noise = Noise {
+        rel: rng.random_range(0.01..0.05),
+        abs: rng.random_range(1e-4..1e-3),
+    };
+    Ok(Measurement {
+        kind,
+        channels,
+        wavelengths,
+        geometry,
+        rows,
+        noise,
+    })
+}
+
+/// The kinds of data some model adds the effect on (any kind for a null case).
+fn kinds(hidden: Option<Effect>) -> Vec<Kind> {
+    hidden.map_or_else(|| vec![Kind::Brdf, Kind::Btdf], Effect::kinds)
+}
+
+/// The fewest φ planes on which some model adds the effect to data of `kind` (1 for a
+/// null case): an effect that shows only between planes is hidden in two-plane data.
+fn min_planes(hidden: Option<Effect>, kind: Kind) -> usize {
+    hidden.map_or(1, |e| e.min_planes(kind))
+}
+
+/// A data set on the case's rows, to see which models parse and extend here.
+fn probe_data(m: &Measurement, seed: u64) -> Result<Dataset> {
+    // The catalogue's first model of the kind: every case's data can carry it.
+    let probe_spec = crate::bsdf::catalogue(m.kind)
+        .into_iter()
+        .next()
+        .ok_or_else(|| anyhow!("no {} model in the catalogue", m.kind))?;
+    let probe_model = Model::parse(&probe_spec, m.channels)?;
+    synthesize(
+        &probe_model,
+        &probe_model.defaults(),
+        &m.rows,
+        &m.wavelengths,
+        m.noise,
+        seed,
+        "probe",
+    )
+    .map_err(|e| anyhow!(e))
+}
+
+/// Every (start S0, truth S1) pair the catalogue offers on the probe's rows: each model of
+/// `kind` that fits there, with each of its extensions that adds `hidden`
+/// ([`extensions`]), or itself for a null case.
+fn start_truth_pairs(kind: Kind, hidden: Option<Effect>, probe: &Dataset) -> Vec<(String, String)> {
+    let mut pairs: Vec<(String, String)> = Vec::new();
+    for s0 in every_spec(kind) {
+        if Model::for_data(&s0, probe).is_err() {
+            continue;
+        }
+        match hidden {
+            None => pairs.push((s0.clone(), s0)),
+            Some(e) => {
+                for c in extensions(&s0, probe).unwrap_or_default() {
+                    if c.effect == e {
+                        pairs.push((s0.clone(), c.spec));
+                    }
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// S0's parameters: inside their ranges, one on a bound in some cases (as fitted real
+/// data show).
+fn draw_start_params(m0: &Model, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let mut u0: Vec<f64> = (0..m0.dim).map(|_| rng.random_range(0.1..0.9)).collect();
+    if rng.random::<f64>() < 0.15 {
+        let j = rng.random_range(0..m0.dim);
+        u0[j] = if rng.random::<bool>() { 0.0 } else { 1.0 };
+    }
+    m0.from_unit(&u0)
+}
+
+/// The way from S0 to a truth S1 that adds parameters: S0 embedded in S1 (the new
+/// parameters at their neutral values) at one end, the new parameters drawn at the other.
+struct Blend {
+    /// S0's parameters embedded in S1.
+    base: Vec<f64>,
+    /// `base` with S1's new parameters drawn from their ranges.
+    drawn: Vec<f64>,
+    /// Which of S1's parameters are new.
+    fresh: Vec<usize>,
+    /// S1's parameter declarations.
+    decls: Vec<ParamDecl>,
+}
+
+impl Blend {
+    /// Embed S0's parameters `p0` in S1 and draw S1's new parameters (a narrow lobe of
+    /// 1–5° in some cases).
+    fn draw(m0: &Model, p0: &[f64], m1: &Model, rng: &mut ChaCha8Rng) -> Blend {
+        let base = embed(m0, p0, m1);
         let decls = m1.flat_decls();
-        let fresh = new_param_indices(&m0, &m1);
+        let fresh = new_param_indices(m0, m1);
         let narrow = rng.random::<f64>() < 0.3;
         let mut drawn = base.clone();
         for &j in &fresh {
@@ -322,73 +435,66 @@ pub fn generate(
                 _ => d.from_unit(rng.random_range(0.2..0.9)),
             };
         }
-        // Scale the new parameters towards their neutral values (the embedding) until the
-        // effect's signal has the drawn size.
-        let v0 = values(&m0, &p0, &probe);
-        let at = |t: f64| -> Vec<f64> {
-            let mut x = base.clone();
-            for &j in &fresh {
-                let (a, b) = (decls[j].to_unit(base[j]), decls[j].to_unit(drawn[j]));
-                x[j] = decls[j].from_unit(a + t * (b - a));
-            }
-            x
-        };
-        let sig = |t: f64| signal(&values(&m1, &at(t), &probe), &v0, noise);
-        let want = (opts.signal.0.ln()
-            + rng.random::<f64>() * (opts.signal.1.ln() - opts.signal.0.ln()))
-        .exp();
-        let truth_params = match hidden {
-            None => p0.clone(),
-            Some(_) if sig(1.0) <= want || fresh.is_empty() => at(1.0),
-            Some(_) => {
-                let (mut lo, mut hi) = (0.0, 1.0);
-                for _ in 0..30 {
-                    let mid = 0.5 * (lo + hi);
-                    if sig(mid) < want {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                at(hi)
-            }
-        };
-        let achieved = if hidden.is_some() {
-            signal(&values(&m1, &truth_params, &probe), &v0, noise)
-        } else {
-            0.0
-        };
-        if hidden.is_some() && (achieved.is_nan() || achieved <= 0.0) {
-            continue; // the effect does not show on these rows
+        Blend {
+            base,
+            drawn,
+            fresh,
+            decls,
         }
-        let truth_model = if hidden.is_some() { &m1 } else { &m0 };
-        let mut data = synthesize(
-            truth_model,
-            &truth_params,
-            &rows,
-            &wavelengths,
-            noise,
-            seed ^ 0x5eed,
-            &format!("battery case {id}"),
-        )
-        .map_err(|e| anyhow!(e))?;
-        data.material = format!("battery case {id}");
-        let case = Case {
-            id,
-            hidden: hidden.map(|e| e.name().to_string()),
-            start,
-            truth: truth_model.spec.clone(),
-            truth_params,
-            geometry,
-            samples: data.len(),
-            channels,
-            noise_rel: noise.rel,
-            signal: achieved,
-            seed,
-        };
-        return Ok((case, data));
     }
-    Err(anyhow!("no case could be drawn for {hidden:?}"))
+
+    /// S1's parameters a fraction `t` of the way from the neutral values to the drawn
+    /// ones, in each parameter's unit box.
+    fn at(&self, t: f64) -> Vec<f64> {
+        let mut x = self.base.clone();
+        for &j in &self.fresh {
+            let d = &self.decls[j];
+            let (a, b) = (d.to_unit(self.base[j]), d.to_unit(self.drawn[j]));
+            x[j] = d.from_unit(a + t * (b - a));
+        }
+        x
+    }
+
+    /// The parameters on the way whose signal (`sig`) is `want`, by bisection; the drawn
+    /// ones where even they show less (or nothing is new).
+    fn scaled(&self, sig: impl Fn(&[f64]) -> f64, want: f64) -> Vec<f64> {
+        if sig(&self.at(1.0)) <= want || self.fresh.is_empty() {
+            return self.at(1.0);
+        }
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..30 {
+            let mid = 0.5 * (lo + hi);
+            if sig(&self.at(mid)) < want {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        self.at(hi)
+    }
+}
+
+/// The case's data: the truth on the case's rows with its noise (a seed apart from the
+/// probe's).
+fn synthesize_case(
+    truth: &Model,
+    params: &[f64],
+    m: &Measurement,
+    seed: u64,
+    id: usize,
+) -> Result<Dataset> {
+    let mut data = synthesize(
+        truth,
+        params,
+        &m.rows,
+        &m.wavelengths,
+        m.noise,
+        seed ^ 0x5eed,
+        &format!("battery case {id}"),
+    )
+    .map_err(|e| anyhow!(e))?;
+    data.material = format!("battery case {id}");
+    Ok(data)
 }
 
 /// Diagnose one case and judge it (keeping its diagnosis log when the battery runs one

@@ -261,21 +261,8 @@ fn extend_path(
 ) -> Result<(Vec<Step>, bool)> {
     loop {
         let current = steps.last().expect("a step").fit.clone();
-        if consistency(&current, opts.alpha).0 && opts.stop_when_consistent {
-            let last = steps.last_mut().unwrap();
-            last.evidence.push_str(if last.effect.is_none() {
-                ". Stopped: nothing to add"
-            } else {
-                ". Stopped: nothing significant remains"
-            });
-            return Ok((steps, true));
-        }
-        if steps.len() > opts.max_steps {
-            steps.last_mut().unwrap().evidence.push_str(&format!(
-                ". Stopped after {} effects (--max-steps)",
-                opts.max_steps
-            ));
-            return Ok((steps, consistency(&current, opts.alpha).0));
+        if let Some(consistent) = stop_before_round(&mut steps, &current, opts) {
+            return Ok((steps, consistent));
         }
         let cands = extensions(&current.model.spec, data)?;
         if cands.is_empty() {
@@ -292,89 +279,18 @@ fn extend_path(
             current.model.spec,
             backend.id()
         ));
-        let flagged = flagged_regions(data, &current.z);
-        // A model met again on another path (backtracking) keeps its first fit: each fit
-        // is a multi-start search over the same data, its seeds a small part of it.
-        let todo: Vec<Candidate> = cands
-            .iter()
-            .filter(|c| !cache.contains_key(&c.spec))
-            .cloned()
-            .collect();
-        for (c, f) in todo
-            .iter()
-            .zip(fit_all(&todo, data, backend, opts, &current, &flagged))
-        {
-            cache.insert(c.spec.clone(), f.map_err(|e| format!("{e:#}")));
-        }
-        let fits: Vec<Result<FitResult>> = cands
-            .iter()
-            .map(|c| match &cache[&c.spec] {
-                Ok(f) => Ok(f.clone()),
-                Err(e) => Err(anyhow::anyhow!("{e}")),
-            })
-            .collect();
-        let m = cands.len();
-        let mut scored: Vec<Scored> = cands
-            .into_iter()
-            .zip(fits)
-            .map(|(c, f)| score(data, &current, &flagged, c, f, m, opts))
-            .collect();
-        calibrate_round(&mut scored, data, backend, opts, &current, log);
-        log(format!(
-            "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10} {:>7} {:>6}  verdict",
-            "model", "effect", "χ²_red", "ΔP", "F", "p", "test", "ΔBIC", "flagged", "s"
-        ));
-        for s in &scored {
-            log(format!(
-                "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10.1} {:>7} {:>6.1}  {}",
-                s.candidate.spec,
-                s.candidate.effect.name(),
-                s.fit
-                    .as_ref()
-                    .map(|f| format!("{:.3}", f.chi2_red))
-                    .unwrap_or("-".into()),
-                s.dp,
-                s.f.map(|f| format!("{f:.1}")).unwrap_or("-".into()),
-                s.p.map(|p| format!("{p:.1e}")).unwrap_or("-".into()),
-                s.p_test.label(),
-                s.delta_bic,
-                s.removal_flagged
-                    .map(|r| format!("{:.0}%", 100.0 * r))
-                    .unwrap_or("-".into()),
-                s.fit.as_ref().map(|f| f.seconds).unwrap_or(0.0),
-                s.verdict
-            ));
-        }
-        let best = choose(&scored).cloned();
-        let Some(best) = best else {
-            let why = if scored.iter().any(|s| s.significant) {
-                "the only significant extensions add parameters the data does not determine"
-            } else {
-                "no extension improves the fit significantly; the remaining misfit is not one of the catalogue's effects, or the geometry cannot separate it"
-            };
-            log(format!("  → stop: {why}"));
-            let last = steps.last_mut().unwrap();
-            last.evidence.push_str(&format!(". Stopped: {why}"));
-            last.candidates = scored;
-            return Ok((steps, consistency(&current, opts.alpha).0));
+        let scored = score_round(data, backend, opts, log, cache, &current, cands);
+        log_round(log, &scored);
+        let best = match pick(&scored, data.len()) {
+            Ok(best) => best,
+            Err(why) => {
+                log(format!("  → stop: {why}"));
+                let last = steps.last_mut().unwrap();
+                last.evidence.push_str(&format!(". Stopped: {why}"));
+                last.candidates = scored;
+                return Ok((steps, consistency(&current, opts.alpha).0));
+            }
         };
-        if let Some(rival) = rival(&scored, &best, data.len()) {
-            let chi2 = |s: &Scored| s.fit.as_ref().map_or(f64::NAN, |f| f.chi2_red);
-            let why = format!(
-                "the data cannot tell two effects apart: `{}` [{}] (χ²_red {:.3}) and `{}` [{}] (χ²_red {:.3}) explain the misfit equally well (their scaled BICs within {AMBIGUOUS_BIC}); measure where they differ to decide",
-                best.candidate.spec,
-                best.candidate.effect,
-                chi2(&best),
-                rival.candidate.spec,
-                rival.candidate.effect,
-                chi2(rival)
-            );
-            log(format!("  → stop: {why}"));
-            let last = steps.last_mut().unwrap();
-            last.evidence.push_str(&format!(". Stopped: {why}"));
-            last.candidates = scored;
-            return Ok((steps, consistency(&current, opts.alpha).0));
-        }
         let (step, _) = adopt_step(data, &current, &best, &scored, opts);
         log(format!(
             "  → adopt {} [{}]",
@@ -384,6 +300,132 @@ fn extend_path(
         steps.last_mut().unwrap().candidates = scored;
         steps.push(step);
     }
+}
+
+/// Whether a path ends before another round of candidates, and if so whether it ended
+/// consistent (its last step saying why it stopped): its last model is consistent and
+/// the options say to stop there, or it has taken --max-steps effects.
+fn stop_before_round(
+    steps: &mut [Step],
+    current: &FitResult,
+    opts: &DiagnoseOptions,
+) -> Option<bool> {
+    if consistency(current, opts.alpha).0 && opts.stop_when_consistent {
+        let last = steps.last_mut().unwrap();
+        last.evidence.push_str(if last.effect.is_none() {
+            ". Stopped: nothing to add"
+        } else {
+            ". Stopped: nothing significant remains"
+        });
+        return Some(true);
+    }
+    if steps.len() > opts.max_steps {
+        steps.last_mut().unwrap().evidence.push_str(&format!(
+            ". Stopped after {} effects (--max-steps)",
+            opts.max_steps
+        ));
+        return Some(consistency(current, opts.alpha).0);
+    }
+    None
+}
+
+/// Fit and score every candidate extension of `current` against it, the p-values
+/// calibrated where the F test does not hold ([`calibrate_round`]). A model met again on
+/// another path (backtracking) keeps its first fit from `cache`: each fit is a
+/// multi-start search over the same data, its seeds a small part of it.
+fn score_round(
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    cache: &mut FitCache,
+    current: &FitResult,
+    cands: Vec<Candidate>,
+) -> Vec<Scored> {
+    let flagged = flagged_regions(data, &current.z);
+    let todo: Vec<Candidate> = cands
+        .iter()
+        .filter(|c| !cache.contains_key(&c.spec))
+        .cloned()
+        .collect();
+    for (c, f) in todo
+        .iter()
+        .zip(fit_all(&todo, data, backend, opts, current, &flagged))
+    {
+        cache.insert(c.spec.clone(), f.map_err(|e| format!("{e:#}")));
+    }
+    let fits: Vec<Result<FitResult>> = cands
+        .iter()
+        .map(|c| match &cache[&c.spec] {
+            Ok(f) => Ok(f.clone()),
+            Err(e) => Err(anyhow::anyhow!("{e}")),
+        })
+        .collect();
+    let m = cands.len();
+    let mut scored: Vec<Scored> = cands
+        .into_iter()
+        .zip(fits)
+        .map(|(c, f)| score(data, current, &flagged, c, f, m, opts))
+        .collect();
+    calibrate_round(&mut scored, data, backend, opts, current, log);
+    scored
+}
+
+/// The round's candidate table in the log: each candidate's fit, test, BIC, share of the
+/// flagged misfit removed, fit time and verdict.
+fn log_round(log: &mut dyn FnMut(String), scored: &[Scored]) {
+    log(format!(
+        "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10} {:>7} {:>6}  verdict",
+        "model", "effect", "χ²_red", "ΔP", "F", "p", "test", "ΔBIC", "flagged", "s"
+    ));
+    for s in scored {
+        log(format!(
+            "    {:<26} {:<14} {:>10} {:>4} {:>10} {:>10} {:<9} {:>10.1} {:>7} {:>6.1}  {}",
+            s.candidate.spec,
+            s.candidate.effect.name(),
+            s.fit
+                .as_ref()
+                .map(|f| format!("{:.3}", f.chi2_red))
+                .unwrap_or("-".into()),
+            s.dp,
+            s.f.map(|f| format!("{f:.1}")).unwrap_or("-".into()),
+            s.p.map(|p| format!("{p:.1e}")).unwrap_or("-".into()),
+            s.p_test.label(),
+            s.delta_bic,
+            s.removal_flagged
+                .map(|r| format!("{:.0}%", 100.0 * r))
+                .unwrap_or("-".into()),
+            s.fit.as_ref().map(|f| f.seconds).unwrap_or(0.0),
+            s.verdict
+        ));
+    }
+}
+
+/// The candidate the round adopts ([`choose`]), or why the path stops here: no
+/// candidate is adoptable, or another effect's candidate explains the misfit as well
+/// ([`rival`]) and naming either would be a guess.
+fn pick(scored: &[Scored], samples: usize) -> std::result::Result<Scored, String> {
+    let Some(best) = choose(scored).cloned() else {
+        return Err(if scored.iter().any(|s| s.significant) {
+            "the only significant extensions add parameters the data does not determine"
+        } else {
+            "no extension improves the fit significantly; the remaining misfit is not one of the catalogue's effects, or the geometry cannot separate it"
+        }
+        .to_string());
+    };
+    if let Some(rival) = rival(scored, &best, samples) {
+        let chi2 = |s: &Scored| s.fit.as_ref().map_or(f64::NAN, |f| f.chi2_red);
+        return Err(format!(
+            "the data cannot tell two effects apart: `{}` [{}] (χ²_red {:.3}) and `{}` [{}] (χ²_red {:.3}) explain the misfit equally well (their scaled BICs within {AMBIGUOUS_BIC}); measure where they differ to decide",
+            best.candidate.spec,
+            best.candidate.effect,
+            chi2(&best),
+            rival.candidate.spec,
+            rival.candidate.effect,
+            chi2(rival)
+        ));
+    }
+    Ok(best)
 }
 
 /// BIC of a path's final model: χ² + P ln K.

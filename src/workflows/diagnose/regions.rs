@@ -83,108 +83,146 @@ fn stat(words: String, cone: Option<Cone>, mask: Vec<bool>, z: &[f64]) -> Option
 /// incidence and plane), its flanks (5–50 % of the peak) and tails (< 5 %), large θt;
 /// both — everywhere and each φ plane; each also for θi ≥ 30° and θi ≥ 60°.
 pub fn region_stats(data: &Dataset, z: &[f64]) -> Vec<RegionStat> {
-    let k = data.len();
-    let mut regions: Vec<(String, Option<Cone>, Vec<bool>)> = Vec::new();
+    let mut regions = match data.kind {
+        Kind::Brdf => brdf_regions(data),
+        Kind::Btdf => btdf_regions(data),
+    };
+    regions.push(("everywhere".into(), None, vec![true; data.len()]));
+    regions.extend(plane_regions(data));
+    stats_by_incidence(data, regions, z)
+}
+
+/// A region before its statistics: its words, the cone it is (where it is one), and which
+/// samples it holds.
+type Region = (String, Option<Cone>, Vec<bool>);
+
+/// Which samples of `data` satisfy `f`.
+fn mask(data: &Dataset, f: impl Fn(&Sample) -> bool) -> Vec<bool> {
+    data.samples.iter().map(f).collect()
+}
+
+/// The BRDF regions: the cones about the mirror and the retro direction (each sample in
+/// the nearer one's), the source and forward sides, grazing θo, the tails.
+fn brdf_regions(data: &Dataset) -> Vec<Region> {
+    let mut regions: Vec<Region> = Vec::new();
     let cone = |around, radius_deg| Some(Cone { around, radius_deg });
-    let by = |f: &dyn Fn(&Sample) -> bool| data.samples.iter().map(f).collect::<Vec<bool>>();
-    match data.kind {
-        Kind::Brdf => {
-            let mirror = |s: &Sample| angle_deg(s.wo(), DVec3::new(-s.wi().x, -s.wi().y, s.wi().z));
-            let retro = |s: &Sample| angle_deg(s.wo(), s.wi());
-            for r in [5.0, 15.0] {
-                regions.push((
-                    format!("within {r}° of the mirror direction"),
-                    cone(Around::Mirror, r),
-                    by(&|s| mirror(s) <= r + 0.5 && mirror(s) < retro(s)),
-                ));
-            }
-            for r in [5.0, 15.0] {
-                regions.push((
-                    format!("within {r}° of the retro direction"),
-                    cone(Around::Retro, r),
-                    by(&|s| retro(s) <= r + 0.5 && retro(s) < mirror(s)),
-                ));
-            }
-            let side = |s: &Sample| s.wo().x * s.wi().x + s.wo().y * s.wi().y;
-            regions.push((
-                "on the source (backscatter) side".into(),
-                None,
-                by(&|s| side(s) > 1e-9),
-            ));
-            regions.push((
-                "on the forward side away from the mirror direction".into(),
-                None,
-                by(&|s| side(s) < -1e-9 && mirror(s) > 15.5),
-            ));
-            regions.push((
-                "at grazing θo ≥ 60° away from the mirror direction".into(),
-                None,
-                by(&|s| s.theta_o.to_degrees() >= 59.5 && mirror(s) > 15.5),
-            ));
-            regions.push((
-                "in the tails more than 30° from the mirror direction".into(),
-                None,
-                by(&|s| mirror(s) > 30.5),
-            ));
-        }
-        Kind::Btdf => {
-            // The peak of each (incidence, plane, channel) curve: its brightest sample.
-            let key = |s: &Sample| {
-                (
-                    (s.theta_i.to_degrees() * 10.0).round() as i64,
-                    (s.phi_i.to_degrees() * 10.0).round() as i64,
-                    s.axis,
-                    s.channel,
-                )
-            };
-            let mut peaks: std::collections::HashMap<_, usize> = Default::default();
-            for (j, s) in data.samples.iter().enumerate() {
-                let e = peaks.entry(key(s)).or_insert(j);
-                if s.value > data.samples[*e].value {
-                    *e = j;
-                }
-            }
-            let peak = |s: &Sample| &data.samples[peaks[&key(s)]];
-            let ratio = |s: &Sample| s.value / peak(s).value.max(1e-300);
-            for r in [5.0, 15.0] {
-                regions.push((
-                    format!("within {r}° of the transmission peak"),
-                    cone(Around::Peak, r),
-                    by(&|s| angle_deg(s.wo(), peak(s).wo()) <= r + 0.5),
-                ));
-            }
-            regions.push((
-                "on the flanks of the peak (5–50 % of its value)".into(),
-                None,
-                by(&|s| (0.05..0.5).contains(&ratio(s))),
-            ));
-            regions.push((
-                "in the tails (below 5 % of the peak value)".into(),
-                None,
-                by(&|s| ratio(s) < 0.05),
-            ));
-            regions.push((
-                "at large θt ≥ 50°".into(),
-                None,
-                by(&|s| s.theta_o.to_degrees() >= 49.5),
-            ));
-            regions.push((
-                "at θt ≥ 70°".into(),
-                None,
-                by(&|s| s.theta_o.to_degrees() >= 69.5),
-            ));
+    let mirror = |s: &Sample| angle_deg(s.wo(), DVec3::new(-s.wi().x, -s.wi().y, s.wi().z));
+    let retro = |s: &Sample| angle_deg(s.wo(), s.wi());
+    for r in [5.0, 15.0] {
+        regions.push((
+            format!("within {r}° of the mirror direction"),
+            cone(Around::Mirror, r),
+            mask(data, |s| mirror(s) <= r + 0.5 && mirror(s) < retro(s)),
+        ));
+    }
+    for r in [5.0, 15.0] {
+        regions.push((
+            format!("within {r}° of the retro direction"),
+            cone(Around::Retro, r),
+            mask(data, |s| retro(s) <= r + 0.5 && retro(s) < mirror(s)),
+        ));
+    }
+    let side = |s: &Sample| s.wo().x * s.wi().x + s.wo().y * s.wi().y;
+    regions.push((
+        "on the source (backscatter) side".into(),
+        None,
+        mask(data, |s| side(s) > 1e-9),
+    ));
+    regions.push((
+        "on the forward side away from the mirror direction".into(),
+        None,
+        mask(data, |s| side(s) < -1e-9 && mirror(s) > 15.5),
+    ));
+    regions.push((
+        "at grazing θo ≥ 60° away from the mirror direction".into(),
+        None,
+        mask(data, |s| s.theta_o.to_degrees() >= 59.5 && mirror(s) > 15.5),
+    ));
+    regions.push((
+        "in the tails more than 30° from the mirror direction".into(),
+        None,
+        mask(data, |s| mirror(s) > 30.5),
+    ));
+    regions
+}
+
+/// The BTDF regions, relative to the peak of each (incidence, plane, channel) curve (its
+/// brightest sample): the cones about it, its flanks and tails by value, large θt.
+fn btdf_regions(data: &Dataset) -> Vec<Region> {
+    let mut regions: Vec<Region> = Vec::new();
+    let key = |s: &Sample| {
+        (
+            (s.theta_i.to_degrees() * 10.0).round() as i64,
+            (s.phi_i.to_degrees() * 10.0).round() as i64,
+            s.axis,
+            s.channel,
+        )
+    };
+    let mut peaks: std::collections::HashMap<_, usize> = Default::default();
+    for (j, s) in data.samples.iter().enumerate() {
+        let e = peaks.entry(key(s)).or_insert(j);
+        if s.value > data.samples[*e].value {
+            *e = j;
         }
     }
-    regions.push(("everywhere".into(), None, vec![true; k]));
-    if data.axes.len() > 1 {
-        for (a, phi) in data.axes.iter().enumerate() {
-            regions.push((
+    let peak = |s: &Sample| &data.samples[peaks[&key(s)]];
+    let ratio = |s: &Sample| s.value / peak(s).value.max(1e-300);
+    for r in [5.0, 15.0] {
+        regions.push((
+            format!("within {r}° of the transmission peak"),
+            Some(Cone {
+                around: Around::Peak,
+                radius_deg: r,
+            }),
+            mask(data, |s| angle_deg(s.wo(), peak(s).wo()) <= r + 0.5),
+        ));
+    }
+    regions.push((
+        "on the flanks of the peak (5–50 % of its value)".into(),
+        None,
+        mask(data, |s| (0.05..0.5).contains(&ratio(s))),
+    ));
+    regions.push((
+        "in the tails (below 5 % of the peak value)".into(),
+        None,
+        mask(data, |s| ratio(s) < 0.05),
+    ));
+    regions.push((
+        "at large θt ≥ 50°".into(),
+        None,
+        mask(data, |s| s.theta_o.to_degrees() >= 49.5),
+    ));
+    regions.push((
+        "at θt ≥ 70°".into(),
+        None,
+        mask(data, |s| s.theta_o.to_degrees() >= 69.5),
+    ));
+    regions
+}
+
+/// Each φ plane of data measured on more than one (its normal-exit sample left out, which
+/// every plane shares).
+fn plane_regions(data: &Dataset) -> Vec<Region> {
+    if data.axes.len() <= 1 {
+        return vec![];
+    }
+    data.axes
+        .iter()
+        .enumerate()
+        .map(|(a, phi)| {
+            (
                 format!("on the φ = {phi}° plane"),
                 None,
-                by(&|s| s.axis == a && s.theta_o > 1e-9),
-            ));
-        }
-    }
+                mask(data, |s| s.axis == a && s.theta_o > 1e-9),
+            )
+        })
+        .collect()
+}
+
+/// The statistics of each region, each followed by those of its part at θi ≥ 30° and at
+/// θi ≥ 60° where that part is neither empty nor the whole region: a misfit that grows
+/// with incidence shows there.
+fn stats_by_incidence(data: &Dataset, regions: Vec<Region>, z: &[f64]) -> Vec<RegionStat> {
     let mut out = Vec::new();
     let ti = |s: &Sample| s.theta_i.to_degrees();
     for (words, cone, mask) in regions {

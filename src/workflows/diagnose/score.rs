@@ -4,7 +4,7 @@
 
 use super::regions::RegionStat;
 use super::{Candidate, DiagnoseOptions, FitResult};
-use crate::bsdf::Model;
+use crate::bsdf::{Model, ParamDecl};
 use crate::data::Dataset;
 use crate::inference::bootstrap::Calibrated;
 use crate::inference::covariance::Covariance;
@@ -243,104 +243,148 @@ fn new_params_determined(
     data: &Dataset,
     opts: &DiagnoseOptions,
 ) -> (bool, String, String) {
-    let names = fit.model.flat_names();
-    let decls = fit.model.flat_decls();
-    let new_idx = new_param_indices(old, &fit.model);
-    if new_idx.is_empty() {
+    let new = NewParams::of(old, fit);
+    if new.idx.is_empty() {
         return (true, String::new(), String::new());
     }
-    let unit = |cov: &Covariance, j: usize| {
-        cov.std[j].map(|s| crate::inference::covariance::unit_std(&decls[j], fit.flat[j], s))
-    };
-    let determined = |cov: &Covariance, j: usize| unit(cov, j).is_some_and(|u| u <= IDENT_UNIT_STD);
-    let ridges = |cov: &Covariance| -> String {
+    if new.idx.iter().any(|&j| new.determined(&fit.cov, j)) {
+        return (true, String::new(), new.loose_note());
+    }
+    if let Some(note) = new.determined_when_held(data, opts) {
+        return (true, String::new(), note);
+    }
+    (false, new.why_undetermined(), String::new())
+}
+
+/// The new parameters of an extension's fit, as [`new_params_determined`] judges them.
+struct NewParams<'a> {
+    fit: &'a FitResult,
+    /// The fit's flat parameter names and declarations.
+    names: Vec<String>,
+    decls: Vec<ParamDecl>,
+    /// Which of the fit's parameters are new.
+    idx: Vec<usize>,
+}
+
+impl<'a> NewParams<'a> {
+    fn of(old: &Model, fit: &'a FitResult) -> NewParams<'a> {
+        NewParams {
+            fit,
+            names: fit.model.flat_names(),
+            decls: fit.model.flat_decls(),
+            idx: new_param_indices(old, &fit.model),
+        }
+    }
+
+    /// Parameter `j`'s standard uncertainty under `cov`, as a share of its unit box.
+    fn unit(&self, cov: &Covariance, j: usize) -> Option<f64> {
+        cov.std[j]
+            .map(|s| crate::inference::covariance::unit_std(&self.decls[j], self.fit.flat[j], s))
+    }
+
+    /// Whether `cov` determines parameter `j` ([`IDENT_UNIT_STD`]).
+    fn determined(&self, cov: &Covariance, j: usize) -> bool {
+        self.unit(cov, j).is_some_and(|u| u <= IDENT_UNIT_STD)
+    }
+
+    /// The weak directions of `cov` that a new parameter takes part in, in words with how
+    /// well each is constrained ("" for none).
+    fn ridges(&self, cov: &Covariance) -> String {
         cov.ridges
             .iter()
-            .filter(|r| r.components.iter().any(|(j, _)| new_idx.contains(j)))
+            .filter(|r| r.components.iter().any(|(j, _)| self.idx.contains(j)))
             .map(|r| {
                 let std = if r.unit_std.is_finite() {
                     format!("± {:.2} of the range", r.unit_std)
                 } else {
                     "not at all".into()
                 };
-                format!("{} (constrained {std})", r.words(&names))
+                format!("{} (constrained {std})", r.words(&self.names))
             })
             .collect::<Vec<_>>()
             .join("; ")
-    };
-    let cov = &fit.cov;
-    if new_idx.iter().any(|&j| determined(cov, j)) {
-        let loose: Vec<String> = new_idx
-            .iter()
-            .filter(|&&j| !determined(cov, j))
-            .map(|&j| names[j].clone())
-            .collect();
-        let note = if loose.is_empty() {
-            String::new()
-        } else {
-            let r = ridges(cov);
-            format!(
-                "{} not determined on {} own{}",
-                loose.join(", "),
-                if loose.len() == 1 { "its" } else { "their" },
-                if r.is_empty() {
-                    String::new()
-                } else {
-                    format!(": the data constrain only {r}")
-                }
-            )
-        };
-        return (true, String::new(), note);
     }
-    // No new parameter determined on its own: hold what it trades off against — the
-    // other parameters along the weak directions it takes part in, and any parameter the
-    // data do not constrain at all — at their fitted values, and look again.
-    for &free in &new_idx {
-        let mut hold: Vec<usize> = cov
-            .ridges
+
+    /// Where one new parameter is determined on its own: the note on those that are not
+    /// ("" when every one is), with the ridges that hold them.
+    fn loose_note(&self) -> String {
+        let cov = &self.fit.cov;
+        let loose: Vec<String> = self
+            .idx
             .iter()
-            .filter(|r| r.components.iter().any(|&(j, _)| j == free))
-            .flat_map(|r| r.components.iter().map(|&(j, _)| j))
-            .chain((0..names.len()).filter(|&j| cov.std[j].is_none()))
-            .filter(|&j| j != free && cov.std[j] != Some(0.0))
+            .filter(|&&j| !self.determined(cov, j))
+            .map(|&j| self.names[j].clone())
             .collect();
-        hold.sort_unstable();
-        hold.dedup();
-        if hold.is_empty() {
-            continue;
+        if loose.is_empty() {
+            return String::new();
         }
-        if let Ok(c) = super::fit::conditional_covariance(fit, data, opts, &hold) {
-            if determined(&c, free) {
-                let held: Vec<&str> = hold.iter().map(|&j| names[j].as_str()).collect();
-                let r = ridges(cov);
-                return (
-                    true,
-                    String::new(),
-                    format!(
+        let r = self.ridges(cov);
+        format!(
+            "{} not determined on {} own{}",
+            loose.join(", "),
+            if loose.len() == 1 { "its" } else { "their" },
+            if r.is_empty() {
+                String::new()
+            } else {
+                format!(": the data constrain only {r}")
+            }
+        )
+    }
+
+    /// No new parameter determined on its own: hold what it trades off against — the
+    /// other parameters along the weak directions it takes part in, and any parameter the
+    /// data do not constrain at all — at their fitted values, and look again, one new
+    /// parameter free at a time. The note for the first then determined, if any.
+    fn determined_when_held(&self, data: &Dataset, opts: &DiagnoseOptions) -> Option<String> {
+        let cov = &self.fit.cov;
+        for &free in &self.idx {
+            let mut hold: Vec<usize> = cov
+                .ridges
+                .iter()
+                .filter(|r| r.components.iter().any(|&(j, _)| j == free))
+                .flat_map(|r| r.components.iter().map(|&(j, _)| j))
+                .chain((0..self.names.len()).filter(|&j| cov.std[j].is_none()))
+                .filter(|&j| j != free && cov.std[j] != Some(0.0))
+                .collect();
+            hold.sort_unstable();
+            hold.dedup();
+            if hold.is_empty() {
+                continue;
+            }
+            if let Ok(c) = super::fit::conditional_covariance(self.fit, data, opts, &hold) {
+                if self.determined(&c, free) {
+                    let held: Vec<&str> = hold.iter().map(|&j| self.names[j].as_str()).collect();
+                    let r = self.ridges(cov);
+                    return Some(format!(
                         "{} is determined (± {:.2} of its range) with {} held at the fitted values{}",
-                        names[free],
-                        unit(&c, free).unwrap_or(f64::NAN),
+                        self.names[free],
+                        self.unit(&c, free).unwrap_or(f64::NAN),
                         held.join(", "),
                         if r.is_empty() {
                             String::new()
                         } else {
                             format!(": the data constrain only {r}")
                         }
-                    ),
-                );
+                    ));
+                }
             }
         }
+        None
     }
-    let why: Vec<String> = new_idx
-        .iter()
-        .map(|&j| match unit(cov, j) {
-            Some(u) => format!("{} ± {u:.2} of its range", names[j]),
-            None => format!("{} undetermined", names[j]),
-        })
-        .collect();
-    let r = ridges(cov);
-    (
-        false,
+
+    /// Why the effect counts as undetermined: each new parameter's uncertainty, and the
+    /// ridges.
+    fn why_undetermined(&self) -> String {
+        let cov = &self.fit.cov;
+        let why: Vec<String> = self
+            .idx
+            .iter()
+            .map(|&j| match self.unit(cov, j) {
+                Some(u) => format!("{} ± {u:.2} of its range", self.names[j]),
+                None => format!("{} undetermined", self.names[j]),
+            })
+            .collect();
+        let r = self.ridges(cov);
         format!(
             "{}{}",
             why.join(", "),
@@ -349,9 +393,8 @@ fn new_params_determined(
             } else {
                 format!(" (the data constrain only {r})")
             }
-        ),
-        String::new(),
-    )
+        )
+    }
 }
 
 pub(super) fn score(
