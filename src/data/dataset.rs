@@ -140,6 +140,24 @@ pub enum DataError {
     },
 }
 
+impl DataError {
+    /// An error about the whole of `file`.
+    pub fn in_file(file: &str, msg: String) -> DataError {
+        DataError::File {
+            file: file.into(),
+            msg,
+        }
+    }
+    /// An error at line `line` (1-based) of `file`.
+    pub fn at_line(file: &str, line: usize, msg: String) -> DataError {
+        DataError::Line {
+            file: file.into(),
+            line,
+            msg,
+        }
+    }
+}
+
 fn fmt_lines(file: &str, errors: &[(usize, String)], more: usize) -> String {
     let mut s = format!("{} bad rows in {file}:", errors.len() + more);
     for (line, msg) in errors {
@@ -238,6 +256,22 @@ pub struct RawRow {
     pub wavelength_nm: f64,
     pub value: f64,
     pub uncertainty: f64,
+}
+
+impl RawRow {
+    /// A geometry (θi, φi, θo, φo in degrees) at a wavelength, with a placeholder value
+    /// (0 ± 1) for the model to fill in.
+    pub fn placeholder(geometry: [f64; 4], wavelength_nm: f64) -> RawRow {
+        RawRow {
+            theta_i: geometry[0],
+            phi_i: geometry[1],
+            theta_o: geometry[2],
+            phi_o: geometry[3],
+            wavelength_nm,
+            value: 0.0,
+            uncertainty: 1.0,
+        }
+    }
 }
 
 /// Signed-angle convention (docs/conventions.md): a negative θ is the same angle at φ + 180°.

@@ -306,18 +306,7 @@ pub fn geometry_dataset(
     let mut raw = Vec::with_capacity(rows.len() * channels.len());
     for r in rows {
         for &wl in channels {
-            raw.push((
-                0,
-                RawRow {
-                    theta_i: r[0],
-                    phi_i: r[1],
-                    theta_o: r[2],
-                    phi_o: r[3],
-                    wavelength_nm: wl,
-                    value: 0.0,
-                    uncertainty: 1.0,
-                },
-            ));
+            raw.push((0, RawRow::placeholder(*r, wl)));
         }
     }
     let ds = Dataset::from_rows(kind, label, &raw, label, &ReadOptions::default())?;

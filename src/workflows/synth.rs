@@ -365,18 +365,7 @@ fn placeholder_rows(rows: &[[f64; 4]], wavelengths: &[f64]) -> Vec<(usize, RawRo
     let mut raw = Vec::new();
     for (i, r) in rows.iter().enumerate() {
         for (c, &wl) in wavelengths.iter().enumerate() {
-            raw.push((
-                i * wavelengths.len() + c + 1,
-                RawRow {
-                    theta_i: r[0],
-                    phi_i: r[1],
-                    theta_o: r[2],
-                    phi_o: r[3],
-                    wavelength_nm: wl,
-                    value: 0.0,
-                    uncertainty: 1.0,
-                },
-            ));
+            raw.push((i * wavelengths.len() + c + 1, RawRow::placeholder(*r, wl)));
         }
     }
     raw

@@ -73,15 +73,8 @@ fn parse_header(
     file: &str,
     opts: &ReadOptions,
 ) -> Result<Header, DataError> {
-    let ferr = |msg: String| DataError::File {
-        file: file.into(),
-        msg,
-    };
-    let lerr = |line: usize, msg: String| DataError::Line {
-        file: file.into(),
-        line,
-        msg,
-    };
+    let ferr = |msg: String| DataError::in_file(file, msg);
+    let lerr = |line: usize, msg: String| DataError::at_line(file, line, msg);
     if let Some((line, v)) = keys.get("FORMAT") {
         if !v.eq_ignore_ascii_case("text") {
             return Err(lerr(
@@ -212,15 +205,8 @@ fn param_out(
     n_out: usize,
     option: Option<AltaValues>,
 ) -> Result<(ParamOut, Option<AltaValues>), DataError> {
-    let ferr = |msg: String| DataError::File {
-        file: file.into(),
-        msg,
-    };
-    let lerr = |line: usize, msg: String| DataError::Line {
-        file: file.into(),
-        line,
-        msg,
-    };
+    let ferr = |msg: String| DataError::in_file(file, msg);
+    let lerr = |line: usize, msg: String| DataError::at_line(file, line, msg);
     // ALTA writes UNKNOWN_OUTPUT for a file that does not say: the same as no line.
     let given = keys
         .get("PARAM_OUT")

@@ -129,15 +129,8 @@ pub fn parse_reader<R: BufRead>(
     opts: &ReadOptions,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Dataset, DataError> {
-    let ferr = |msg: String| DataError::File {
-        file: file.into(),
-        msg,
-    };
-    let lerr = |line: usize, msg: String| DataError::Line {
-        file: file.into(),
-        line,
-        msg,
-    };
+    let ferr = |msg: String| DataError::in_file(file, msg);
+    let lerr = |line: usize, msg: String| DataError::at_line(file, line, msg);
     let mut header = HeaderLines::default();
     let mut state: Option<Reading> = None;
     let mut buf = Vec::with_capacity(256);
