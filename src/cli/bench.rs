@@ -6,6 +6,7 @@ use super::BackendArgs;
 use crate::bsdf;
 use crate::data::Kind;
 use crate::engine::{self, BackendChoice};
+use crate::workflows::bench::TimedSweep;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -89,34 +90,12 @@ fn parse_size(s: &str) -> Result<usize, String> {
 /// The seed of `bench --sweep`'s sweeps (`sweep`'s default).
 const SWEEP_SEED: u64 = crate::workflows::sweep::run::DEFAULT_SEED;
 
-/// One backend's timed sweep: its rows, wall seconds, and what it measured of itself
-/// (device submissions, time per phase).
-type TimedSweep = (
-    Vec<crate::output::results::Row>,
-    f64,
-    crate::workflows::sweep::SweepStats,
-);
-
 /// Run the sweep on one backend into a fresh temporary folder, with the defaults a
 /// user's `bsdfit sweep` gets ([`SweepConfig::default`]).
 fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
-    use crate::workflows::sweep::{run, Selection, SweepConfig};
+    use crate::workflows::sweep::{Selection, SweepConfig};
     let choice = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
         .map_err(|e| anyhow::anyhow!("--sweep: backend {backend}: {e}"))?;
-    let dir = std::env::temp_dir().join(format!(
-        "bsdfit-bench-sweep-{}-{backend}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos())
-            .unwrap_or(0)
-    ));
-    std::fs::create_dir_all(&dir).with_context(|| {
-        format!(
-            "--sweep: cannot create the temporary folder {}",
-            dir.display()
-        )
-    })?;
     let defaults = SweepConfig::default();
     let cfg = SweepConfig {
         data: a.sweep_data.clone(),
@@ -127,30 +106,11 @@ fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
         restarts: a.sweep_restarts,
         seed,
         backend: choice,
-        out: dir.clone(),
         pictures: false,
         ..defaults
     };
-    let result = (|| {
-        eprintln!(
-            "bench --sweep: sweep on {backend} (seed {seed}) into {}",
-            dir.display()
-        );
-        let t0 = std::time::Instant::now();
-        let stats = run(&cfg, &mut ConsoleObserver::new("sweep"))
-            .with_context(|| format!("--sweep on {backend}"))?;
-        let wall = t0.elapsed().as_secs_f64();
-        let rows = crate::output::results::read_results(
-            &dir.join(crate::output::results::RESULTS_CSV),
-            false,
-            &mut |m| eprintln!("note: {m}"),
-        )?;
-        Ok((rows, wall, stats))
-    })();
-    if let Err(e) = std::fs::remove_dir_all(&dir) {
-        eprintln!("note: could not remove {}: {e}", dir.display());
-    }
-    result
+    crate::workflows::bench::timed_sweep(cfg, &mut ConsoleObserver::new("sweep"))
+        .with_context(|| format!("--sweep on {backend} (seed {seed})"))
 }
 
 /// The models `bench` measures: `--models`, or the catalogue of the data's kind (of both

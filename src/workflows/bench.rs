@@ -619,6 +619,58 @@ pub struct ReferenceSeed {
     pub comparison: SweepComparison,
 }
 
+/// One backend's timed sweep: its rows, wall seconds, and what it measured of itself
+/// (device submissions, time per phase).
+pub type TimedSweep = (Vec<Row>, f64, crate::workflows::sweep::SweepStats);
+
+/// Run the sweep `cfg` into a fresh temporary folder (its `out` is replaced; the folder
+/// is removed afterwards) and time it: `bench --sweep`.
+pub fn timed_sweep(
+    cfg: crate::workflows::sweep::SweepConfig,
+    obs: &mut dyn crate::workflows::sweep::SweepObserver,
+) -> anyhow::Result<TimedSweep> {
+    use anyhow::Context;
+    let backend = format!("{:?}", cfg.backend).to_lowercase();
+    let dir = std::env::temp_dir().join(format!(
+        "bsdfit-bench-sweep-{}-{backend}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0)
+    ));
+    std::fs::create_dir_all(&dir).with_context(|| {
+        format!(
+            "--sweep: cannot create the temporary folder {}",
+            dir.display()
+        )
+    })?;
+    let cfg = crate::workflows::sweep::SweepConfig {
+        out: dir.clone(),
+        ..cfg
+    };
+    let result = (|| {
+        obs.note(&format!(
+            "bench --sweep: sweep on {backend} (seed {}) into {}",
+            cfg.seed,
+            dir.display()
+        ));
+        let t0 = std::time::Instant::now();
+        let stats = crate::workflows::sweep::run(&cfg, obs)?;
+        let wall = t0.elapsed().as_secs_f64();
+        let rows = crate::output::results::read_results(
+            &dir.join(crate::output::results::RESULTS_CSV),
+            false,
+            &mut |m| obs.note(&format!("note: {m}")),
+        )?;
+        Ok((rows, wall, stats))
+    })();
+    if let Err(e) = std::fs::remove_dir_all(&dir) {
+        obs.note(&format!("note: could not remove {}: {e}", dir.display()));
+    }
+    result
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
