@@ -6,7 +6,6 @@ use super::BackendArgs;
 use crate::bsdf;
 use crate::data::Kind;
 use crate::engine::{self, BackendChoice};
-use crate::workflows::bench::TimedSweep;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -89,29 +88,6 @@ fn parse_size(s: &str) -> Result<usize, String> {
 
 /// The seed of `bench --sweep`'s sweeps (`sweep`'s default).
 const SWEEP_SEED: u64 = crate::workflows::sweep::run::DEFAULT_SEED;
-
-/// Run the sweep on one backend into a fresh temporary folder, with the defaults a
-/// user's `bsdfit sweep` gets ([`SweepConfig::default`]).
-fn timed_sweep(a: &BenchArgs, backend: &str, seed: u64) -> Result<TimedSweep> {
-    use crate::workflows::sweep::{Selection, SweepConfig};
-    let choice = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
-        .map_err(|e| anyhow::anyhow!("--sweep: backend {backend}: {e}"))?;
-    let defaults = SweepConfig::default();
-    let cfg = SweepConfig {
-        data: a.sweep_data.clone(),
-        selection: Selection {
-            models: a.models.clone(),
-            ..defaults.selection.clone()
-        },
-        restarts: a.sweep_restarts,
-        seed,
-        backend: choice,
-        pictures: false,
-        ..defaults
-    };
-    crate::workflows::bench::timed_sweep(cfg, &mut ConsoleObserver::new("sweep"))
-        .with_context(|| format!("--sweep on {backend} (seed {seed})"))
-}
 
 /// The models `bench` measures: `--models`, or the catalogue of the data's kind (of both
 /// kinds without `--data`); a model of the other kind than `--data`'s is an error.
@@ -266,38 +242,50 @@ pub fn run(a: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--sweep`: the sweep once per measured backend (CPU first), printed and returned.
+/// `--sweep`: the sweep once per measured backend (CPU first), then printed.
 fn sweep_bench(
     a: &BenchArgs,
     backends: &[Box<dyn engine::Backend>],
 ) -> Result<crate::workflows::bench::SweepBench> {
-    use crate::workflows::bench::{compare_sweeps, SweepBench, SweepTiming};
-    let data = crate::workflows::sweep::expand_data(&a.sweep_data).context("--sweep-data")?;
-    let mut timings = Vec::new();
-    let mut results = Vec::new();
-    for b in backends {
-        let (rows, wall, stats) = timed_sweep(a, b.id(), SWEEP_SEED)?;
-        timings.push(SweepTiming::new(
-            b.id(),
-            wall,
-            &rows,
-            stats.submissions,
-            stats.phases,
-        ));
-        results.push((b.id(), rows));
-    }
+    use crate::workflows::sweep::{Selection, SweepConfig};
+    let defaults = SweepConfig::default();
+    let base = SweepConfig {
+        data: a.sweep_data.clone(),
+        selection: Selection {
+            models: a.models.clone(),
+            ..defaults.selection.clone()
+        },
+        restarts: a.sweep_restarts,
+        seed: SWEEP_SEED,
+        pictures: false,
+        ..defaults
+    };
+    let ids: Vec<&str> = backends.iter().map(|b| b.id()).collect();
+    let bench = crate::workflows::bench::sweep_bench(
+        &base,
+        &ids,
+        a.sweep_reference_seed,
+        &mut ConsoleObserver::new("sweep"),
+    )?;
+    print_sweep_bench(&bench);
+    Ok(bench)
+}
+
+/// The `--sweep` tables and comparisons on stdout.
+fn print_sweep_bench(bench: &crate::workflows::bench::SweepBench) {
+    let timings = &bench.backends;
     println!();
     println!(
         "{:<8} {:>10} {:>6} {:>14} {:>12}",
         "sweep", "wall (s)", "fits", "evaluations", "evals/s"
     );
-    for t in &timings {
+    for t in timings {
         println!(
             "{:<8} {:>10.2} {:>6} {:>14} {:>12.3e}",
             t.backend, t.wall_seconds, t.fits, t.evaluations, t.evals_per_s
         );
     }
-    for t in &timings {
+    for t in timings {
         let p = &t.phases;
         println!(
             "{} phases (s, summed over the sweep's worker threads): set-up {:.2}, screening \
@@ -305,7 +293,7 @@ fn sweep_bench(
             t.backend, p.setup, p.screening, p.search, p.polish, p.conclusions
         );
     }
-    for t in &timings {
+    for t in timings {
         if let Some(s) = &t.submissions {
             println!(
                 "{} submissions: {}; candidates each: median {:.0}, p90 {:.0}, max {:.0}; \
@@ -325,20 +313,10 @@ fn sweep_bench(
             );
         }
     }
-    let find = |id: &str| timings.iter().find(|t| t.backend == id);
-    let ratio = match (find("cpu"), find("gpu")) {
-        (Some(c), Some(g)) => Some(g.wall_seconds / c.wall_seconds.max(1e-9)),
-        _ => None,
-    };
-    let rows_of = |id: &str| results.iter().find(|(b, _)| *b == id).map(|(_, r)| r);
-    let comparison = match (rows_of("cpu"), rows_of("gpu")) {
-        (Some(c), Some(g)) => Some(compare_sweeps(c, g)),
-        _ => None,
-    };
-    if let Some(r) = ratio {
+    if let Some(r) = bench.gpu_cpu_time_ratio {
         println!("GPU/CPU sweep time ratio: {r:.3}");
     }
-    if let Some(c) = &comparison {
+    if let Some(c) = &bench.comparison {
         print_comparison(
             c,
             timings.first().map_or(0, |t| t.fits),
@@ -346,42 +324,23 @@ fn sweep_bench(
             "the f32 tolerance",
         );
     }
-    // The reference against itself with another seed: multi-start variance alone.
-    let reference_seed = match (a.sweep_reference_seed, rows_of("cpu")) {
-        (Some(seed), Some(first)) => {
-            let (rows, wall, _) = timed_sweep(a, "cpu", seed)?;
-            let c = compare_sweeps(first, &rows);
-            println!();
-            println!(
-                "CPU reference, seed {SWEEP_SEED} against seed {seed} ({wall:.2} s): the spread of \
-                 multi-start search alone"
-            );
-            print_comparison(
-                &c,
-                first.len(),
-                [format!("seed {SWEEP_SEED}"), format!("seed {seed}")],
-                "the tolerance",
-            );
-            Some(crate::workflows::bench::ReferenceSeed {
-                seed,
-                wall_seconds: wall,
-                comparison: c,
-            })
-        }
-        (Some(_), None) => {
-            eprintln!("note: --sweep-reference-seed needs the CPU reference's sweep; skipped");
-            None
-        }
-        (None, _) => None,
-    };
-    Ok(SweepBench {
-        data: data.iter().map(|p| p.display().to_string()).collect(),
-        restarts: a.sweep_restarts,
-        backends: timings,
-        gpu_cpu_time_ratio: ratio,
-        comparison,
-        reference_seed,
-    })
+    if let Some(r) = &bench.reference_seed {
+        println!();
+        println!(
+            "CPU reference, seed {SWEEP_SEED} against seed {} ({:.2} s): the spread of \
+             multi-start search alone",
+            r.seed, r.wall_seconds
+        );
+        print_comparison(
+            &r.comparison,
+            timings
+                .iter()
+                .find(|t| t.backend == "cpu")
+                .map_or(0, |t| t.fits),
+            [format!("seed {SWEEP_SEED}"), format!("seed {}", r.seed)],
+            "the tolerance",
+        );
+    }
 }
 
 /// Print a comparison of two sweeps, `labels` naming the first and the second (the

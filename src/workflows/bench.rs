@@ -671,6 +671,77 @@ pub fn timed_sweep(
     result
 }
 
+/// `bench --sweep`: the sweep `base` once on each backend of `ids` (`cpu`, `gpu`, in that
+/// order), timed and compared; with `reference_seed`, the CPU reference's sweep once more
+/// with that seed, compared with its first (the spread of multi-start search alone).
+pub fn sweep_bench(
+    base: &crate::workflows::sweep::SweepConfig,
+    ids: &[&str],
+    reference_seed: Option<u64>,
+    obs: &mut dyn crate::workflows::sweep::SweepObserver,
+) -> anyhow::Result<SweepBench> {
+    use crate::engine::BackendChoice;
+    use anyhow::Context;
+    let data = crate::workflows::sweep::expand_data(&base.data).context("--sweep-data")?;
+    let on = |id: &str, seed: u64| crate::workflows::sweep::SweepConfig {
+        backend: if id == "gpu" {
+            BackendChoice::Gpu
+        } else {
+            BackendChoice::Cpu
+        },
+        seed,
+        ..base.clone()
+    };
+    let mut timings = Vec::new();
+    let mut results = Vec::new();
+    for &id in ids {
+        let (rows, wall, stats) = timed_sweep(on(id, base.seed), obs)
+            .with_context(|| format!("--sweep on {id} (seed {})", base.seed))?;
+        timings.push(SweepTiming::new(
+            id,
+            wall,
+            &rows,
+            stats.submissions,
+            stats.phases,
+        ));
+        results.push((id, rows));
+    }
+    let find = |id: &str| timings.iter().find(|t| t.backend == id);
+    let ratio = match (find("cpu"), find("gpu")) {
+        (Some(c), Some(g)) => Some(g.wall_seconds / c.wall_seconds.max(1e-9)),
+        _ => None,
+    };
+    let rows_of = |id: &str| results.iter().find(|(b, _)| *b == id).map(|(_, r)| r);
+    let comparison = match (rows_of("cpu"), rows_of("gpu")) {
+        (Some(c), Some(g)) => Some(compare_sweeps(c, g)),
+        _ => None,
+    };
+    let reference_seed = match (reference_seed, rows_of("cpu")) {
+        (Some(seed), Some(first)) => {
+            let (rows, wall, _) = timed_sweep(on("cpu", seed), obs)
+                .with_context(|| format!("--sweep on cpu (seed {seed})"))?;
+            Some(ReferenceSeed {
+                seed,
+                wall_seconds: wall,
+                comparison: compare_sweeps(first, &rows),
+            })
+        }
+        (Some(_), None) => {
+            obs.note("note: --sweep-reference-seed needs the CPU reference's sweep; skipped");
+            None
+        }
+        (None, _) => None,
+    };
+    Ok(SweepBench {
+        data: data.iter().map(|p| p.display().to_string()).collect(),
+        restarts: base.restarts,
+        backends: timings,
+        gpu_cpu_time_ratio: ratio,
+        comparison,
+        reference_seed,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
