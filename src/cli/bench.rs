@@ -260,10 +260,17 @@ fn sweep_bench(
         pictures: false,
         ..defaults
     };
-    let ids: Vec<&str> = backends.iter().map(|b| b.id()).collect();
+    // The measured backends, by the choice that selects each.
+    let choices = backends
+        .iter()
+        .map(|b| {
+            BackendChoice::from_name(b.id())
+                .with_context(|| format!("no --backend selects the backend '{}'", b.id()))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let bench = crate::workflows::bench::sweep_bench(
         &base,
-        &ids,
+        &choices,
         a.sweep_reference_seed,
         &mut ConsoleObserver::new("sweep"),
     )?;

@@ -183,12 +183,7 @@ pub fn sweep_argv(a: &SweepArgs) -> Vec<String> {
     opt("optimizer", a.optimizer.join(","));
     opt("restarts", a.restarts.to_string());
     opt("seed", a.seed.to_string());
-    opt(
-        "backend",
-        clap::ValueEnum::to_possible_value(&a.backend.backend)
-            .map(|p| p.get_name().to_string())
-            .unwrap_or_else(|| "auto".into()),
-    );
+    opt("backend", a.backend.backend.name().to_string());
     for f in &a.constraints.fix {
         opt("fix", f.clone());
     }

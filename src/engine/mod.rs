@@ -268,6 +268,25 @@ pub enum BackendChoice {
     Cpu,
 }
 
+impl BackendChoice {
+    /// The `--backend` value that names it, which is also the id of the backend it
+    /// selects ([`Backend::id`]) for `gpu` and `cpu`.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendChoice::Auto => "auto",
+            BackendChoice::Gpu => "gpu",
+            BackendChoice::Cpu => "cpu",
+        }
+    }
+
+    /// The choice named `name` (`auto`, `gpu`, `cpu`).
+    pub fn from_name(name: &str) -> Option<BackendChoice> {
+        [BackendChoice::Auto, BackendChoice::Gpu, BackendChoice::Cpu]
+            .into_iter()
+            .find(|c| c.name() == name)
+    }
+}
+
 /// Pick a backend. `notice` receives one-line messages for the user (which adapter, or
 /// why the CPU is used).
 pub fn select(
@@ -296,7 +315,7 @@ pub fn select(
 
 #[cfg(test)]
 mod tests {
-    use super::{Spread, SubmissionStats};
+    use super::{cpu, Backend, BackendChoice, Spread, SubmissionStats};
 
     #[test]
     fn spreads_take_the_nearest_rank_and_the_mean() {
@@ -309,5 +328,17 @@ mod tests {
         assert_eq!(log.submissions, 2);
         assert_eq!((log.candidates.max, log.evaluations.mean), (4.0, 200.0));
         assert_eq!(log.seconds_total, 2.0);
+    }
+
+    /// `BackendChoice::name` is the spelling `--backend` accepts, and names round-trip.
+    #[test]
+    fn backend_choice_names_are_the_option_values() {
+        for c in [BackendChoice::Auto, BackendChoice::Gpu, BackendChoice::Cpu] {
+            let value = clap::ValueEnum::to_possible_value(&c).unwrap();
+            assert_eq!(c.name(), value.get_name());
+            assert_eq!(BackendChoice::from_name(c.name()), Some(c));
+        }
+        assert_eq!(BackendChoice::from_name("tpu"), None);
+        assert_eq!(cpu::CpuBackend::new().id(), BackendChoice::Cpu.name());
     }
 }

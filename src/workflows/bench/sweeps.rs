@@ -472,7 +472,7 @@ pub fn timed_sweep(
     obs: &mut dyn crate::workflows::sweep::SweepObserver,
 ) -> anyhow::Result<TimedSweep> {
     use anyhow::Context;
-    let backend = format!("{:?}", cfg.backend).to_lowercase();
+    let backend = cfg.backend.name();
     let dir = std::env::temp_dir().join(format!(
         "bsdfit-bench-sweep-{}-{backend}-{}",
         std::process::id(),
@@ -513,31 +513,27 @@ pub fn timed_sweep(
     result
 }
 
-/// `bench --sweep`: the sweep `base` once on each backend of `ids` (`cpu`, `gpu`, in that
-/// order), timed and compared; with `reference_seed`, the CPU reference's sweep once more
+/// `bench --sweep`: the sweep `base` once on each of `backends` (CPU first), timed and compared; with `reference_seed`, the CPU reference's sweep once more
 /// with that seed, compared with its first (the spread of multi-start search alone).
 pub fn sweep_bench(
     base: &crate::workflows::sweep::SweepConfig,
-    ids: &[&str],
+    backends: &[crate::engine::BackendChoice],
     reference_seed: Option<u64>,
     obs: &mut dyn crate::workflows::sweep::SweepObserver,
 ) -> anyhow::Result<SweepBench> {
     use crate::engine::BackendChoice;
     use anyhow::Context;
     let data = crate::workflows::sweep::expand_data(&base.data).context("--sweep-data")?;
-    let on = |id: &str, seed: u64| crate::workflows::sweep::SweepConfig {
-        backend: if id == "gpu" {
-            BackendChoice::Gpu
-        } else {
-            BackendChoice::Cpu
-        },
+    let on = |backend: BackendChoice, seed: u64| crate::workflows::sweep::SweepConfig {
+        backend,
         seed,
         ..base.clone()
     };
     let mut timings = Vec::new();
     let mut results = Vec::new();
-    for &id in ids {
-        let (rows, wall, stats) = timed_sweep(on(id, base.seed), obs)
+    for &backend in backends {
+        let id = backend.name();
+        let (rows, wall, stats) = timed_sweep(on(backend, base.seed), obs)
             .with_context(|| format!("--sweep on {id} (seed {})", base.seed))?;
         timings.push(SweepTiming::new(
             id,
@@ -560,7 +556,7 @@ pub fn sweep_bench(
     };
     let reference_seed = match (reference_seed, rows_of("cpu")) {
         (Some(seed), Some(first)) => {
-            let (rows, wall, _) = timed_sweep(on("cpu", seed), obs)
+            let (rows, wall, _) = timed_sweep(on(BackendChoice::Cpu, seed), obs)
                 .with_context(|| format!("--sweep on cpu (seed {seed})"))?;
             Some(ReferenceSeed {
                 seed,
