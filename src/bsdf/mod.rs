@@ -560,6 +560,13 @@ impl Model {
         p.index + if p.axes > 1 { axis * rgb_width } else { 0 } + if p.decl.rgb { ch } else { 0 }
     }
 
+    /// The scalar view of group `g` (see [`Self::scalars_into`]).
+    pub fn scalars(&self, flat: &[f64], g: usize) -> Vec<f64> {
+        let mut v = Vec::with_capacity(self.params.len());
+        self.scalars_into(flat, g, &mut v);
+        v
+    }
+
     /// Resolve the flat vector into the scalar view of group `g`.
     pub fn scalars_into(&self, flat: &[f64], g: usize, out: &mut Vec<f64>) {
         out.clear();
@@ -605,9 +612,7 @@ impl Model {
     /// Evaluate the model for one flat parameter vector at one geometry and group (the
     /// channel index when there is one plane).
     pub fn eval(&self, flat: &[f64], g: usize, wi: DVec3, wo: DVec3) -> f64 {
-        let mut s = Vec::with_capacity(self.params.len());
-        self.scalars_into(flat, g, &mut s);
-        self.root.eval(&s, wi, wo)
+        self.root.eval(&self.scalars(flat, g), wi, wo)
     }
 
     /// The declaration of each flat entry (rgb declarations repeated per channel).

@@ -460,14 +460,7 @@ pub fn merl_table(fit: &SavedFit, rgb: [usize; 3]) -> Result<Vec<u8>> {
         "{} is a BTDF model: a MERL table holds a BRDF (use --format tabulated)",
         m.spec
     );
-    let views: Vec<Vec<f64>> = rgb
-        .iter()
-        .map(|&g| {
-            let mut v = Vec::new();
-            m.scalars_into(&fit.flat, g, &mut v);
-            v
-        })
-        .collect();
+    let views: Vec<Vec<f64>> = rgb.iter().map(|&g| m.scalars(&fit.flat, g)).collect();
     let bytes = merl::encode_par(|th, td, pd| {
         let (wi, wo) =
             merl::cell_directions(th, td, pd).expect("encode visits cells above the horizon");

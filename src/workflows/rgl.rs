@@ -149,14 +149,7 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
     check_representable(fit)?;
     let m = &fit.model;
     let (groups, wavelengths) = channel_groups(fit, channels);
-    let views: Vec<Vec<f64>> = groups
-        .iter()
-        .map(|&g| {
-            let mut v = Vec::new();
-            m.scalars_into(&fit.flat, g, &mut v);
-            v
-        })
-        .collect();
+    let views: Vec<Vec<f64>> = groups.iter().map(|&g| m.scalars(&fit.flat, g)).collect();
     let thetas = theta_i_nodes();
     // One incidence node per task: its value slice (C × H × W) and luminance (H × W).
     let slices: Vec<(Vec<f32>, Vec<f32>)> = thetas
