@@ -61,11 +61,7 @@ fn compute<T: Send>(
     match outcome {
         Ok(result) => result.map_err(to_py),
         Err(panic) => {
-            let what = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
+            let what = bsdfit::output::text::panic_text(panic.as_ref()).unwrap_or("unknown panic");
             Err(PyRuntimeError::new_err(format!(
                 "bsdfit internal error (a bug, please report it): {what}"
             )))

@@ -18,3 +18,34 @@ pub fn plural_with(n: usize, one: &str, many: &str) -> String {
         format!("{n} {many}")
     }
 }
+
+/// The message a caught panic carries (`panic!` with a literal or a formatted text), if
+/// it carries one.
+pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> Option<&str> {
+    payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::panic_text;
+
+    #[test]
+    fn a_panic_says_its_message_or_nothing() {
+        let caught = |f: fn()| std::panic::catch_unwind(f).unwrap_err();
+        assert_eq!(
+            panic_text(caught(|| panic!("a literal")).as_ref()),
+            Some("a literal")
+        );
+        assert_eq!(
+            panic_text(caught(|| panic!("row {}", 7)).as_ref()),
+            Some("row 7")
+        );
+        assert_eq!(
+            panic_text(caught(|| std::panic::panic_any(3u8)).as_ref()),
+            None
+        );
+    }
+}

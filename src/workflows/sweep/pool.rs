@@ -183,11 +183,3 @@ fn stages_of(runnable: &[Runnable]) -> Vec<Vec<usize>> {
     }
     stages
 }
-
-/// A caught panic's message.
-pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
-    p.downcast_ref::<String>()
-        .cloned()
-        .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-        .unwrap_or_else(|| "panic".into())
-}

@@ -3,7 +3,7 @@
 //! sweep`, `bench --sweep` and the Python module's `sweep()` all call [`run`].
 
 use super::lock::DirLock;
-use super::pool::{panic_message, FitOutcome, Pool, Runnable};
+use super::pool::{FitOutcome, Pool, Runnable};
 use super::{expand_data, skipped_entry, slurm, tasks, write_skipped, Selection, Task};
 use crate::bsdf::Model;
 use crate::data::ReadOptions;
@@ -16,7 +16,7 @@ use crate::output::results::{
     read_results, results_csv_text, write_if_changed, write_summaries, Appender, DataFile, Key,
     Row, Skipped, DEFAULT_OUT, RESULTS_CSV,
 };
-use crate::output::text::{plural, plural_with};
+use crate::output::text::{panic_text, plural, plural_with};
 use crate::workflows::checks::nonfinite_message;
 use crate::workflows::checks::{batch_bytes, batch_candidates, check_batch_memory};
 use anyhow::{Context, Result};
@@ -555,7 +555,7 @@ impl FitRun<'_> {
                 return Ok(None);
             }
             Err(p) => {
-                let msg = panic_message(p.as_ref());
+                let msg = panic_text(p.as_ref()).unwrap_or("panic");
                 obs.alert(&format!(
                     "fit panicked: {} · {} · {loss}: {msg}",
                     f.name, t.model
