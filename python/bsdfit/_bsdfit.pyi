@@ -118,9 +118,6 @@ def diagnose_json(
 ) -> str:
     """The diagnosis as ``bsdfit diagnose --json`` writes it."""
 
-def run_cli(args: List[str]) -> None:
-    """Run a command of the command line in this process (``["sweep", …]``)."""
-
 def sweep(
     paths: List[str],
     out: str,

@@ -487,12 +487,6 @@ fn diagnose_json(
     })
 }
 
-/// Run a command of the command line in this process (`["sweep", …]`).
-#[pyfunction]
-fn run_cli(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
-    compute(py, move || bsdfit::cli::run_args(args))
-}
-
 /// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does, with its
 /// progress on stderr); the number of fits it added.
 #[pyfunction]
@@ -571,7 +565,6 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
     m.add_function(wrap_pyfunction!(eval_fit, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
-    m.add_function(wrap_pyfunction!(run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;

@@ -221,20 +221,6 @@ pub fn main() -> i32 {
     }
 }
 
-/// Run one command given as its arguments (without the program name), in this process:
-/// `["sweep", "data", "--out", "results"]` does what `bsdfit sweep data --out results`
-/// does. A bad argument is an error carrying clap's message, never an exit.
-pub fn run_args<I, S>(args: I) -> Result<()>
-where
-    I: IntoIterator<Item = S>,
-    S: Into<std::ffi::OsString> + Clone,
-{
-    let argv =
-        std::iter::once(std::ffi::OsString::from("bsdfit")).chain(args.into_iter().map(Into::into));
-    let cli = Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{}", e.render()))?;
-    dispatch(cli.command)
-}
-
 fn dispatch(command: Command) -> Result<()> {
     match command {
         Command::Fit(a) => fit::run(a),
