@@ -15,7 +15,7 @@ use bsdfit::data::{Dataset, Kind, ReadOptions};
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
-use bsdfit::engine::Backend;
+use bsdfit::engine::{Backend, Problem};
 use bsdfit::inference::fit::{fit, FitOptions, FitReport};
 use bsdfit::inference::saved::FitFile;
 use bsdfit::workflows::diagnose::{self, DiagnoseOptions, Effect};
@@ -23,6 +23,7 @@ use bsdfit::workflows::export;
 use bsdfit::workflows::rgl;
 use bsdfit::workflows::sweep::{self, Selection, SweepConfig, SweepObserver};
 use bsdfit::workflows::synth::{geometry_expr, synthesize, Noise};
+use rand::{Rng, SeedableRng};
 
 /// The one registry line (idempotent: every test calls it).
 fn register() {
@@ -114,6 +115,67 @@ fn the_toy_model_is_in_the_catalogue_and_fits_on_both_backends() {
     let (model, truth, data) = synth("fa(minnaert)", params, "specular+offplane", 6);
     let r = fit_on(&model, &data, &CpuBackend::new());
     assert_recovered(&r, &truth, "cpu, fa(minnaert)");
+}
+
+/// The toy's twins agree: GPU (f32, its WGSL) against CPU (f64, its Rust) model values at
+/// random parameters of its whole box and random directions up to 85°, alone and under
+/// `fa`. Per value |gpu − cpu| ≤ 2e-3·|cpu| + 1e-30 (the bound of `tests/gpu_parity.rs`:
+/// a few ulp of f32 per operation over a chain of pow/exp; the floor is f32's range), and
+/// NaN never passes.
+#[test]
+fn the_toy_models_wgsl_twin_matches_its_rust() {
+    register();
+    let gpu = GpuBackend::new().expect("a Vulkan adapter (CI installs lavapipe)");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let rows: Vec<[f64; 4]> = (0..300)
+        .map(|_| {
+            [
+                rng.random_range(0.0..85.0),
+                rng.random_range(0.0..360.0),
+                rng.random_range(0.0..85.0),
+                rng.random_range(0.0..360.0),
+            ]
+        })
+        .collect();
+    for spec in ["minnaert", "fa(minnaert)"] {
+        let model = Model::parse(spec, WAVELENGTHS.len()).unwrap();
+        let data = synthesize(
+            &model,
+            &model.defaults(),
+            &rows,
+            &WAVELENGTHS,
+            NOISE,
+            3,
+            "toy",
+        )
+        .unwrap();
+        let params: Vec<f64> = (0..12)
+            .flat_map(|_| {
+                let u: Vec<f64> = (0..model.dim).map(|_| rng.random::<f64>()).collect();
+                model.from_unit(&u)
+            })
+            .collect();
+        let problem = Problem {
+            model: &model,
+            data: &data,
+            loss: chi2(),
+        };
+        let c = CpuBackend::new()
+            .prepare(problem)
+            .unwrap()
+            .values(&params)
+            .unwrap();
+        let g = gpu.prepare(problem).unwrap().values(&params).unwrap();
+        assert_eq!(c.len(), g.len());
+        for (i, (&cv, &gv)) in c.iter().zip(&g).enumerate() {
+            assert!(cv.is_finite(), "{spec}: CPU value {i} is {cv}");
+            let err = (gv - cv).abs();
+            assert!(
+                err <= 2e-3 * cv.abs() + 1e-30,
+                "{spec}: value {i}: gpu {gv} cpu {cv}"
+            );
+        }
+    }
 }
 
 /// Quiet sweep progress.
