@@ -25,6 +25,7 @@
 pub mod alta;
 pub mod merl;
 pub mod rgl;
+pub mod tensor;
 pub mod v1;
 
 use crate::data::{DataError, Dataset, ReadOptions};

@@ -8,6 +8,7 @@
 //! carry no uncertainties: `--assume-uncertainty` is required, as for MERL tables.
 //! Isotropic materials only (an anisotropic file is refused with a message).
 
+use super::tensor::TensorFile;
 use super::{mark_assumed, require_assumption};
 use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
 use glam::DVec3;
@@ -21,17 +22,10 @@ pub const DEFAULT_GEOMETRY: &str = "grid:10";
 /// RGB files: the wavelengths R, G and B stand for (as for MERL tables).
 pub const NOMINAL_NM: [f64; 3] = [650.0, 550.0, 450.0];
 
-/// The tensor file's magic.
-pub const MAGIC: &[u8; 12] = b"tensor_file\0";
+pub use super::tensor::MAGIC;
 
 pub fn looks_like(head: &[u8]) -> bool {
     head.starts_with(MAGIC)
-}
-
-/// One field: its shape and values (as f64).
-struct Field {
-    shape: Vec<usize>,
-    values: Vec<f64>,
 }
 
 fn bad(file: &str, msg: impl Into<String>) -> DataError {
@@ -39,73 +33,6 @@ fn bad(file: &str, msg: impl Into<String>) -> DataError {
         file: file.into(),
         msg: msg.into(),
     }
-}
-
-/// The fields of a tensor file, by name (numbers as f64, bytes as 0–255).
-fn fields(bytes: &[u8], file: &str) -> Result<BTreeMap<String, Field>, DataError> {
-    let take = |at: usize, n: usize| -> Result<&[u8], DataError> {
-        bytes.get(at..at + n).ok_or_else(|| {
-            bad(
-                file,
-                "RGL .bsdf file: truncated (a field runs past the end)",
-            )
-        })
-    };
-    if take(0, 12)? != MAGIC {
-        return Err(bad(file, "not a tensor file (no 'tensor_file' header)"));
-    }
-    let version = take(12, 2)?;
-    if version != [1, 0] {
-        return Err(bad(
-            file,
-            format!(
-                "tensor file version {}.{}, expected 1.0",
-                version[0], version[1]
-            ),
-        ));
-    }
-    let n = u32::from_le_bytes(take(14, 4)?.try_into().expect("4 bytes"));
-    let mut at = 18;
-    let mut out = BTreeMap::new();
-    for _ in 0..n {
-        let len = u16::from_le_bytes(take(at, 2)?.try_into().expect("2 bytes")) as usize;
-        let name = String::from_utf8_lossy(take(at + 2, len)?).into_owned();
-        at += 2 + len;
-        let ndim = u16::from_le_bytes(take(at, 2)?.try_into().expect("2 bytes")) as usize;
-        let dtype = take(at + 2, 1)?[0];
-        let offset = u64::from_le_bytes(take(at + 3, 8)?.try_into().expect("8 bytes")) as usize;
-        at += 11;
-        let mut shape = Vec::with_capacity(ndim);
-        for _ in 0..ndim {
-            shape.push(u64::from_le_bytes(take(at, 8)?.try_into().expect("8 bytes")) as usize);
-            at += 8;
-        }
-        let count = shape
-            .iter()
-            .try_fold(1usize, |a, &s| a.checked_mul(s))
-            .ok_or_else(|| bad(file, format!("field {name}: shape {shape:?} overflows")))?;
-        let values: Vec<f64> = match dtype {
-            1 => take(offset, count)?.iter().map(|&b| b as f64).collect(),
-            10 => take(offset, 4 * count)?
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")) as f64)
-                .collect(),
-            11 => take(offset, 8 * count)?
-                .chunks_exact(8)
-                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-                .collect(),
-            t => {
-                return Err(bad(
-                    file,
-                    format!(
-                    "field {name}: element type {t} is not read (uint8, float32 and float64 are)"
-                ),
-                ))
-            }
-        };
-        out.insert(name, Field { shape, values });
-    }
-    Ok(out)
 }
 
 /// A 2D table over [0, 1]², one slice per combination of parameter nodes, interpolated
@@ -287,20 +214,32 @@ struct Material {
     /// Wavelengths of the value table's channels (RGB files: 0, 1, 2 for R, G, B).
     wavelengths: Vec<f64>,
     jacobian: bool,
+    /// The file's `description`, its first line, if any.
+    description: Option<String>,
 }
 
 impl Material {
-    fn from_fields(f: BTreeMap<String, Field>, file: &str) -> Result<Material, DataError> {
-        let get = |name: &str| {
-            f.get(name).ok_or_else(|| {
+    fn from_file(tf: &TensorFile, file: &str) -> Result<Material, DataError> {
+        let info = |name: &str| {
+            tf.field(name).ok_or_else(|| {
                 bad(
                     file,
                     format!("RGL .bsdf file without the field '{name}' (not a measured material?)"),
                 )
             })
         };
-        let theta_i = get("theta_i")?.values.clone();
-        let phi_i = get("phi_i")?.values.clone();
+        let values = |name: &str| info(name).map(|_| tf.values(name).expect("the field exists"));
+        if let Some(d) = tf.field("description").filter(|d| !d.element.is_byte()) {
+            return Err(bad(
+                file,
+                format!(
+                    "field description: element type {} cannot hold text (uint8 or int8 can)",
+                    d.element.name()
+                ),
+            ));
+        }
+        let theta_i = increasing(values("theta_i")?, "theta_i", file)?;
+        let phi_i = increasing(values("phi_i")?, "phi_i", file)?;
         if phi_i.len() > 2 {
             return Err(bad(
                 file,
@@ -310,78 +249,98 @@ impl Material {
                 ),
             ));
         }
-        let phi_i = vec![phi_i.first().copied().unwrap_or(0.0)];
-        let (table, wavelengths) = match (f.get("rgb"), f.get("spectra"), f.get("wavelengths")) {
-            (_, Some(s), Some(w)) => (s, w.values.clone()),
-            (Some(r), _, _) => (r, vec![0.0, 1.0, 2.0]),
-            _ => {
-                return Err(bad(
-                    file,
-                    "RGL .bsdf file without an 'rgb' or 'spectra' table",
-                ))
-            }
+        let spectral = tf.field("spectra").is_some() && tf.field("wavelengths").is_some();
+        let (table_name, wavelengths) = if spectral {
+            (
+                "spectra",
+                increasing(values("wavelengths")?, "wavelengths", file)?,
+            )
+        } else if tf.field("rgb").is_some() {
+            ("rgb", vec![0.0, 1.0, 2.0])
+        } else {
+            return Err(bad(
+                file,
+                "RGL .bsdf file without an 'rgb' or 'spectra' table",
+            ));
         };
-        let shape_ok =
-            |fd: &Field, rank: usize| fd.shape.len() == rank && fd.shape.iter().all(|&s| s >= 1);
-        let (ndf, sigma, vndf) = (get("ndf")?, get("sigma")?, get("vndf")?);
-        let nt = theta_i.len();
-        let sliced = |fd: &Field| fd.shape[1] == nt && fd.shape[2] >= 2 && fd.shape[3] >= 2;
-        if !(shape_ok(table, 5)
-            && table.shape[1] == nt
+        let (table, ndf, sigma, vndf) = (
+            info(table_name)?,
+            info("ndf")?,
+            info("sigma")?,
+            info("vndf")?,
+        );
+        let (np, nt) = (phi_i.len(), theta_i.len());
+        let grid = |shape: &[usize], rank: usize| {
+            shape.len() == rank && shape[rank - 2..].iter().all(|&s| s >= 2)
+        };
+        let per_incidence = |shape: &[usize]| shape[0] == np && shape[1] == nt;
+        if !(grid(&table.shape, 5)
+            && per_incidence(&table.shape)
             && table.shape[2] == wavelengths.len()
-            && table.shape[3] >= 2
-            && table.shape[4] >= 2
-            && shape_ok(ndf, 2)
-            && shape_ok(sigma, 2)
-            && shape_ok(vndf, 4)
-            && sliced(vndf)
-            && ndf.shape.iter().all(|&s| s >= 2)
-            && sigma.shape.iter().all(|&s| s >= 2))
+            && grid(&ndf.shape, 2)
+            && grid(&sigma.shape, 2)
+            && grid(&vndf.shape, 4)
+            && per_incidence(&vndf.shape))
         {
             return Err(bad(
                 file,
-                "RGL .bsdf file with tables of inconsistent shapes",
+                format!(
+                    "RGL .bsdf file with tables of inconsistent shapes ({table_name} {:?}, vndf {:?}, ndf {:?}, sigma {:?} for {np} incidence azimuth(s), {nt} incidence angle(s){})",
+                    table.shape,
+                    vndf.shape,
+                    ndf.shape,
+                    sigma.shape,
+                    if spectral { format!(", {} wavelengths", wavelengths.len()) } else { String::new() }
+                ),
             ));
         }
-        // Keep the first azimuth's slices only (an isotropic file has one or two equal).
-        let first = |fd: &Field, per: usize| fd.values[..per].to_vec();
-        let per_values = nt * table.shape[2] * table.shape[3] * table.shape[4];
-        let per_vndf = nt * vndf.shape[2] * vndf.shape[3];
-        let jacobian = f
-            .get("jacobian")
-            .is_some_and(|j| j.values.first() == Some(&1.0));
+        let (table_shape, vndf_shape) = (table.shape.clone(), vndf.shape.clone());
+        let table = values(table_name)?;
+        let vndf = values("vndf")?;
+        // An isotropic file has one incidence azimuth, or two holding the same tables;
+        // the first is read. Two that differ describe an anisotropic material.
+        if np == 2 {
+            same_azimuth_slices(&phi_i, &[(table_name, &table), ("vndf", &vndf)], file)?;
+        }
+        let first = |v: Vec<f64>| v[..v.len() / np].to_vec();
+        let jacobian = tf
+            .values("jacobian")
+            .is_some_and(|j| j.first().is_some_and(|&v| v != 0.0));
+        let phi_i = vec![phi_i[0]];
         Ok(Material {
-            ndf: Table::new(
-                ndf.values.clone(),
-                ndf.shape[1],
-                ndf.shape[0],
-                vec![],
-                false,
-            ),
+            ndf: Table::new(values("ndf")?, ndf.shape[1], ndf.shape[0], vec![], false),
             sigma: Table::new(
-                sigma.values.clone(),
+                values("sigma")?,
                 sigma.shape[1],
                 sigma.shape[0],
                 vec![],
                 false,
             ),
             vndf: Table::new(
-                first(vndf, per_vndf),
-                vndf.shape[3],
-                vndf.shape[2],
+                first(vndf),
+                vndf_shape[3],
+                vndf_shape[2],
                 vec![phi_i.clone(), theta_i.clone()],
                 true,
             ),
             values: Table::new(
-                first(table, per_values),
-                table.shape[4],
-                table.shape[3],
-                vec![phi_i.clone(), theta_i.clone(), wavelengths.clone()],
+                first(table),
+                table_shape[4],
+                table_shape[3],
+                vec![phi_i, theta_i.clone(), wavelengths.clone()],
                 false,
             ),
             theta_i,
             wavelengths,
             jacobian,
+            description: tf
+                .text("description")
+                .and_then(|d| {
+                    d.lines()
+                        .next()
+                        .map(|l| l.trim().chars().take(80).collect())
+                })
+                .filter(|d: &String| !d.is_empty()),
         })
     }
 
@@ -411,18 +370,64 @@ impl Material {
     }
 }
 
+/// The nodes of a parameter (`theta_i`, `phi_i`, `wavelengths`): finite and strictly
+/// increasing, as interpolation between them needs.
+fn increasing(v: Vec<f64>, name: &str, file: &str) -> Result<Vec<f64>, DataError> {
+    if v.is_empty() || v.iter().any(|x| !x.is_finite()) || v.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(bad(
+            file,
+            format!("field {name}: its values must be finite and increase ({v:?})"),
+        ));
+    }
+    Ok(v)
+}
+
+/// With two incidence azimuths, each table's two halves (one per azimuth) must agree to
+/// float32 rounding: otherwise the material depends on φi and is anisotropic.
+fn same_azimuth_slices(
+    phi_i: &[f64],
+    tables: &[(&str, &[f64])],
+    file: &str,
+) -> Result<(), DataError> {
+    for (name, t) in tables {
+        let (a, b) = t.split_at(t.len() / 2);
+        let scale = t.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        if worst > 1e-6 * scale {
+            return Err(bad(
+                file,
+                format!(
+                    "an anisotropic RGL material: its two incidence azimuths (φi = {:.1}° and {:.1}°) hold different {name} tables (largest difference {:.2e} of the table's maximum); bsdfit reads isotropic materials only",
+                    phi_i[0].to_degrees(),
+                    phi_i[1].to_degrees(),
+                    worst / scale
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Read an RGL `.bsdf` file as a dataset: the material evaluated at the directions of
 /// the sample geometry and at the channels (RGB: R, G, B at [`NOMINAL_NM`]; spectral:
 /// `--wavelengths`, default 450, 550, 650 nm), with the assumed uncertainties.
 pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, DataError> {
     let (rel, abs) = require_assumption(file, opts, "an RGL .bsdf material")?;
-    let material = Material::from_fields(fields(bytes, file)?, file)?;
+    let tf = TensorFile::parse(bytes).map_err(|e| bad(file, format!("RGL .bsdf file: {e}")))?;
+    let material = Material::from_file(&tf, file)?;
     let spectral = material.wavelengths.len() != 3 || material.wavelengths != [0.0, 1.0, 2.0];
     let (expr, rows) = sample_geometry(file, opts)?;
     let channels = channels(&material, spectral, file, opts)?;
     let mut b = Builder::new(Kind::Brdf, file, opts);
     b.notices.push(format!(
-        "{file}: RGL measured material ({} incidence angles), sampled on geometry {expr} ({} directions){}",
+        "{file}: RGL measured material{} ({} incidence angles), sampled on geometry {expr} ({} directions){}",
+        material
+            .description
+            .as_ref()
+            .map_or(String::new(), |d| format!(" '{d}'")),
         material.theta_i.len(),
         rows.len(),
         if spectral {
@@ -545,13 +550,21 @@ fn evaluate(
     file: &str,
     (rel, abs): (f64, f64),
 ) -> Result<(), DataError> {
+    let mut clamped = 0usize;
     for s in &mut ds.samples {
         let lambda = channels
             .iter()
             .find(|c| c.0 == s.wavelength_nm)
             .map_or(s.wavelength_nm, |c| c.1);
-        let value = material.brdf(s.wi(), s.wo(), lambda);
-        if !value.is_finite() || value < 0.0 {
+        let mut value = material.brdf(s.wi(), s.wo(), lambda);
+        if value < 0.0 && value.is_finite() {
+            // RGB tables hold negative values where the measured spectrum lies outside the
+            // colour gamut; the database's own RGB reader clamps them to zero, and so does
+            // bsdfit (counted in a notice).
+            value = 0.0;
+            clamped += 1;
+        }
+        if !value.is_finite() {
             return Err(DataError::Line {
                 file: file.into(),
                 line: s.line as usize,
@@ -565,6 +578,12 @@ fn evaluate(
         }
         s.value = value;
         s.uncertainty = super::assumed_uncertainty(value, rel, abs);
+    }
+    if clamped > 0 {
+        ds.notices.push(format!(
+            "{file}: {clamped} of {} sampled values were negative in the material's table (colours outside the gamut of an RGB file) and are read as 0",
+            ds.samples.len()
+        ));
     }
     Ok(())
 }
