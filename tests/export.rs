@@ -859,35 +859,40 @@ fn rgl_export_tabulates_f_cos_on_the_half_vector_grid_and_refuses_what_it_cannot
         vec![1, nt as u64, nn as u64, nn as u64]
     );
     let rgb = f32s(rgb);
-    // Lambert: every cell holds ρ/π · cos θo of the direction its half vector gives; R is
-    // the longest wavelength (ρ = 0.8 in the data).
+    // Lambert: every cell holds ρ/π · cos θo of the direction its half vector gives, in
+    // each channel: R, G, B are the longest, middle and shortest wavelength (ρ = 0.8,
+    // 0.5, 0.2 in the data). The cell (x, y) of an n × n table sits at u = (x, y)/(n − 1),
+    // θm = u_x² · π/2 and φm = (2u_y − 1) · π, by the format's definition (written here,
+    // not taken from the library).
     let fit = saved(&json);
-    let rho_r = fit.flat[2];
+    let rho_rgb = [fit.flat[2], fit.flat[1], fit.flat[0]];
     let mut checked = 0;
     for (k, &ti) in theta_i.iter().enumerate().step_by(17) {
         let wi = glam::DVec3::new((ti as f64).sin(), 0.0, (ti as f64).cos());
-        for (y, x) in [(64, 20), (10, 100), (100, 60), (127, 127), (0, 0)] {
+        for (y, x) in [(64, 20), (10, 100), (100, 60), (127, 127), (0, 0), (1, 1)] {
             let (ux, uy) = (x as f64 / (nn - 1) as f64, y as f64 / (nn - 1) as f64);
             let (tm, pm) = (
-                bsdfit::workflows::rgl::u_to_theta(ux),
-                bsdfit::workflows::rgl::u_to_phi(uy),
+                ux * ux * std::f64::consts::FRAC_PI_2,
+                (2.0 * uy - 1.0) * std::f64::consts::PI,
             );
             let m = glam::DVec3::new(tm.sin() * pm.cos(), tm.sin() * pm.sin(), tm.cos());
             let wo = 2.0 * wi.dot(m) * m - wi;
-            let want = if wo.z > 1e-9 && wi.dot(m) > 0.0 {
-                rho_r / std::f64::consts::PI * wo.z
-            } else {
-                0.0
-            };
-            let got = rgb[((k * 3) * nn + y) * nn + x] as f64;
-            assert!(
-                (got - want).abs() <= 1e-6 * want.max(1e-3),
-                "θi node {k}, cell ({x}, {y}): {got} vs {want}"
-            );
-            checked += 1;
+            for (c, rho) in rho_rgb.iter().enumerate() {
+                let want = if wo.z > 1e-9 && wi.dot(m) > 0.0 {
+                    rho / std::f64::consts::PI * wo.z
+                } else {
+                    0.0
+                };
+                let got = rgb[((k * 3 + c) * nn + y) * nn + x] as f64;
+                assert!(
+                    (got - want).abs() <= 1e-6 * want.max(1e-3),
+                    "θi node {k}, channel {c}, cell ({x}, {y}): {got} vs {want}"
+                );
+                checked += 1;
+            }
         }
     }
-    assert!(checked >= 20);
+    assert!(checked >= 60);
 
     // BTDF and per-plane fits: a clear error that names the alternative.
     let (_, btdf) = synth_and_fit(
