@@ -5,8 +5,9 @@
 //! α and η are not identified.
 //!
 //! The long test (`cargo test --release --test bootstrap -- --ignored`) runs enough null
-//! data sets to measure the rate at α = 0.01; the reduced one in CI checks the calibration
-//! at α = 0.1 and 0.2 on fewer sets, with bounds from the binomial distribution.
+//! data sets to measure the rate at α = 0.01; the reduced one in CI checks P(p ≤ x) = x at
+//! x = 0.1 … 0.4 on 400 sets, with bounds from the binomial distribution, and shows on the
+//! same sets that the check rejects the uncalibrated nominal F test.
 
 mod common;
 
@@ -113,29 +114,74 @@ fn the_cases_are_irregular_nulls() {
     assert!(why.contains("alpha") && why.contains("on a bound"), "{why}");
 }
 
-/// Reduced for CI: 40 null sets per case, 59 replicates each. Under the null
-/// P(p ≤ x) = x for a calibrated test (P(p ≤ x) ≤ x where the mass at T = 0 makes p = 1);
-/// at x = 0.2 and 0.1 over 80 sets the count must lie within the binomial 99.9 % range,
-/// and no p-value is ever below 1/(B + 1) unless the tail gave it.
+/// The two-sided 99.9 % range of Binomial(n, x) (0.05 % in each tail), from its pmf.
+fn binomial_range(n: usize, x: f64) -> (usize, usize) {
+    let mut pmf = (1.0 - x).powi(n as i32);
+    let (mut cdf, mut lo) = (0.0, None);
+    for k in 0..=n {
+        cdf += pmf;
+        if lo.is_none() && cdf >= 5e-4 {
+            lo = Some(k);
+        }
+        if cdf >= 1.0 - 5e-4 {
+            return (lo.unwrap_or(k), k);
+        }
+        pmf *= (n - k) as f64 / (k + 1) as f64 * x / (1.0 - x);
+    }
+    (lo.unwrap_or(n), n)
+}
+
+/// The levels x at which a calibrated test's P(p ≤ x) = x is checked: below the null's
+/// probability of a positive statistic (about 0.5 for both cases: p = 1 where T = 0).
+const LEVELS: [f64; 4] = [0.1, 0.2, 0.3, 0.4];
+
+/// For each level, (x, count of p ≤ x, the binomial 99.9 % range of a calibrated test).
+fn level_counts(ps: &[f64]) -> Vec<(f64, usize, (usize, usize))> {
+    LEVELS
+        .iter()
+        .map(|&x| {
+            let count = ps.iter().filter(|&&p| p <= x).count();
+            (x, count, binomial_range(ps.len(), x))
+        })
+        .collect()
+}
+
+/// Reduced for CI: 200 null sets per case, 59 replicates each. Under the null a
+/// calibrated test has P(p ≤ x) = x, so over the 400 sets the count of p ≤ x must lie
+/// within the binomial 99.9 % range at every level of [`LEVELS`]. The same check rejects
+/// the nominal F test's p-values on these very sets (it is conservative on these
+/// irregular nulls), so it can tell a calibrated test from an uncalibrated one; it also
+/// rejects the bootstrap's p-values halved or doubled.
 #[test]
 fn bootstrap_p_values_are_calibrated_on_null_data_reduced() {
     let mut all = Vec::new();
     for (k, (null, params, ext)) in CASES.iter().enumerate() {
-        let ps = p_values(null, params, ext, 40, 59, 51_000 + 1000 * k as u64);
+        let ps = p_values(null, params, ext, 200, 59, 51_000 + 1000 * k as u64);
         let (nom, cal) = rate(&ps, 0.1);
         eprintln!("{ext}: rate of p < 0.1: nominal F {nom:.3}, bootstrap {cal:.3}");
         all.extend(ps);
     }
-    let n = all.len() as f64;
-    for (x, lo, hi) in [(0.2, 5.0, 29.0), (0.1, 1.0, 18.0)] {
-        // Binomial(80, x): 99.9 % of counts lie within [lo, hi] (0.05 % in each tail).
-        let count = all.iter().filter(|p| p.1 <= x).count() as f64;
-        eprintln!("bootstrap: {count} of {n} p-values ≤ {x}");
+    let nominal: Vec<f64> = all.iter().map(|p| p.0).collect();
+    let bootstrap: Vec<f64> = all.iter().map(|p| p.1).collect();
+    for (x, count, (lo, hi)) in level_counts(&bootstrap) {
+        eprintln!("bootstrap: {count} of {} p-values ≤ {x} (calibrated: {lo}–{hi})", all.len());
         assert!(
             (lo..=hi).contains(&count),
-            "{count} of {n} bootstrap p-values ≤ {x}, outside the binomial 99.9 % range [{lo}, {hi}]"
+            "{count} of {} bootstrap p-values ≤ {x}, outside the binomial 99.9 % range [{lo}, {hi}]",
+            all.len()
         );
     }
+    // The check has power here: the nominal F fails it on the same sets.
+    let rejected: Vec<String> = level_counts(&nominal)
+        .into_iter()
+        .filter(|(_, c, (lo, hi))| !(lo..=hi).contains(&c))
+        .map(|(x, c, (lo, hi))| format!("{c} ≤ {x} (range {lo}–{hi})"))
+        .collect();
+    eprintln!("nominal F: outside the range at {rejected:?}");
+    assert!(
+        !rejected.is_empty(),
+        "the calibration check cannot tell the nominal F test from a calibrated one on these sets"
+    );
 }
 
 /// The false-positive rate at α = 0.01 (slow: `BSDFIT_BOOT_SETS` null sets per case,
