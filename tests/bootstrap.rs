@@ -164,7 +164,10 @@ fn bootstrap_p_values_are_calibrated_on_null_data_reduced() {
     let nominal: Vec<f64> = all.iter().map(|p| p.0).collect();
     let bootstrap: Vec<f64> = all.iter().map(|p| p.1).collect();
     for (x, count, (lo, hi)) in level_counts(&bootstrap) {
-        eprintln!("bootstrap: {count} of {} p-values ≤ {x} (calibrated: {lo}–{hi})", all.len());
+        eprintln!(
+            "bootstrap: {count} of {} p-values ≤ {x} (calibrated: {lo}–{hi})",
+            all.len()
+        );
         assert!(
             (lo..=hi).contains(&count),
             "{count} of {} bootstrap p-values ≤ {x}, outside the binomial 99.9 % range [{lo}, {hi}]",

@@ -244,7 +244,10 @@ fn tensor_elements_decode_by_type_signed_fractional_and_wide() {
             vec![-(2f64.powi(53)), -4.0, 2f64.powi(45)],
         ),
         (ElementType::F16, vec![-1.5, 0.0999755859375, 65504.0]),
-        (ElementType::F32, vec![-1.5, 0.1f32 as f64, 3.0e38f32 as f64]),
+        (
+            ElementType::F32,
+            vec![-1.5, 0.1f32 as f64, 3.0e38f32 as f64],
+        ),
         (ElementType::F64, vec![-1.5, 0.1, 1e300]),
     ];
     let fields: Vec<Field> = cases
