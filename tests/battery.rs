@@ -9,13 +9,15 @@
 //! hidden case with a false effect (another effect named first, or besides). A failure
 //! prints every case.
 
-use bsdfit::engine::{self, BackendChoice};
+mod common;
+
 use bsdfit::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions};
 use bsdfit::workflows::diagnose::{DiagnoseOptions, Effect};
 
 #[test]
 fn one_random_truth_per_effect_and_null_cases() {
-    let backend = engine::select(BackendChoice::Auto, &mut |m| eprintln!("{m}")).unwrap();
+    // The GPU engine (lavapipe in CI, where its absence fails).
+    let backend = common::gpu_engine();
     let effects: Vec<Effect> = Effect::all().collect();
     let opts = BatteryOptions {
         cases: 1,

@@ -12,16 +12,15 @@ mod common;
 
 use bsdfit::bsdf::Model;
 use bsdfit::data::{Dataset, Kind};
-use bsdfit::engine::{self, Backend, BackendChoice};
+use bsdfit::engine::Backend;
 use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect};
 use common::synth_rows;
 use std::sync::OnceLock;
 
-/// One backend for the whole file: the GPU (lavapipe here and in CI) when present.
+/// One backend for the whole file: the GPU engine (lavapipe in CI, where its absence fails).
 fn backend() -> &'static dyn Backend {
     static B: OnceLock<Box<dyn Backend>> = OnceLock::new();
-    B.get_or_init(|| engine::select(BackendChoice::Auto, &mut |m| eprintln!("{m}")).unwrap())
-        .as_ref()
+    B.get_or_init(common::gpu_engine).as_ref()
 }
 
 fn opts(seed: u64) -> DiagnoseOptions {

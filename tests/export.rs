@@ -522,7 +522,7 @@ fn tabulated_export_is_the_documented_grid_and_reads_back() {
 }
 
 #[test]
-#[ignore = "needs python3 with mitsuba (pip install mitsuba); run with --ignored"]
+#[ignore = "needs python3 with mitsuba (pip install mitsuba); scripts/test.sh runs it with --ignored"]
 fn mitsuba_export_evaluates_as_bsdfit_in_mitsuba() {
     let python = std::env::var("BSDFIT_PYTHON").unwrap_or_else(|_| "python3".into());
     let importable = Command::new(&python)
@@ -530,9 +530,9 @@ fn mitsuba_export_evaluates_as_bsdfit_in_mitsuba() {
         .output()
         .is_ok_and(|o| o.status.success());
     if !importable {
-        eprintln!(
-            "skipped: {python} cannot import mitsuba (pip install mitsuba, or set BSDFIT_PYTHON)"
-        );
+        common::missing(&format!(
+            "{python} cannot import mitsuba (pip install mitsuba, or set BSDFIT_PYTHON)"
+        ));
         return;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check-mitsuba-export.py");

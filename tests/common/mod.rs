@@ -29,6 +29,39 @@ pub fn shuffled_dataset(
         .expect("valid data")
 }
 
+/// Whether this run is CI (`CI=true`), where the README's test command has installed
+/// everything a test needs from the machine (lavapipe, Mitsuba, Slurm).
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Something a test needs from the machine is missing: under CI that fails the test (a
+/// skip there would hide the check); elsewhere the reason is printed and the caller skips.
+pub fn missing(what: &str) {
+    assert!(
+        !in_ci(),
+        "{what}: CI=true, where scripts/test.sh installs it, so its absence is a failure"
+    );
+    eprintln!("skipped: {what}");
+}
+
+/// The engine of the tests that claim GPU coverage without needing it to be correct: the
+/// GPU engine (lavapipe in CI). Without a Vulkan adapter that fails under CI; elsewhere
+/// the test runs on the CPU reference, saying so, rather than passing as GPU coverage.
+pub fn gpu_engine() -> Box<dyn bsdfit::engine::Backend> {
+    match bsdfit::engine::gpu::GpuBackend::new() {
+        Ok(g) => {
+            eprintln!("using {}", bsdfit::engine::Backend::name(&g));
+            Box::new(g)
+        }
+        Err(e) => {
+            missing(&format!("no Vulkan adapter for the GPU engine ({e})"));
+            eprintln!("running on the CPU reference instead: this is not GPU coverage");
+            Box::new(bsdfit::engine::cpu::CpuBackend::new())
+        }
+    }
+}
+
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
