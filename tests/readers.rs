@@ -744,6 +744,64 @@ fn merl_writer_reader_round_trip() {
     );
 }
 
+/// A MERL file written here from the format's definition (MERL's BRDFRead.cpp), not with
+/// bsdfit's encoder: the header 90, 90, 180 (int32), then the R, G and B blocks of f64,
+/// each indexed iφd + 180·(iθd + 90·iθh), stored as the BRDF divided by 1/1500, 1.15/1500
+/// and 1.66/1500. Each cell holds a value of its own indices, so the reader's value at a
+/// sample, times nothing but the published scale of its channel, names the cell the
+/// test's own lookup finds from the sample's directions.
+#[test]
+fn merl_file_written_from_the_definition_reads_with_the_published_scales() {
+    const SCALE_RGB: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
+    let (nh, nd, np) = (90usize, 90usize, 180usize);
+    let cells = nh * nd * np;
+    let stored = |c: usize, idx: usize| 100.0 * (c + 1) as f64 + (idx % 9973) as f64 / 97.0;
+    let mut bytes = Vec::with_capacity(12 + 24 * cells);
+    for d in [nh, nd, np] {
+        bytes.extend_from_slice(&(d as i32).to_le_bytes());
+    }
+    for c in 0..3 {
+        for idx in 0..cells {
+            bytes.extend_from_slice(&stored(c, idx).to_le_bytes());
+        }
+    }
+    // The test's own forward lookup: Rusinkiewicz half/difference angles of (ωi, ωo),
+    // then MERL's truncating indices (θh non-linear; φd folded into [0, π)).
+    let lookup = |wi: DVec3, wo: DVec3| -> usize {
+        let h = (wi + wo).normalize();
+        let (theta_h, phi_h) = (h.z.clamp(-1.0, 1.0).acos(), h.y.atan2(h.x));
+        let (c, s) = (phi_h.cos(), phi_h.sin());
+        let d = DVec3::new(c * wi.x + s * wi.y, -s * wi.x + c * wi.y, wi.z);
+        let (c, s) = (theta_h.cos(), theta_h.sin());
+        let d = DVec3::new(c * d.x - s * d.z, d.y, s * d.x + c * d.z);
+        let (theta_d, mut phi_d) = (d.z.clamp(-1.0, 1.0).acos(), d.y.atan2(d.x));
+        if phi_d < 0.0 {
+            phi_d += PI;
+        }
+        let ih = (((theta_h / FRAC_PI_2) * (nh * nh) as f64).sqrt() as usize).min(nh - 1);
+        let id = ((theta_d / FRAC_PI_2 * nd as f64) as usize).min(nd - 1);
+        let ip = ((phi_d / PI * np as f64) as usize).min(np - 1);
+        ip + np * (id + nd * ih)
+    };
+    let d = readers::parse_bytes(&bytes, "written.binary", &with_assumed()).unwrap();
+    assert_eq!(d.channels, vec![450.0, 550.0, 650.0]);
+    assert_eq!(d.len(), 3 * merl::DEFAULT_MAX_SAMPLES);
+    let rgb_nm = [650.0, 550.0, 450.0];
+    for s in &d.samples {
+        let c = rgb_nm.iter().position(|&w| w == s.wavelength_nm).unwrap();
+        let (wi, wo) = (dir(s.theta_i, s.phi_i), dir(s.theta_o, s.phi_o));
+        let want = stored(c, lookup(wi, wo)) * SCALE_RGB[c];
+        assert!(
+            (s.value - want).abs() <= 1e-12 * want,
+            "{} nm at θi {:.2}°, θo {:.2}°: {} vs {want}",
+            s.wavelength_nm,
+            s.theta_i.to_degrees(),
+            s.theta_o.to_degrees(),
+            s.value
+        );
+    }
+}
+
 #[test]
 fn merl_unmeasured_cells_are_dropped() {
     let mut bytes = merl_table();
