@@ -526,10 +526,21 @@ fn bench_sweep_times_both_backends_and_compares_them() {
     assert_eq!(c["rankings_identical"], true, "{c}");
     assert_eq!(c["groups_reordered"], 0, "{c}");
     assert_eq!(c["rankings_agree_up_to_ties"], true, "{c}");
+    // The bounds are the test's own, not the bench's: a Lambertian fit is linear and both
+    // backends end it with the same f64 polish, so they reach the same optimum to the
+    // polish's stopping test (measured: 5e-11 in the loss, 5e-8 of the unit box), far
+    // inside the bench's documented tolerances, which the JSON must state unchanged.
     let loss = c["max_rel_loss_diff"]["value"].as_f64().unwrap();
     let param = c["max_param_diff_unit_box"]["value"].as_f64().unwrap();
-    assert!(loss <= c["loss_tolerance"].as_f64().unwrap(), "{c}");
-    assert!(param <= c["param_tolerance"].as_f64().unwrap(), "{c}");
+    assert!(loss <= 1e-8, "{c}");
+    assert!(param <= 1e-6, "{c}");
+    for (key, documented) in [
+        ("loss_tolerance", 1e-3),
+        ("param_tolerance", 1e-2),
+        ("param_tolerance_sigma", 0.05),
+    ] {
+        assert_eq!(c[key].as_f64(), Some(documented), "{key}: {c}");
+    }
     assert_eq!(c["fits_at_different_optima"], 0, "{c}");
     let over = c["max_param_diff_over_tolerance"]["value"]
         .as_f64()
