@@ -8,7 +8,6 @@ use bsdfit::workflows::sweep::lock::{host_name, LOCK_FILE};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
 
 fn bin() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_bsdfit"));
@@ -269,8 +268,9 @@ fn stale_foreign_and_live_locks() {
 fn unwritable_destinations_fail_before_the_work() {
     let tmp = tempfile::tempdir().unwrap();
     let (brdf, _) = data(tmp.path());
-    // A fit that would take a long time (many restarts) fails at once on its --json.
-    let t0 = Instant::now();
+    // A fit that would take a long time (many restarts) fails before fitting on its
+    // --json: nothing of a fit is printed (a fit prints its result before writing the
+    // report, so a check made after the work would leave it on stdout).
     let o = run(&[
         "fit",
         p(&brdf),
@@ -284,7 +284,6 @@ fn unwritable_destinations_fail_before_the_work() {
         "/proc/x/fit.json",
     ]);
     clear_error(&o, &["--json /proc/x/fit.json", "/proc/x"]);
-    assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
     assert!(
         text(&o.stdout).is_empty(),
         "no fit ran: {}",
@@ -467,8 +466,8 @@ fn seeds_and_restarts_say_what_they_take() {
     }
     let o = run(&["fit", p(&brdf), "--model", "lambert", "--restarts", "0"]);
     assert!(text(&o.stderr).contains("--restarts takes a positive integer"));
-    // A request that cannot fit in memory is refused up front, with a way out.
-    let t0 = Instant::now();
+    // A request that cannot fit in memory is refused up front, with a way out, and no fit
+    // is printed.
     let o = run(&[
         "fit",
         p(&brdf),
@@ -480,7 +479,7 @@ fn seeds_and_restarts_say_what_they_take() {
         "cpu",
     ]);
     clear_error(&o, &["--restarts 1000000", "GiB", "fewer"]);
-    assert!(t0.elapsed() < Duration::from_secs(5));
+    assert!(text(&o.stdout).is_empty(), "{}", text(&o.stdout));
 }
 
 #[test]
