@@ -5,6 +5,20 @@ use bsdfit::bsdf::{catalogue, Model};
 use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
 use bsdfit::engine::loss::{Loss, Metric, Weights};
 use proptest::prelude::*;
+use proptest::test_runner::{FileFailurePersistence, RngSeed};
+
+/// A fixed seed, so every run draws the same cases, and failures kept in the repository
+/// (`tests/properties.proptest-regressions`, replayed first on every later run).
+fn config() -> ProptestConfig {
+    ProptestConfig {
+        cases: 64,
+        rng_seed: RngSeed::Fixed(0x6273_6466),
+        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(
+            "tests/properties.proptest-regressions",
+        ))),
+        ..ProptestConfig::default()
+    }
+}
 
 fn row() -> impl Strategy<Value = RawRow> {
     (
@@ -27,7 +41,7 @@ fn row() -> impl Strategy<Value = RawRow> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    #![proptest_config(config())]
 
     /// Writing a dataset and reading it back gives the same samples (angles to 1e-9°,
     /// values and uncertainties exactly: they are written with full precision).
