@@ -953,3 +953,46 @@ fn out_of_plane_data_is_one_plane() {
         d.notices
     );
 }
+
+/// What other tools write into a v1-shaped CSV beyond bsdfit's own files: the columns in
+/// another order, capitalised names, quoted cells, spaces after the commas, every form
+/// of a number's exponent and decimal point, CRLF without a final line end. Each value is
+/// checked against the row it came from; a UTF-16 file is refused, naming the encoding.
+#[test]
+fn csv_dialects_of_other_tools_read_to_the_same_samples() {
+    let text = "# kind: brdf\r\n\
+                Value,phi_i,\"theta_i\",theta_o, phi_o ,Wavelength_NM,uncertainty\r\n\
+                \"0.25\", 0, 10,20,0,550,2.5E-3\r\n\
+                .5,0,30,40,90,550.,5e-3\r\n\
+                1.25e+0,180,45,60,0,5.5e2,0.0125";
+    let d = parse(text).unwrap();
+    assert_eq!(d.len(), 3);
+    let want = [
+        (10.0, 0.0, 20.0, 0.0, 0.25, 2.5e-3),
+        (30.0, 0.0, 40.0, 90.0, 0.5, 5e-3),
+        (45.0, 180.0, 60.0, 0.0, 1.25, 0.0125),
+    ];
+    for (s, w) in d.samples.iter().zip(want) {
+        let deg = |r: f64| r.to_degrees();
+        assert!(
+            (deg(s.theta_i) - w.0).abs() < 1e-9
+                && (deg(s.phi_i) - w.1).abs() < 1e-9
+                && (deg(s.theta_o) - w.2).abs() < 1e-9
+                && (deg(s.phi_o) - w.3).abs() < 1e-9
+                && s.value == w.4
+                && s.uncertainty == w.5
+                && s.wavelength_nm == 550.0,
+            "{s:?} vs {w:?}"
+        );
+    }
+    let mut utf16 = vec![0xFF, 0xFE];
+    for u in
+        "# kind: brdf\ntheta_i,phi_i,theta_o,phi_o,wavelength_nm,value,uncertainty\n".encode_utf16()
+    {
+        utf16.extend_from_slice(&u.to_le_bytes());
+    }
+    let e = bsdfit::data::readers::parse_bytes(&utf16, "wide.csv", &ReadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("wide.csv:1") && e.contains("UTF-8"), "{e}");
+}

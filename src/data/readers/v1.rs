@@ -88,7 +88,8 @@ fn parse_header(t: &str) -> Result<([usize; 7], usize), String> {
     }
     let mut index = [0usize; 7];
     for (k, col) in COLUMNS.iter().enumerate() {
-        match names.iter().position(|n| n == col) {
+        // Spreadsheets capitalise headers: the names match whatever their case.
+        match names.iter().position(|n| n.eq_ignore_ascii_case(col)) {
             Some(p) => index[k] = p,
             None => {
                 return Err(format!(
@@ -98,7 +99,10 @@ fn parse_header(t: &str) -> Result<([usize; 7], usize), String> {
             }
         }
     }
-    if let Some(extra) = names.iter().find(|n| !COLUMNS.contains(n)) {
+    if let Some(extra) = names
+        .iter()
+        .find(|n| !COLUMNS.iter().any(|c| n.eq_ignore_ascii_case(c)))
+    {
         return Err(format!("unexpected column '{extra}'"));
     }
     if names.len() != COLUMNS.len() {
