@@ -299,6 +299,48 @@ fn alta_cosine_factor_and_rgb_outputs() {
     );
 }
 
+/// What ALTA's own tools write and the other tests' files do not use: a header block
+/// (`#ALTA HEADER BEGIN` … `#ALTA HEADER END`) with a `#CMD` line, CRLF line ends, tabs
+/// and runs of spaces between columns, a comment among the rows, exponents, and `#VS`
+/// given per output (1, 2 and 1 interval columns for R, G, B). Every value and
+/// uncertainty is checked: u = (a₋ + a₊)/(2√3), from the definition (GUM 4.3.7).
+#[test]
+fn alta_files_as_alta_tools_write_them() {
+    let text = "#ALTA HEADER BEGIN\r\n\
+                #CMD data2data --input x.binary --output y.alta\r\n\
+                #DIM 3 3\r\n\
+                #PARAM_IN RUSIN_TH_TD_PD\r\n\
+                #PARAM_OUT RGB_COLOR\r\n\
+                #VS 1 2 1\r\n\
+                #SAMPLE blue-metallic-paint\r\n\
+                #ALTA HEADER END\r\n\
+                0.1\t0.5\t1.0\t0.2\t0.3\t0.4\t0.01\t0.02\t0.04\t0.03\r\n\
+                # a comment\r\n\
+                0.2   0.6  1.2e0  2E-1 3.0e-1 .4 1e-2 0.02 0.04 3E-2\r\n";
+    let d = alta::parse(text, "tools.alta", &ReadOptions::default()).unwrap();
+    assert_eq!(d.len(), 6);
+    assert_eq!(d.material, "blue-metallic-paint");
+    let sqrt3 = 3f64.sqrt();
+    for s in &d.samples {
+        let (value, u) = match s.wavelength_nm as u64 {
+            650 => (0.2, 0.01 / sqrt3),
+            550 => (0.3, (0.02 + 0.04) / (2.0 * sqrt3)),
+            450 => (0.4, 0.03 / sqrt3),
+            w => panic!("wavelength {w}"),
+        };
+        assert!(
+            (s.value - value).abs() < 1e-15 && (s.uncertainty - u).abs() < 1e-15,
+            "{} nm: {} ± {}",
+            s.wavelength_nm,
+            s.value,
+            s.uncertainty
+        );
+    }
+    // The two rows are two geometries; the comment between them is not a row.
+    let lines: std::collections::BTreeSet<u32> = d.samples.iter().map(|s| s.line).collect();
+    assert_eq!(lines.into_iter().collect::<Vec<_>>(), vec![9, 11]);
+}
+
 #[test]
 fn alta_without_intervals_is_refused_unless_assumed() {
     let text = "#DIM 3 1\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n#PARAM_OUT INV_STERADIAN\n0.2 0.3 0.1 0.5\n0.2 -0.3 0.0 0.7\n";
