@@ -5,6 +5,8 @@
 //! process's resident size noted, then the file is read and the high-water mark compared.
 //! Rows are shaped like a goniometer's export (six decimals, ~55 bytes a row).
 
+mod common;
+
 use bsdfit::data::{readers, ReadOptions};
 use std::io::Write;
 
@@ -17,7 +19,7 @@ fn status_kib(field: &str) -> Option<u64> {
 #[test]
 fn reading_a_large_file_takes_at_most_twice_its_size() {
     if status_kib("VmHWM:").is_none() {
-        eprintln!("no /proc/self/status: the peak cannot be measured on this system");
+        common::missing("/proc/self/status (Linux), to measure the peak memory");
         return;
     }
     let rows: usize = std::env::var("BSDFIT_MEMORY_ROWS")
