@@ -103,8 +103,14 @@ fn a_lost_device_is_a_typed_fault_that_check_errors_reports() {
     assert_eq!(g.fault(), Some(fault.clone()));
 
     // Refused, with the same fault: no third submission, no new evaluator, no kernels.
+    assert_eq!(g.submission_count(), 2);
     let again = eval.costs(&point).expect_err("refused");
     assert_eq!(device_fault(&again), Some(&fault));
+    assert_eq!(
+        g.submission_count(),
+        2,
+        "a submission begun on a lost device"
+    );
     let fresh = g
         .prepare(problem)
         .err()
@@ -135,9 +141,9 @@ fn a_read_back_that_never_completes_times_out_as_a_typed_fault() {
             .map_err(|e| (device_fault(&e).cloned(), e.to_string()));
         let checked = g.check_errors().map_err(|e| device_fault(&e).cloned());
         let again = eval.costs(&point).map_err(|e| device_fault(&e).cloned());
-        tx.send((first, checked, again)).ok();
+        tx.send((first, checked, again, g.submission_count())).ok();
     });
-    let (first, checked, again) = rx
+    let (first, checked, again, submitted) = rx
         .recv_timeout(WATCHDOG)
         .expect("the read-back still waits: the timeout did not end it");
     let (fault, text) = first.expect_err("the read-back never completes");
@@ -153,6 +159,7 @@ fn a_read_back_that_never_completes_times_out_as_a_typed_fault() {
         "check_errors reports the hang"
     );
     assert_eq!(again.map(|_| ()), Err(Some(hung)), "refused after the hang");
+    assert_eq!(submitted, 1, "a submission begun on a hung device");
 }
 
 // ---- the command line: a sweep and a fit that meet a lost or hung GPU ----

@@ -156,6 +156,11 @@ impl Device {
         self.health.get()
     }
 
+    /// Submissions begun so far (numbered from 1 as [`fault::FAULT_VAR`] counts them).
+    pub fn submission_count(&self) -> u64 {
+        self.health.submissions.load(Ordering::SeqCst)
+    }
+
     /// `Err` (the device's fault) once the device is lost or hung: it takes no more work.
     pub fn refuse_if_faulted(&self) -> Result<()> {
         match self.fault() {

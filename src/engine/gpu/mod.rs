@@ -174,6 +174,12 @@ impl GpuBackend {
         self
     }
 
+    /// Submissions begun so far, numbered from 1 as `BSDFIT_GPU_FAULT` counts them (a
+    /// submission the device refused is not begun).
+    pub fn submission_count(&self) -> u64 {
+        self.device.submission_count()
+    }
+
     /// The errors the device reported since the last check, as one `Err`; the device's
     /// [`DeviceFault`] once it is lost or hung.
     pub fn check_errors(&self) -> Result<()> {
