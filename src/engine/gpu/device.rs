@@ -182,8 +182,9 @@ impl Device {
         Ok((n, injected))
     }
 
-    /// Poll the device; a panic inside wgpu (its answer to a device error it cannot
-    /// return, e.g. a lost device met while waiting) is caught and reported.
+    /// Poll the device. A panic inside wgpu (its answer to a device error it cannot
+    /// return, e.g. a lost device met while waiting) is caught, and the device is taken
+    /// as lost.
     fn poll(&self, how: wgpu::PollType) -> std::result::Result<(), PollFailed> {
         let polled =
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.device.poll(how)));
@@ -191,13 +192,19 @@ impl Device {
             Ok(Ok(_)) => Ok(()),
             Ok(Err(wgpu::PollError::Timeout)) => Err(PollFailed::Timeout),
             Ok(Err(e)) => Err(PollFailed::Other(e.to_string())),
-            Err(p) => Err(PollFailed::Other(format!(
-                "wgpu: {}",
-                p.downcast_ref::<String>()
+            Err(p) => {
+                // wgpu could not go on with the device: it is lost, whatever it said.
+                let said = p
+                    .downcast_ref::<String>()
                     .map(String::as_str)
                     .or_else(|| p.downcast_ref::<&str>().copied())
-                    .unwrap_or("panic")
-            ))),
+                    .unwrap_or("panic");
+                let f = self.health.set(DeviceFault::Lost {
+                    submission: self.submission_count(),
+                    detail: format!("wgpu panicked while polling it: {}", said.trim()),
+                });
+                Err(PollFailed::Other(f.to_string()))
+            }
         }
     }
 
@@ -215,7 +222,7 @@ impl Device {
 
     /// The error for a read-back that failed with `what`: the device's fault where it
     /// has one (wgpu reported the loss), else the errors wgpu reported, else `what`.
-    fn read_back_error(&self, what: String) -> anyhow::Error {
+    pub fn read_back_error(&self, what: String) -> anyhow::Error {
         if let Some(f) = self.settle() {
             return f.into();
         }

@@ -4,7 +4,7 @@
 
 use super::device::Device;
 use super::fault::Injected;
-use anyhow::{anyhow, Result};
+use anyhow::Result;
 
 /// One dispatch of a compute pass: a pipeline over a grid of workgroups.
 pub struct Dispatch<'a> {
@@ -96,9 +96,10 @@ impl<'d> Recorder<'d> {
         };
         self.device.wait_read_back(n, index, &rx)?;
         let out = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| anyhow!("GPU read-back failed: {e:?}"))?;
+            let view = slice.get_mapped_range().map_err(|e| {
+                self.device
+                    .read_back_error(format!("GPU read-back failed: {e:?}"))
+            })?;
             read(&view)
         };
         staging.unmap();
