@@ -268,6 +268,8 @@ fn sweep_survives(fault: &str, env: &[(&str, &str)], says: &[&str], brief: &str)
         "no row kept from before the fault: submission {fault} came earlier than this test \
          expects (see MID_SWEEP)"
     );
+    let skipped = std::fs::read_to_string(dir.join("skipped.json")).unwrap();
+    assert_eq!(skipped.trim(), "[]", "a fit recorded as failed besides its re-run");
     let cmp = compare_sweeps(&cpu, &got);
     assert!(
         cmp.within_tolerance && cmp.max_rel_loss_diff.value <= SWEEP_LOSS_TOL,
