@@ -253,7 +253,8 @@ fn sweep_survives(fault: &str, env: &[(&str, &str)], says: &[&str], brief: &str)
         match r.backend.as_str() {
             "gpu" => {}
             "cpu" => {
-                let c = cpu.iter().find(|c| c.key() == r.key()).unwrap();
+                let c = cpu.iter().find(|c| c.key() == r.key());
+                let c = c.unwrap_or_else(|| panic!("{}: not the CPU sweep's fit", fit_name(r)));
                 assert_eq!(r.deterministic(), c.deterministic(), "{}", fit_name(r));
             }
             other => panic!("{}: backend {other}", fit_name(r)),
@@ -269,7 +270,11 @@ fn sweep_survives(fault: &str, env: &[(&str, &str)], says: &[&str], brief: &str)
          expects (see MID_SWEEP)"
     );
     let skipped = std::fs::read_to_string(dir.join("skipped.json")).unwrap();
-    assert_eq!(skipped.trim(), "[]", "a fit recorded as failed besides its re-run");
+    assert_eq!(
+        skipped.trim(),
+        "[]",
+        "a fit recorded as failed besides its re-run"
+    );
     let cmp = compare_sweeps(&cpu, &got);
     assert!(
         cmp.within_tolerance && cmp.max_rel_loss_diff.value <= SWEEP_LOSS_TOL,
