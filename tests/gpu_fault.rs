@@ -311,7 +311,7 @@ fn a_sweep_that_loses_its_gpu_ends_with_the_cpu_sweeps_rows() {
         &[],
         &[
             &format!("GPU fault: the GPU device was lost at submission {MID_SWEEP}"),
-            "the sweep goes on on the CPU reference",
+            "the sweep continues on the CPU reference",
         ],
         &brief,
     );

@@ -454,7 +454,7 @@ impl FitRun<'_> {
                 PoolEvent::Rerun { cells, fault } => {
                     if !std::mem::replace(&mut faulted, true) {
                         obs.alert(&format!(
-                            "GPU fault: {fault}; the sweep goes on on the CPU reference, \
+                            "GPU fault: {fault}; the sweep continues on the CPU reference, \
                              and the fits the GPU failed are re-run there"
                         ));
                     }
