@@ -132,7 +132,12 @@ pub fn run(a: FitArgs) -> Result<()> {
             loss,
             report,
             mc_error: failed,
+            fallback,
         } = outcome;
+        if let Some(line) = fallback {
+            // Also among the summary's warnings; said here too, beside the other notices.
+            eprintln!("{line}");
+        }
         if failed.is_some() {
             mc_error = failed;
         }

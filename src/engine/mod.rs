@@ -15,6 +15,7 @@ pub mod loss;
 pub mod reduce;
 pub mod wgsl;
 
+pub use gpu::fault::{device_fault, DeviceFault};
 pub use reduce::{normal_equations_of_values, RowTerms, ValueWindow, Values, WindowPart};
 
 /// The order in which both backends walk a problem's samples: by cos θi, then cos θo
@@ -88,6 +89,12 @@ pub trait Backend: Send + Sync {
     /// on a thread of its own, while the device serves other fits.
     fn prepare_kernels(&self, _model: &Model) -> anyhow::Result<()> {
         Ok(())
+    }
+    /// The fault that ended a device backend's use (its device lost or hung): it then
+    /// refuses all work, and callers re-run what it failed on the CPU reference. `None`
+    /// for host backends, which have no device to lose.
+    fn fault(&self) -> Option<DeviceFault> {
+        None
     }
 }
 

@@ -5,8 +5,9 @@
 
 use crate::bsdf::Model;
 use crate::data::{Dataset, Kind};
+use crate::engine::cpu::CpuBackend;
 use crate::engine::loss::{Loss, Metric, Weights};
-use crate::engine::Backend;
+use crate::engine::{device_fault, Backend};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
 use crate::inference::mc::{monte_carlo, McOptions};
@@ -96,6 +97,32 @@ pub struct FitOutcome {
     pub loss: Loss,
     pub report: FitReport,
     pub mc_error: Option<anyhow::Error>,
+    /// Where the GPU was lost or hung and the fit (or its Monte Carlo replicas) was
+    /// re-run on the CPU reference: what happened, in one line (also among the report's
+    /// warnings; the report's `backend` is the one that produced it).
+    pub fallback: Option<String>,
+}
+
+/// `work` on `backend`; where its device fails it (lost or hung, [`device_fault`]),
+/// `work` again on the CPU reference, with a line saying so (naming `what` was re-run).
+fn on_device_or_cpu<T>(
+    backend: &dyn Backend,
+    what: &str,
+    work: &mut dyn FnMut(&dyn Backend) -> Result<T>,
+) -> Result<(T, Option<String>)> {
+    match work(backend) {
+        Ok(t) => Ok((t, None)),
+        Err(e) => {
+            let fault = device_fault(&e).cloned().or_else(|| backend.fault());
+            match fault {
+                Some(f) if backend.id() != "cpu" => {
+                    let line = format!("GPU fault: {f}; {what} re-run on the CPU reference");
+                    Ok((work(&CpuBackend::new())?, Some(line)))
+                }
+                _ => Err(e),
+            }
+        }
+    }
 }
 
 impl FitRequest {
@@ -146,7 +173,8 @@ impl FitRequest {
     }
 
     /// Fit `data` on `backend`, then (with `mc`) refit its replicas. `progress` gets the
-    /// number of restarts still active in each stage.
+    /// number of restarts still active in each stage. Where the GPU is lost or hangs,
+    /// what it failed is re-run on the CPU reference ([`FitOutcome::fallback`]).
     pub fn run(
         &self,
         data: &Dataset,
@@ -154,9 +182,15 @@ impl FitRequest {
         progress: &mut dyn FnMut(Stage, usize),
     ) -> Result<FitOutcome> {
         let (model, loss, opts) = self.prepare(data)?;
-        let mut report = fit(&model, data, loss, backend, &opts, &mut |active| {
-            progress(Stage::Fit, active)
-        })?;
+        let (mut report, mut fallback) =
+            on_device_or_cpu(backend, "the fit was", &mut |b: &dyn Backend| {
+                fit(&model, data, loss, b, &opts, &mut |active| {
+                    progress(Stage::Fit, active)
+                })
+            })?;
+        // The replicas go where the fit went (the GPU only if it is still there).
+        let cpu = CpuBackend::new();
+        let backend: &dyn Backend = if fallback.is_some() { &cpu } else { backend };
         let finite = report.best.chi2_red.is_finite() && report.best.loss.is_finite();
         let mut mc_error = None;
         if self.mc > 0 && finite {
@@ -166,30 +200,43 @@ impl FitRequest {
                 seed: self.seed,
                 restarts: self.mc_restarts,
             };
-            let outcome = monte_carlo(
-                &model,
-                data,
-                loss,
+            let outcome = on_device_or_cpu(
                 backend,
-                &opts,
-                &report.flat_params,
-                &report.flat_std,
-                &mc,
-                &mut |active| progress(Stage::MonteCarlo, active),
+                "its Monte Carlo replicas were",
+                &mut |b: &dyn Backend| {
+                    monte_carlo(
+                        &model,
+                        data,
+                        loss,
+                        b,
+                        &opts,
+                        &report.flat_params,
+                        &report.flat_std,
+                        &mc,
+                        &mut |active| progress(Stage::MonteCarlo, active),
+                    )
+                },
             );
             match outcome {
-                Ok(summary) => report.monte_carlo = Some(summary),
+                Ok((summary, line)) => {
+                    report.monte_carlo = Some(summary);
+                    fallback = fallback.or(line);
+                }
                 Err(e) => {
                     report.warnings.push(format!("--mc failed: {e:#}"));
                     mc_error = Some(e);
                 }
             }
         }
+        if let Some(line) = &fallback {
+            report.warnings.push(line.clone());
+        }
         Ok(FitOutcome {
             model,
             loss,
             report,
             mc_error,
+            fallback,
         })
     }
 }

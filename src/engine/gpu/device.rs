@@ -1,9 +1,14 @@
 //! The device layer: opening a Vulkan adapter, catching wgpu's asynchronous errors as
-//! values, and the resources every other layer asks for (textures, buffers, shader
-//! modules). Nothing here knows what a BSDF or a loss is.
+//! values, noticing a device lost or hung ([`super::fault`]), and the resources every
+//! other layer asks for (textures, buffers, shader modules). Nothing here knows what a
+//! BSDF or a loss is.
 
+use super::fault::{self, DeviceFault, FaultPlan, Injected};
 use anyhow::{anyhow, bail, Context as _, Result};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 use wgpu::util::DeviceExt;
 
 /// An opened device, its queue and what the adapter offers.
@@ -19,6 +24,40 @@ pub struct Device {
     /// Errors wgpu reports asynchronously; [`Device::check_errors`] turns them into
     /// `Err` values instead of the default handler's panic.
     errors: Arc<Mutex<Vec<String>>>,
+    /// Submissions so far and the fault that ended the device's use, shared with wgpu's
+    /// device-lost callback.
+    health: Arc<Health>,
+    /// The fault to inject ([`fault::FAULT_VAR`]).
+    plan: Option<FaultPlan>,
+    /// How long a read-back waits for its submission ([`fault::TIMEOUT_VAR`]).
+    timeout: Duration,
+}
+
+/// What a device has been through: its submissions (numbered from 1) and its fault.
+#[derive(Default)]
+struct Health {
+    submissions: AtomicU64,
+    fault: Mutex<Option<DeviceFault>>,
+}
+
+impl Health {
+    /// Record `f` unless the device already has a fault; the device's fault.
+    fn set(&self, f: DeviceFault) -> DeviceFault {
+        match self.fault.lock() {
+            Ok(mut g) => g.get_or_insert(f).clone(),
+            Err(_) => f,
+        }
+    }
+
+    fn get(&self) -> Option<DeviceFault> {
+        self.fault.lock().ok().and_then(|g| g.clone())
+    }
+}
+
+/// Why a poll did not end in the wait's success.
+enum PollFailed {
+    Timeout,
+    Other(String),
 }
 
 impl Device {
@@ -29,6 +68,8 @@ impl Device {
     }
 
     async fn open_async() -> Result<Device> {
+        let plan = FaultPlan::from_env()?;
+        let timeout = fault::timeout_from_env()?;
         // Mesa's Vulkan loader prints an error when XDG_RUNTIME_DIR is unset (headless
         // machines, CI); compute never presents to a window, so any directory will do.
         if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
@@ -72,6 +113,21 @@ impl Device {
         device.on_uncaptured_error(Arc::new(move |e| {
             sink.lock().map(|mut v| v.push(e.to_string())).ok();
         }));
+        // wgpu reports a lost device here, not to the error handler: on the poll that
+        // finds it (a driver's loss), or the first poll after the queue drained
+        // (`destroy`).
+        let health: Arc<Health> = Arc::default();
+        let watch = health.clone();
+        device.set_device_lost_callback(move |reason, message| {
+            let detail = match message.trim() {
+                "" => format!("{reason:?}"),
+                m => format!("{reason:?}: {m}"),
+            };
+            watch.set(DeviceFault::Lost {
+                submission: watch.submissions.load(Ordering::SeqCst),
+                detail,
+            });
+        });
         Ok(Device {
             mappable: features.contains(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS),
             device,
@@ -79,7 +135,140 @@ impl Device {
             info,
             limits,
             errors,
+            health,
+            plan,
+            timeout,
         })
+    }
+
+    /// Inject `plan` instead of what [`fault::FAULT_VAR`] says (tests).
+    pub fn set_fault_plan(&mut self, plan: Option<FaultPlan>) {
+        self.plan = plan;
+    }
+
+    /// Wait at most `timeout` for each read-back instead of [`fault::TIMEOUT_VAR`]'s.
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
+    /// The fault that ended the device's use, if any.
+    pub fn fault(&self) -> Option<DeviceFault> {
+        self.health.get()
+    }
+
+    /// Submissions begun so far (numbered from 1 as [`fault::FAULT_VAR`] counts them).
+    pub fn submission_count(&self) -> u64 {
+        self.health.submissions.load(Ordering::SeqCst)
+    }
+
+    /// `Err` (the device's fault) once the device is lost or hung: it takes no more work.
+    pub fn refuse_if_faulted(&self) -> Result<()> {
+        match self.fault() {
+            Some(f) => Err(f.into()),
+            None => Ok(()),
+        }
+    }
+
+    /// Number the next submission (refused once the device has a fault), and what the
+    /// fault switch does at it.
+    pub fn begin_submission(&self) -> Result<(u64, Option<Injected>)> {
+        self.refuse_if_faulted()?;
+        let n = self.health.submissions.fetch_add(1, Ordering::SeqCst) + 1;
+        let injected = self.plan.filter(|p| p.at == n).map(|p| p.what);
+        if injected == Some(Injected::Lost) {
+            // The genuine loss: every later use fails through wgpu's own channels.
+            self.device.destroy();
+        }
+        Ok((n, injected))
+    }
+
+    /// Poll the device. A panic inside wgpu (its answer to a device error it cannot
+    /// return, e.g. a lost device met while waiting) is caught, and the device is taken
+    /// as lost.
+    fn poll(&self, how: wgpu::PollType) -> std::result::Result<(), PollFailed> {
+        let polled =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.device.poll(how)));
+        match polled {
+            Ok(Ok(_)) => Ok(()),
+            Ok(Err(wgpu::PollError::Timeout)) => Err(PollFailed::Timeout),
+            Ok(Err(e)) => Err(PollFailed::Other(e.to_string())),
+            Err(p) => {
+                // wgpu could not go on with the device: it is lost, whatever it said.
+                let said = p
+                    .downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| p.downcast_ref::<&str>().copied())
+                    .unwrap_or("panic");
+                let f = self.health.set(DeviceFault::Lost {
+                    submission: self.submission_count(),
+                    detail: format!("wgpu panicked while polling it: {}", said.trim()),
+                });
+                Err(PollFailed::Other(f.to_string()))
+            }
+        }
+    }
+
+    /// Let wgpu deliver what it knows (the device-lost callback fires on a poll once the
+    /// queue has drained: wait for it, within the timeout), then the device's fault.
+    fn settle(&self) -> Option<DeviceFault> {
+        if self.fault().is_none() {
+            let _ = self.poll(wgpu::PollType::Wait {
+                submission_index: None,
+                timeout: Some(self.timeout),
+            });
+        }
+        self.fault()
+    }
+
+    /// The error for a read-back that failed with `what`: the device's fault where it
+    /// has one (wgpu reported the loss), else the errors wgpu reported, else `what`.
+    pub fn read_back_error(&self, what: String) -> anyhow::Error {
+        if let Some(f) = self.settle() {
+            return f.into();
+        }
+        match self.check_errors() {
+            Err(e) => e.context(what),
+            Ok(()) => anyhow!(what),
+        }
+    }
+
+    /// Wait for submission `n` (wgpu's `index`; `None` where it was never submitted)
+    /// and for its read-back's mapping, `mapped`, each at most the timeout. A timeout
+    /// marks the device hung.
+    pub fn wait_read_back(
+        &self,
+        n: u64,
+        index: Option<wgpu::SubmissionIndex>,
+        mapped: &Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+    ) -> Result<()> {
+        let hung = || -> anyhow::Error {
+            self.health
+                .set(DeviceFault::Hung {
+                    submission: n,
+                    seconds: self.timeout.as_secs_f64(),
+                })
+                .into()
+        };
+        if let Some(index) = index {
+            match self.poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: Some(self.timeout),
+            }) {
+                Ok(()) => {}
+                Err(PollFailed::Timeout) => return Err(hung()),
+                Err(PollFailed::Other(e)) => {
+                    return Err(self.read_back_error(format!("GPU poll failed: {e}")))
+                }
+            }
+        }
+        match mapped.recv_timeout(self.timeout) {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(e)) => Err(self.read_back_error(format!("GPU read-back failed: {e}"))),
+            Err(RecvTimeoutError::Timeout) => Err(hung()),
+            Err(RecvTimeoutError::Disconnected) => {
+                Err(self.read_back_error("GPU read-back was dropped".into()))
+            }
+        }
     }
 
     /// Whether the device is a CPU (lavapipe): its memory is the host's.
@@ -98,17 +287,26 @@ impl Device {
         )
     }
 
-    /// The errors wgpu reported since the last call, as one `Err`.
+    /// The errors wgpu reported since the last call, as one `Err`: the device's fault
+    /// ([`DeviceFault`], typed) once it is lost or hung, whatever else was reported.
     pub fn check_errors(&self) -> Result<()> {
-        let mut errs = self
-            .errors
-            .lock()
-            .map_err(|_| anyhow!("GPU error log poisoned"))?;
-        if errs.is_empty() {
-            return Ok(());
+        let msg = {
+            let mut errs = self
+                .errors
+                .lock()
+                .map_err(|_| anyhow!("GPU error log poisoned"))?;
+            let msg = errs.join("; ");
+            errs.clear();
+            msg
+        };
+        if msg.is_empty() {
+            return self.refuse_if_faulted();
         }
-        let msg = errs.join("; ");
-        errs.clear();
+        // An error may be the first sign of a lost device, which wgpu reports to the
+        // device-lost callback alone.
+        if let Some(f) = self.settle() {
+            return Err(f.into());
+        }
         bail!("GPU error: {msg}")
     }
 

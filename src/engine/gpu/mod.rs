@@ -1,5 +1,7 @@
 //! The GPU engine: wgpu compute on Vulkan, f32, in layers:
 //! - [`device`]: the adapter, the device and its errors as values;
+//! - [`fault`]: a device lost or hung as a typed error, the read-back timeout and the
+//!   fault-injection switch;
 //! - [`bindings`]: the kernels' bindings and uniform block, declared once for the Rust
 //!   and the WGSL side;
 //! - [`recorder`]: one submission's uploads, dispatches and read-back (no models);
@@ -37,6 +39,7 @@
 pub mod bindings;
 pub mod device;
 mod evaluator;
+pub mod fault;
 pub mod pipelines;
 mod recorder;
 pub mod records;
@@ -49,6 +52,7 @@ use crate::engine::loss::Term;
 use anyhow::{anyhow, Result};
 use device::Device;
 pub use evaluator::GpuEvaluator;
+pub use fault::{device_fault, DeviceFault, FaultPlan};
 use pipelines::{Entry, PipelineCache};
 use std::collections::HashMap;
 use std::sync::Mutex;
@@ -157,6 +161,31 @@ impl GpuBackend {
         self
     }
 
+    /// Inject `plan` (`None`: no fault) instead of what `BSDFIT_GPU_FAULT` says (tests of
+    /// the fault paths, [`fault`]).
+    pub fn with_fault(mut self, plan: Option<FaultPlan>) -> Self {
+        self.device.set_fault_plan(plan);
+        self
+    }
+
+    /// Wait at most `timeout` for each read-back instead of `BSDFIT_GPU_TIMEOUT`'s.
+    pub fn with_timeout(mut self, timeout: std::time::Duration) -> Self {
+        self.device.set_timeout(timeout);
+        self
+    }
+
+    /// Submissions begun so far, numbered from 1 as `BSDFIT_GPU_FAULT` counts them (a
+    /// submission the device refused is not begun).
+    pub fn submission_count(&self) -> u64 {
+        self.device.submission_count()
+    }
+
+    /// The errors the device reported since the last check, as one `Err`; the device's
+    /// [`DeviceFault`] once it is lost or hung.
+    pub fn check_errors(&self) -> Result<()> {
+        self.device.check_errors()
+    }
+
     /// Whether the device was opened with subgroup operations.
     pub fn has_subgroups(&self) -> bool {
         self.device.has_subgroups()
@@ -243,7 +272,11 @@ impl Backend for GpuBackend {
         let log = self.submission_log.lock().ok()?;
         Some(super::SubmissionStats::of(&log))
     }
+    fn fault(&self) -> Option<DeviceFault> {
+        self.device.fault()
+    }
     fn prepare_kernels(&self, model: &Model) -> Result<()> {
+        self.device.refuse_if_faulted()?;
         // For the usual batch: data with μ tables (a few dozen polar angles at most).
         let pipes = self.value_pipelines(model, self.shape.for_batch(true))?;
         self.pipelines
@@ -252,8 +285,16 @@ impl Backend for GpuBackend {
     }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {
         super::check_shared(problems)?;
+        self.device.refuse_if_faulted()?;
         GpuEvaluator::new(self, problems)
             .map(|e| Box::new(e) as Box<dyn Evaluator + 'a>)
-            .map_err(|e| anyhow!("{e:#}"))
+            .map_err(|e| {
+                // One line, the causes included; a device fault stays typed beneath it.
+                let line = format!("{e:#}");
+                match device_fault(&e) {
+                    Some(f) => anyhow::Error::new(f.clone()).context(line),
+                    None => anyhow!(line),
+                }
+            })
     }
 }

@@ -3,7 +3,8 @@
 //! knows nothing of models, losses or what the bytes mean.
 
 use super::device::Device;
-use anyhow::{anyhow, Result};
+use super::fault::Injected;
+use anyhow::Result;
 
 /// One dispatch of a compute pass: a pipeline over a grid of workgroups.
 pub struct Dispatch<'a> {
@@ -59,7 +60,11 @@ impl<'d> Recorder<'d> {
 
     /// Submit, wait, and hand the first `bytes` of `source` to `read`: copied into
     /// `staging` first, or mapped as they are where `staging` is `None` (a buffer
-    /// created mappable, [`Device::mappable`]).
+    /// created mappable, [`Device::mappable`]). The wait is bounded by the device's
+    /// read-back timeout; a device lost or hung fails with its [`DeviceFault`], and so
+    /// does every later submission.
+    ///
+    /// [`DeviceFault`]: super::fault::DeviceFault
     pub fn submit_and_read<R>(
         mut self,
         source: &wgpu::Buffer,
@@ -67,6 +72,7 @@ impl<'d> Recorder<'d> {
         bytes: u64,
         read: impl FnOnce(&[u8]) -> R,
     ) -> Result<R> {
+        let (n, injected) = self.device.begin_submission()?;
         let staging = match staging {
             Some(staging) => {
                 self.encoder
@@ -75,27 +81,25 @@ impl<'d> Recorder<'d> {
             }
             None => source,
         };
-        let q = &self.device.queue;
-        let index = q.submit(Some(self.encoder.finish()));
         let slice = staging.slice(0..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            tx.send(r).ok();
-        });
-        self.device
-            .device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(index),
-                timeout: None,
-            })
-            .map_err(|e| anyhow!("GPU poll failed: {e}"))?;
-        rx.recv()
-            .map_err(|_| anyhow!("GPU read-back was dropped"))?
-            .map_err(|e| anyhow!("GPU read-back failed: {e}"))?;
+        // `hang@N` (fault::FAULT_VAR): the submission is never made, so its read-back
+        // never completes (the sender stays alive, unused, until the wait ends).
+        let (index, _unsent) = if injected == Some(Injected::Hang) {
+            (None, Some(tx))
+        } else {
+            let index = self.device.queue.submit(Some(self.encoder.finish()));
+            slice.map_async(wgpu::MapMode::Read, move |r| {
+                tx.send(r).ok();
+            });
+            (Some(index), None)
+        };
+        self.device.wait_read_back(n, index, &rx)?;
         let out = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| anyhow!("GPU read-back failed: {e:?}"))?;
+            let view = slice.get_mapped_range().map_err(|e| {
+                self.device
+                    .read_back_error(format!("GPU read-back failed: {e:?}"))
+            })?;
             read(&view)
         };
         staging.unmap();

@@ -1,12 +1,16 @@
 //! The sweep's worker pool: cells grouped into stages that step in lockstep, one worker
 //! per core, kernels compiled ahead on a thread of their own, and every finished fit
 //! handed back to the calling thread (which appends it to results.csv at once).
+//!
+//! **A device lost or hung** ([`crate::engine::DeviceFault`]): the fits of a stage that
+//! the device failed are re-run on the fallback backend (the CPU reference), and every
+//! stage that starts after the fault runs there; fits the device finished before stay.
 
 use super::Task;
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::Loss;
-use crate::engine::Backend;
+use crate::engine::{device_fault, Backend, DeviceFault};
 use crate::inference::fit::{fit, fit_stage, FitOptions, FitReport, PhaseSeconds};
 use crate::output::results::DataFile;
 use anyhow::Result;
@@ -20,11 +24,26 @@ pub type FitOutcome = std::thread::Result<Result<FitReport>>;
 /// A cell the pool can fit: its task and its model, built for the task's data.
 pub type Runnable<'a> = (&'a Task, Model);
 
+/// What the pool hands the calling thread.
+pub enum PoolEvent {
+    /// The device failed these cells' fits (indices into the runnable cells) with
+    /// `fault`: they are being re-run on the fallback backend, their outcomes to follow.
+    Rerun {
+        cells: Vec<usize>,
+        fault: DeviceFault,
+    },
+    /// A cell's fit ended (on the fallback backend where a `Rerun` named it).
+    Landed(usize, Box<FitOutcome>),
+}
+
 /// What the pool needs besides its cells: the data, the backend and the fit options
 /// every cell shares (each stage sets its own optimizer).
 pub struct Pool<'a> {
     pub files: &'a [DataFile],
     pub backend: &'a dyn Backend,
+    /// Where fits go once `backend`'s device is lost or hung (the CPU reference; `None`
+    /// for a host backend).
+    pub fallback: Option<&'a dyn Backend>,
     pub options: FitOptions,
 }
 
@@ -38,8 +57,9 @@ pub struct PoolStats {
 
 impl Pool<'_> {
     /// Fit every runnable cell. `each` receives every cell's outcome (by its index into
-    /// `runnable`) on the calling thread, as soon as its stage ends; an error from `each`
-    /// stops the workers after their stages in flight and is returned.
+    /// `runnable`) on the calling thread, as soon as its stage ends, and the re-runs a
+    /// device fault caused before their outcomes; an error from `each` stops the workers
+    /// after their stages in flight and is returned.
     ///
     /// A stage is one model (same spec, channels and planes) under one optimizer and one
     /// loss term shape over every data set, loss and weighting it applies to (the default
@@ -52,7 +72,7 @@ impl Pool<'_> {
     pub fn run(
         &self,
         runnable: &[Runnable],
-        each: &mut dyn FnMut(usize, FitOutcome) -> Result<()>,
+        each: &mut dyn FnMut(PoolEvent) -> Result<()>,
     ) -> Result<PoolStats> {
         let stages = stages_of(runnable);
         let workers = std::thread::available_parallelism()
@@ -75,16 +95,14 @@ impl Pool<'_> {
                         break;
                     }
                     let stage = &stages[si];
-                    for (i, outcome) in self.fit_one_stage(runnable, stage, phases) {
-                        if tx.send((i, outcome)).is_err() {
-                            return;
-                        }
+                    if !self.fit_one_stage(runnable, stage, phases, &mut |ev| tx.send(ev).is_ok()) {
+                        return;
                     }
                 });
             }
             drop(tx);
-            for (i, outcome) in rx {
-                if let Err(e) = each(i, outcome) {
+            for event in rx {
+                if let Err(e) = each(event) {
                     stop.store(true, SeqCst);
                     return Err(e);
                 }
@@ -115,39 +133,106 @@ impl Pool<'_> {
         }
     }
 
-    /// Fit one stage's cells together; if that fails (one bad fit fails the stage), fit
-    /// each alone, so a failure is attributed to its own cell and the others still land.
+    /// Fit one stage's cells on the backend, or on the fallback once the device has a
+    /// fault; the cells the device failed are fitted again on the fallback. `send` gets
+    /// the events in order; false when the receiver has gone (then so does the worker).
     fn fit_one_stage(
         &self,
         runnable: &[Runnable],
         stage: &[usize],
         phases: &Mutex<PhaseSeconds>,
-    ) -> Vec<(usize, FitOutcome)> {
-        let (first, model) = &runnable[stage[0]];
+        send: &mut dyn FnMut(PoolEvent) -> bool,
+    ) -> bool {
+        // `spare`: where the cells the device fails go (none once they run there).
+        let (backend, spare) = match self.fallback {
+            Some(f) if self.backend.fault().is_some() => (f, None),
+            spare => (self.backend, spare),
+        };
+        let outcomes = self.fit_cells(runnable, stage, backend, phases);
+        let mut failed = Vec::new();
+        let mut fault = None;
+        for (&i, outcome) in stage.iter().zip(outcomes) {
+            match (spare, self.device_failed(&outcome)) {
+                (Some(_), Some(f)) => {
+                    fault.get_or_insert(f);
+                    failed.push(i);
+                }
+                _ => {
+                    if !send(PoolEvent::Landed(i, Box::new(outcome))) {
+                        return false;
+                    }
+                }
+            }
+        }
+        let (Some(spare), Some(fault)) = (spare, fault) else {
+            return true;
+        };
+        if !send(PoolEvent::Rerun {
+            cells: failed.clone(),
+            fault,
+        }) {
+            return false;
+        }
+        let again = self.fit_cells(runnable, &failed, spare, phases);
+        failed
+            .into_iter()
+            .zip(again)
+            .all(|(i, outcome)| send(PoolEvent::Landed(i, Box::new(outcome))))
+    }
+
+    /// The device fault behind a failed fit: its error's, or the backend's own where the
+    /// fit failed (an error or a panic) after the device had one.
+    fn device_failed(&self, outcome: &FitOutcome) -> Option<DeviceFault> {
+        match outcome {
+            Ok(Ok(_)) => None,
+            Ok(Err(e)) => device_fault(e).cloned().or_else(|| self.backend.fault()),
+            Err(_) => self.backend.fault(),
+        }
+    }
+
+    /// Fit `cells` (one stage's) together on `backend`; if that fails (one bad fit fails
+    /// the stage), fit each alone, so a failure is attributed to its own cell and the
+    /// others still land. Where the device failed the stage, every cell gets its fault
+    /// (alone they would be refused).
+    fn fit_cells(
+        &self,
+        runnable: &[Runnable],
+        cells: &[usize],
+        backend: &dyn Backend,
+        phases: &Mutex<PhaseSeconds>,
+    ) -> Vec<FitOutcome> {
+        let (first, model) = &runnable[cells[0]];
         let opts = FitOptions {
             optimizer: first.optimizer,
             ..self.options.clone()
         };
-        let datas: Vec<&Dataset> = stage
+        let datas: Vec<&Dataset> = cells
             .iter()
             .map(|&i| &self.files[runnable[i].0.data].data)
             .collect();
-        let losses: Vec<Loss> = stage
+        let losses: Vec<Loss> = cells
             .iter()
             .map(|&i| Loss::new(runnable[i].0.loss, runnable[i].0.weights))
             .collect();
-        let backend = self.backend;
         let together = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             fit_stage(model, &datas, &losses, backend, &opts, &mut |_| {})
         }));
-        let outcomes: Vec<FitOutcome> = match together {
-            Ok(Ok((reports, spent))) => {
+        let fault = match &together {
+            Ok(Err(e)) => device_fault(e).cloned(),
+            _ => None,
+        };
+        match (together, fault) {
+            (Ok(Ok((reports, spent))), _) => {
                 if let Ok(mut p) = phases.lock() {
                     *p += spent;
                 }
                 reports.into_iter().map(|r| Ok(Ok(r))).collect()
             }
-            _ => stage
+            (_, Some(f)) => cells
+                .iter()
+                .map(|_| Ok(Err(anyhow::Error::new(f.clone()))))
+                .collect(),
+            _ => cells
                 .iter()
                 .zip(datas.iter().zip(&losses))
                 .map(|(&i, (data, &loss))| {
@@ -156,8 +241,7 @@ impl Pool<'_> {
                     }))
                 })
                 .collect(),
-        };
-        stage.iter().copied().zip(outcomes).collect()
+        }
     }
 }
 

@@ -3,11 +3,11 @@
 //! sweep`, `bench --sweep` and the Python module's `sweep()` all call [`run`].
 
 use super::lock::DirLock;
-use super::pool::{FitOutcome, Pool, Runnable};
+use super::pool::{FitOutcome, Pool, PoolEvent, Runnable};
 use super::{expand_data, skipped_entry, slurm, tasks, write_skipped, Selection, Task};
 use crate::bsdf::Model;
 use crate::data::ReadOptions;
-use crate::engine::{self, loss::Loss, BackendChoice};
+use crate::engine::{self, loss::Loss, Backend as _, BackendChoice};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::fit::{FitOptions, PhaseSeconds};
 use crate::output::files::check_writable_dir;
@@ -426,11 +426,13 @@ impl FitRun<'_> {
         let (runnable, unbuilt) = self.build_models(todo, obs);
         self.check_before_fitting(&runnable, obs)?;
         let backend = engine::select(self.cfg.backend, &mut |m| obs.note(&m))?;
+        let cpu = engine::cpu::CpuBackend::new();
         let mut app = Appender::open(self.csv_path)?;
         obs.begin(todo.len() as u64, unbuilt);
         let pool = Pool {
             files: self.files,
             backend: backend.as_ref(),
+            fallback: (backend.id() != cpu.id()).then_some(&cpu as &dyn engine::Backend),
             options: FitOptions {
                 restarts: self.cfg.restarts,
                 seed: self.cfg.seed,
@@ -438,13 +440,36 @@ impl FitRun<'_> {
                 ..Default::default()
             },
         };
-        let stats = pool.run(&runnable, &mut |i, outcome| {
-            let (t, model) = &runnable[i];
-            let f = &self.files[t.data];
-            let what = format!(
+        let files = self.files;
+        let what = |t: &Task| {
+            format!(
                 "{} · {} · {}/{} · {}",
-                f.name, t.model, t.loss, t.weights, t.optimizer
-            );
+                files[t.data].name, t.model, t.loss, t.weights, t.optimizer
+            )
+        };
+        let mut faulted = false;
+        let stats = pool.run(&runnable, &mut |event| {
+            let (i, outcome) = match event {
+                PoolEvent::Landed(i, outcome) => (i, *outcome),
+                PoolEvent::Rerun { cells, fault } => {
+                    if !std::mem::replace(&mut faulted, true) {
+                        obs.alert(&format!(
+                            "GPU fault: {fault}; the sweep continues on the CPU reference, \
+                             and the fits the GPU failed are re-run there"
+                        ));
+                    }
+                    for &i in &cells {
+                        obs.alert(&format!(
+                            "re-running on the CPU reference ({}): {}",
+                            fault.brief(),
+                            what(runnable[i].0)
+                        ));
+                    }
+                    return Ok(());
+                }
+            };
+            let (t, model) = &runnable[i];
+            let what = what(t);
             if let Some(row) = self.land(t, model, outcome, backend.as_ref(), obs)? {
                 app.push(&row)?;
                 rows.push(row);
