@@ -229,6 +229,59 @@ def test_bad_input_raises_the_cli_message():
         bsdfit.Dataset.read(tape, alta_values="cosine")
 
 
+def on_columns(n=200, seed=21, rho=0.3, sigma=0.45):
+    """Oren–Nayar data with 2 % noise at random directions, one channel (550 nm)."""
+    rng = np.random.default_rng(seed)
+    ti, pi, to, po = random_geometry(rng, n)
+    f = oren_nayar(rho, sigma, ti, pi, to, po)
+    u = 0.02 * f + 1e-4
+    return ti, pi, to, po, 550.0, f + rng.normal(0.0, 1.0, n) * u, u
+
+
+def test_bounds_confine_a_prior_pulls_and_fix_holds_as_on_the_command_line(tmp_path):
+    """Oren–Nayar data with σ = 0.45. bounds σ ∈ [0.1, 0.3] end the fit on 0.3 and say
+    so; a prior N(σ̂ + 5·std, std) moves σ about half way to its mean (a Gaussian prior
+    as wide as the likelihood: half way, ±15 % for the nonlinearity) and narrows its std
+    (by about 1/√2); a prior 100 times narrower holds σ at its mean; fix holds it
+    exactly, with std 0. The command line with --bounds, --prior and --fix on the same
+    file gives the same parameters to 1e-9."""
+    path = tmp_path / "on.csv"
+    bsdfit.Dataset.from_arrays("brdf", *on_columns()).write_csv(path)
+    data = bsdfit.Dataset.read(path)
+    opts = dict(seed=1, backend="cpu", restarts=4)
+    free = bsdfit.fit(data, "on", **opts)
+    s0, sd0 = free.params["sigma"], free.std["sigma"]
+    assert abs(s0 - 0.45) < 4 * sd0 and 0 < sd0 < 0.03, (s0, sd0)
+
+    bounded = bsdfit.fit(data, "on", bounds={"sigma": (0.1, 0.3)}, **opts)
+    assert bounded.params["sigma"] == pytest.approx(0.3, abs=1e-9)
+    assert any("upper bound 0.3" in w for w in bounded.warnings), bounded.warnings
+    assert bounded.chi2_red > free.chi2_red + 1
+
+    mean = s0 + 5 * sd0
+    pulled = bsdfit.fit(data, "on", prior={"sigma": (mean, sd0)}, **opts)
+    share = (pulled.params["sigma"] - s0) / (mean - s0)
+    assert 0.35 < share < 0.65, share
+    assert 0 < pulled.std["sigma"] < 0.85 * sd0, (pulled.std["sigma"], sd0)
+    held = bsdfit.fit(data, "on", prior={"sigma": (mean, sd0 / 100)}, **opts)
+    assert abs(held.params["sigma"] - mean) < 0.01 * (mean - s0)
+
+    fixed = bsdfit.fit(data, "on", fix={"sigma": 0.3}, **opts)
+    assert fixed.params["sigma"] == 0.3 and fixed.std["sigma"] == 0.0
+    assert fixed.param_names == free.param_names
+
+    for fit, option in ((bounded, ["--bounds", "sigma=0.1:0.3"]),
+                        (pulled, ["--prior", f"sigma={mean!r}:{sd0!r}"]),
+                        (held, ["--prior", f"sigma={mean!r}:{sd0 / 100!r}"]),
+                        (fixed, ["--fix", "sigma=0.3"])):
+        out = tmp_path / "cli.json"
+        run_cli("fit", path, "--model", "on", "--seed", 1, "--backend", "cpu", "--restarts", 4, *option, "--json", out)
+        cli = json.loads(out.read_text())
+        np.testing.assert_allclose(fit.report["flat_params"], cli["flat_params"], rtol=1e-9, err_msg=str(option))
+        assert fit.chi2_red == pytest.approx(cli["best"]["chi2_red"], rel=1e-9), option
+        assert fit.report.get("constraints") == cli.get("constraints"), option
+
+
 def test_gpu_fit_on_lavapipe_equals_the_cpu_fit():
     """The GPU engine (lavapipe in CI) reaches the CPU's optimum: LM fits end with an f64
     polish on either backend, so at one optimum the losses agree to ~1e-9 (stated: 1e-6
