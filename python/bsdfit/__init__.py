@@ -14,6 +14,8 @@ command line, so the same data and seed give the same parameters), with the GIL 
 from __future__ import annotations
 
 import json
+import numbers
+import operator
 import os
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
@@ -43,17 +45,70 @@ ArrayLike = Union[float, Sequence[float], np.ndarray]
 PathLike = Union[str, "os.PathLike[str]"]
 
 
-def _floats(name: str, x: Any) -> np.ndarray:
+# The checks of the arguments' Python types and ranges, one function per kind of argument:
+# each names the argument in its message. What the values mean (a row's angles, a model's
+# name, a constraint's range) is checked by the library, with the command line's messages.
+
+_U64_MAX = 2**64 - 1
+
+# What numpy's dtype kinds hold, in words, for the arrays that are not real numbers.
+_DTYPE_WORDS = {
+    "b": "booleans",
+    "c": "complex numbers",
+    "O": "Python objects",
+    "U": "strings",
+    "S": "bytes",
+    "M": "dates",
+    "m": "time spans",
+    "V": "records",
+}
+
+
+def _short(x: Any) -> str:
+    """``x`` in a message: its type and a short repr."""
+    text = repr(x)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(x).__name__} {text}"
+
+
+def _numbers(name: str, x: Any, *, max_ndim: Optional[int], allow_empty: bool) -> np.ndarray:
+    """``x`` as a float64 array: real numbers (integers or floats) only; at most
+    ``max_ndim`` dimensions (None: any); empty only with ``allow_empty``. Anything else
+    raises TypeError (not numbers) or ValueError (the wrong shape) naming ``name``."""
+    expected = "a number or a 1-D array of numbers" if max_ndim == 1 else "numbers"
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name}: expected {expected}, got {_short(x)}")
     try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{name}: not an array of numbers ({e})") from None
-    return a
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        # numpy ≥ 1.24 refuses a ragged sequence outright.
+        raise ValueError(
+            f"{name}: expected {expected}, got a ragged sequence (its items differ in length or nesting)"
+        ) from None
+    kind = a.dtype.kind
+    if kind == "O" and any(isinstance(e, (list, tuple, np.ndarray)) for e in a.flat):
+        # Older numpy makes an object array of a ragged sequence.
+        raise ValueError(
+            f"{name}: expected {expected}, got a ragged sequence (its items differ in length or nesting)"
+        )
+    if kind not in "iuf":
+        words = _DTYPE_WORDS.get(kind, f"dtype {a.dtype}")
+        got = f"an array of {words} (dtype {a.dtype})" if a.ndim else _short(x)
+        raise TypeError(f"{name}: expected real numbers, got {got}")
+    if max_ndim is not None and a.ndim > max_ndim:
+        raise ValueError(
+            f"{name}: expected {expected}, got a {a.ndim}-D array of shape {a.shape}"
+        )
+    if not allow_empty and a.size == 0:
+        raise ValueError(f"{name}: an empty array (no samples)")
+    return a.astype(np.float64, copy=False)
 
 
 def _columns(**cols: Any) -> List[np.ndarray]:
-    """Broadcast the columns to one shape and flatten them to contiguous float64."""
-    arrays = [_floats(k, v) for k, v in cols.items()]
+    """The columns of :meth:`Dataset.from_arrays`: numbers or 1-D arrays of numbers, none
+    empty, the numbers broadcast to the arrays' length; contiguous float64."""
+    arrays = [_numbers(k, v, max_ndim=1, allow_empty=False) for k, v in cols.items()]
     try:
         shaped = np.broadcast_arrays(*arrays)
     except ValueError:
@@ -62,11 +117,57 @@ def _columns(**cols: Any) -> List[np.ndarray]:
     return [np.ascontiguousarray(a, dtype=np.float64).ravel() for a in shaped]
 
 
+def _int(name: str, n: Any, lo: int, hi: int = _U64_MAX) -> int:
+    """An integer in [lo, hi] (an int or a numpy integer; not a bool, not a float)."""
+    if isinstance(n, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected an integer, got {_short(n)}")
+    try:
+        k = operator.index(n)
+    except TypeError:
+        raise TypeError(f"{name}: expected an integer, got {_short(n)}") from None
+    if k < lo:
+        raise ValueError(f"{name} must be ≥ {lo}, got {k}")
+    if k > hi:
+        raise ValueError(f"{name} must be ≤ {hi}, got {k}")
+    return k
+
+
+def _real(name: str, x: Any) -> float:
+    """A real number (an int, a float or a numpy number; not a bool, not a string)."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real):
+        raise TypeError(f"{name}: expected a number, got {_short(x)}")
+    return float(x)
+
+
+def _text(name: str, x: Any) -> str:
+    if not isinstance(x, str):
+        raise TypeError(f"{name}: expected a string, got {_short(x)}")
+    return x
+
+
+def _path(name: str, p: Any) -> str:
+    try:
+        return os.fsdecode(os.fspath(p))
+    except TypeError:
+        raise TypeError(f"{name}: expected a file path (str or os.PathLike), got {_short(p)}") from None
+
+
+def _wavelengths(given: Optional[Any]) -> Optional[List[float]]:
+    if given is None:
+        return None
+    return [float(w) for w in _numbers("wavelengths", given, max_ndim=1, allow_empty=True).ravel()]
+
+
 def _assume(assume_uncertainty: Optional[Union[str, Tuple[float, float]]]) -> Optional[str]:
     if assume_uncertainty is None or isinstance(assume_uncertainty, str):
         return assume_uncertainty
-    rel, abs_ = assume_uncertainty
-    return f"{float(rel)!r},{float(abs_)!r}"
+    pair = _numbers("assume_uncertainty", assume_uncertainty, max_ndim=1, allow_empty=True)
+    if pair.shape != (2,):
+        raise ValueError(
+            f"assume_uncertainty: expected (rel, abs) or 'REL,ABS', got {_short(assume_uncertainty)}"
+        )
+    rel, abs_ = (float(v) for v in pair)
+    return f"{rel!r},{abs_!r}"
 
 
 class Dataset:
@@ -106,17 +207,18 @@ class Dataset:
         and ``sample_geometry`` names the geometry an RGL .bsdf material is sampled at
         (default ``"grid:10"``).
 
-        Raises OSError when the file cannot be read, ValueError when its content is bad.
+        Raises OSError (FileNotFoundError, IsADirectoryError, …) when the file cannot be
+        read, ValueError when its content is bad, TypeError for an argument of the wrong type.
         """
         native = _bsdfit.read_dataset(
-            os.fspath(path),
-            None if wavelengths is None else [float(w) for w in wavelengths],
-            None if band is None else float(band),
-            None if max_samples is None else int(max_samples),
+            _path("path", path),
+            _wavelengths(wavelengths),
+            None if band is None else _real("band", band),
+            None if max_samples is None else _int("max_samples", max_samples, 0),
             _assume(assume_uncertainty),
             bool(allow_zero_uncertainty),
-            alta_values,
-            sample_geometry,
+            None if alta_values is None else _text("alta_values", alta_values),
+            None if sample_geometry is None else _text("sample_geometry", sample_geometry),
         )
         return cls(native)
 
@@ -137,12 +239,16 @@ class Dataset:
         band: Optional[float] = None,
         allow_zero_uncertainty: bool = False,
     ) -> "Dataset":
-        """Measurements from arrays (broadcast together, then flattened).
+        """Measurements from arrays: one sample per row of the 1-D arrays, a number
+        standing for all rows (and an array of one item likewise).
 
         ``kind`` is ``"brdf"`` or ``"btdf"``; angles in degrees (signed polar angles
         allowed, as in the v1 CSV), wavelength in nm, value and its standard uncertainty
-        (k = 1) in sr⁻¹. Each row is checked as a file row would be; a bad row raises
-        ValueError naming it as ``arrays:ROW`` (1-based).
+        (k = 1) in sr⁻¹. Each row is checked as a file row would be; a bad row (NaN or
+        infinite values included) raises ValueError naming it as ``arrays:ROW`` (1-based).
+        An argument that is not real numbers (strings, complex numbers, booleans, Python
+        objects) raises TypeError naming it; one with two or more dimensions, a ragged
+        sequence, an empty array, or arrays of different lengths raise ValueError.
         """
         ti, pi, to, po, wl, v, u = _columns(
             theta_i=theta_i,
@@ -154,7 +260,7 @@ class Dataset:
             uncertainty=uncertainty,
         )
         native = _bsdfit.dataset_from_arrays(
-            kind,
+            _text("kind", kind),
             ti,
             pi,
             to,
@@ -162,9 +268,9 @@ class Dataset:
             wl,
             v,
             u,
-            material,
-            None if wavelengths is None else [float(w) for w in wavelengths],
-            None if band is None else float(band),
+            _text("material", material),
+            _wavelengths(wavelengths),
+            None if band is None else _real("band", band),
             bool(allow_zero_uncertainty),
         )
         return cls(native)
@@ -242,7 +348,32 @@ class Dataset:
 
     def write_csv(self, path: PathLike) -> None:
         """Write as bsdfit v1 CSV (what ``bsdfit convert`` writes)."""
-        self._native.write_csv(os.fspath(path))
+        self._native.write_csv(_path("path", path))
+
+
+def _check_report(report: Any, name: str) -> None:
+    """Whether ``report`` (JSON data) is a fit report :class:`Fit` can use: the checks of
+    ``bsdfit eval``'s reader, and the best fit's χ²_red and loss; ValueError naming
+    ``name`` if not."""
+    if isinstance(report, dict) and "per_axis" in report:
+        raise ValueError(
+            f"{name}: a per-plane fit file (fit --per-axis) holds one fit per plane: "
+            "load each with Fit(report['per_axis'][k]['fit'])"
+        )
+    try:
+        text = json.dumps(report, allow_nan=False)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} is not a bsdfit fit report: not JSON data ({e})") from None
+    _bsdfit.check_fit_report(text, name)
+    best = report.get("best")
+    if not (
+        isinstance(best, dict)
+        and all(type(best.get(k)) in (int, float) for k in ("chi2_red", "loss"))
+    ):
+        raise ValueError(
+            f"{name} is not a bsdfit fit report: no 'best' with the numbers 'chi2_red' and "
+            "'loss' (docs/output.md)"
+        )
 
 
 class Fit:
@@ -254,27 +385,36 @@ class Fit:
     """
 
     def __init__(self, report: Dict[str, Any], warnings: Sequence[str] = ()) -> None:
-        if "per_axis" in report:
-            raise ValueError(
-                "a per-plane fit file (fit --per-axis) holds one fit per plane: "
-                "load each with Fit(report['per_axis'][k]['fit'])"
-            )
+        """``report``: the dict of a fit report (the JSON of ``bsdfit fit --json``),
+        checked as ``bsdfit eval`` checks the file (ValueError if it is not one)."""
+        if not isinstance(report, dict):
+            raise TypeError(f"report: expected the dict of a fit report, got {_short(report)}")
+        _check_report(report, "Fit(report)")
         self.report: Dict[str, Any] = report
         self.warnings: List[str] = list(report.get("warnings", [])) + list(warnings)
 
     @classmethod
     def load(cls, path: PathLike) -> "Fit":
-        """Read a fit report written by :meth:`to_json` or ``bsdfit fit --json``."""
-        with open(os.fspath(path), encoding="utf-8") as f:
-            try:
-                report = json.load(f)
-            except json.JSONDecodeError as e:
-                raise ValueError(f"{os.fspath(path)}: not a fit report ({e})") from None
+        """Read a fit report written by :meth:`to_json` or ``bsdfit fit --json``.
+
+        Raises OSError when the file cannot be read, ValueError naming it when it is not
+        a fit report (not UTF-8 JSON, or fields missing or inconsistent, as ``bsdfit
+        eval`` checks them)."""
+        name = _path("path", path)
+        with open(name, "rb") as f:
+            raw = f.read()
+        try:
+            report = json.loads(raw.decode("utf-8"))
+        except UnicodeDecodeError as e:
+            raise ValueError(f"{name} is not a bsdfit fit report: not UTF-8 text ({e})") from None
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{name} is not a bsdfit fit report: not JSON ({e})") from None
+        _check_report(report, name)
         return cls(report)
 
     def to_json(self, path: PathLike) -> None:
         """Write the report in the command line's format (``bsdfit eval``/``export`` read it)."""
-        with open(os.fspath(path), "w", encoding="utf-8") as f:
+        with open(_path("path", path), "w", encoding="utf-8") as f:
             json.dump(self.report, f, indent=2)
             f.write("\n")
 
@@ -365,7 +505,9 @@ class Fit:
         uncertainty of each value propagated from the fit's covariance, as ``bsdfit eval``.
 
         ``wavelength_nm`` must be channels of the fit; by default, the fit's only channel.
-        Returns ``(values, uncertainties)`` shaped like the broadcast inputs.
+        Returns ``(values, uncertainties)`` shaped like the broadcast inputs (of any number
+        of dimensions; empty inputs give empty results). Arguments that are not real
+        numbers raise TypeError, NaN or infinite ones ValueError, each naming itself.
         """
         if wavelength_nm is None:
             if len(self.channels) != 1:
@@ -374,7 +516,7 @@ class Fit:
                     "say which with wavelength_nm"
                 )
             wavelength_nm = self.channels[0]
-        arrays = [_floats(k, v) for k, v in
+        arrays = [_numbers(k, v, max_ndim=None, allow_empty=True) for k, v in
                   zip(("theta_i", "phi_i", "theta_o", "phi_o", "wavelength_nm"),
                       (theta_i, phi_i, theta_o, phi_o, wavelength_nm))]
         try:
@@ -392,12 +534,22 @@ class Fit:
         return values.reshape(shape), uncertainties.reshape(shape)
 
 
-def _constraint_list(given: Any) -> List[str]:
+# Per constraint argument: the command line's form, and the pair a mapping's value must be
+# (None: one value, or one per channel).
+_CONSTRAINTS: Dict[str, Tuple[str, Optional[Tuple[str, str]], str]] = {
+    "fix": ("NAME=VALUE", None, "{'sigma': 0.3}"),
+    "bounds": ("NAME=LO:HI", ("lo", "hi"), "{'alpha': (0.01, 0.5)}"),
+    "prior": ("NAME=MEAN:SD", ("mean", "sd"), "{'eta': (1.5, 0.1)}"),
+}
+
+
+def _constraint_list(name: str, given: Any) -> List[str]:
     """``fix``/``bounds``/``prior`` as the command line's NAME=… strings.
 
     Accepts a mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``,
     ``{"rho": [0.4, 0.5, 0.6]}``) or the strings themselves.
     """
+    form, pair, example = _CONSTRAINTS[name]
     if given is None:
         return []
     if isinstance(given, str):
@@ -405,14 +557,23 @@ def _constraint_list(given: Any) -> List[str]:
     if isinstance(given, Mapping):
         out = []
         for k, v in given.items():
+            if not isinstance(k, str):
+                raise TypeError(f"{name}: parameter names are strings, got {_short(k)}")
             if isinstance(v, str):
                 out.append(f"{k}={v}")
-            elif np.ndim(v) == 0:
-                out.append(f"{k}={float(v)!r}")
-            else:
-                out.append(f"{k}=" + ":".join(repr(float(x)) for x in np.ravel(v)))
+                continue
+            values = _numbers(f"{name}[{k!r}]", v, max_ndim=1, allow_empty=False).ravel()
+            if pair is not None and values.size != 2:
+                raise ValueError(
+                    f"{name}[{k!r}]: expected ({pair[0]}, {pair[1]}), got {_short(v)}"
+                )
+            out.append(f"{k}=" + ":".join(repr(float(x)) for x in values))
         return out
-    return [str(s) for s in given]
+    if isinstance(given, (list, tuple)) and all(isinstance(item, str) for item in given):
+        return list(given)
+    raise TypeError(
+        f"{name}: expected a mapping such as {example} or {form} strings, got {_short(given)}"
+    )
 
 
 def fit(
@@ -441,41 +602,34 @@ def fit(
     ({name: (lo, hi)}), ``prior`` ({name: (mean, sd)}), and Monte Carlo replicas ``mc``
     with ``mc_scale`` and ``mc_restarts``. The same data and seed give the same parameters
     as the command line.
+
+    Arguments of the wrong type raise TypeError, bad values ValueError, each naming the
+    argument (``restarts`` ≥ 1, ``seed`` in [0, 2**64 − 1], ``backend`` one of "auto",
+    "cpu", "gpu", …); warnings the command line prints (a very large batch) are in
+    :attr:`Fit.warnings`.
     """
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
-    text, mc_error = _bsdfit.fit_json(
+    text, mc_error, notes = _bsdfit.fit_json(
         dataset._native,
-        str(model),
-        str(loss),
-        str(weighting),
-        optimizer,
-        _positive("restarts", restarts),
-        _seed(seed),
-        str(backend),
-        _constraint_list(fix),
-        _constraint_list(bounds),
-        _constraint_list(prior),
-        int(mc),
-        float(mc_scale),
-        int(mc_restarts),
+        _text("model", model),
+        _text("loss", loss),
+        _text("weighting", weighting),
+        None if optimizer is None else _text("optimizer", optimizer),
+        _int("restarts", restarts, 1),
+        _int("seed", seed, 0),
+        _text("backend", backend),
+        _constraint_list("fix", fix),
+        _constraint_list("bounds", bounds),
+        _constraint_list("prior", prior),
+        _int("mc", mc, 0),
+        _real("mc_scale", mc_scale),
+        _int("mc_restarts", mc_restarts, 0),
     )
-    result = Fit(json.loads(text))
+    result = Fit(json.loads(text), notes)
     if mc_error is not None:
         raise ValueError(f"mc: {mc_error} (the fit itself: {result!r})")
     return result
-
-
-def _positive(name: str, n: Any) -> int:
-    if isinstance(n, bool) or int(n) != n or int(n) < 1:
-        raise ValueError(f"{name}: a positive integer, got {n!r}")
-    return int(n)
-
-
-def _seed(seed: Any) -> int:
-    if isinstance(seed, bool) or int(seed) != seed or int(seed) < 0:
-        raise ValueError(f"seed: a non-negative integer, got {seed!r}")
-    return int(seed)
 
 
 @dataclass(frozen=True)
@@ -490,10 +644,12 @@ class Step:
 
 class Diagnosis:
     """What ``bsdfit diagnose`` found: the steps from the start model, the effects named,
-    and the final model. ``report`` is the whole JSON of ``diagnose --json``."""
+    and the final model. ``report`` is the whole JSON of ``diagnose --json``; ``warnings``
+    what the command line prints on stderr besides (a very large batch)."""
 
-    def __init__(self, report: Dict[str, Any]) -> None:
+    def __init__(self, report: Dict[str, Any], warnings: Sequence[str] = ()) -> None:
         self.report = report
+        self.warnings: List[str] = list(warnings)
 
     @property
     def steps(self) -> List[Step]:
@@ -549,26 +705,26 @@ def diagnose(
     effect, add it and repeat while the improvement is significant (``bsdfit diagnose``)."""
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
-    text = _bsdfit.diagnose_json(
+    text, notes = _bsdfit.diagnose_json(
         dataset._native,
-        str(model),
-        str(loss),
-        str(weighting),
-        str(optimizer),
-        _positive("restarts", restarts),
-        _seed(seed),
-        float(alpha),
-        int(max_steps),
-        int(bootstrap),
-        int(bootstrap_restarts),
-        str(backend),
-        _constraint_list(fix),
-        _constraint_list(bounds),
-        _constraint_list(prior),
+        _text("model", model),
+        _text("loss", loss),
+        _text("weighting", weighting),
+        _text("optimizer", optimizer),
+        _int("restarts", restarts, 1),
+        _int("seed", seed, 0),
+        _real("alpha", alpha),
+        _int("max_steps", max_steps, 0),
+        _int("bootstrap", bootstrap, 0),
+        _int("bootstrap_restarts", bootstrap_restarts, 0),
+        _text("backend", backend),
+        _constraint_list("fix", fix),
+        _constraint_list("bounds", bounds),
+        _constraint_list("prior", prior),
         bool(backtrack),
-        int(explore),
+        _int("explore", explore, 0),
     )
-    return Diagnosis(json.loads(text))
+    return Diagnosis(json.loads(text), notes)
 
 
 def sweep(
@@ -588,28 +744,31 @@ def sweep(
     """Run ``bsdfit sweep`` over data files or folders into ``out`` (the same folder the
     command line writes: results.csv, results.json, pictures, report.html; resumable).
     Returns the path of ``out``."""
-    if isinstance(paths, (str, os.PathLike)):
+    if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
 
-    def listed(given: Optional[Sequence[str]]) -> Optional[List[str]]:
+    def listed(name: str, given: Optional[Sequence[str]]) -> Optional[List[str]]:
         if given is None:
             return None
-        return [given] if isinstance(given, str) else list(given)
+        if isinstance(given, str):
+            return [given]
+        return [_text(name, g) for g in given]
 
+    out_path = _path("out", out)
     _bsdfit.sweep(
-        [os.fspath(p) for p in paths],
-        os.fspath(out),
-        listed(models),
-        listed(losses),
-        listed(weights),
-        _positive("restarts", restarts),
-        _seed(seed),
-        str(backend),
+        [_path("paths", p) for p in paths],
+        out_path,
+        listed("models", models),
+        listed("losses", losses),
+        listed("weights", weights),
+        _int("restarts", restarts, 1),
+        _int("seed", seed, 0),
+        _text("backend", backend),
         bool(pictures),
-        None if shard is None else str(shard),
+        None if shard is None else _text("shard", shard),
         _assume(assume_uncertainty),
     )
-    return os.fspath(out)
+    return out_path
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,10 @@
 """Type stub of ``bsdfit._bsdfit``, the native half of the module (Rust, PyO3).
 
 Use the ``bsdfit`` package instead: it wraps these with keyword arguments, numpy
-broadcasting and the :class:`bsdfit.Fit` object. Every function that computes releases
-the GIL; errors are ``OSError`` (a file), ``ValueError`` (bad input, with the command
-line's message) or ``RuntimeError`` (a bug).
+broadcasting and the :class:`bsdfit.Fit` object, and checks the arguments' types and
+ranges first. Every function that computes releases the GIL; errors are ``OSError`` or
+its subclass for the cause (a file), ``ValueError`` (bad input, with the command line's
+message) or ``RuntimeError`` (a bug).
 """
 
 from typing import List, Optional, Tuple
@@ -82,9 +83,10 @@ def fit_json(
     mc: int,
     mc_scale: float,
     mc_restarts: int,
-) -> Tuple[str, Optional[str]]:
-    """Fit one model: the report as ``bsdfit fit --json`` writes it, and the Monte Carlo
-    error if the replicas failed (the fit itself stands)."""
+) -> Tuple[str, Optional[str], List[str]]:
+    """Fit one model: the report as ``bsdfit fit --json`` writes it, the Monte Carlo
+    error if the replicas failed (the fit itself stands), and the warnings the command
+    line prints on stderr."""
 
 def eval_fit(
     fit_text: str,
@@ -96,6 +98,10 @@ def eval_fit(
 ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], List[str]]:
     """A fit's values and propagated standard uncertainties at these geometries, in order,
     with the warnings ``bsdfit eval`` prints."""
+
+def check_fit_report(text: str, name: str) -> None:
+    """Raise ValueError (naming ``name``) unless ``text`` is a fit report ``bsdfit eval``
+    can use."""
 
 def diagnose_json(
     dataset: NativeDataset,
@@ -115,8 +121,9 @@ def diagnose_json(
     prior: List[str],
     backtrack: bool,
     explore: int,
-) -> str:
-    """The diagnosis as ``bsdfit diagnose --json`` writes it."""
+) -> Tuple[str, List[str]]:
+    """The diagnosis as ``bsdfit diagnose --json`` writes it, and the warnings the command
+    line prints on stderr."""
 
 def sweep(
     paths: List[str],

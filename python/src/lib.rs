@@ -4,9 +4,11 @@
 //! the `Fit` object) lives in `bsdfit/__init__.py`; this file only moves data across.
 //!
 //! Every call that computes releases the GIL, and every error comes back as a Python
-//! exception carrying the command line's message: `OSError` when a file cannot be read,
-//! `ValueError` for bad input, `RuntimeError` for a bug (a panic is caught here and never
-//! crosses into Python).
+//! exception carrying the command line's message: `OSError` (or its subclass for the
+//! cause: `FileNotFoundError`, `PermissionError`, `IsADirectoryError`) when a file cannot
+//! be read, `ValueError` for bad input, `RuntimeError` for a bug (a panic is caught here
+//! and never crosses into Python). The arguments' Python types and ranges are checked in
+//! `bsdfit/__init__.py`, before they get here.
 
 // Each function takes the keyword arguments of its Python call, one Rust argument each.
 #![allow(clippy::too_many_arguments)]
@@ -20,7 +22,10 @@ use bsdfit::inference::saved::FitFile;
 use bsdfit::workflows::{diagnose, export, fit};
 use clap_value::parse_choice;
 use numpy::{PyArray1, PyReadonlyArray1};
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{
+    PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
+    PyValueError,
+};
 use pyo3::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
@@ -34,21 +39,25 @@ mod clap_value {
                 .iter()
                 .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
                 .collect();
+            let names: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
             anyhow::anyhow!("{what}: '{s}' is not one of {}", names.join(", "))
         })
     }
 }
 
-/// An error as Python sees it: `OSError` when a file could not be read or written,
-/// `ValueError` otherwise, with the whole chain of causes as the command line prints it.
+/// An error as Python sees it: `OSError` when a file could not be read or written (the
+/// subclass Python's own `open` would raise for the cause), `ValueError` otherwise, with
+/// the whole chain of causes as the command line prints it.
 fn to_py(e: anyhow::Error) -> PyErr {
+    use std::io::ErrorKind;
     let msg = format!("{e:#}");
-    if e.chain()
-        .any(|c| c.downcast_ref::<std::io::Error>().is_some())
-    {
-        PyOSError::new_err(msg)
-    } else {
-        PyValueError::new_err(msg)
+    let io = e.chain().find_map(|c| c.downcast_ref::<std::io::Error>());
+    match io.map(|io| io.kind()) {
+        None => PyValueError::new_err(msg),
+        Some(ErrorKind::NotFound) => PyFileNotFoundError::new_err(msg),
+        Some(ErrorKind::PermissionDenied) => PyPermissionError::new_err(msg),
+        Some(ErrorKind::IsADirectory) => PyIsADirectoryError::new_err(msg),
+        Some(_) => PyOSError::new_err(msg),
     }
 }
 
@@ -58,6 +67,11 @@ fn compute<T: Send>(
     work: impl FnOnce() -> anyhow::Result<T> + Send,
 ) -> PyResult<T> {
     let outcome = py.detach(|| catch_unwind(AssertUnwindSafe(work)));
+    caught(outcome)
+}
+
+/// The outcome of `work` run under `catch_unwind` as a Python result.
+fn caught<T>(outcome: std::thread::Result<anyhow::Result<T>>) -> PyResult<T> {
     match outcome {
         Ok(result) => result.map_err(to_py),
         Err(panic) => {
@@ -141,7 +155,16 @@ impl NativeDataset {
     /// Write the dataset as bsdfit v1 CSV.
     fn write_csv(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let data = self.data.clone();
-        compute(py, move || data.write(&path))
+        compute(py, move || {
+            // An OSError of the cause's kind, naming the file, before the writer's message.
+            std::fs::File::create(&path).map_err(|e| {
+                anyhow::Error::new(std::io::Error::new(
+                    e.kind(),
+                    format!("cannot write {}: {e}", path.display()),
+                ))
+            })?;
+            data.write(&path)
+        })
     }
 }
 
@@ -187,12 +210,19 @@ fn read_dataset(
 ) -> PyResult<NativeDataset> {
     let data = compute(py, move || {
         // Name the file in an OSError before any reader sees it.
-        std::fs::File::open(&path).map_err(|e| {
+        let named = |kind: std::io::ErrorKind, why: String| {
             anyhow::Error::new(std::io::Error::new(
-                e.kind(),
-                format!("{}: {e}", path.display()),
+                kind,
+                format!("{}: {why}", path.display()),
             ))
-        })?;
+        };
+        std::fs::File::open(&path).map_err(|e| named(e.kind(), e.to_string()))?;
+        if path.is_dir() {
+            return Err(named(
+                std::io::ErrorKind::IsADirectory,
+                "a folder, not a data file".into(),
+            ));
+        }
         let opts = read_options(
             wavelengths,
             band,
@@ -319,7 +349,8 @@ fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
     parse_choice("backend", s)
 }
 
-/// Fit one model; the report as the JSON text `bsdfit fit --json` writes.
+/// Fit one model: the report as the JSON text `bsdfit fit --json` writes, the Monte Carlo
+/// error if its replicas failed, and the warnings the command line prints on stderr.
 #[pyfunction]
 #[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts))]
 fn fit_json(
@@ -338,7 +369,7 @@ fn fit_json(
     mc: usize,
     mc_scale: f64,
     mc_restarts: usize,
-) -> PyResult<(String, Option<String>)> {
+) -> PyResult<(String, Option<String>, Vec<String>)> {
     let data = dataset.data.clone();
     compute(py, move || {
         let request = fit::FitRequest {
@@ -355,8 +386,16 @@ fn fit_json(
             mc_scale,
             mc_restarts,
         };
-        // Every check runs before the backend starts.
-        request.prepare(&data)?;
+        // Every check runs before the backend starts, as on the command line.
+        let (model, _, _) = request.prepare(&data)?;
+        let mut notes = Vec::new();
+        bsdfit::cli::checks::check_batch_memory(
+            restarts,
+            model.dim,
+            data.len(),
+            &format!("{} on {}", model.spec, data.source.display()),
+            &mut |w| notes.push(w),
+        )?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let outcome = request.run(&data, backend.as_ref(), &mut |_, _| {})?;
         let report = &outcome.report;
@@ -374,7 +413,7 @@ fn fit_json(
             )
         );
         let mc_error = outcome.mc_error.map(|e| format!("{e:#}"));
-        Ok((serde_json::to_string(&outcome.report)?, mc_error))
+        Ok((serde_json::to_string(&outcome.report)?, mc_error, notes))
     })
 }
 
@@ -436,7 +475,8 @@ fn eval_fit<'py>(
     ))
 }
 
-/// Diagnose a dataset from a start model; the JSON text `bsdfit diagnose --json` writes.
+/// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
+/// and the warnings the command line prints on stderr.
 #[pyfunction]
 #[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_restarts, backend, fix, bounds, prior, backtrack, explore))]
 fn diagnose_json(
@@ -458,12 +498,25 @@ fn diagnose_json(
     prior: Vec<String>,
     backtrack: bool,
     explore: usize,
-) -> PyResult<String> {
+) -> PyResult<(String, Vec<String>)> {
     let data = dataset.data.clone();
     compute(py, move || {
-        anyhow::ensure!(restarts >= 1, "restarts must be at least 1");
         let constraints = constraint_spec(fix, bounds, prior, true);
-        let (loss, _) = diagnose::check_start(&data, &model, &loss, &weights, alpha, &constraints)?;
+        let (loss, start) =
+            diagnose::check_start(&data, &model, &loss, &weights, alpha, &constraints)?;
+        // As `bsdfit diagnose`: extensions add a few parameters; estimate with three more.
+        let mut notes = Vec::new();
+        bsdfit::cli::checks::check_batch_memory(
+            restarts.saturating_add(1),
+            start.dim + 3,
+            data.len(),
+            &format!(
+                "{} and its extensions on {}",
+                start.spec,
+                data.source.display()
+            ),
+            &mut |w| notes.push(w),
+        )?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let opts = diagnose::DiagnoseOptions {
             loss,
@@ -483,7 +536,7 @@ fn diagnose_json(
             ..Default::default()
         };
         let d = diagnose::diagnose(&data, &model, backend.as_ref(), &opts, &mut |_| {})?;
-        Ok(serde_json::to_string(&d.to_json())?)
+        Ok((serde_json::to_string(&d.to_json())?, notes))
     })
 }
 
@@ -531,6 +584,13 @@ fn sweep(
     })
 }
 
+/// Check that `text` is a fit report `bsdfit eval` and `export` can use (the checks of
+/// their reader); `name` names it in the message. Quick: it keeps the GIL.
+#[pyfunction]
+fn check_fit_report(text: &str, name: &str) -> PyResult<()> {
+    caught(catch_unwind(|| FitFile::parse(text, name).map(|_| ())))
+}
+
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
@@ -564,6 +624,7 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
     m.add_function(wrap_pyfunction!(eval_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(check_fit_report, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;

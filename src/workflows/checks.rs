@@ -20,7 +20,8 @@ const SCREEN: u64 = 8;
 /// Candidates in a fit's largest batch: the screening draws (restarts × 8) or one compass
 /// poll (restarts × (2P + 1)), whichever is larger.
 pub fn batch_candidates(restarts: usize, params: usize) -> u64 {
-    restarts as u64 * SCREEN.max(2 * params as u64 + 1)
+    // Saturating: a request of near 2⁶⁴ restarts must read as huge, not wrap to a few.
+    (restarts as u64).saturating_mul(SCREEN.max(2 * params as u64 + 1))
 }
 
 /// Bytes of one batch: candidates × (P parameters + the P(P + 1)/2 + P + 1 sums of
@@ -220,5 +221,11 @@ mod tests {
         assert!(warned.is_empty());
         check_batch_memory(60_000, 4, 384, "on", &mut |w| warned.push(w)).unwrap();
         assert_eq!(warned.len(), 1, "{warned:?}");
+        // The largest requests are refused too: restarts × (2P + 1) or × 8 once wrapped
+        // around to 2 and to 0 candidates for the last two.
+        for (restarts, params) in [(usize::MAX, 4), (usize::MAX / 9 + 1, 4), (1 << 63, 2)] {
+            let e = check_batch_memory(restarts, params, 384, "on", &mut |_| {});
+            assert!(e.is_err(), "{restarts} restarts of {params} parameters");
+        }
     }
 }
