@@ -44,7 +44,8 @@ fn bad(file: &str, msg: impl Into<String>) -> DataError {
 /// The fields of a tensor file, by name (numbers as f64, bytes as 0–255).
 fn fields(bytes: &[u8], file: &str) -> Result<BTreeMap<String, Field>, DataError> {
     let take = |at: usize, n: usize| -> Result<&[u8], DataError> {
-        bytes.get(at..at + n).ok_or_else(|| {
+        // Saturating: an offset or a size in a header may be anything up to 2⁶⁴ − 1.
+        bytes.get(at..at.saturating_add(n)).ok_or_else(|| {
             bad(
                 file,
                 "RGL .bsdf file: truncated (a field runs past the end)",
@@ -86,11 +87,11 @@ fn fields(bytes: &[u8], file: &str) -> Result<BTreeMap<String, Field>, DataError
             .ok_or_else(|| bad(file, format!("field {name}: shape {shape:?} overflows")))?;
         let values: Vec<f64> = match dtype {
             1 => take(offset, count)?.iter().map(|&b| b as f64).collect(),
-            10 => take(offset, 4 * count)?
+            10 => take(offset, count.saturating_mul(4))?
                 .chunks_exact(4)
                 .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")) as f64)
                 .collect(),
-            11 => take(offset, 8 * count)?
+            11 => take(offset, count.saturating_mul(8))?
                 .chunks_exact(8)
                 .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
                 .collect(),
