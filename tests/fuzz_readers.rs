@@ -18,8 +18,11 @@ use std::path::{Path, PathBuf};
 
 const FILE: &str = "fuzz-input.dat";
 
-/// Where failing cases are saved (relative to the package root, where tests run).
-const REGRESSIONS: &str = "tests/fuzz_readers.proptest-regressions";
+/// Where failing cases are saved.
+const REGRESSIONS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/fuzz_readers.proptest-regressions"
+);
 
 fn opts(assume: bool, allow_zero: bool) -> ReadOptions {
     ReadOptions {
