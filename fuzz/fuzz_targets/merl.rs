@@ -51,7 +51,7 @@ fuzz_target!(|data: &[u8]| {
     // check) and one of the other two, chosen by the input's length.
     let [strict, assumed, lenient] = option_sets();
     check(merl::parse(&table, FILE, &strict), FILE);
-    let other = if data.len() % 2 == 0 {
+    let other = if data.len().is_multiple_of(2) {
         assumed
     } else {
         lenient
