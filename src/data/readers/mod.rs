@@ -109,13 +109,13 @@ pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
             }
             continue;
         }
-        // The first line that is not a comment: a Zemax keyword, an ASTM keyword line with
-        // a VARS line to come, or a v1 header naming its columns.
-        if zemax::looks_like(t) {
-            return Some(Format::ZemaxBsdf);
-        }
+        // The first line that is not a comment: an ASTM keyword line with a VARS line to
+        // come (ASTM's SOURCE is also a Zemax keyword), a Zemax keyword, or a v1 header naming its columns.
         if astm::looks_like(text_lines()) {
             return Some(Format::AstmE1392);
+        }
+        if zemax::looks_like(t) {
+            return Some(Format::ZemaxBsdf);
         }
         return t.contains("theta_i").then_some(Format::V1Csv);
     }

@@ -90,6 +90,8 @@ pub fn parse(text: &str, file: &str, opts: &ReadOptions) -> Result<Dataset, Data
 /// The table being read: its block (rotation × incidence), TIS and values so far.
 struct Table {
     block: usize,
+    /// The line of its TIS.
+    tis_line: usize,
     tis: f64,
     rows: usize,
     /// Values at (azimuth j, radial k), NaN where masked; with their (line, column).
@@ -229,7 +231,7 @@ impl Reading<'_> {
         if let Some(t) = &self.table {
             return Err(e(at, format!(
                 "'{}' where the table of TIS line {} expects its row {} of {} (one per ScatterAzimuth angle)",
-                first.text, t.values.first().map_or(line, |v| v.1 .0), t.rows + 1, self.h.azimuths.len()
+                first.text, t.tis_line, t.rows + 1, self.h.azimuths.len()
             )));
         }
         let word = first.text.to_ascii_lowercase();
@@ -337,6 +339,7 @@ impl Reading<'_> {
         }
         self.table = Some(Table {
             block: self.done[c],
+            tis_line: line,
             tis,
             rows: 0,
             values: Vec::with_capacity(self.h.azimuths.len() * self.h.radials.len()),
@@ -457,7 +460,7 @@ impl Reading<'_> {
         if let Some(t) = &self.table {
             return Err(e(format!(
                 "the table of the TIS line at line {} has {} of its {} rows (one per ScatterAzimuth angle)",
-                t.values.first().map_or(at.0, |v| v.1 .0), t.rows, self.h.azimuths.len()
+                t.tis_line, t.rows, self.h.azimuths.len()
             )));
         }
         if let Some(c) = self.channel {
