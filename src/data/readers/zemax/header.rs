@@ -41,19 +41,19 @@ pub(super) const LISTS: [&str; 4] = [
     "ScatterRadial",
 ];
 
-/// The checked header.
+/// The checked header: the table's layout (angles in degrees).
 #[derive(Clone, Debug)]
-pub(super) struct Header {
-    pub(super) symmetry: Symmetry,
-    pub(super) spectral: Spectral,
-    pub(super) kind: Kind,
-    pub(super) rotations: Vec<f64>,
-    pub(super) incidences: Vec<f64>,
-    pub(super) azimuths: Vec<f64>,
-    pub(super) radials: Vec<f64>,
-    pub(super) source: Option<String>,
+pub struct Header {
+    pub symmetry: Symmetry,
+    pub spectral: Spectral,
+    pub kind: Kind,
+    pub rotations: Vec<f64>,
+    pub incidences: Vec<f64>,
+    pub azimuths: Vec<f64>,
+    pub radials: Vec<f64>,
+    pub source: Option<String>,
     /// bsdfit's `# wavelength_nm: W` comment, if any.
-    pub(super) wavelength: Option<f64>,
+    pub wavelength: Option<f64>,
     /// Where the spectral content is declared (channel errors point there).
     pub(super) spectral_at: Pos,
 }

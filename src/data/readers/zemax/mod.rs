@@ -58,8 +58,8 @@ use crate::data::{
     PROGRESS_EVERY_LINES,
 };
 use geometry::{cell_geometry, incident_azimuth, table_integral, HORIZON_COS};
-use header::{Header, HeaderLines, Pos};
-pub use header::{Spectral, Symmetry, MAX_ANGLES};
+pub use header::{Header, Spectral, Symmetry, MAX_ANGLES};
+use header::{HeaderLines, Pos};
 use std::collections::{BTreeMap, HashMap};
 use std::io::BufRead;
 use std::path::Path;
@@ -80,6 +80,33 @@ pub fn looks_like(first_line: &str) -> bool {
         .iter()
         .chain(header::LISTS.iter())
         .any(|k| k.eq_ignore_ascii_case(word))
+}
+
+/// The header of a Zemax BSDF file (its layout: symmetry, spectral content, kind and the
+/// four angle lists), read up to the start of the data; the tables are not read.
+pub fn read_header<R: BufRead>(reader: R, file: &str) -> Result<Header, DataError> {
+    let mut lines = LineReader::new(reader, file);
+    let mut header = HeaderLines::default();
+    while let Some(text) = lines.next_line()? {
+        let line = lines.line;
+        let t = text.trim();
+        if t.is_empty() {
+            continue;
+        }
+        if t.starts_with('#') {
+            header.comment(&text, line, file)?;
+        } else if header.take(&text, line, file)? {
+            return header.finish(file, (line, 1));
+        }
+    }
+    let at = lines.line.max(1);
+    header.finish(file, (at, 1))?;
+    Err(DataError::at(
+        file,
+        at,
+        1,
+        "no data after the header".into(),
+    ))
 }
 
 /// Parse Zemax BSDF text; `file` names the source in messages.
