@@ -27,6 +27,12 @@ def zemax_direction(rotation, aoi, azimuth, radial):
     measured from the direction towards the normal, counter-clockwise seen from above.
     Returns (theta_i, phi_i, theta_o, phi_o, cos_o), theta_o on the scattered side."""
     phi_i = (rotation + 90.0) % 360.0
+    if aoi == 0.0:
+        # The specular direction is the normal: "towards the normal" is, by continuity from
+        # aoi > 0 (where s lies on the far side, at longitude phi_i + 180), the longitude
+        # phi_i, and counter-clockwise from above adds to the longitude.
+        c = math.radians(radial)
+        return (aoi, phi_i, radial, (phi_i + azimuth) % 360.0 if radial > 0 else 0.0, math.cos(c))
     # The specular direction: polar angle aoi, azimuth phi_i + 180 (colatitude c0).
     c0 = math.radians(aoi)
     lon0 = math.radians(phi_i + 180.0)
