@@ -921,6 +921,32 @@ fn band_averages_neighbouring_wavelengths() {
     assert!(err(&t, &opts).contains("--band needs --wavelengths"));
 }
 
+/// Found by fuzzing (docs/reliability.md): a band average of finite uncertainties beyond
+/// about 1e154 sr⁻¹ (a typo such as `0.003e00167`) squared them to ∞, and the dataset was
+/// read with an infinite uncertainty.
+#[test]
+fn band_average_of_huge_uncertainties_is_finite() {
+    let t = file(
+        "brdf",
+        &[
+            "0,0,10,0,550,0.15,3e164",
+            "0,0,20,0,550,0.15,1e300",
+            "0,0,20,0,555,0.15,1e300",
+        ],
+    );
+    let opts = ReadOptions {
+        wavelengths: Some(vec![550.0]),
+        band_nm: Some(10.0),
+        ..Default::default()
+    };
+    let d = Dataset::parse(&t, "f.csv", &opts).unwrap();
+    let u: Vec<f64> = d.samples.iter().map(|s| s.uncertainty).collect();
+    assert_eq!(u.len(), 2);
+    // One value: its own uncertainty; two: sqrt(2)·1e300 / 2.
+    assert!((u[0] / 3e164 - 1.0).abs() < 1e-15, "{u:?}");
+    assert!((u[1] / (1e300 / 2f64.sqrt()) - 1.0).abs() < 1e-15, "{u:?}");
+}
+
 #[test]
 fn out_of_plane_data_is_one_plane() {
     // Up to 32 distinct azimuths are measurement planes…

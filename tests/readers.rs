@@ -4,7 +4,7 @@
 
 mod common;
 
-use bsdfit::data::readers::{self, alta, merl, Format};
+use bsdfit::data::readers::{self, alta, merl, rgl, Format};
 use bsdfit::data::{Dataset, ReadOptions, Sample};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -929,6 +929,93 @@ fn merl_malformed_tables() {
         e.contains("MERL table carries no uncertainties") && e.contains("--assume-uncertainty"),
         "{e}"
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// RGL tensor files: inputs the fuzzers found (docs/reliability.md)
+
+/// A tensor field: name, element type, shape, data, and the offset written in the header
+/// (`None`: where the data are).
+type TensorField<'a> = (&'a str, u8, Vec<u64>, Vec<u8>, Option<u64>);
+
+/// A tensor file of `fields`: each field's data after the header (8-byte aligned), its
+/// header entry as given.
+fn tensor_file(fields: &[TensorField]) -> Vec<u8> {
+    let mut head = rgl::MAGIC.to_vec();
+    head.extend_from_slice(&[1, 0]);
+    head.extend_from_slice(&(fields.len() as u32).to_le_bytes());
+    let header_len: usize = head.len()
+        + fields
+            .iter()
+            .map(|f| 2 + f.0.len() + 2 + 1 + 8 + 8 * f.2.len())
+            .sum::<usize>();
+    let mut at = header_len.div_ceil(8) * 8;
+    let mut body = Vec::new();
+    for (name, dtype, shape, data, offset) in fields {
+        head.extend_from_slice(&(name.len() as u16).to_le_bytes());
+        head.extend_from_slice(name.as_bytes());
+        head.extend_from_slice(&(shape.len() as u16).to_le_bytes());
+        head.push(*dtype);
+        head.extend_from_slice(&offset.unwrap_or(at as u64).to_le_bytes());
+        for s in shape {
+            head.extend_from_slice(&s.to_le_bytes());
+        }
+        body.push((at, data.clone()));
+        at = (at + data.len()).div_ceil(8) * 8;
+    }
+    let mut out = head;
+    for (at, data) in body {
+        out.resize(at, 0);
+        out.extend_from_slice(&data);
+    }
+    out
+}
+
+fn f32s(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// A field whose data offset lies within a few bytes of 2⁶⁴: offset + size overflowed
+/// (a panic in debug builds) instead of reporting a field past the end.
+#[test]
+fn rgl_field_offset_at_the_top_of_the_address_space_is_an_error() {
+    let file = tensor_file(&[(
+        "description",
+        1,
+        vec![4],
+        b"abcd".to_vec(),
+        Some(u64::MAX - 1),
+    )]);
+    let e = err_of(rgl::parse(&file, "t.bsdf", &with_assumed()));
+    assert!(e.starts_with("t.bsdf: RGL .bsdf file: truncated"), "{e}");
+}
+
+/// A material whose `vndf` shape [1, 1, 2³¹, 2³¹] has 2⁶² float32 elements: their byte
+/// size 4 · 2⁶² overflowed (a panic in debug builds; in release it wrapped to 0 bytes, an
+/// empty table read as one of 2⁶² values, and the reader panicked slicing it).
+#[test]
+fn rgl_field_byte_size_past_the_address_space_is_an_error() {
+    let quad = f32s(&[1.0; 4]);
+    let file = tensor_file(&[
+        ("theta_i", 10, vec![1], f32s(&[0.0]), None),
+        ("phi_i", 10, vec![1], f32s(&[0.0]), None),
+        ("ndf", 10, vec![2, 2], quad.clone(), None),
+        ("sigma", 10, vec![2, 2], quad.clone(), None),
+        ("vndf", 10, vec![1, 1, 1 << 31, 1 << 31], quad, None),
+        ("rgb", 10, vec![1, 1, 3, 2, 2], f32s(&[0.5; 12]), None),
+    ]);
+    let e = err_of(rgl::parse(&file, "t.bsdf", &with_assumed()));
+    assert!(e.starts_with("t.bsdf: RGL .bsdf file: truncated"), "{e}");
+    // The same with float64 elements (8 · 2⁶¹ bytes).
+    let file = tensor_file(&[(
+        "theta_i",
+        11,
+        vec![1 << 61],
+        0f64.to_le_bytes().to_vec(),
+        None,
+    )]);
+    let e = err_of(rgl::parse(&file, "t.bsdf", &with_assumed()));
+    assert!(e.starts_with("t.bsdf: RGL .bsdf file: truncated"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------

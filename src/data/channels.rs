@@ -203,14 +203,15 @@ fn average_bands(
         let first = groups[a].2; // smallest index of the group (sorted last)
         let mut s = samples[first].clone();
         let mut sum = 0.0;
-        let mut var = 0.0;
+        // sqrt(Σu²)/n as a running hypot of u/n: Σu² overflowed to ∞ for u ≳ 1e154.
+        let mut u = 0.0f64;
         for g in &groups[a..b] {
             let m = &samples[g.2];
             sum += m.value;
-            var += m.uncertainty * m.uncertainty;
+            u = u.hypot(m.uncertainty / n as f64);
         }
         s.value = sum / n as f64;
-        s.uncertainty = var.sqrt() / n as f64;
+        s.uncertainty = u;
         s.channel = groups[a].0;
         s.wavelength_nm = chosen[groups[a].0];
         out.push((first, s));

@@ -1,0 +1,11 @@
+//! The ALTA text reader on arbitrary bytes.
+#![no_main]
+use bsdfit::data::readers::alta;
+use bsdfit_fuzz::{check, option_sets, FILE};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    for opts in option_sets() {
+        check(alta::parse_reader(data, FILE, &opts, &mut |_| {}), FILE);
+    }
+});

@@ -1,0 +1,75 @@
+//! What every fuzz target checks: the readers' contract (the same as
+//! `tests/fuzz_readers.rs`), and the option sets each input is read with.
+
+use bsdfit::data::readers::alta::AltaValues;
+use bsdfit::data::{DataError, Dataset, ReadOptions};
+
+/// The name every input is read under (the `any` target also uses other extensions).
+pub const FILE: &str = "fuzz-input.dat";
+
+/// The option sets each input is read with: strict (nothing assumed, every sample kept),
+/// assumed uncertainties (ALTA without `#VS`, MERL, RGL), and lenient (zero
+/// uncertainties floored, a channel selection with bands, `--alta-values`, a small
+/// MERL subsample). RGL materials are sampled on small geometries to keep inputs fast.
+pub fn option_sets() -> [ReadOptions; 3] {
+    [
+        ReadOptions {
+            max_samples: Some(0),
+            sample_geometry: Some("grid:30".into()),
+            ..Default::default()
+        },
+        ReadOptions {
+            assume_uncertainty: Some((0.05, 0.001)),
+            max_samples: Some(0),
+            alta_values: Some(AltaValues::BrdfCos),
+            sample_geometry: Some("grid:30".into()),
+            ..Default::default()
+        },
+        ReadOptions {
+            allow_zero_uncertainty: true,
+            wavelengths: Some(vec![550.0, 650.0]),
+            band_nm: Some(30.0),
+            assume_uncertainty: Some((0.02, 0.0)),
+            max_samples: Some(5),
+            alta_values: Some(AltaValues::Brdf),
+            sample_geometry: Some("csic".into()),
+        },
+    ]
+}
+
+/// The contract: an error names the file; a dataset is well formed (samples, finite
+/// values, positive finite uncertainties, indices in range, unit directions). A
+/// violation panics, which libFuzzer reports as a crash.
+pub fn check(result: Result<Dataset, DataError>, file: &str) {
+    match result {
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains(file), "error without the file name: {msg}");
+        }
+        Ok(d) => {
+            assert!(!d.samples.is_empty(), "a dataset without samples");
+            for s in &d.samples {
+                assert!(
+                    s.value.is_finite() && s.uncertainty.is_finite() && s.uncertainty > 0.0,
+                    "value {} ± {}",
+                    s.value,
+                    s.uncertainty
+                );
+                assert!(
+                    s.channel < d.channels.len() && s.axis < d.axes.len(),
+                    "channel {} of {}, axis {} of {}",
+                    s.channel,
+                    d.channels.len(),
+                    s.axis,
+                    d.axes.len()
+                );
+                assert!(
+                    (s.wi().length() - 1.0).abs() < 1e-9 && (s.wo().length() - 1.0).abs() < 1e-9,
+                    "directions {:?} {:?}",
+                    s.wi(),
+                    s.wo()
+                );
+            }
+        }
+    }
+}
