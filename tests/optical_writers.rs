@@ -65,7 +65,10 @@ fn fit_json(spec: &str, channels: &[f64], axes: &[f64], params: &[(&str, f64)], 
     let m = Model::parse_for(spec, channels.len(), axes).unwrap();
     let names = m.flat_names();
     for (k, _) in params {
-        assert!(names.iter().any(|n| n == k), "{spec} has no parameter {k} ({names:?})");
+        assert!(
+            names.iter().any(|n| n == k),
+            "{spec} has no parameter {k} ({names:?})"
+        );
     }
     let flat: Vec<f64> = names
         .iter()

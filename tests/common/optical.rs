@@ -7,15 +7,14 @@ use glam::{DMat3, DVec3};
 // ---------------------------------------------------------------------------------------
 // The oracle: a Zemax cell's direction by rotations.
 //
-// "Radial 0° is defined at the angle of specular reflection … Azimuth 0° is defined by
-// pointing from the angle of specular reflection towards the axis normal to the sample,
-// with Azimuth angles increasing in a counter-clockwise fashion." In a local frame whose
-// +z is the specular direction and whose +x points at the normal, the cell is
-// (sin r cos a, sin r sin a, cos r). With the source at azimuth φi, that frame is the
-// sample frame turned by −α about +y (taking +z to the specular direction
-// (−sin α, 0, cos α) and +x to (cos α, 0, sin α), towards the normal), then by φi about +z.
-// The sample rotation ψ is "the angle between the normal of the plane of incidence and
-// the +X local axis": φi = ψ + 90°.
+// The format's definitions (docs/data-formats.md): the radial angle is 0 at the specular
+// direction and grows outwards; the azimuth is 0 on the side that faces the sample normal
+// and turns counter-clockwise; the sample rotation is the angle from the sample's +X axis
+// to the normal of the plane of incidence. In a local frame whose +z is the specular
+// direction and whose +x points at the normal, the cell is (sin r cos a, sin r sin a,
+// cos r). With the source at azimuth φi, that frame is the sample frame turned by −α about
+// +y (taking +z to the specular direction (−sin α, 0, cos α) and +x to (cos α, 0, sin α),
+// towards the normal), then by φi about +z; φi = ψ + 90°.
 
 pub fn rot_y(b: f64) -> DMat3 {
     let (s, c) = b.sin_cos();

@@ -15,12 +15,11 @@ import sys
 
 
 def zemax_direction(rotation, aoi, azimuth, radial):
-    """A Zemax cell's scattered direction, from the definitions: "Radial 0 deg is defined at
-    the angle of specular reflection, with increasing Radial angles extending outward.
-    Azimuth 0 deg is defined by pointing from the angle of specular reflection towards the
-    axis normal to the sample, with Azimuth angles increasing in a counter-clockwise
-    fashion"; the sample rotation is "the angle between the normal of the plane of
-    incidence and the +X local axis", so the source is at azimuth rotation + 90 deg.
+    """A Zemax cell's scattered direction, from the definitions (docs/data-formats.md):
+    the radial angle is 0 at the specular direction and grows outwards; the azimuth is 0
+    on the side facing the sample normal and turns counter-clockwise; the sample rotation
+    is the angle from the sample's +X axis to the normal of the plane of incidence, so the
+    source is at azimuth rotation + 90 deg.
 
     Built by spherical trigonometry on the great circle through the specular direction s
     and the normal: the direction at angular distance r from s, along the bearing a

@@ -1,24 +1,25 @@
 //! The four angles of a Zemax tabular BSDF cell and bsdfit's (θi, φi, θo, φo)
-//! (docs/data-formats.md, "Zemax BSDF"; the definitions quoted there).
+//! (docs/data-formats.md, "Zemax tabular BSDF", gives the definitions this rests on: the
+//! Zemax knowledge-base articles on the tabular BSDF format, paraphrased there).
 //!
-//! - **Sample rotation ψ** is "the angle between the normal of the plane of incidence
-//!   and the +X local axis": the plane of incidence is perpendicular to the azimuth ψ,
-//!   so the incident direction lies at the azimuth **φi = ψ + 90°** of the sample's frame
-//!   (ψ = 0: incidence in the YZ plane, Zemax's meridional plane).
-//! - **AngleOfIncidence α** "represents the specular reflected or transmitted angle". For
-//!   a BRDF the specular direction is the mirror of ωi, so θi = α; for a BTDF of a sample
-//!   measured in air (what bsdfit's BTDFs are, docs/conventions.md) the direct
-//!   transmission is undeviated, at θt = θi = α. In bsdfit's angles both are
-//!   **s = (θ = α, φ = φi + 180°)**, θ of a BTDF measured from −n.
-//! - **ScatterRadial r** and **ScatterAzimuth a** are spherical coordinates about s:
-//!   "Radial 0° is defined at the angle of specular reflection, with increasing Radial
-//!   angles extending outward. Azimuth 0° is defined by pointing from the angle of
-//!   specular reflection towards the axis normal to the sample, with Azimuth angles
-//!   increasing in a counter-clockwise fashion." So r is the angle between the scattered
-//!   direction and s, and a its azimuth about s, from the great circle through s and the
-//!   normal (on the normal's side), increasing from +x towards +y of the sample's frame
-//!   (counter-clockwise seen from the illuminated side, the usual view of a hemisphere
-//!   plot). In the frame e₃ = s, e₁ = the tangent at s pointing at the normal, e₂ = e₃×e₁:
+//! - **Sample rotation ψ** is defined as the angle from the sample's local +X axis to the
+//!   normal of the plane of incidence: the plane of incidence is perpendicular to the
+//!   azimuth ψ, so the incident direction lies at the azimuth **φi = ψ + 90°** of the
+//!   sample's frame (ψ = 0: incidence in the YZ plane, Zemax's meridional plane).
+//! - **AngleOfIncidence α** is, by the definition's own note, the angle of the specular
+//!   (reflected or transmitted) direction rather than of the incident ray. For a BRDF the
+//!   specular direction is the mirror of ωi, so θi = α; for a BTDF of a sample measured
+//!   in air (what bsdfit's BTDFs are, docs/conventions.md) the direct transmission is
+//!   undeviated, at θt = θi = α. In bsdfit's angles both are **s = (θ = α, φ = φi + 180°)**,
+//!   θ of a BTDF measured from −n.
+//! - **ScatterRadial r** and **ScatterAzimuth a** are spherical coordinates about s: the
+//!   radial angle is 0 at s and grows outwards from it; the azimuth is 0 on the side of s
+//!   that faces the sample normal and grows counter-clockwise. So r is the angle between
+//!   the scattered direction and s, and a its azimuth about s, from the great circle
+//!   through s and the normal (on the normal's side), increasing from +x towards +y of the
+//!   sample's frame (counter-clockwise seen from the illuminated side, the usual view of a
+//!   hemisphere plot). In the frame e₃ = s, e₁ = the tangent at s pointing at the normal,
+//!   e₂ = e₃×e₁:
 //!
 //!   ω = cos r · s + sin r · (cos a · e₁ + sin a · e₂),
 //!
