@@ -384,7 +384,7 @@ impl<'a> Data<'a> {
                 (line, cols[2].unwrap_or(1)),
             )?;
         }
-        for (j, v) in self.vars.values.clone().iter().enumerate() {
+        for (j, v) in self.vars.values.iter().enumerate() {
             let c = cells[v.index];
             let Some(value) = number(c.text)
                 .map_err(|m| DataError::at(file, line, c.column, format!("{}: {m}", v.name)))?
