@@ -589,3 +589,86 @@ fn a_spectral_astm_brdf_in_radians_is_fitted_and_diagnosed_like_any_measurement(
     ]);
     assert_ok(&out, "diagnose");
 }
+
+#[test]
+fn convert_sweep_and_eval_at_read_both_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let (zemax, _) = measured_btdf(dir.path());
+    let astm = dir.path().join("btdf.astm");
+    // 550 nm: the nominal wavelength of a Monochrome table without a wavelength comment.
+    let v = fit_json("btdf(tr)+scale", &[550.0], &[0.0], &TRUTH, 0.01);
+    let json = write_json(dir.path(), "btdf.json", &v);
+    assert_ok(
+        &bsdfit(&[
+            "export",
+            p(&json),
+            "--format",
+            "astm",
+            "--geometry",
+            "oblique",
+            "--out",
+            p(&astm),
+        ]),
+        "export",
+    );
+    for data in [&zemax, &astm] {
+        let csv = dir.path().join("converted.csv");
+        let out = bsdfit(&[
+            "convert",
+            p(data),
+            "--assume-uncertainty",
+            "0.01,1e-5",
+            "--allow-zero-uncertainty",
+            "--out",
+            p(&csv),
+        ]);
+        assert_ok(&out, "convert");
+        let ds = bsdfit::data::Dataset::read(&csv, &Default::default()).unwrap();
+        assert_eq!(ds.kind, bsdfit::data::Kind::Btdf);
+        let evaluated = dir.path().join("eval.csv");
+        assert_ok(
+            &bsdfit(&["eval", p(&json), "--at", p(data), "--out", p(&evaluated)]),
+            "eval --at",
+        );
+        // eval --at reads the geometries (no assumption needed) and gives the same rows.
+        let e = bsdfit::data::Dataset::read(&evaluated, &ReadOptionsAllowZero::get()).unwrap();
+        assert_eq!(e.len(), ds.len());
+    }
+    let out = bsdfit(&[
+        "sweep",
+        p(&zemax),
+        p(&astm),
+        "--models",
+        "btdf(tr)+scale",
+        "--losses",
+        "chi2",
+        "--restarts",
+        "2",
+        "--backend",
+        "cpu",
+        "--assume-uncertainty",
+        "0.01,1e-5",
+        "--allow-zero-uncertainty",
+        "--no-pictures",
+        "--out",
+        p(&dir.path().join("sweep")),
+    ]);
+    assert_ok(&out, "sweep");
+    assert!(
+        text(&out.stderr).contains("2 new fits"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+/// Read options that floor zero uncertainties (model rows where the model is 0).
+struct ReadOptionsAllowZero;
+
+impl ReadOptionsAllowZero {
+    fn get() -> bsdfit::data::ReadOptions {
+        bsdfit::data::ReadOptions {
+            allow_zero_uncertainty: true,
+            ..Default::default()
+        }
+    }
+}
