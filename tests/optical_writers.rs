@@ -497,7 +497,44 @@ fn a_per_plane_fit_is_an_asymmetrical_table_with_each_plane_its_own_model() {
         }
     }
     assert!(on_planes > 20, "{on_planes}");
-    // A plane-symmetric grid cannot hold it: refused, saying what to do.
+    // On a plane-symmetric file's grid, the azimuths are mirrored to the whole circle.
+    let half = ZemaxSpec {
+        symmetry: "PlaneSymmetrical",
+        spectral: "Monochrome",
+        kind: "BTDF",
+        rotations: vec![0.0],
+        aoi: vec![0.0, 20.0],
+        azimuths: vec![0.0, 60.0, 120.0, 180.0],
+        radials: vec![0.0, 10.0, 30.0],
+        eol: "\n",
+    };
+    let half_file = dir.path().join("half.bsdf");
+    std::fs::write(&half_file, zemax_text(&half, &|_, _, _, _, _| 1.0, 0.5)).unwrap();
+    let out = bsdfit(&[
+        "export",
+        p(&json),
+        "--format",
+        "zemax",
+        "--out",
+        p(&out_file),
+        "--geometry",
+        p(&half_file),
+    ]);
+    assert_ok(&out, "export on a plane-symmetric file's grid");
+    assert!(
+        text(&out.stderr).contains("mirrored"),
+        "{}",
+        text(&out.stderr)
+    );
+    let Some(t) = python_read("zemax", &out_file) else {
+        return;
+    };
+    assert_eq!(t["symmetry"], "Asymmetrical");
+    assert_eq!(
+        f64s(&t["azimuths"]),
+        vec![0.0, 60.0, 120.0, 180.0, 240.0, 300.0]
+    );
+    // An explicitly plane-symmetric grid cannot hold it: refused, saying what to do.
     let out = bsdfit(&[
         "export",
         p(&json),

@@ -152,7 +152,7 @@ fn write_zemax(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
     } else {
         Symmetry::PlaneSymmetrical
     };
-    let (grid, from) = match (&a.geometry, fit_data_of(&file, readers::Format::ZemaxBsdf)) {
+    let (mut grid, mut from) = match (&a.geometry, fit_data_of(&file, readers::Format::ZemaxBsdf)) {
         (Some(spec), _) => (
             ZemaxGrid::parse(spec, symmetry)?,
             format!("--geometry {spec}"),
@@ -163,6 +163,16 @@ fn write_zemax(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
         ),
         (None, None) => (ZemaxGrid::usual(symmetry), "the usual grid".into()),
     };
+    // A per-plane fit on a plane-symmetric file's grid: the grid mirrored to the whole
+    // circle (an explicit symmetry=PlaneSymmetrical is refused by zemax_file).
+    let from_file = a
+        .geometry
+        .as_deref()
+        .is_none_or(|g| std::path::Path::new(g).is_file());
+    if planes.per_plane() && grid.symmetry == Symmetry::PlaneSymmetrical && from_file {
+        grid = grid.asymmetrical();
+        from += ", its azimuths mirrored to the whole circle for a per-plane fit";
+    }
     let spectrum = zemax::spectrum(&planes.channels, a.channel)?;
     let w = zemax::zemax_file(&file, fit_path, &grid, spectrum)?;
     write_result(&a.out, &w.text, true)?;

@@ -114,6 +114,28 @@ impl ZemaxGrid {
         Ok(g)
     }
 
+    /// The same grid as an asymmetrical table: a plane-symmetric half (azimuths 0–180°)
+    /// mirrored to the whole circle (a and 360° − a), for a per-plane fit.
+    pub fn asymmetrical(&self) -> ZemaxGrid {
+        if self.symmetry != Symmetry::PlaneSymmetrical {
+            return self.clone();
+        }
+        let mut az: Vec<f64> = self.azimuths.clone();
+        az.extend(
+            self.azimuths
+                .iter()
+                .filter(|a| **a > 0.0 && **a < 180.0)
+                .map(|a| 360.0 - a),
+        );
+        az.sort_by(f64::total_cmp);
+        az.dedup();
+        ZemaxGrid {
+            symmetry: Symmetry::Asymmetrical,
+            azimuths: az,
+            ..self.clone()
+        }
+    }
+
     /// The ranges and combinations the reader accepts.
     fn check(&self) -> Result<()> {
         anyhow::ensure!(
