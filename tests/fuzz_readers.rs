@@ -1,6 +1,7 @@
 //! Fuzz-style property tests of every reader: arbitrary bytes, and bytes shaped like each
-//! format (v1 CSV, ALTA text, MERL tables, RGL tensor files), must never panic, every
-//! error must name the file, and every dataset read must be well formed. About 17,000
+//! format (v1 CSV, ALTA text, MERL tables, RGL tensor files, Zemax BSDF and ASTM E1392
+//! text), must never panic, every error must name the file (the Zemax and ASTM readers:
+//! `file:line:column`), and every dataset read must be well formed. About 17,000
 //! cases run in CI, from fixed seeds; `cargo test --test fuzz_readers -- --ignored` runs
 //! 15 × more. A failing case is saved to `tests/fuzz_readers.proptest-regressions` (commit
 //! it) and replayed first on every later run.
@@ -10,7 +11,7 @@
 //! (docs/reliability.md): this is the slice of the fuzzing that CI runs.
 
 use bsdfit::data::readers::alta::AltaValues;
-use bsdfit::data::readers::{self, alta, merl, rgl};
+use bsdfit::data::readers::{self, alta, astm, merl, rgl, zemax};
 use bsdfit::data::{DataError, Dataset, ReadOptions};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, FileFailurePersistence, RngAlgorithm, TestRng, TestRunner};
@@ -64,6 +65,37 @@ fn contract(result: Result<Dataset, DataError>, file: &str) -> Result<(), String
         }
     }
     Ok(())
+}
+
+/// Whether every place an error message names is `file:line:column:` — the contract of
+/// the Zemax and ASTM readers (one error, or "N bad rows in file:" and one per line).
+fn located(msg: &str, file: &str) -> bool {
+    let place = |l: &str| {
+        let Some(rest) = l.strip_prefix(file).and_then(|r| r.strip_prefix(':')) else {
+            return false;
+        };
+        let mut parts = rest.splitn(3, ':');
+        let num = |x: Option<&str>| {
+            x.is_some_and(|x| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit()))
+        };
+        num(parts.next()) && num(parts.next()) && parts.next().is_some()
+    };
+    let mut lines = msg.lines();
+    let first = lines.next().unwrap_or("");
+    if first.ends_with(&format!("bad rows in {file}:")) {
+        lines.all(|l| l.starts_with("… and ") || place(l))
+    } else {
+        place(first)
+    }
+}
+
+/// [`check`] for the Zemax and ASTM readers: their errors also name line and column.
+fn check_located(result: Result<Dataset, DataError>) -> Result<(), TestCaseError> {
+    if let Err(e) = &result {
+        let msg = e.to_string();
+        prop_assert!(located(&msg, FILE), "error without file:line:column: {msg}");
+    }
+    check(result)
 }
 
 /// Run a reader and check the contract: no panic (a panic fails the property), an error
@@ -230,6 +262,227 @@ fn loose_alta() -> impl Strategy<Value = String> {
         ),
     )
         .prop_map(|(h, rows)| h.join("\n") + "\n" + &rows.join("\n"))
+}
+
+/// Damage to the lines of a text file: a line dropped, repeated, replaced by junk
+/// tokens, a junk line inserted, a token of a line replaced, or the file cut.
+#[derive(Clone, Debug)]
+enum LineDamage {
+    Drop(usize),
+    Repeat(usize),
+    Junk(usize, Vec<String>),
+    Insert(usize, Vec<String>),
+    Token(usize, usize, String),
+    Cut(usize),
+}
+
+fn line_damage() -> impl Strategy<Value = LineDamage> {
+    let k = 0usize..64;
+    prop_oneof![
+        k.clone().prop_map(LineDamage::Drop),
+        k.clone().prop_map(LineDamage::Repeat),
+        (k.clone(), prop::collection::vec(token(), 0..6)).prop_map(|(k, t)| LineDamage::Junk(k, t)),
+        (k.clone(), prop::collection::vec(token(), 0..6))
+            .prop_map(|(k, t)| LineDamage::Insert(k, t)),
+        (k.clone(), 0usize..12, token()).prop_map(|(k, j, t)| LineDamage::Token(k, j, t)),
+        k.prop_map(LineDamage::Cut),
+    ]
+}
+
+/// `lines` with up to three damages, joined with `eol`.
+fn damaged(mut lines: Vec<String>, damages: Vec<LineDamage>, eol: &str, sep: char) -> String {
+    for d in damages {
+        let n = lines.len().max(1);
+        match d {
+            LineDamage::Drop(k) if !lines.is_empty() => {
+                lines.remove(k % n);
+            }
+            LineDamage::Repeat(k) if !lines.is_empty() => {
+                let l = lines[k % n].clone();
+                lines.insert(k % n, l);
+            }
+            LineDamage::Junk(k, t) if !lines.is_empty() => lines[k % n] = t.join(" "),
+            LineDamage::Insert(k, t) => lines.insert(k % (lines.len() + 1), t.join(" ")),
+            LineDamage::Token(k, j, t) if !lines.is_empty() => {
+                let mut cells: Vec<String> = lines[k % n].split(sep).map(str::to_string).collect();
+                let c = cells.len();
+                cells[j % c] = t;
+                lines[k % n] = cells.join(&sep.to_string());
+            }
+            LineDamage::Cut(k) => lines.truncate(k % (lines.len() + 1)),
+            _ => {}
+        }
+    }
+    lines.join(eol) + eol
+}
+
+/// Text shaped like a Zemax tabular BSDF: a consistent header and tables (random
+/// symmetry, spectral content, kind, lists and values), with up to three damages.
+fn zemax_text() -> impl Strategy<Value = String> {
+    let list = |lo: f64, hi: f64| {
+        prop::collection::btree_set((lo as i64)..(hi as i64), 1..4)
+            .prop_map(|s| s.into_iter().map(|x| x as f64).collect::<Vec<f64>>())
+    };
+    (
+        (0usize..3, any::<bool>(), any::<bool>()),
+        (
+            list(0.0, 360.0),
+            list(0.0, 91.0),
+            list(0.0, 361.0),
+            list(0.0, 181.0),
+        ),
+        prop::collection::vec(
+            prop_oneof![4 => 0.0..5.0f64, 1 => Just(0.0), 1 => -0.1..0.0f64],
+            64,
+        ),
+        prop::collection::vec(line_damage(), 0..4),
+        prop_oneof![2 => Just(0usize), 1 => 1usize..4],
+        prop_oneof![Just("\n"), Just("\r\n")],
+    )
+        .prop_map(
+            |((sym, xyz, btdf), (rot, aoi, az, rad), values, damages, n, eol)| {
+                let symmetry = ["PlaneSymmetrical", "Asymmetrical", "Asymmetrical4D"][sym];
+                let rot = if sym == 2 { rot } else { vec![rot[0]] };
+                let join = |v: &[f64]| {
+                    v.iter()
+                        .map(|x| x.to_string())
+                        .collect::<Vec<_>>()
+                        .join("\t")
+                };
+                let mut l: Vec<String> = vec![
+                    "# shaped like a Zemax BSDF".into(),
+                    "Source  Measured".into(),
+                    format!("Symmetry  {symmetry}"),
+                    format!(
+                        "SpectralContent  {}",
+                        if xyz { "XYZ" } else { "Monochrome" }
+                    ),
+                    format!("ScatterType  {}", if btdf { "BTDF" } else { "BRDF" }),
+                ];
+                for (name, v) in [
+                    ("SampleRotation", &rot),
+                    ("AngleOfIncidence", &aoi),
+                    ("ScatterAzimuth", &az),
+                    ("ScatterRadial", &rad),
+                ] {
+                    l.push(format!("{name} {}", v.len()));
+                    l.push(join(v));
+                }
+                l.push(String::new());
+                let sections: &[&str] = if xyz {
+                    &["TristimulusX", "TristimulusY", "TristimulusZ"]
+                } else {
+                    &["Monochrome"]
+                };
+                let mut k = 0;
+                for s in sections {
+                    l.push(s.to_string());
+                    l.push("DataBegin".into());
+                    for _ in 0..rot.len() * aoi.len() {
+                        l.push(format!("TIS {}", values[k % 64]));
+                        for _ in 0..az.len() {
+                            let row: Vec<String> = (0..rad.len())
+                                .map(|_| {
+                                    k += 1;
+                                    format!("{:.4E}", values[k % 64])
+                                })
+                                .collect();
+                            l.push(row.join("\t"));
+                        }
+                    }
+                    l.push("DataEnd".into());
+                }
+                damaged(l, damages.into_iter().take(n).collect(), eol, '\t')
+            },
+        )
+}
+
+/// Text shaped like an ASTM E1392 file: header keywords, a VARS line (four or three
+/// angles, wavelengths or a named value, u_ columns or not) and rows in the declared unit
+/// (or radians), reflected or transmitted, with up to three damages.
+fn astm_text() -> impl Strategy<Value = String> {
+    (
+        (
+            0usize..3,
+            any::<bool>(),
+            0usize..3,
+            any::<bool>(),
+            any::<bool>(),
+            0usize..3,
+        ),
+        prop::collection::vec(
+            (
+                0.0..1.0f64,
+                0.0..1.0f64,
+                0.0..1.0f64,
+                0.0..1.0f64,
+                prop::collection::vec(-0.05..3.0f64, 3),
+            ),
+            1..10,
+        ),
+        prop::collection::vec(line_damage(), 0..4),
+        prop_oneof![2 => Just(0usize), 1 => 1usize..4],
+        prop_oneof![Just("\n"), Just("\r\n")],
+    )
+        .prop_map(
+            |((unit, three, values, with_u, btdf, num), rows, damages, n, eol)| {
+                // unit: 0 undeclared (radians), 1 ANGLE_UNITS DEG, 2 degrees in the names.
+                let scale = if unit == 0 { 1.0f64.to_radians() } else { 1.0 };
+                let suffix = if unit == 2 { "[deg]" } else { "" };
+                let names: Vec<&str> = match values {
+                    0 => vec!["550nm"],
+                    1 => vec!["450", "550", "650"],
+                    _ => vec!["BRDF"],
+                };
+                let mut vars: Vec<String> = if three {
+                    vec![
+                        format!("theta_i{suffix}"),
+                        format!("theta_s{suffix}"),
+                        format!("phi_s{suffix}"),
+                    ]
+                } else {
+                    ["theta_i", "phi_i", "theta_s", "phi_s"]
+                        .iter()
+                        .map(|a| format!("{a}{suffix}"))
+                        .collect()
+                };
+                vars.extend(names.iter().map(|n| n.to_string()));
+                if with_u {
+                    vars.extend(names.iter().map(|n| format!("u_{n}")));
+                }
+                let mut l = vec!["SOURCE fuzz".to_string(), "SAMPLE_NAME \"shaped\"".into()];
+                if unit == 1 {
+                    l.push("ANGLE_UNITS DEG".into());
+                }
+                if num > 0 {
+                    l.push(format!("NUM_POINTS {}", rows.len() + num - 1));
+                }
+                l.push(format!("VARS {}", vars.join(",")));
+                for (ti, pi, ts, ps, v) in rows {
+                    let ts = if btdf { 180.0 - 89.0 * ts } else { 89.0 * ts };
+                    let mut cells: Vec<f64> = if three {
+                        vec![80.0 * ti, ts, 360.0 * ps]
+                    } else {
+                        vec![80.0 * ti, 360.0 * pi, ts, 360.0 * ps]
+                    };
+                    for c in cells.iter_mut() {
+                        *c *= scale;
+                    }
+                    cells.extend(v.iter().take(names.len()));
+                    if with_u {
+                        cells.extend(v.iter().take(names.len()).map(|x| 0.02 * x.abs() + 1e-4));
+                    }
+                    l.push(
+                        cells
+                            .iter()
+                            .map(|c| c.to_string())
+                            .collect::<Vec<_>>()
+                            .join(","),
+                    );
+                }
+                damaged(l, damages.into_iter().take(n).collect(), eol, ',')
+            },
+        )
 }
 
 /// Byte strings that start like a MERL table: its dimensions (or others), then junk.
@@ -665,6 +918,8 @@ fn all_readers(bytes: &[u8], assume: bool, allow_zero: bool) -> Result<(), TestC
     check(alta::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     check(merl::parse(bytes, FILE, &o))?;
     check(rgl::parse(bytes, FILE, &o))?;
+    check_located(zemax::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
+    check_located(astm::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     // The fuzz targets' lenient set: a channel selection averaged over bands.
     check(readers::parse_bytes(bytes, FILE, &fuzz_option_sets()[2]))?;
     Ok(())
@@ -674,7 +929,9 @@ fn all_readers(bytes: &[u8], assume: bool, allow_zero: bool) -> Result<(), TestC
 /// seed (another for each scale).
 fn fuzz(scale: u32) {
     use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
-    let (cases, csv_ok, alta_ok, rgl_ok) = (
+    let (cases, csv_ok, alta_ok, rgl_ok, zemax_ok, astm_ok) = (
+        AtomicUsize::new(0),
+        AtomicUsize::new(0),
         AtomicUsize::new(0),
         AtomicUsize::new(0),
         AtomicUsize::new(0),
@@ -734,8 +991,40 @@ fn fuzz(scale: u32) {
             all_readers(&b, true, z)
         },
     );
+    run(
+        seed(6),
+        3000 * scale,
+        (zemax_text(), any::<bool>()),
+        |(t, z)| {
+            cases.fetch_add(1, Relaxed);
+            if zemax::parse(&t, FILE, &opts(true, z)).is_ok() {
+                zemax_ok.fetch_add(1, Relaxed);
+            }
+            all_readers(t.as_bytes(), true, z)
+        },
+    );
+    run(
+        seed(7),
+        3000 * scale,
+        (astm_text(), any::<bool>(), any::<bool>()),
+        |(t, a, z)| {
+            cases.fetch_add(1, Relaxed);
+            if astm::parse(&t, FILE, &opts(a, z)).is_ok() {
+                astm_ok.fetch_add(1, Relaxed);
+            }
+            all_readers(t.as_bytes(), a, z)
+        },
+    );
     // Every case ran, and the shaped inputs reach the readers' happy paths too.
-    assert!(cases.load(Relaxed) >= 17_000 * scale as usize, "{cases:?}");
+    assert!(cases.load(Relaxed) >= 23_000 * scale as usize, "{cases:?}");
+    assert!(
+        zemax_ok.load(Relaxed) > 100 * scale as usize,
+        "Zemax-shaped inputs read: {zemax_ok:?}"
+    );
+    assert!(
+        astm_ok.load(Relaxed) > 100 * scale as usize,
+        "ASTM-shaped inputs read: {astm_ok:?}"
+    );
     assert!(
         csv_ok.load(Relaxed) > 100 * scale as usize,
         "v1-shaped inputs read: {csv_ok:?}"
@@ -749,17 +1038,17 @@ fn fuzz(scale: u32) {
         "RGL-shaped inputs read: {rgl_ok:?}"
     );
     eprintln!(
-        "{cases:?} cases; read without error: {csv_ok:?} v1-shaped, {alta_ok:?} ALTA-shaped, {rgl_ok:?} RGL-shaped"
+        "{cases:?} cases; read without error: {csv_ok:?} v1-shaped, {alta_ok:?} ALTA-shaped, {rgl_ok:?} RGL-shaped, {zemax_ok:?} Zemax-shaped, {astm_ok:?} ASTM-shaped"
     );
 }
 
-/// 17,000 cases, each through all five readers and the sniffing entry point.
+/// 23,000 cases, each through all seven readers and the sniffing entry point.
 #[test]
 fn readers_never_panic_and_name_the_file() {
     fuzz(1);
 }
 
-/// The same with 15 × more cases (about 255,000), from other seeds.
+/// The same with 15 × more cases (about 345,000), from other seeds.
 #[test]
 #[ignore]
 fn readers_never_panic_and_name_the_file_long() {
@@ -864,6 +1153,21 @@ fn replay(target: &str, path: &Path) -> usize {
                 FILE,
             ),
             "alta" => expect(alta::parse_reader(&bytes[..], FILE, &o, &mut |_| {}), FILE),
+            "zemax" | "astm" => {
+                let r = if target == "zemax" {
+                    zemax::parse_reader(&bytes[..], FILE, &o, &mut |_| {})
+                } else {
+                    astm::parse_reader(&bytes[..], FILE, &o, &mut |_| {})
+                };
+                if let Err(e) = &r {
+                    let msg = e.to_string();
+                    assert!(
+                        located(&msg, FILE),
+                        "{shown} through the {target} reader: error without file:line:column: {msg}"
+                    );
+                }
+                expect(r, FILE)
+            }
             "rgl" => expect(rgl::parse(&bytes, FILE, &o), FILE),
             "merl" => {
                 expect(merl::parse(&bytes, FILE, &o), FILE);
@@ -910,6 +1214,8 @@ fn fuzz_corpus_and_reproducers_replay() {
         ("alta", 10, 10),
         ("merl", 3, 2),
         ("rgl", 8, 5),
+        ("zemax", 8, 6),
+        ("astm", 8, 6),
         ("any", 5, 5),
     ] {
         let seeds = kept("fuzz/seeds", target);

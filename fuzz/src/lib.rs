@@ -73,3 +73,30 @@ pub fn check(result: Result<Dataset, DataError>, file: &str) {
         }
     }
 }
+
+/// [`check`] for the readers whose every error names `file:line:column` (Zemax BSDF, ASTM
+/// E1392): one located error, or "N bad rows in file:" and one located error per line.
+pub fn check_located(result: Result<Dataset, DataError>, file: &str) {
+    if let Err(e) = &result {
+        let msg = e.to_string();
+        let place = |l: &str| {
+            let Some(rest) = l.strip_prefix(file).and_then(|r| r.strip_prefix(':')) else {
+                return false;
+            };
+            let mut parts = rest.splitn(3, ':');
+            let num = |x: Option<&str>| {
+                x.is_some_and(|x| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit()))
+            };
+            num(parts.next()) && num(parts.next()) && parts.next().is_some()
+        };
+        let mut lines = msg.lines();
+        let first = lines.next().unwrap_or("");
+        let ok = if first.ends_with(&format!("bad rows in {file}:")) {
+            lines.all(|l| l.starts_with("… and ") || place(l))
+        } else {
+            place(first)
+        };
+        assert!(ok, "error without file:line:column: {msg}");
+    }
+    check(result, file);
+}

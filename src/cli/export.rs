@@ -1,8 +1,10 @@
 //! `bsdfit export`.
 
+use crate::data::readers::{self, zemax::Symmetry};
 use crate::inference::saved::FitFile;
 use crate::output::files::{write_atomic, write_result};
 use crate::workflows::export::{self, Grid};
+use crate::workflows::optical::{self, astm, zemax, zemax::ZemaxGrid};
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -21,14 +23,21 @@ pub enum Format {
     /// `measured` plugin and pbrt-v4's `measured` material render: any isotropic BRDF
     /// fit; RGB (R, G, B as for merl) or, with --spectral, every channel at its wavelength.
     Rgl,
+    /// A Zemax tabular BSDF file (read by OpticStudio and other optical design programs):
+    /// BRDF or BTDF, each table's TIS integrated from the model; plane-symmetrical, or
+    /// asymmetrical for a per-plane fit (docs/data-formats.md).
+    Zemax,
+    /// ASTM E1392 text: one row per geometry, a column per channel, then the propagated
+    /// standard uncertainties as u_ columns; BRDF or BTDF (docs/data-formats.md).
+    Astm,
 }
 
 #[derive(Args)]
 pub struct ExportArgs {
     /// A fit report written by `bsdfit fit --json`.
     pub fit: PathBuf,
-    /// What to write: tabulated (v1 CSV on a grid), merl (MERL binary BRDF table) or
-    /// mitsuba (Mitsuba 3 XML, exact counterparts only).
+    /// What to write: tabulated (v1 CSV on a grid), merl (MERL binary BRDF table),
+    /// mitsuba (Mitsuba 3 XML, exact counterparts only), rgl, zemax or astm.
     #[arg(long, value_enum)]
     pub format: Format,
     /// Output file.
@@ -57,6 +66,17 @@ pub struct ExportArgs {
     /// per-plane parameters is tabulated on its planes only).
     #[arg(long, default_value_t = Grid::default().phi_step, value_name = "DEG")]
     pub phi_step: f64,
+    /// zemax, astm: where to tabulate. zemax: a Zemax file (its grid) or
+    /// 'aoi=LIST;azimuth=LIST;radial=LIST[;rotation=LIST][;symmetry=S]' (LIST: numbers and
+    /// from:step:to ranges); astm: a data file (its geometries) or a named geometry (see
+    /// `bsdfit models`). Default: the fit's data file when it is of the same format, else
+    /// the format's usual grid.
+    #[arg(long, value_name = "SPEC")]
+    pub geometry: Option<String>,
+    /// zemax: the fit channel (nearest wavelength, nm) to write as the Monochrome table,
+    /// for a fit with several channels.
+    #[arg(long, value_name = "NM")]
+    pub channel: Option<f64>,
 }
 
 pub fn run(a: &ExportArgs) -> Result<()> {
@@ -69,6 +89,8 @@ pub fn run(a: &ExportArgs) -> Result<()> {
         Format::Tabulated => write_tabulated(a, file, &fit_path),
         Format::Merl => write_merl(a, file, &fit_path),
         Format::Mitsuba => write_mitsuba(a, file, &fit_path),
+        Format::Zemax => write_zemax(a, file, &fit_path),
+        Format::Astm => write_astm(a, file, &fit_path),
     }
 }
 
@@ -87,6 +109,118 @@ fn check_format_options(a: &ExportArgs) -> Result<()> {
     anyhow::ensure!(
         !a.spectral || a.format == Format::Rgl,
         "--spectral applies to --format rgl only"
+    );
+    anyhow::ensure!(
+        a.geometry.is_none() || matches!(a.format, Format::Zemax | Format::Astm),
+        "--geometry applies to --format zemax and astm"
+    );
+    anyhow::ensure!(
+        a.channel.is_none() || a.format == Format::Zemax,
+        "--channel applies to --format zemax only"
+    );
+    anyhow::ensure!(
+        a.rgb.is_none() || !matches!(a.format, Format::Zemax | Format::Astm),
+        "--rgb applies to --format merl, mitsuba and rgl"
+    );
+    Ok(())
+}
+
+/// A fit file, narrowed to one fit when --plane is given.
+fn narrowed(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<FitFile> {
+    Ok(match a.plane {
+        Some(p) => FitFile::Single(Box::new(file.select(Some(p), fit_path)?)),
+        None => file,
+    })
+}
+
+/// The fit's data file, when it exists and is of `format`.
+fn fit_data_of(file: &FitFile, format: readers::Format) -> Option<PathBuf> {
+    let data = match file {
+        FitFile::Single(f) => f.data.clone(),
+        FitFile::PerAxis(v) => v[0].1.data.clone(),
+    };
+    let path = PathBuf::from(data);
+    (path.is_file() && readers::detect(&path).ok() == Some(format)).then_some(path)
+}
+
+/// `--format zemax`: the Zemax tabular BSDF of the fit.
+fn write_zemax(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    let file = narrowed(a, file, fit_path)?;
+    let planes = optical::Planes::new(&file);
+    let symmetry = if planes.per_plane() {
+        Symmetry::Asymmetrical
+    } else {
+        Symmetry::PlaneSymmetrical
+    };
+    let (mut grid, mut from) = match (&a.geometry, fit_data_of(&file, readers::Format::ZemaxBsdf)) {
+        (Some(spec), _) => (
+            ZemaxGrid::parse(spec, symmetry)?,
+            format!("--geometry {spec}"),
+        ),
+        (None, Some(path)) => (
+            ZemaxGrid::parse(&path.display().to_string(), symmetry)?,
+            format!("the grid of the fit's data {}", path.display()),
+        ),
+        (None, None) => (ZemaxGrid::usual(symmetry), "the usual grid".into()),
+    };
+    // A per-plane fit on a plane-symmetric file's grid: the grid mirrored to the whole
+    // circle (an explicit symmetry=PlaneSymmetrical is refused by zemax_file).
+    let from_file = a
+        .geometry
+        .as_deref()
+        .is_none_or(|g| std::path::Path::new(g).is_file());
+    if planes.per_plane() && grid.symmetry == Symmetry::PlaneSymmetrical && from_file {
+        grid = grid.asymmetrical();
+        from += ", its azimuths mirrored to the whole circle for a per-plane fit";
+    }
+    let spectrum = zemax::spectrum(&planes.channels, a.channel)?;
+    let w = zemax::zemax_file(&file, fit_path, &grid, spectrum)?;
+    write_result(&a.out, &w.text, true)?;
+    eprintln!(
+        "wrote {} (Zemax {} {}, {} tables, {} cells, on {from}; TIS integrated from the model)",
+        a.out.display(),
+        w.symmetry.name(),
+        if planes.kind == crate::data::Kind::Btdf {
+            "BTDF"
+        } else {
+            "BRDF"
+        },
+        w.tables,
+        w.cells
+    );
+    note_fit_warnings(&planes.first().warnings);
+    Ok(())
+}
+
+/// `--format astm`: the ASTM E1392 text of the fit, with its propagated uncertainties.
+fn write_astm(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
+    let file = narrowed(a, file, fit_path)?;
+    let planes = export::fit_planes(&file);
+    let (rows, what) = match (&a.geometry, fit_data_of(&file, readers::Format::AstmE1392)) {
+        (Some(spec), _) if std::path::Path::new(spec).is_file() => {
+            (astm::file_rows(std::path::Path::new(spec))?.1, spec.clone())
+        }
+        (Some(spec), _) => (
+            crate::workflows::synth::geometry_expr(spec)
+                .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?
+                .1,
+            format!("geometry {spec}"),
+        ),
+        (None, Some(path)) => (astm::file_rows(&path)?.1, path.display().to_string()),
+        (None, None) => (
+            astm::usual_rows(planes.as_deref()),
+            "the usual ASTM grid".into(),
+        ),
+    };
+    let (text, warnings) = astm::astm_file(&file, fit_path, &rows, &what)?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    write_result(&a.out, &text, true)?;
+    eprintln!(
+        "wrote {} (ASTM E1392, {} rows at {what}, values and u_ columns)",
+        a.out.display(),
+        rows.len()
     );
     Ok(())
 }

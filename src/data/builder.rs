@@ -45,6 +45,59 @@ struct RowKey {
     index: u32,
 }
 
+/// The field of a row a check is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Field {
+    ThetaI,
+    PhiI,
+    ThetaO,
+    PhiO,
+    Wavelength,
+    Value,
+    Uncertainty,
+}
+
+/// Where a reader found each field of a row: 1-based character columns of one line
+/// (`None`: not written as such, e.g. a direction computed from several cells).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Cells {
+    pub(crate) theta_i: Option<usize>,
+    pub(crate) phi_i: Option<usize>,
+    pub(crate) theta_o: Option<usize>,
+    pub(crate) phi_o: Option<usize>,
+    pub(crate) wavelength: Option<usize>,
+    pub(crate) value: Option<usize>,
+    pub(crate) uncertainty: Option<usize>,
+}
+
+impl Cells {
+    /// Every field at one column (a table cell that stands for a whole row).
+    pub(crate) fn all(column: usize) -> Cells {
+        let c = Some(column);
+        Cells {
+            theta_i: c,
+            phi_i: c,
+            theta_o: c,
+            phi_o: c,
+            wavelength: c,
+            value: c,
+            uncertainty: c,
+        }
+    }
+
+    fn of(&self, f: Field) -> Option<usize> {
+        match f {
+            Field::ThetaI => self.theta_i,
+            Field::PhiI => self.phi_i,
+            Field::ThetaO => self.theta_o,
+            Field::PhiO => self.phi_o,
+            Field::Wavelength => self.wavelength,
+            Field::Value => self.value,
+            Field::Uncertainty => self.uncertainty,
+        }
+    }
+}
+
 /// Validates rows one at a time into samples and finishes them into a [`Dataset`]
 /// (repeated geometries, channels, planes). Every reader goes through it, so every format
 /// gets the same checks and messages. Bad rows are collected, not returned at the first.
@@ -54,7 +107,7 @@ pub(crate) struct Builder<'a> {
     opts: &'a ReadOptions,
     samples: Vec<Sample>,
     keys: Vec<RowKey>,
-    errors: Vec<(usize, String)>,
+    errors: Vec<(usize, Option<usize>, String)>,
     more_errors: usize,
     floored: usize,
     /// Notices of the reader (printed before the builder's own).
@@ -78,11 +131,21 @@ impl<'a> Builder<'a> {
 
     /// Record a bad row (the first [`MAX_REPORTED_ERRORS`] are kept, the rest counted).
     pub(crate) fn error(&mut self, line: usize, msg: String) {
+        self.error_at(line, None, msg);
+    }
+
+    /// Record a problem at a column (1-based, in characters) of a line, when known.
+    pub(crate) fn error_at(&mut self, line: usize, column: Option<usize>, msg: String) {
         if self.errors.len() < MAX_REPORTED_ERRORS {
-            self.errors.push((line, msg));
+            self.errors.push((line, column, msg));
         } else {
             self.more_errors += 1;
         }
+    }
+
+    /// The kind of the samples.
+    pub(crate) fn kind(&self) -> Kind {
+        self.kind
     }
 
     /// Rows accepted so far.
@@ -93,67 +156,16 @@ impl<'a> Builder<'a> {
     /// Validate one row (degrees, signed angles allowed) and keep it as a sample.
     /// `text` is the row as written, for the byte-identical-repeat warning.
     pub(crate) fn push(&mut self, line: usize, r: RawRow, text: Option<&str>) {
-        for (name, v) in [
-            ("theta_i", r.theta_i),
-            ("phi_i", r.phi_i),
-            ("theta_o", r.theta_o),
-            ("phi_o", r.phi_o),
-            ("wavelength_nm", r.wavelength_nm),
-            ("value", r.value),
-            ("uncertainty", r.uncertainty),
-        ] {
-            if !v.is_finite() {
-                return self.error(line, format!("column {name} is not a finite number ({v})"));
-            }
-        }
-        for (name, v) in [("theta_i", r.theta_i), ("theta_o", r.theta_o)] {
-            if !(-90.0..=90.0).contains(&v) {
-                return self.error(line, format!("{name} = {v}° is outside [-90, 90]"));
-            }
-        }
-        if r.wavelength_nm <= 0.0 {
-            return self.error(
-                line,
-                format!("wavelength_nm = {} must be positive", r.wavelength_nm),
-            );
-        }
-        if r.value.abs() > MAX_ABS_VALUE {
-            return self.error(
-                line,
-                format!(
-                    "value = {} sr⁻¹ is outside the range of a BSDF (|value| ≤ {MAX_ABS_VALUE:e} sr⁻¹; a unit or exponent mistake?)",
-                    r.value
-                ),
-            );
-        }
-        let mut u = r.uncertainty;
-        if u < 0.0 {
-            return self.error(line, format!("uncertainty = {u} is negative"));
-        }
-        let tiny = u < MIN_ABS_UNCERTAINTY || u < MIN_REL_UNCERTAINTY * r.value.abs();
-        if tiny {
-            if !self.opts.allow_zero_uncertainty {
-                let msg = if u == 0.0 {
-                    "uncertainty is zero (pass --allow-zero-uncertainty to use a floor)".into()
-                } else {
-                    format!(
-                        "uncertainty = {u:e} is below max({MIN_REL_UNCERTAINTY:e}·|value|, {MIN_ABS_UNCERTAINTY:e} sr⁻¹): its χ² weight 1/u² would overflow or swamp every other sample (pass --allow-zero-uncertainty to use a floor)"
-                    )
-                };
-                return self.error(line, msg);
-            }
-            u = (UNCERTAINTY_FLOOR_REL * r.value.abs()).max(UNCERTAINTY_FLOOR_ABS);
-            self.floored += 1;
-        }
-        if r.value < -3.0 * u {
-            return self.error(
-                line,
-                format!(
-                    "value = {} is negative beyond 3 uncertainties ({u})",
-                    r.value
-                ),
-            );
-        }
+        self.push_at(line, r, text, &Cells::default());
+    }
+
+    /// [`Builder::push`] for a reader that knows where each field of the row is written:
+    /// a rejected field's error names its column.
+    pub(crate) fn push_at(&mut self, line: usize, r: RawRow, text: Option<&str>, cells: &Cells) {
+        let u = match self.check(&r) {
+            Ok(u) => u,
+            Err((field, msg)) => return self.error_at(line, cells.of(field), msg),
+        };
         let key = geometry_key(r.theta_i, r.phi_i, r.theta_o, r.phi_o, r.wavelength_nm);
         let (ti, pi) = normalise_angles(r.theta_i, r.phi_i);
         let (to, po) = normalise_angles(r.theta_o, r.phi_o);
@@ -186,6 +198,76 @@ impl<'a> Builder<'a> {
         });
     }
 
+    /// The row's checks (docs/conventions.md): its uncertainty (floored if allowed and
+    /// needed), or the field at fault and why.
+    fn check(&mut self, r: &RawRow) -> Result<f64, (Field, String)> {
+        for (field, name, v) in [
+            (Field::ThetaI, "theta_i", r.theta_i),
+            (Field::PhiI, "phi_i", r.phi_i),
+            (Field::ThetaO, "theta_o", r.theta_o),
+            (Field::PhiO, "phi_o", r.phi_o),
+            (Field::Wavelength, "wavelength_nm", r.wavelength_nm),
+            (Field::Value, "value", r.value),
+            (Field::Uncertainty, "uncertainty", r.uncertainty),
+        ] {
+            if !v.is_finite() {
+                return Err((field, format!("column {name} is not a finite number ({v})")));
+            }
+        }
+        for (field, name, v) in [
+            (Field::ThetaI, "theta_i", r.theta_i),
+            (Field::ThetaO, "theta_o", r.theta_o),
+        ] {
+            if !(-90.0..=90.0).contains(&v) {
+                return Err((field, format!("{name} = {v}° is outside [-90, 90]")));
+            }
+        }
+        if r.wavelength_nm <= 0.0 {
+            return Err((
+                Field::Wavelength,
+                format!("wavelength_nm = {} must be positive", r.wavelength_nm),
+            ));
+        }
+        if r.value.abs() > MAX_ABS_VALUE {
+            return Err((
+                Field::Value,
+                format!(
+                    "value = {} sr⁻¹ is outside the range of a BSDF (|value| ≤ {MAX_ABS_VALUE:e} sr⁻¹; a unit or exponent mistake?)",
+                    r.value
+                ),
+            ));
+        }
+        let mut u = r.uncertainty;
+        if u < 0.0 {
+            return Err((Field::Uncertainty, format!("uncertainty = {u} is negative")));
+        }
+        let tiny = u < MIN_ABS_UNCERTAINTY || u < MIN_REL_UNCERTAINTY * r.value.abs();
+        if tiny {
+            if !self.opts.allow_zero_uncertainty {
+                let msg = if u == 0.0 {
+                    "uncertainty is zero (pass --allow-zero-uncertainty to use a floor)".into()
+                } else {
+                    format!(
+                        "uncertainty = {u:e} is below max({MIN_REL_UNCERTAINTY:e}·|value|, {MIN_ABS_UNCERTAINTY:e} sr⁻¹): its χ² weight 1/u² would overflow or swamp every other sample (pass --allow-zero-uncertainty to use a floor)"
+                    )
+                };
+                return Err((Field::Uncertainty, msg));
+            }
+            u = (UNCERTAINTY_FLOOR_REL * r.value.abs()).max(UNCERTAINTY_FLOOR_ABS);
+            self.floored += 1;
+        }
+        if r.value < -3.0 * u {
+            return Err((
+                Field::Value,
+                format!(
+                    "value = {} is negative beyond 3 uncertainties ({u})",
+                    r.value
+                ),
+            ));
+        }
+        Ok(u)
+    }
+
     /// The errors so far as one [`DataError`], if any.
     pub(crate) fn take_errors(&mut self) -> Option<DataError> {
         if self.errors.is_empty() {
@@ -195,8 +277,15 @@ impl<'a> Builder<'a> {
         let mut errors = std::mem::take(&mut self.errors);
         let more = std::mem::take(&mut self.more_errors);
         Some(if errors.len() == 1 && more == 0 {
-            let (line, msg) = errors.pop().expect("one error");
-            DataError::Line { file, line, msg }
+            match errors.pop().expect("one error") {
+                (line, Some(column), msg) => DataError::At {
+                    file,
+                    line,
+                    column,
+                    msg,
+                },
+                (line, None, msg) => DataError::Line { file, line, msg },
+            }
         } else {
             DataError::Lines { file, errors, more }
         })

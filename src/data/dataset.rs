@@ -130,12 +130,21 @@ pub enum DataError {
         line: usize,
         msg: String,
     },
-    /// Several bad rows: the first [`MAX_REPORTED_ERRORS`], one per line of the message,
-    /// then how many more there are.
+    /// A problem at a place in a line: `file:line:column: msg`, the column 1-based in
+    /// characters.
+    #[error("{file}:{line}:{column}: {msg}")]
+    At {
+        file: String,
+        line: usize,
+        column: usize,
+        msg: String,
+    },
+    /// Several bad rows: the first [`MAX_REPORTED_ERRORS`] as (line, column if known,
+    /// message), one per line of the message, then how many more there are.
     #[error("{}", fmt_lines(.file, .errors, *.more))]
     Lines {
         file: String,
-        errors: Vec<(usize, String)>,
+        errors: Vec<(usize, Option<usize>, String)>,
         more: usize,
     },
 }
@@ -156,12 +165,24 @@ impl DataError {
             msg,
         }
     }
+    /// An error at line `line`, character column `column` (both 1-based) of `file`.
+    pub fn at(file: &str, line: usize, column: usize, msg: String) -> DataError {
+        DataError::At {
+            file: file.into(),
+            line,
+            column,
+            msg,
+        }
+    }
 }
 
-fn fmt_lines(file: &str, errors: &[(usize, String)], more: usize) -> String {
+fn fmt_lines(file: &str, errors: &[(usize, Option<usize>, String)], more: usize) -> String {
     let mut s = format!("{} bad rows in {file}:", errors.len() + more);
-    for (line, msg) in errors {
-        s += &format!("\n{file}:{line}: {msg}");
+    for (line, column, msg) in errors {
+        match column {
+            Some(c) => s += &format!("\n{file}:{line}:{c}: {msg}"),
+            None => s += &format!("\n{file}:{line}: {msg}"),
+        }
     }
     if more > 0 {
         s += &format!("\n… and {more} more");

@@ -5,7 +5,7 @@ mod builder;
 mod channels;
 mod dataset;
 pub mod readers;
-pub(crate) use builder::Builder;
+pub(crate) use builder::{Builder, Cells};
 pub use dataset::*;
 
 /// The bundled data directory: `./data` if present, else the crate's own `data/`.

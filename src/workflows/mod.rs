@@ -5,6 +5,7 @@ pub mod checks;
 pub mod diagnose;
 pub mod export;
 pub mod fit;
+pub mod optical;
 pub mod rgl;
 pub mod scale;
 pub mod sweep;

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod cli;
+pub mod optical;
 
 use bsdfit::bsdf::Model;
 use glam::DVec3;

@@ -6,9 +6,12 @@
 //! | ALTA text | a leading `#DIM`, `#PARAM_IN`, `#PARAM_OUT`, `#VS` or `#ALTA` line | [`alta`] |
 //! | MERL binary | three little-endian int32 dimensions (90, 90, 180), or dimensions whose table of doubles has exactly the file's size | [`merl`] |
 //! | RGL `.bsdf` measured material | the tensor file header `tensor_file\0` | [`rgl`] (sampled at `--sample-geometry`) |
+//! | Zemax tabular BSDF | a first line (after `#` comments) starting with a keyword of its header (`Source`, `Symmetry`, …) | [`zemax`] |
+//! | ASTM E1392 text | a first line starting with an upper-case keyword, and a `VARS` line | [`astm`] |
 //!
 //! Content decides, not the extension; only when nothing matches does the extension
-//! (`.binary` → MERL) pick the reader whose error will explain the problem, v1 otherwise.
+//! (`.binary` → MERL, `.bsdf` → RGL, or Zemax for a text file) pick the reader whose
+//! error will explain the problem, v1 otherwise.
 //!
 //! **Missing uncertainties.** ALTA files without `#VS` intervals and MERL tables carry
 //! none. They are refused unless the user assumes some with `--assume-uncertainty REL,ABS`
@@ -23,10 +26,13 @@
 //! fits report it among their warnings.
 
 pub mod alta;
+pub mod astm;
 pub mod merl;
 pub mod rgl;
 pub mod tensor;
+pub(crate) mod text;
 pub mod v1;
+pub mod zemax;
 
 use crate::data::{DataError, Dataset, ReadOptions};
 use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
@@ -49,6 +55,8 @@ pub enum Format {
     AltaText,
     MerlBinary,
     RglBsdf,
+    ZemaxBsdf,
+    AstmE1392,
 }
 
 impl std::fmt::Display for Format {
@@ -58,6 +66,8 @@ impl std::fmt::Display for Format {
             Format::AltaText => "ALTA text",
             Format::MerlBinary => "MERL binary",
             Format::RglBsdf => "RGL .bsdf",
+            Format::ZemaxBsdf => "Zemax BSDF",
+            Format::AstmE1392 => "ASTM E1392",
         })
     }
 }
@@ -72,6 +82,11 @@ pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
         return Some(Format::MerlBinary);
     }
     let head = head.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(head);
+    let text_lines = || {
+        head.split(|&b| b == b'\n')
+            .take(200)
+            .map(|l| std::str::from_utf8(l).unwrap_or(""))
+    };
     for raw in head.split(|&b| b == b'\n').take(200) {
         let line = String::from_utf8_lossy(raw);
         let t = line.trim();
@@ -94,16 +109,32 @@ pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
             }
             continue;
         }
-        // The first line that is not a comment: a v1 header names its columns.
+        // The first line that is not a comment: an ASTM keyword line with a VARS line to
+        // come (ASTM's SOURCE is also a Zemax keyword), a Zemax keyword, or a v1 header naming its columns.
+        if astm::looks_like(text_lines()) {
+            return Some(Format::AstmE1392);
+        }
+        if zemax::looks_like(t) {
+            return Some(Format::ZemaxBsdf);
+        }
         return t.contains("theta_i").then_some(Format::V1Csv);
     }
     None
 }
 
-fn by_extension(path: &Path) -> Format {
+/// The reader whose error explains an unrecognised file: by extension (`.bsdf` is both
+/// RGL's binary tensor file and Zemax's text; valid UTF-8 text there goes to Zemax).
+fn by_extension(path: &Path, head: &[u8]) -> Format {
     match path.extension().and_then(|e| e.to_str()) {
         Some(e) if e.eq_ignore_ascii_case("binary") => Format::MerlBinary,
-        Some(e) if e.eq_ignore_ascii_case("bsdf") => Format::RglBsdf,
+        Some(e) if e.eq_ignore_ascii_case("bsdf") => {
+            let text = std::str::from_utf8(head).is_ok_and(|t| !t.contains('\0'));
+            if text {
+                Format::ZemaxBsdf
+            } else {
+                Format::RglBsdf
+            }
+        }
         _ => Format::V1Csv,
     }
 }
@@ -117,7 +148,7 @@ pub fn detect(path: &Path) -> Result<Format, DataError> {
     f.take(1 << 16)
         .read_to_end(&mut head)
         .map_err(|e| cannot_read(&file, e))?;
-    Ok(sniff(&head, len).unwrap_or_else(|| by_extension(path)))
+    Ok(sniff(&head, len).unwrap_or_else(|| by_extension(path, &head)))
 }
 
 fn cannot_read(file: &str, e: std::io::Error) -> DataError {
@@ -154,7 +185,9 @@ pub fn load_with_progress(
     let head = reader.fill_buf().map_err(|e| cannot_read(&file, e))?;
     let Some(format) = sniff(head, len) else {
         // Nothing recognisable: the extension's reader explains what it expected.
-        return match by_extension(path) {
+        let fallback = by_extension(path, &head[..head.len().min(4096)]);
+        return match fallback {
+            Format::ZemaxBsdf => zemax::parse_reader(reader, &file, opts, progress),
             Format::RglBsdf => {
                 let mut bytes = Vec::new();
                 reader
@@ -192,6 +225,8 @@ pub fn load_with_progress(
             rgl::parse(&bytes, &file, opts)
         }
         Format::AltaText => alta::parse_reader(reader, &file, opts, progress),
+        Format::ZemaxBsdf => zemax::parse_reader(reader, &file, opts, progress),
+        Format::AstmE1392 => astm::parse_reader(reader, &file, opts, progress),
         Format::V1Csv => Dataset::parse_reader(reader, &file, opts, progress),
     }
 }
@@ -203,9 +238,12 @@ pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Datas
         Some(Format::MerlBinary) => merl::parse(bytes, file, opts),
         Some(Format::RglBsdf) => rgl::parse(bytes, file, opts),
         Some(Format::AltaText) => alta::parse_reader(bytes, file, opts, &mut |_| {}),
+        Some(Format::ZemaxBsdf) => zemax::parse_reader(bytes, file, opts, &mut |_| {}),
+        Some(Format::AstmE1392) => astm::parse_reader(bytes, file, opts, &mut |_| {}),
         Some(Format::V1Csv) => Dataset::parse_reader(bytes, file, opts, &mut |_| {}),
-        None => match by_extension(Path::new(file)) {
+        None => match by_extension(Path::new(file), &bytes[..bytes.len().min(4096)]) {
             Format::MerlBinary => merl::parse(bytes, file, opts),
+            Format::ZemaxBsdf => zemax::parse_reader(bytes, file, opts, &mut |_| {}),
             Format::RglBsdf => rgl::parse(bytes, file, opts),
             _ => Dataset::parse_reader(bytes, file, opts, &mut |_| {}).map_err(unrecognised),
         },
@@ -214,7 +252,7 @@ pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Datas
 
 /// A v1 error for a file that matched no format: say the other formats were tried too.
 fn unrecognised(e: DataError) -> DataError {
-    const HINT: &str = " (nor is the file recognisable as ALTA text or a MERL table)";
+    const HINT: &str = " (nor is the file recognisable as ALTA text, a MERL table, an RGL .bsdf, a Zemax BSDF or an ASTM E1392 file)";
     match e {
         DataError::File { file, msg } => DataError::File {
             file,
@@ -223,6 +261,17 @@ fn unrecognised(e: DataError) -> DataError {
         DataError::Line { file, line, msg } => DataError::Line {
             file,
             line,
+            msg: msg + HINT,
+        },
+        DataError::At {
+            file,
+            line,
+            column,
+            msg,
+        } => DataError::At {
+            file,
+            line,
+            column,
             msg: msg + HINT,
         },
         other => other,
