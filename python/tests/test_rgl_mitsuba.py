@@ -1,6 +1,6 @@
 """`bsdfit export --format rgl` checked in a real renderer: Mitsuba 3's `measured` plugin
 loads the exported .bsdf file of every BRDF model of the catalogue, and its evaluation at
-2,000 random direction pairs agrees with bsdfit's own (median relative error under 2 %
+4,000 random direction pairs agrees with bsdfit's own (median relative error under 2 %
 where the BRDF exceeds 1 % of its maximum); a sphere rendered with it is finite and not
 black; bsdfit reads materials laid out as the RGL database's files as Mitsuba evaluates
 them. Skipped, saying why, where Mitsuba cannot be imported, except under CI=true, where
@@ -29,7 +29,7 @@ except ImportError:
     pytest.skip("Mitsuba 3 is not installed (pip install mitsuba)", allow_module_level=True)
 
 MEDIAN_BOUND = 0.02
-N_DIRECTIONS = 2000
+N_DIRECTIONS = 4000
 
 
 def random_directions(n, seed):
@@ -67,7 +67,7 @@ RGB_NM = (650.0, 550.0, 450.0)
 def median_error(ref, got):
     sel = ref > 0.01 * ref.max()
     # At least 50 directions for a meaningful median (the dim B channel of a sharply
-    # peaked fit has 87 of 2,000 above 1 % of its maximum).
+    # peaked fit, dmg(ggx) of the brick, has 84 of 4,000 above 1 % of its maximum).
     assert sel.sum() >= 50, "too few directions above 1 % of the maximum"
     assert np.all(np.isfinite(got[sel])), "Mitsuba returned a non-finite value"
     return float(np.median(np.abs(got[sel] - ref[sel]) / ref[sel]))
