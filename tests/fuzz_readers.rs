@@ -10,7 +10,12 @@
 //! (`fuzz/seeds/`) and on every crash reproducer kept in `fuzz/regressions/`
 //! (docs/reliability.md): this is the slice of the fuzzing that CI runs.
 
-use bsdfit::data::readers::alta::AltaValues;
+/// The fuzz targets' own library (fuzz/src/lib.rs, plain Rust over bsdfit): the option
+/// sets every input is read with, shared so the CI slice reads as the targets do.
+#[path = "../fuzz/src/lib.rs"]
+#[allow(dead_code)]
+mod fuzz_contract;
+
 use bsdfit::data::readers::{self, alta, astm, merl, rgl, zemax};
 use bsdfit::data::{DataError, Dataset, ReadOptions};
 use proptest::prelude::*;
@@ -921,7 +926,11 @@ fn all_readers(bytes: &[u8], assume: bool, allow_zero: bool) -> Result<(), TestC
     check_located(zemax::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     check_located(astm::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     // The fuzz targets' lenient set: a channel selection averaged over bands.
-    check(readers::parse_bytes(bytes, FILE, &fuzz_option_sets()[2]))?;
+    check(readers::parse_bytes(
+        bytes,
+        FILE,
+        &fuzz_contract::option_sets()[2],
+    ))?;
     Ok(())
 }
 
@@ -1083,34 +1092,6 @@ fn merl_full_size_random_table() {
     }
 }
 
-/// The option sets the fuzz targets read every input with (fuzz/src/lib.rs): strict,
-/// assumed uncertainties, lenient.
-fn fuzz_option_sets() -> [ReadOptions; 3] {
-    [
-        ReadOptions {
-            max_samples: Some(0),
-            sample_geometry: Some("grid:30".into()),
-            ..Default::default()
-        },
-        ReadOptions {
-            assume_uncertainty: Some((0.05, 0.001)),
-            max_samples: Some(0),
-            alta_values: Some(AltaValues::BrdfCos),
-            sample_geometry: Some("grid:30".into()),
-            ..Default::default()
-        },
-        ReadOptions {
-            allow_zero_uncertainty: true,
-            wavelengths: Some(vec![550.0, 650.0]),
-            band_nm: Some(30.0),
-            assume_uncertainty: Some((0.02, 0.0)),
-            max_samples: Some(5),
-            alta_values: Some(AltaValues::Brdf),
-            sample_geometry: Some("csic".into()),
-        },
-    ]
-}
-
 /// What the `merl` fuzz target also reads for an input that starts with the MERL header
 /// (fuzz/fuzz_targets/merl.rs): a full-size table whose R, G and B blocks start with the
 /// input's three equal runs of whole doubles after the header, every other cell −1.
@@ -1146,7 +1127,7 @@ fn replay(target: &str, path: &Path) -> usize {
             panic!("{shown} through the {target} reader: {e}");
         }
     };
-    for o in fuzz_option_sets() {
+    for o in fuzz_contract::option_sets() {
         match target {
             "v1" => expect(
                 Dataset::parse_reader(&bytes[..], FILE, &o, &mut |_| {}),
