@@ -363,6 +363,61 @@ mod tests {
         assert!((p - exact).abs() < 0.03, "{p} vs {exact}");
     }
 
+    /// T = Δχ²/(χ²₁/ν₁), a worse extension counting as 0, and so does anything up to
+    /// [`ZERO`]; ν₁ = 0 counts as 1.
+    #[test]
+    fn the_statistic_is_delta_chi2_over_the_extensions_reduced_chi2() {
+        assert_eq!(statistic(120.0, 100.0, 50), 10.0);
+        assert_eq!(statistic(100.0, 120.0, 50), 0.0);
+        assert_eq!(statistic(100.0 + 5e-4, 100.0, 100), 0.0);
+        assert!((statistic(100.0 + 2e-3, 100.0, 100) - 2e-3).abs() < 1e-12);
+        assert_eq!(statistic(10.0, 5.0, 0), 1.0);
+    }
+
+    /// Each branch of the p-value against counts and tails worked out by hand.
+    #[test]
+    fn p_values_by_hand() {
+        // B = 10, three replicates at or above T = 3 (3.0 itself counts): (1 + 3)/11;
+        // six of ten positive.
+        let reps = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0];
+        let (p, source, share, tail) = p_value(3.0, &reps);
+        assert_eq!(
+            (p, source, share, tail),
+            (4.0 / 11.0, PSource::Empirical, 0.6, None)
+        );
+        // None reaches T and only 9 are positive: the bound 1/(B + 1).
+        let mut reps = vec![0.5; 9];
+        reps.push(0.0);
+        let (p, source, share, tail) = p_value(1.0, &reps);
+        assert_eq!(
+            (p, source, share, tail),
+            (1.0 / 11.0, PSource::EmpiricalBound, 0.9, None)
+        );
+        // Positive replicates all equal: no variance to fit a tail to.
+        let (p, source, ..) = p_value(5.0, &[1.0; 12]);
+        assert_eq!((p, source), (1.0 / 13.0, PSource::EmpiricalBound));
+        // Ten positive replicates 2 ± d (mean 2, variance 10d²/9 = 2) and ten at 0:
+        // a = var/(2·mean) = 1/2, ν = 2·mean²/var = 4, π = 1/2, and
+        // P(χ²₄ ≥ x) = e^(−x/2)(1 + x/2): p = π·P(χ²₄ ≥ 2T) = ½e^(−T)(1 + T).
+        let d = 1.8f64.sqrt();
+        let mut reps: Vec<f64> = (0..10)
+            .map(|i| if i % 2 == 0 { 2.0 + d } else { 2.0 - d })
+            .collect();
+        reps.extend([0.0; 10]);
+        let (p, source, share, tail) = p_value(20.0, &reps);
+        let (a, nu) = tail.unwrap();
+        assert_eq!((source, share), (PSource::Tail, 0.5));
+        assert!(
+            (a - 0.5).abs() < 1e-12 && (nu - 4.0).abs() < 1e-12,
+            "{a} {nu}"
+        );
+        let want = 0.5 * (-20.0f64).exp() * 21.0;
+        assert!((p / want - 1.0).abs() < 1e-9, "{p} vs {want}");
+        // Just above every replicate the tail (½e^(−3.4)·4.4 = 0.073) is capped at 1/21.
+        let (p, source, ..) = p_value(3.4, &reps);
+        assert_eq!((p, source), (1.0 / 21.0, PSource::Tail));
+    }
+
     /// Without positive replicates no tail can be fitted: the p-value is the empirical
     /// bound 1/(B + 1), never 0.
     #[test]
