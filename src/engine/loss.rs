@@ -644,6 +644,14 @@ mod tests {
             assert_eq!(w.to_string().parse::<Weights>(), Ok(w));
         }
         assert!("nope".parse::<Metric>().is_err() && "nope".parse::<Weights>().is_err());
+        assert_eq!(
+            Loss::new(Metric::Ngan, Weights::Relunc).to_string(),
+            "ngan/relunc"
+        );
+        // The paper's metrics per kind, in its order.
+        use Metric::*;
+        assert_eq!(Metric::for_kind(Kind::Brdf), [Smape, Rmse, Ngan, Low]);
+        assert_eq!(Metric::for_kind(Kind::Btdf), [F, Cosf, Logf, Logcosf]);
     }
 
     /// An evaluator's row order: each row the constants of its sample, padding rows all
@@ -690,6 +698,78 @@ mod tests {
             let r_far = t.rescaled_sum_squares(&far, 100.0);
             assert!(r_far > 1e3 * r_loud && r_far < raw(&t, &far), "{term:?}");
         }
+    }
+
+    /// s = Σ w a² f y / Σ w a² f² (the least-squares level of the linear residual),
+    /// held in [1/max, max], applied to the values before the terms; the lower of the
+    /// rescaled and the raw Σr². Values whose level cannot be fitted (Σ w a² f y ≤ 0) are
+    /// judged raw.
+    #[test]
+    fn the_rescaling_is_the_least_squares_level() {
+        let values = [0.3, 0.1, 2.0, 0.2];
+        for term in [Term::Square, Term::LogSquare] {
+            let t = terms(term);
+            let (w, a, y) = (
+                [1.0, 2.0, 0.5, 1.0],
+                [1.0, 0.9, 0.7, 0.5],
+                [0.2, 0.5, 1.0, 0.4],
+            );
+            let g = |k: usize, v: f64| match term {
+                Term::LogSquare => (1.0 + a[k] * v).ln(),
+                _ => a[k] * v,
+            };
+            let ss = |s: f64| -> f64 {
+                (0..4)
+                    .map(|k| w[k] * (g(k, s * values[k]) - g(k, y[k])).powi(2))
+                    .sum()
+            };
+            let fy: f64 = (0..4).map(|k| w[k] * a[k] * a[k] * values[k] * y[k]).sum();
+            let ff: f64 = (0..4)
+                .map(|k| w[k] * a[k] * a[k] * values[k] * values[k])
+                .sum();
+            let s = fy / ff;
+            assert!(s > 0.2 && s < 0.9, "{s}");
+            let got = t.rescaled_sum_squares(&values, 100.0);
+            assert!((got - ss(s).min(ss(1.0))).abs() < 1e-12, "{term:?}: {got}");
+            if term == Term::Square {
+                // The linear residual's own optimum: well below the raw Σr².
+                assert!(got < 0.9 * ss(1.0), "{term:?}");
+            }
+            // Held at 1/max_scale = 1/1.25 = 0.8 where s is below it.
+            let got = t.rescaled_sum_squares(&values, 1.25);
+            assert!(
+                (got - ss(0.8).min(ss(1.0))).abs() < 1e-12,
+                "{term:?}: {got}"
+            );
+            if term == Term::Square {
+                assert!(got < ss(1.0) && got > ss(s), "{term:?}");
+            }
+            // Held at max_scale where s is above it.
+            let small: Vec<f64> = values.iter().map(|v| v / 10.0).collect();
+            let raw = |v: &[f64]| -> f64 { (0..4).map(|k| t.residual(k, v[k]).powi(2)).sum() };
+            let got = t.rescaled_sum_squares(&small, 2.0);
+            let twice: Vec<f64> = small.iter().map(|v| 2.0 * v).collect();
+            assert!(
+                (got - raw(&twice).min(raw(&small))).abs() < 1e-12,
+                "{term:?}"
+            );
+            assert!(got < raw(&small), "{term:?}");
+        }
+        // Values only where the data are 0 (Σ w a² f y = 0): judged raw, not scaled
+        // down towards the zeros.
+        let zeros = LossTerms::new(
+            Term::Square,
+            Finish::Sum,
+            vec![1.0; 2],
+            vec![1.0; 2],
+            vec![0.0, 0.5],
+        );
+        assert_eq!(zeros.rescaled_sum_squares(&[1.0, 0.0], 100.0), 1.25);
+        // Values against the data's sign (Σ w a² f y < 0): no level is fitted.
+        let t = terms(Term::Square);
+        let against = [-0.3, -0.1, -2.0, -0.2];
+        let raw: f64 = (0..4).map(|k| t.residual(k, against[k]).powi(2)).sum();
+        assert_eq!(t.rescaled_sum_squares(&against, 100.0), raw);
     }
 
     #[test]
