@@ -372,13 +372,15 @@ mod tests {
     /// share of replicas on a bound are those of the replicas' ρ̂, drawn again here.
     #[test]
     fn lambert_replicas_summarise_to_their_closed_form_optima() {
-        for (rows, seed) in [
+        for (rows, seed, bound) in [
             (
                 &[(0.10, 0.004), (0.11, 0.006), (0.095, 0.005), (0.102, 0.008)][..],
                 7,
+                false,
             ),
-            // ρ̂ near 0: about half the replicas end on the bound ρ = 0.
-            (&[(0.001, 0.01), (0.0, 0.012), (0.002, 0.01)][..], 3),
+            // ρ̂ near 0, and near 1: about half the replicas end on the bound.
+            (&[(0.001, 0.01), (0.0, 0.012), (0.002, 0.01)][..], 3, true),
+            (&[(0.318, 0.01), (0.32, 0.012), (0.316, 0.01)][..], 4, true),
         ] {
             let d = data(rows);
             let n = 20;
@@ -390,7 +392,11 @@ mod tests {
                 .collect();
             let mean = reps.iter().sum::<f64>() / n as f64;
             let sd = (reps.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-            let on_bound = reps.iter().filter(|&&r| r <= 1e-6).count() as f64 / n as f64;
+            let on_bound = reps
+                .iter()
+                .filter(|&&r| r <= 1e-6 || r >= 1.0 - 1e-6)
+                .count() as f64
+                / n as f64;
             reps.sort_by(f64::total_cmp);
             let widths: Vec<f64> = (0..2).map(|i| reps[i + 18] - reps[i]).collect();
             let lo = if widths[1] < widths[0] { 1 } else { 0 };
@@ -416,7 +422,7 @@ mod tests {
             assert_eq!(sum.correlation, vec![vec![Some(1.0)]]);
             let warned = sum.warnings.iter().any(|w| w.contains("on a bound"));
             assert_eq!(warned, on_bound >= 0.05, "{:?}", sum.warnings);
-            if rows[0].0 < 0.01 {
+            if bound {
                 assert!(on_bound > 0.2 && on_bound < 0.8, "{on_bound}");
             } else {
                 assert_eq!(on_bound, 0.0);
