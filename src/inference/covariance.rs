@@ -842,11 +842,9 @@ mod tests {
             let mut out = empty(3);
             out.std = vec![Some(1.0); 3];
             let c = [[1.0, ab, r], [ab, 1.0, r], [r, r, 1.0]];
-            for a in 0..3 {
-                for b in 0..3 {
-                    out.correlation[a][b] = Some(c[a][b]);
-                }
-            }
+            out.correlation = (c.iter())
+                .map(|row| row.iter().map(|&v| Some(v)).collect())
+                .collect();
             out
         };
         let w = multiple_correlation_warnings(&with(0.705, 0.0), &names);
