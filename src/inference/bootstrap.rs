@@ -619,6 +619,46 @@ mod tests {
             "{c:?}"
         );
         assert!(c.seconds >= nulls.seconds);
+        // The refits are deterministic: the same calibration against null refits that
+        // report 1000 more evaluations reports 1000 more; against a non-finite null χ²
+        // of the measured data it is an error.
+        let again = |chi2_0: f64, extra: u64| NullRefits {
+            replicates: nulls.replicates.clone(),
+            flat: nulls.flat.clone(),
+            chi2: [&[chi2_0][..], &nulls.chi2[1..]].concat(),
+            seconds: nulls.seconds,
+            evaluations: nulls.evaluations + extra,
+        };
+        let embed_null = |g: &[f64]| embed(&null, g, &ext);
+        let more = again(nulls.chi2[0], 1000);
+        let c2 = calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &more,
+            fit.dof,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(c2.evaluations, c.evaluations + 1000);
+        assert_eq!(
+            (c2.p, c2.statistic, c2.exceeding),
+            (c.p, c.statistic, c.exceeding)
+        );
+        let nan = again(f64::NAN, 0);
+        assert!(calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &nan,
+            fit.dof,
+            &backend,
+            &base,
+            &boot
+        )
+        .is_err());
     }
 
     /// Replicates drawn from a model's values, not the data's: y* = y′ + u z.
