@@ -327,22 +327,27 @@ mod tests {
         Loss::new(Metric::Chi2, Weights::Uniform)
     }
 
-    /// Lambert's χ² optimum in closed form, ρ̂ = π Σ(y/u²)/Σ(1/u²), held in [0, 1].
-    fn rho_hat(d: &Dataset) -> f64 {
+    /// Lambert's χ² optimum in closed form, ρ̂ = π Σ(y/u²)/Σ(1/u²), held in [lo, hi].
+    fn rho_hat(d: &Dataset, [lo, hi]: [f64; 2]) -> f64 {
         let (mut num, mut den) = (0.0, 0.0);
         for s in &d.samples {
             num += s.value / (s.uncertainty * s.uncertainty);
             den += 1.0 / (s.uncertainty * s.uncertainty);
         }
-        (PI * num / den).clamp(0.0, 1.0)
+        (PI * num / den).clamp(lo, hi)
     }
 
-    fn run(d: &Dataset, linear: f64, replicas: usize, seed: u64) -> McSummary {
+    /// ρ fitted within `bounds` (`--bounds`).
+    fn run(d: &Dataset, bounds: [f64; 2], linear: f64, replicas: usize, seed: u64) -> McSummary {
         let model = Model::for_data("lambert", d).unwrap();
         let opts = FitOptions {
             optimizer: Optimizer::Lm,
             restarts: 1,
             screen: 1,
+            constraints: crate::inference::constraints::ConstraintSpec {
+                bounds: vec![format!("rho={}:{}", bounds[0], bounds[1])],
+                ..Default::default()
+            },
             ..FitOptions::default()
         };
         let mc = McOptions {
@@ -351,7 +356,7 @@ mod tests {
             seed,
             restarts: 1,
         };
-        let best = [rho_hat(d)];
+        let best = [rho_hat(d, bounds)];
         let backend = CpuBackend::new();
         monte_carlo(
             &model,
@@ -372,29 +377,41 @@ mod tests {
     /// share of replicas on a bound are those of the replicas' ρ̂, drawn again here.
     #[test]
     fn lambert_replicas_summarise_to_their_closed_form_optima() {
-        for (rows, seed, bound) in [
+        // ρ inside [0, 1]; then within --bounds rho=0.05:0.95, ρ̂ near each end, where
+        // about half the replicas end on the bound.
+        let (wide, narrow) = ([0.0, 1.0], [0.05, 0.95]);
+        for (rows, bounds, seed, bound) in [
             (
                 &[(0.10, 0.004), (0.11, 0.006), (0.095, 0.005), (0.102, 0.008)][..],
+                wide,
                 7,
                 false,
             ),
-            // ρ̂ near 0, and near 1: about half the replicas end on the bound.
-            (&[(0.001, 0.01), (0.0, 0.012), (0.002, 0.01)][..], 3, true),
-            (&[(0.3185, 0.01), (0.32, 0.012), (0.317, 0.01)][..], 4, true),
+            (
+                &[(0.016, 0.01), (0.015, 0.012), (0.017, 0.01)][..],
+                narrow,
+                3,
+                true,
+            ),
+            (
+                &[(0.3025, 0.01), (0.304, 0.012), (0.301, 0.01)][..],
+                narrow,
+                4,
+                true,
+            ),
         ] {
             let d = data(rows);
             let n = 20;
-            let sum = run(&d, 0.01, n, seed);
+            let sum = run(&d, bounds, 0.01, n, seed);
             let mut reps: Vec<f64> = ReplicaSource::new(&d, chi2(), 0.0, seed)
                 .draw(n)
                 .iter()
-                .map(rho_hat)
+                .map(|r| rho_hat(r, bounds))
                 .collect();
             let mean = reps.iter().sum::<f64>() / n as f64;
             let sd = (reps.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-            let on_bound = reps
-                .iter()
-                .filter(|&&r| r <= 1e-6 || r >= 1.0 - 1e-6)
+            let on_bound = (reps.iter())
+                .filter(|&&r| r == bounds[0] || r == bounds[1])
                 .count() as f64
                 / n as f64;
             reps.sort_by(f64::total_cmp);
@@ -404,7 +421,10 @@ mod tests {
             let p = &sum.params[0];
             let tol = 1e-4 * sd;
             assert_eq!((sum.replicas, sum.converged), (n, n));
-            assert_eq!(p.value, rho_hat(&d));
+            assert_eq!(p.value, rho_hat(&d, bounds));
+            assert!(sum.evaluations > 0 && sum.batches > 0, "{sum:?}");
+            let failed = sum.warnings.iter().any(|w| w.contains("no finite fit"));
+            assert!(!failed, "{:?}", sum.warnings);
             assert_eq!(p.linear_sd, Some(0.01));
             assert!((p.mean - mean).abs() < tol, "mean {} vs {mean}", p.mean);
             assert!((p.sd - sd).abs() < tol, "sd {} vs {sd}", p.sd);
@@ -532,14 +552,18 @@ mod tests {
             param(1.0, Some(1.51), 1.5, 0.0),
             "differ by a factor 0.66"
         ));
-        // [0, 3] about 1: 1 below, 2 above, a ratio of 2 is not "more than 2".
-        assert!(disagreement(&param(1.0, Some(1.0), 1.0, 0.0)).is_none());
-        assert!(disagreement(&param(1.0, Some(1.0), 2.0, 0.0)).is_none());
-        assert!(says(param(1.0, Some(1.0), 0.9, 0.0), "asymmetric"));
-        assert!(says(param(1.0, Some(1.0), 2.1, 0.0), "asymmetric"));
+        // [1, 4] about 2: 1 below, 2 above, a ratio of 2 is not "more than 2".
+        let shifted = |value: f64| McParam {
+            interval: [1.0, 4.0],
+            ..param(1.0, Some(1.0), value, 0.0)
+        };
+        assert!(disagreement(&shifted(2.0)).is_none());
+        assert!(disagreement(&shifted(3.0)).is_none());
+        assert!(says(shifted(1.9), "asymmetric"));
+        assert!(says(shifted(3.1), "asymmetric"));
         // A best fit on an end of the interval is not judged by the ratio.
-        assert!(disagreement(&param(1.0, Some(1.0), 0.0, 0.0)).is_none());
-        assert!(disagreement(&param(1.0, Some(1.0), 3.0, 0.0)).is_none());
+        assert!(disagreement(&shifted(1.0)).is_none());
+        assert!(disagreement(&shifted(4.0)).is_none());
     }
 
     #[test]
