@@ -647,6 +647,21 @@ mod tests {
             (c2.p, c2.statistic, c2.exceeding),
             (c.p, c.statistic, c.exceeding)
         );
+        // A replicate whose null refit is not finite is left out of the counts.
+        let mut one_failed = again(nulls.chi2[0], 0);
+        one_failed.chi2[5] = f64::NAN;
+        let c3 = calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &one_failed,
+            fit.dof,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(c3.fitted, c.fitted - 1);
         let nan = again(f64::NAN, 0);
         assert!(calibrate(
             &ext,
