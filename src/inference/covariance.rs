@@ -689,6 +689,48 @@ mod tests {
         assert!((got / want - 1.0).abs() < 1e-9, "σ {got} vs {want}");
     }
 
+    /// 9,000 samples: more than one of the CPU evaluator's windows (8,192 rows) and
+    /// many of the Jacobian's chunks (1,024 rows), every row still counted once.
+    #[test]
+    fn chi2_sigma_over_several_windows() {
+        let pi = std::f64::consts::PI;
+        let mut rows = Vec::new();
+        for ti in 0..60 {
+            for to in 1..76 {
+                for po in [0.0, 90.0] {
+                    let k = rows.len();
+                    let row = RawRow {
+                        theta_i: ti as f64,
+                        phi_i: 0.0,
+                        theta_o: to as f64,
+                        phi_o: po,
+                        wavelength_nm: 550.0,
+                        value: 0.1 + 0.002 * ((k * 7919) % 11) as f64 / 10.0,
+                        uncertainty: 0.005 + 0.001 * (k % 7) as f64,
+                    };
+                    rows.push((k + 1, row));
+                }
+            }
+        }
+        let d =
+            Dataset::from_rows(Kind::Brdf, "w", &rows, "w.csv", &ReadOptions::default()).unwrap();
+        assert_eq!(d.len(), 9000);
+        let space = Constraints::none(&lambert(&d));
+        let chi2 = Loss::new(Metric::Chi2, Weights::Uniform);
+        let b: f64 = (d.samples.iter())
+            .map(|s| (1.0 / (pi * s.uncertainty)).powi(2))
+            .sum();
+        let birge = (chi2_at(&d, 0.32) / (d.len() - 1) as f64).max(1.0);
+        let want = (birge / b).sqrt();
+        let got = cov_of(&d, chi2, &[0.32], &space).std[0].unwrap();
+        assert!((got / want - 1.0).abs() < 1e-9, "σ {got} vs {want}");
+        // The same through a sum-of-squares loss other than χ² (the loss's residuals).
+        let rmse = Loss::new(Metric::Rmse, Weights::Uniform);
+        let got = cov_of(&d, rmse, &[0.32], &space).std[0].unwrap();
+        let want = sigma_by_hand(&d, rmse, 0.32);
+        assert!((got / want - 1.0).abs() < 1e-6, "σ {got} vs {want}");
+    }
+
     #[test]
     fn central_differences_step_du_in_the_unit_box_and_stop_at_its_edges() {
         let d = data(&[550.0], 0.2);
