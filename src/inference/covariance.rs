@@ -790,6 +790,9 @@ mod tests {
         let (inv, und) = pseudo_inverse(&diag(4.0, 1e-10)).unwrap();
         assert!(close(&inv, &[0.25, 0.0, 0.0, 0.0]), "{inv}");
         assert_eq!(und, [false, true]);
+        // Exactly 1e-10 of the largest is not above it.
+        let (_, und) = pseudo_inverse(&diag(1.0, 1e-10)).unwrap();
+        assert_eq!(und, [false, true]);
         let (inv, und) = pseudo_inverse(&diag(4.0, 1e-9)).unwrap();
         assert!(
             (inv[(1, 1)] / 1e9 - 1.0).abs() < 1e-9 && und == [false, false],
