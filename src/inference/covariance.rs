@@ -848,7 +848,7 @@ mod tests {
     #[test]
     fn warnings_name_undetermined_parameters_wide_sigmas_and_tight_pairs() {
         let names = ["a", "b", "c"];
-        let decls = [decl(0.0, 1.0), decl(0.0, 2.0), decl(0.0, 1.0)];
+        let decls = [decl(1.0, 2.0), decl(0.0, 2.0), decl(0.0, 1.0)];
         let mut out = empty(3);
         out.std = vec![Some(1.5), Some(1.5), None];
         for a in 0..2 {
@@ -909,6 +909,15 @@ mod tests {
         // A parameter with a pairwise |correlation| above 0.99 is left to that warning.
         let w = multiple_correlation_warnings(&with(0.1, 0.995), &names);
         assert!(w.is_empty(), "{w:?}");
+        // A parameter with σ = 0 (no correlations) takes no part.
+        let mut four = empty(4);
+        let three = with(0.705, 0.0);
+        four.std = vec![Some(1.0), Some(1.0), Some(1.0), Some(0.0)];
+        for a in 0..3 {
+            four.correlation[a][..3].copy_from_slice(&three.correlation[a]);
+        }
+        let w = multiple_correlation_warnings(&four, &["a", "b", "c", "d"]);
+        assert_eq!(w.len(), 3, "{w:?}");
         // Fewer than three determined parameters: nothing to add.
         let mut two = with(0.705, 0.0);
         two.std[2] = None;
