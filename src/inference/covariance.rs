@@ -1002,6 +1002,13 @@ mod tests {
         assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
         let jtj = DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0]);
         assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
+        // An eigenvalue above 0 but below 1e-10 of the largest is no constraint at all.
+        let jtj = DMatrix::from_row_slice(2, 2, &[50.0, 0.0, 0.0, 3e-12]);
+        let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+        assert!(
+            r[0].unit_std.is_infinite() && r[0].components[0].0 == 1,
+            "{r:?}"
+        );
     }
 
     #[test]
