@@ -1002,7 +1002,19 @@ mod tests {
         assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
         let jtj = DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0]);
         assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
-        // An eigenvalue above 0 but below 1e-10 of the largest is no constraint at all.
+        // A standard uncertainty of exactly 0.1 (λ = 100) is a ridge ("at least" 0.1).
+        let jtj = DMatrix::from_row_slice(2, 2, &[400.0, 0.0, 0.0, 100.0]);
+        let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert_eq!((r[0].unit_std, r[0].components[0].0), (0.1, 1));
+        // An eigenvalue of exactly 1e-10 of the largest is no constraint at all; nor is
+        // one above 0 but below that.
+        let jtj = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1e-10]);
+        let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+        assert!(
+            r[0].unit_std.is_infinite() && r[0].components[0].0 == 1,
+            "{r:?}"
+        );
         let jtj = DMatrix::from_row_slice(2, 2, &[50.0, 0.0, 0.0, 3e-12]);
         let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
         assert!(
