@@ -502,6 +502,183 @@ mod tests {
             .sum()
     }
 
+    /// Five samples at assorted angles (degrees: θi, θo), values and uncertainties.
+    fn five(kind: Kind) -> Dataset {
+        use crate::data::{RawRow, ReadOptions};
+        let rows: Vec<(usize, RawRow)> = [
+            (10.0, 20.0, 0.8, 0.05),
+            (35.0, 5.0, 0.3, 0.02),
+            (60.0, 45.0, 1.7, 0.3),
+            (0.0, 70.0, 0.05, 0.01),
+            (75.0, 30.0, 2.5, 0.4),
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, &(ti, to, value, uncertainty))| {
+            let row = RawRow {
+                theta_i: ti,
+                phi_i: 0.0,
+                theta_o: to,
+                phi_o: 90.0,
+                wavelength_nm: 550.0,
+                value,
+                uncertainty,
+            };
+            (i + 1, row)
+        })
+        .collect();
+        Dataset::from_rows(kind, "five", &rows, "five.csv", &ReadOptions::default()).unwrap()
+    }
+
+    /// Model values beside the five samples' (one of them 0).
+    const MODEL: [f64; 5] = [0.9, 0.25, 2.0, 0.0, 2.2];
+
+    /// Every loss of docs/losses.md written out from its definition, for every weighting:
+    /// SMAPE, RMSE, Ngan and Löw (BRDF: means over K, angular factors inside the sum),
+    /// the BTDF sums of g(f) = f, cosθt·f, ln(1 + f), ln(1 + cosθt·f), and χ² (which
+    /// ignores the weighting). The loss, its terms summed and finished, and its residuals'
+    /// squares summed must all give it.
+    #[test]
+    fn every_loss_is_its_definition() {
+        const E: f64 = 1e-6;
+        let k = MODEL.len() as f64;
+        for kind in [Kind::Brdf, Kind::Btdf] {
+            let data = five(kind);
+            let metrics = [Metric::for_kind(kind), &[Metric::Chi2]].concat();
+            for metric in metrics {
+                for weights in [Weights::Uniform, Weights::Relunc, Weights::Invunc] {
+                    let mut sum = 0.0;
+                    for (s, &yp) in data.samples.iter().zip(&MODEL) {
+                        let (y, u) = (s.value, s.uncertainty);
+                        let w = match weights {
+                            Weights::Uniform => 1.0,
+                            Weights::Relunc => 1.0 / (u.abs() / (y.abs() + E) + E),
+                            Weights::Invunc => 1.0 / u,
+                        };
+                        let (ci, si, so) = (s.theta_i.cos(), s.theta_i.sin(), s.theta_o.sin());
+                        let ct = s.theta_o.cos();
+                        sum += match metric {
+                            Metric::Smape => w * (yp - y).abs() / (yp.abs() + y.abs() + E),
+                            Metric::Rmse => w * (yp - y).powi(2) * ci * ci,
+                            Metric::Ngan => w * (yp - y).powi(2) * ci * ci * si * so,
+                            Metric::Low => w * (yp - y).powi(2) * ci * ci * si,
+                            Metric::F => w * (yp - y).powi(2),
+                            Metric::Cosf => w * (ct * yp - ct * y).powi(2),
+                            Metric::Logf => w * ((1.0 + yp).ln() - (1.0 + y).ln()).powi(2),
+                            Metric::Logcosf => {
+                                w * ((1.0 + ct * yp).ln() - (1.0 + ct * y).ln()).powi(2)
+                            }
+                            Metric::Chi2 => ((yp - y) / u).powi(2),
+                        };
+                    }
+                    let want = match metric {
+                        Metric::Smape | Metric::Ngan | Metric::Low => sum / k,
+                        Metric::Rmse => (sum / k).sqrt(),
+                        _ => sum,
+                    };
+                    let loss = Loss::new(metric, weights);
+                    let t = loss.terms(&data);
+                    let close = |got: f64| (got - want).abs() <= 1e-12 * want.abs();
+                    let what = format!("{kind:?} {loss}");
+                    assert!(want > 0.0, "{what}");
+                    assert!(
+                        close(t.loss(&MODEL)),
+                        "{what}: {} vs {want}",
+                        t.loss(&MODEL)
+                    );
+                    let terms: f64 = (0..5).map(|i| t.term_at(i, MODEL[i])).sum();
+                    assert!(close(t.finish_sum(terms)), "{what}");
+                    assert!(close(loss.finisher(&data).finish_sum(terms)), "{what}");
+                    assert!(
+                        (t.finisher().sum_of(want) - terms).abs() <= 1e-12 * terms,
+                        "{what}"
+                    );
+                    if loss.is_sum_of_squares() {
+                        let r2: f64 = (0..5).map(|i| t.residual(i, MODEL[i]).powi(2)).sum();
+                        assert!(close(t.finish_sum(r2)), "{what}");
+                        let mut rows = Vec::new();
+                        t.residuals_into(&MODEL, &mut rows);
+                        let r2: f64 = rows.iter().map(|r| r * r).sum();
+                        assert!(close(t.finish_sum(r2)), "{what}");
+                    } else {
+                        assert_eq!(metric, Metric::Smape);
+                    }
+                    if metric == Metric::Chi2 {
+                        assert!(close(chi2(&data, &MODEL)), "{what}");
+                        let z = normalised_residuals(&data, &MODEL);
+                        assert!(close(z.iter().map(|z| z * z).sum()), "{what}");
+                        for ((z, s), yp) in z.iter().zip(&data.samples).zip(MODEL) {
+                            assert_eq!(*z, (yp - s.value) / s.uncertainty);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Each metric applies to the kind of data it was defined for; LM applies to all but
+    /// SMAPE; a loss's name reads back as itself.
+    #[test]
+    fn metrics_kinds_and_names() {
+        for kind in [Kind::Brdf, Kind::Btdf] {
+            for &m in Metric::for_kind(kind) {
+                assert!(m.applies_to(kind) && Metric::Chi2.applies_to(kind), "{m}");
+                let other = if kind == Kind::Brdf {
+                    Kind::Btdf
+                } else {
+                    Kind::Brdf
+                };
+                assert!(!m.applies_to(other), "{m}");
+                assert_eq!(m.to_string().parse::<Metric>(), Ok(m));
+                let loss = Loss::new(m, Weights::uncertainty_for(kind));
+                assert_eq!(loss.is_sum_of_squares(), m != Metric::Smape);
+                assert_eq!(
+                    loss.finisher(&five(kind)).is_sum_of_squares(),
+                    m != Metric::Smape
+                );
+            }
+        }
+        assert_eq!(Weights::uncertainty_for(Kind::Brdf), Weights::Relunc);
+        assert_eq!(Weights::uncertainty_for(Kind::Btdf), Weights::Invunc);
+        for w in [Weights::Uniform, Weights::Relunc, Weights::Invunc] {
+            assert_eq!(w.to_string().parse::<Weights>(), Ok(w));
+        }
+        assert!("nope".parse::<Metric>().is_err() && "nope".parse::<Weights>().is_err());
+        assert_eq!(
+            Loss::new(Metric::Ngan, Weights::Relunc).to_string(),
+            "ngan/relunc"
+        );
+        // The paper's metrics per kind, in its order.
+        use Metric::*;
+        assert_eq!(Metric::for_kind(Kind::Brdf), [Smape, Rmse, Ngan, Low]);
+        assert_eq!(Metric::for_kind(Kind::Btdf), [F, Cosf, Logf, Logcosf]);
+    }
+
+    /// An evaluator's row order: each row the constants of its sample, padding rows all
+    /// 0 (so a padding row adds 0 to every sum), the finish still over the K samples.
+    #[test]
+    fn rows_in_an_evaluators_order_carry_their_samples_and_pad_with_zeros() {
+        let t = Loss::new(Metric::Logcosf, Weights::Invunc).terms(&five(Kind::Btdf));
+        let order = [3u32, NO_SAMPLE, 0, 4, 1, 2, NO_SAMPLE];
+        let r = t.in_rows(order.iter().copied());
+        assert_eq!((r.rows(), r.count, t.rows(), t.count), (7, 5, 5, 5));
+        for (row, &k) in order.iter().enumerate() {
+            let got = [r.w[row], r.a[row], r.y[row], r.gy[row], r.sqrt_w[row]];
+            if k == NO_SAMPLE {
+                assert_eq!(got, [0.0; 5]);
+                assert_eq!(r.residual(row, 0.0), 0.0);
+            } else {
+                let k = k as usize;
+                assert_eq!(got, [t.w[k], t.a[k], t.y[k], t.gy[k], t.sqrt_w[k]]);
+                assert_eq!(r.residual(row, 0.7), t.residual(k, 0.7));
+            }
+        }
+        let back = t.reordered(&[4, 3, 2, 1, 0]);
+        assert_eq!(back.y, [t.y[4], t.y[3], t.y[2], t.y[1], t.y[0]]);
+        assert_eq!(back.gy, [t.gy[4], t.gy[3], t.gy[2], t.gy[1], t.gy[0]]);
+        assert_eq!(r.finish_sum(10.0), t.finish_sum(10.0));
+    }
+
     #[test]
     fn a_rescaled_shape_outranks_a_dead_model_that_raw_sum_squares_prefers() {
         for term in [Term::Square, Term::LogSquare] {
@@ -521,6 +698,78 @@ mod tests {
             let r_far = t.rescaled_sum_squares(&far, 100.0);
             assert!(r_far > 1e3 * r_loud && r_far < raw(&t, &far), "{term:?}");
         }
+    }
+
+    /// s = Σ w a² f y / Σ w a² f² (the least-squares level of the linear residual),
+    /// held in [1/max, max], applied to the values before the terms; the lower of the
+    /// rescaled and the raw Σr². Values whose level cannot be fitted (Σ w a² f y ≤ 0) are
+    /// judged raw.
+    #[test]
+    fn the_rescaling_is_the_least_squares_level() {
+        let values = [0.3, 0.1, 2.0, 0.2];
+        for term in [Term::Square, Term::LogSquare] {
+            let t = terms(term);
+            let (w, a, y) = (
+                [1.0, 2.0, 0.5, 1.0],
+                [1.0, 0.9, 0.7, 0.5],
+                [0.2, 0.5, 1.0, 0.4],
+            );
+            let g = |k: usize, v: f64| match term {
+                Term::LogSquare => (1.0 + a[k] * v).ln(),
+                _ => a[k] * v,
+            };
+            let ss = |s: f64| -> f64 {
+                (0..4)
+                    .map(|k| w[k] * (g(k, s * values[k]) - g(k, y[k])).powi(2))
+                    .sum()
+            };
+            let fy: f64 = (0..4).map(|k| w[k] * a[k] * a[k] * values[k] * y[k]).sum();
+            let ff: f64 = (0..4)
+                .map(|k| w[k] * a[k] * a[k] * values[k] * values[k])
+                .sum();
+            let s = fy / ff;
+            assert!(s > 0.2 && s < 0.9, "{s}");
+            let got = t.rescaled_sum_squares(&values, 100.0);
+            assert!((got - ss(s).min(ss(1.0))).abs() < 1e-12, "{term:?}: {got}");
+            if term == Term::Square {
+                // The linear residual's own optimum: well below the raw Σr².
+                assert!(got < 0.9 * ss(1.0), "{term:?}");
+            }
+            // Held at 1/max_scale = 1/1.25 = 0.8 where s is below it.
+            let got = t.rescaled_sum_squares(&values, 1.25);
+            assert!(
+                (got - ss(0.8).min(ss(1.0))).abs() < 1e-12,
+                "{term:?}: {got}"
+            );
+            if term == Term::Square {
+                assert!(got < ss(1.0) && got > ss(s), "{term:?}");
+            }
+            // Held at max_scale where s is above it.
+            let small: Vec<f64> = values.iter().map(|v| v / 10.0).collect();
+            let raw = |v: &[f64]| -> f64 { (0..4).map(|k| t.residual(k, v[k]).powi(2)).sum() };
+            let got = t.rescaled_sum_squares(&small, 2.0);
+            let twice: Vec<f64> = small.iter().map(|v| 2.0 * v).collect();
+            assert!(
+                (got - raw(&twice).min(raw(&small))).abs() < 1e-12,
+                "{term:?}"
+            );
+            assert!(got < raw(&small), "{term:?}");
+        }
+        // Values only where the data are 0 (Σ w a² f y = 0): judged raw, not scaled
+        // down towards the zeros.
+        let zeros = LossTerms::new(
+            Term::Square,
+            Finish::Sum,
+            vec![1.0; 2],
+            vec![1.0; 2],
+            vec![0.0, 0.5],
+        );
+        assert_eq!(zeros.rescaled_sum_squares(&[1.0, 0.0], 100.0), 1.25);
+        // Values against the data's sign (Σ w a² f y < 0): no level is fitted.
+        let t = terms(Term::Square);
+        let against = [-0.3, -0.1, -2.0, -0.2];
+        let raw: f64 = (0..4).map(|k| t.residual(k, against[k]).powi(2)).sum();
+        assert_eq!(t.rescaled_sum_squares(&against, 100.0), raw);
     }
 
     #[test]

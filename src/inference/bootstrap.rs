@@ -363,6 +363,348 @@ mod tests {
         assert!((p - exact).abs() < 0.03, "{p} vs {exact}");
     }
 
+    /// T = Δχ²/(χ²₁/ν₁), a worse extension counting as 0, and so does anything up to
+    /// [`ZERO`]; ν₁ = 0 counts as 1.
+    #[test]
+    fn the_statistic_is_delta_chi2_over_the_extensions_reduced_chi2() {
+        assert_eq!(statistic(120.0, 100.0, 50), 10.0);
+        assert_eq!(statistic(100.0, 120.0, 50), 0.0);
+        assert_eq!(statistic(100.0 + 5e-4, 100.0, 100), 0.0);
+        // Exactly 1e-3 (1/1000, correctly rounded) is "at or below".
+        assert_eq!(statistic(1001.0, 1000.0, 1), 0.0);
+        assert!((statistic(100.0 + 2e-3, 100.0, 100) - 2e-3).abs() < 1e-12);
+        assert_eq!(statistic(10.0, 5.0, 0), 1.0);
+    }
+
+    /// Each branch of the p-value against counts and tails worked out by hand.
+    #[test]
+    fn p_values_by_hand() {
+        // B = 10, three replicates at or above T = 3 (3.0 itself counts): (1 + 3)/11;
+        // six of ten positive.
+        let reps = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0];
+        let (p, source, share, tail) = p_value(3.0, &reps);
+        assert_eq!(
+            (p, source, share, tail),
+            (4.0 / 11.0, PSource::Empirical, 0.6, None)
+        );
+        // None reaches T and only 9 are positive: the bound 1/(B + 1).
+        let mut reps = vec![0.5; 9];
+        reps.push(0.0);
+        let (p, source, share, tail) = p_value(1.0, &reps);
+        assert_eq!(
+            (p, source, share, tail),
+            (1.0 / 11.0, PSource::EmpiricalBound, 0.9, None)
+        );
+        // Positive replicates all equal: no variance to fit a tail to.
+        let (p, source, ..) = p_value(5.0, &[1.0; 12]);
+        assert_eq!((p, source), (1.0 / 13.0, PSource::EmpiricalBound));
+        // Ten positive replicates 2 ± d (mean 2, variance 10d²/9 = 2) and ten at 0:
+        // a = var/(2·mean) = 1/2, ν = 2·mean²/var = 4, π = 1/2, and
+        // P(χ²₄ ≥ x) = e^(−x/2)(1 + x/2): p = π·P(χ²₄ ≥ 2T) = ½e^(−T)(1 + T).
+        let d = 1.8f64.sqrt();
+        let mut reps: Vec<f64> = (0..10)
+            .map(|i| if i % 2 == 0 { 2.0 + d } else { 2.0 - d })
+            .collect();
+        reps.extend([0.0; 10]);
+        let (p, source, share, tail) = p_value(20.0, &reps);
+        let (a, nu) = tail.unwrap();
+        assert_eq!((source, share), (PSource::Tail, 0.5));
+        assert!(
+            (a - 0.5).abs() < 1e-12 && (nu - 4.0).abs() < 1e-12,
+            "{a} {nu}"
+        );
+        let want = 0.5 * (-20.0f64).exp() * 21.0;
+        assert!((p / want - 1.0).abs() < 1e-9, "{p} vs {want}");
+        // Just above every replicate the tail (½e^(−3.4)·4.4 = 0.073) is capped at 1/21.
+        let (p, source, ..) = p_value(3.4, &reps);
+        assert_eq!((p, source), (1.0 / 21.0, PSource::Tail));
+    }
+
+    /// A replicate statistic of exactly [`ZERO`] is not positive.
+    #[test]
+    fn a_replicate_at_zero_is_not_positive() {
+        let (_, _, share, _) = p_value(1.0, &[1e-3, 0.5, 2.0e-3, 0.0]);
+        assert_eq!(share, 0.5);
+    }
+
+    /// The replicate fits: LM stopped at 1e-7 of χ² within 100 iterations, at least one
+    /// restart, a seed of their own; everything else as the base options.
+    #[test]
+    fn replicate_fits_use_lm_with_a_looser_tolerance() {
+        let base = FitOptions {
+            optimizer: Optimizer::Compass,
+            restarts: 9,
+            screen: 5,
+            seed: 1,
+            ..FitOptions::default()
+        };
+        for restarts in [0, 3] {
+            let boot = BootstrapOptions {
+                replicates: 9,
+                restarts,
+                seed: 1,
+            };
+            let o = replicate_options(&base, &boot);
+            assert_eq!(o.optimizer, Optimizer::Lm);
+            assert_eq!(o.restarts, restarts.max(1));
+            assert_eq!((o.lm.ftol, o.lm.max_iterations), (1e-7, 100));
+            assert_eq!((o.screen, o.lm.xtol), (5, base.lm.xtol));
+            assert_ne!(o.seed, boot.seed);
+        }
+    }
+
+    #[test]
+    fn descriptions_name_the_source_of_the_p_value() {
+        let mut c = Calibrated {
+            p: 0.05,
+            source: PSource::Empirical,
+            statistic: 3.25,
+            replicates: 99,
+            fitted: 98,
+            exceeding: 4,
+            positive_share: 0.5,
+            tail: None,
+            seconds: 1.0,
+            evaluations: 10,
+        };
+        assert_eq!(
+            c.describe(),
+            "bootstrap: 4 of 98 replicates reach T = 3.2500"
+        );
+        c.source = PSource::EmpiricalBound;
+        c.exceeding = 0;
+        assert!(c
+            .describe()
+            .ends_with("too few positive to fit a tail (p is a bound)"));
+        c.source = PSource::Tail;
+        c.tail = Some((1.25, 2.5));
+        assert!(
+            c.describe()
+                .ends_with("tail 0.50·1.250·χ²_2.50 fitted to them"),
+            "{}",
+            c.describe()
+        );
+    }
+
+    /// Lambert data (ρ = 0.46, 2 % noise) and its Oren–Nayar extension, whose null σ = 0
+    /// is irregular: the null refits start with the measured data, the replicates scatter
+    /// about the null's fitted values by their uncertainties, and the calibrated p-value
+    /// agrees with its own counts.
+    #[test]
+    fn a_calibration_counts_its_replicates_and_agrees_with_its_p_value() {
+        use crate::data::{Kind, RawRow, ReadOptions};
+        use crate::engine::cpu::CpuBackend;
+        use crate::workflows::diagnose::{embed, fit_model, DiagnoseOptions};
+        let f = 0.46 / std::f64::consts::PI;
+        let mut rows = Vec::new();
+        for ti in [10.0, 35.0, 60.0] {
+            for k in 0..=22 {
+                let to = -77.0 + 7.0 * k as f64;
+                if (to - ti).abs() > 0.5 {
+                    let i = rows.len();
+                    let wiggle = ((i * 7919) % 13) as f64 / 6.0 - 1.0;
+                    let row = RawRow {
+                        theta_i: ti,
+                        phi_i: 20.0,
+                        theta_o: to,
+                        phi_o: 20.0,
+                        wavelength_nm: 550.0,
+                        value: f * (1.0 + 0.02 * wiggle),
+                        uncertainty: 0.02 * f,
+                    };
+                    rows.push((i + 1, row));
+                }
+            }
+        }
+        let data =
+            Dataset::from_rows(Kind::Brdf, "b", &rows, "b.csv", &ReadOptions::default()).unwrap();
+        let backend = CpuBackend::new();
+        let opts = DiagnoseOptions {
+            restarts: 4,
+            seed: 1,
+            ..Default::default()
+        };
+        let null = Model::for_data("lambert", &data).unwrap();
+        let ext = Model::for_data("on", &data).unwrap();
+        let current = fit_model(&null, &data, &backend, &opts, &[]).unwrap();
+        let start = embed(&null, &current.flat, &ext);
+        let fit = fit_model(&ext, &data, &backend, &opts, &[start]).unwrap();
+        let base = FitOptions {
+            optimizer: Optimizer::Lm,
+            restarts: 2,
+            screen: 1,
+            ..FitOptions::default()
+        };
+        let boot = BootstrapOptions {
+            replicates: 19,
+            restarts: 1,
+            seed: 3,
+        };
+        let nulls = refit_null(
+            &null,
+            &current.flat,
+            &current.values,
+            &data,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(
+            (nulls.replicates.len(), nulls.flat.len(), nulls.chi2.len()),
+            (20, 20, 20)
+        );
+        for (a, b) in nulls.replicates[0].samples.iter().zip(&data.samples) {
+            assert_eq!(a.value, b.value);
+        }
+        let z: Vec<f64> = nulls.replicates[1..]
+            .iter()
+            .flat_map(|r| {
+                r.samples
+                    .iter()
+                    .zip(&current.values)
+                    .map(|(s, v)| (s.value - v) / s.uncertainty)
+            })
+            .collect();
+        let n = z.len() as f64;
+        let mean = z.iter().sum::<f64>() / n;
+        let sd = (z.iter().map(|z| (z - mean).powi(2)).sum::<f64>() / n).sqrt();
+        assert!(
+            z.len() == 19 * data.len() && mean.abs() < 0.15 && (sd - 1.0).abs() < 0.1,
+            "{mean} {sd}"
+        );
+        assert!(
+            (nulls.chi2[0] / current.chi2 - 1.0).abs() < 1e-6,
+            "{} {}",
+            nulls.chi2[0],
+            current.chi2
+        );
+
+        let c = calibrate(
+            &ext,
+            &fit.flat,
+            &|g| embed(&null, g, &ext),
+            &nulls,
+            fit.dof,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(c.replicates, 19);
+        assert!(
+            c.fitted >= 17 && c.fitted <= 19 && c.exceeding <= c.fitted,
+            "{c:?}"
+        );
+        let t = statistic(current.chi2, fit.chi2, fit.dof);
+        assert!(
+            (c.statistic - t).abs() < 0.01 + 1e-3 * t,
+            "T {} vs {t}",
+            c.statistic
+        );
+        let bound = 1.0 / (c.fitted + 1) as f64;
+        match c.source {
+            PSource::Empirical => {
+                assert_eq!(
+                    c.p,
+                    (1 + c.exceeding) as f64 / (c.fitted + 1) as f64,
+                    "{c:?}"
+                )
+            }
+            PSource::EmpiricalBound => assert!(c.exceeding == 0 && c.p == bound, "{c:?}"),
+            PSource::Tail => assert!(c.exceeding == 0 && c.p <= bound, "{c:?}"),
+        }
+        assert!(
+            c.evaluations > nulls.evaluations && c.evaluations < 100 * nulls.evaluations,
+            "{c:?}"
+        );
+        assert!(c.seconds >= nulls.seconds);
+        // The refits are deterministic: the same calibration against null refits that
+        // report 1000 more evaluations reports 1000 more; against a non-finite null χ²
+        // of the measured data it is an error.
+        let again = |chi2_0: f64, extra: u64| NullRefits {
+            replicates: nulls.replicates.clone(),
+            flat: nulls.flat.clone(),
+            chi2: [&[chi2_0][..], &nulls.chi2[1..]].concat(),
+            seconds: nulls.seconds,
+            evaluations: nulls.evaluations + extra,
+        };
+        let embed_null = |g: &[f64]| embed(&null, g, &ext);
+        let more = again(nulls.chi2[0], 1000);
+        let c2 = calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &more,
+            fit.dof,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(c2.evaluations, c.evaluations + 1000);
+        assert_eq!(
+            (c2.p, c2.statistic, c2.exceeding),
+            (c.p, c.statistic, c.exceeding)
+        );
+        // A replicate whose null refit is not finite is left out of the counts.
+        let mut one_failed = again(nulls.chi2[0], 0);
+        one_failed.chi2[5] = f64::NAN;
+        let c3 = calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &one_failed,
+            fit.dof,
+            &backend,
+            &base,
+            &boot,
+        )
+        .unwrap();
+        assert_eq!(c3.fitted, c.fitted - 1);
+        let nan = again(f64::NAN, 0);
+        assert!(calibrate(
+            &ext,
+            &fit.flat,
+            &embed_null,
+            &nan,
+            fit.dof,
+            &backend,
+            &base,
+            &boot
+        )
+        .is_err());
+    }
+
+    /// Replicates drawn from a model's values, not the data's: y* = y′ + u z.
+    #[test]
+    fn null_replicates_scatter_about_the_models_values() {
+        use crate::data::{Kind, RawRow, ReadOptions};
+        let rows: Vec<(usize, RawRow)> = (0..3)
+            .map(|i| {
+                let row = RawRow {
+                    theta_i: 10.0 * i as f64,
+                    phi_i: 0.0,
+                    theta_o: 30.0,
+                    phi_o: 180.0,
+                    wavelength_nm: 550.0,
+                    value: 1.0,
+                    uncertainty: 1e-6,
+                };
+                (i + 1, row)
+            })
+            .collect();
+        let data =
+            Dataset::from_rows(Kind::Brdf, "n", &rows, "n.csv", &ReadOptions::default()).unwrap();
+        let reps = null_replicates(&data, &[2.0, 3.0, 4.0], 5, 1);
+        assert_eq!(reps.len(), 5);
+        for r in &reps {
+            for (s, v) in r.samples.iter().zip([2.0, 3.0, 4.0]) {
+                assert!((s.value - v).abs() < 1e-4, "{} vs {v}", s.value);
+            }
+        }
+    }
+
     /// Without positive replicates no tail can be fitted: the p-value is the empirical
     /// bound 1/(B + 1), never 0.
     #[test]

@@ -296,6 +296,275 @@ impl McSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::{Kind, RawRow, ReadOptions};
+    use crate::engine::cpu::CpuBackend;
+    use crate::engine::loss::{Metric, Weights};
+    use crate::inference::fit::Optimizer;
+    use std::f64::consts::PI;
+
+    /// BRDF samples at one wavelength: (value, uncertainty) at assorted angles.
+    fn data(rows: &[(f64, f64)]) -> Dataset {
+        let rows: Vec<(usize, RawRow)> = rows
+            .iter()
+            .enumerate()
+            .map(|(i, &(value, uncertainty))| {
+                let row = RawRow {
+                    theta_i: 5.0 + 10.0 * i as f64,
+                    phi_i: 0.0,
+                    theta_o: 30.0,
+                    phi_o: 180.0,
+                    wavelength_nm: 550.0,
+                    value,
+                    uncertainty,
+                };
+                (i + 1, row)
+            })
+            .collect();
+        Dataset::from_rows(Kind::Brdf, "d", &rows, "d.csv", &ReadOptions::default()).unwrap()
+    }
+
+    fn chi2() -> Loss {
+        Loss::new(Metric::Chi2, Weights::Uniform)
+    }
+
+    /// Lambert's χ² optimum in closed form, ρ̂ = π Σ(y/u²)/Σ(1/u²), held in [lo, hi].
+    fn rho_hat(d: &Dataset, [lo, hi]: [f64; 2]) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for s in &d.samples {
+            num += s.value / (s.uncertainty * s.uncertainty);
+            den += 1.0 / (s.uncertainty * s.uncertainty);
+        }
+        (PI * num / den).clamp(lo, hi)
+    }
+
+    /// ρ fitted within `bounds` (`--bounds`).
+    fn run(d: &Dataset, bounds: [f64; 2], linear: f64, replicas: usize, seed: u64) -> McSummary {
+        let model = Model::for_data("lambert", d).unwrap();
+        let opts = FitOptions {
+            optimizer: Optimizer::Lm,
+            restarts: 1,
+            screen: 1,
+            constraints: crate::inference::constraints::ConstraintSpec {
+                bounds: vec![format!("rho={}:{}", bounds[0], bounds[1])],
+                ..Default::default()
+            },
+            ..FitOptions::default()
+        };
+        let mc = McOptions {
+            replicas,
+            scale_rel: 0.0,
+            seed,
+            restarts: 1,
+        };
+        let best = [rho_hat(d, bounds)];
+        let backend = CpuBackend::new();
+        monte_carlo(
+            &model,
+            d,
+            chi2(),
+            &backend,
+            &opts,
+            &best,
+            &[Some(linear)],
+            &mc,
+            &mut |_| {},
+        )
+        .unwrap()
+    }
+
+    /// Each replica of a Lambert χ² fit has its optimum in closed form: the summary's
+    /// mean, standard deviation (n − 1), shortest 95 % interval (19 of 20 values) and
+    /// share of replicas on a bound are those of the replicas' ρ̂, drawn again here.
+    #[test]
+    fn lambert_replicas_summarise_to_their_closed_form_optima() {
+        // ρ inside [0, 1]; then within --bounds rho=0.05:0.95, ρ̂ near each end, where
+        // about half the replicas end on the bound.
+        let (wide, narrow) = ([0.0, 1.0], [0.05, 0.95]);
+        for (rows, bounds, seed, bound) in [
+            (
+                &[(0.10, 0.004), (0.11, 0.006), (0.095, 0.005), (0.102, 0.008)][..],
+                wide,
+                7,
+                false,
+            ),
+            (
+                &[(0.016, 0.01), (0.015, 0.012), (0.017, 0.01)][..],
+                narrow,
+                3,
+                true,
+            ),
+            (
+                &[(0.3025, 0.01), (0.304, 0.012), (0.301, 0.01)][..],
+                narrow,
+                4,
+                true,
+            ),
+        ] {
+            let d = data(rows);
+            let n = 20;
+            let sum = run(&d, bounds, 0.01, n, seed);
+            let mut reps: Vec<f64> = ReplicaSource::new(&d, chi2(), 0.0, seed)
+                .draw(n)
+                .iter()
+                .map(|r| rho_hat(r, bounds))
+                .collect();
+            let mean = reps.iter().sum::<f64>() / n as f64;
+            let sd = (reps.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+            let on_bound = (reps.iter())
+                .filter(|&&r| r == bounds[0] || r == bounds[1])
+                .count() as f64
+                / n as f64;
+            reps.sort_by(f64::total_cmp);
+            let widths: Vec<f64> = (0..2).map(|i| reps[i + 18] - reps[i]).collect();
+            let lo = if widths[1] < widths[0] { 1 } else { 0 };
+            let interval = [reps[lo], reps[lo + 18]];
+            let p = &sum.params[0];
+            let tol = 1e-4 * sd;
+            assert_eq!((sum.replicas, sum.converged), (n, n));
+            assert_eq!(p.value, rho_hat(&d, bounds));
+            assert!(sum.evaluations > 0 && sum.batches > 0, "{sum:?}");
+            let failed = sum.warnings.iter().any(|w| w.contains("no finite fit"));
+            assert!(!failed, "{:?}", sum.warnings);
+            assert_eq!(p.linear_sd, Some(0.01));
+            assert!((p.mean - mean).abs() < tol, "mean {} vs {mean}", p.mean);
+            assert!((p.sd - sd).abs() < tol, "sd {} vs {sd}", p.sd);
+            assert!(
+                (p.interval[0] - interval[0]).abs() < tol,
+                "{:?} vs {interval:?}",
+                p.interval
+            );
+            assert!(
+                (p.interval[1] - interval[1]).abs() < tol,
+                "{:?} vs {interval:?}",
+                p.interval
+            );
+            assert_eq!(p.on_bound, on_bound);
+            assert_eq!(sum.correlation, vec![vec![Some(1.0)]]);
+            let warned = sum.warnings.iter().any(|w| w.contains("on a bound"));
+            assert_eq!(warned, on_bound >= 0.05, "{:?}", sum.warnings);
+            if bound {
+                assert!(on_bound > 0.2 && on_bound < 0.8, "{on_bound}");
+            } else {
+                assert_eq!(on_bound, 0.0);
+            }
+        }
+    }
+
+    /// y* = (y + u z)(1 + s z₀): mean y, standard deviation u per value; the scale draw
+    /// z₀ shared by all values of a replica; log losses floor the draws at 0.
+    #[test]
+    fn replica_draws_have_the_stated_distribution() {
+        let n = 4000;
+        let one = data(&[(10.0, 1.0)]);
+        let v: Vec<f64> = (ReplicaSource::new(&one, chi2(), 0.0, 5).draw(n).iter())
+            .map(|r| r.samples[0].value)
+            .collect();
+        let mean = v.iter().sum::<f64>() / n as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+        assert!((mean - 10.0).abs() < 0.07, "{mean}");
+        assert!((sd - 1.0).abs() < 0.05, "{sd}");
+        // Values with negligible uncertainty and a 10 % scale: each replica is the data
+        // times one factor 1 + 0.1 z₀.
+        let two = data(&[(10.0, 1e-4), (20.0, 2e-4)]);
+        let reps = ReplicaSource::new(&two, chi2(), 0.1, 5).draw(n);
+        let first: Vec<f64> = reps.iter().map(|r| r.samples[0].value).collect();
+        for r in &reps {
+            let ratio = r.samples[1].value / r.samples[0].value;
+            assert!((ratio - 2.0).abs() < 1e-3, "{ratio}");
+        }
+        let mean = first.iter().sum::<f64>() / n as f64;
+        let sd = (first.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+        assert!(
+            (mean - 10.0).abs() < 0.07 && (sd - 1.0).abs() < 0.05,
+            "{mean} {sd}"
+        );
+        // A value 0.1 ± 1: about 46 % of the draws fall below 0; a log loss floors them.
+        let low = data(&[(0.1, 1.0)]);
+        let logf = Loss::new(Metric::Logf, Weights::Uniform);
+        for (loss, floored) in [(chi2(), false), (logf, true)] {
+            let v: Vec<f64> = (ReplicaSource::new(&low, loss, 0.0, 5).draw(n).iter())
+                .map(|r| r.samples[0].value)
+                .collect();
+            let below = v.iter().filter(|&&x| x < 0.0).count() as f64 / n as f64;
+            let zero = v.iter().filter(|&&x| x == 0.0).count() as f64 / n as f64;
+            if floored {
+                assert!(below == 0.0 && (zero - 0.46).abs() < 0.04, "{below} {zero}");
+            } else {
+                assert!((below - 0.46).abs() < 0.04 && zero == 0.0, "{below} {zero}");
+            }
+        }
+    }
+
+    #[test]
+    fn shortest_intervals_by_hand() {
+        // Four values, half of them: [0, 5] 5 wide, [5, 9] 4, [9, 10] 1.
+        assert_eq!(shortest_interval(&[0.0, 5.0, 9.0, 10.0], 0.5), [9.0, 10.0]);
+        // Three of five: [0, 2] and [1, 3] equally short: the first.
+        assert_eq!(
+            shortest_interval(&[0.0, 1.0, 2.0, 3.0, 10.0], 0.6),
+            [0.0, 2.0]
+        );
+        // All of them, one of them, none.
+        assert_eq!(shortest_interval(&[1.0, 2.0, 4.0], 1.0), [1.0, 4.0]);
+        assert_eq!(shortest_interval(&[1.0, 2.0, 4.0], 0.01), [1.0, 1.0]);
+        assert!(shortest_interval(&[], 0.95).iter().all(|v| v.is_nan()));
+    }
+
+    #[test]
+    fn pearson_correlation_by_hand() {
+        // Deviations (−1.5, −0.5, 0.5, 1.5) and (−1.5, 0.5, −0.5, 1.5): 4/5.
+        let a = [1.0, 2.0, 3.0, 4.0];
+        assert!((correlation(&a, &[1.0, 3.0, 2.0, 4.0]).unwrap() - 0.8).abs() < 1e-15);
+        assert!((correlation(&a, &[2.0, 4.0, 6.0, 8.0]).unwrap() - 1.0).abs() < 1e-15);
+        assert!((correlation(&a, &[8.0, 6.0, 4.0, 2.0]).unwrap() + 1.0).abs() < 1e-15);
+        // Shifted: the means are subtracted.
+        assert!(
+            (correlation(&[11.0, 12.0, 13.0, 14.0], &[1.0, 3.0, 2.0, 4.0]).unwrap() - 0.8).abs()
+                < 1e-12
+        );
+        assert_eq!(correlation(&a, &[3.0; 4]), None);
+    }
+
+    /// Each warning's condition at and beside its threshold.
+    #[test]
+    fn disagreement_warnings_at_their_thresholds() {
+        let param = |sd: f64, linear: Option<f64>, value: f64, on_bound: f64| McParam {
+            name: "p".into(),
+            value,
+            mean: value,
+            sd,
+            interval: [0.0, 3.0],
+            linear_sd: linear,
+            on_bound,
+        };
+        let says = |p: McParam, what: &str| disagreement(&p).is_some_and(|w| w.contains(what));
+        assert!(says(param(1.0, Some(1.0), 1.5, 0.05), "on a bound"));
+        assert!(disagreement(&param(1.0, Some(1.0), 1.5, 0.049)).is_none());
+        assert!(says(param(1.0, None, 1.5, 0.0), "undetermined"));
+        // Factors up to 1.5 either way are agreement.
+        assert!(disagreement(&param(1.5, Some(1.0), 1.5, 0.0)).is_none());
+        assert!(disagreement(&param(1.0, Some(1.5), 1.5, 0.0)).is_none());
+        assert!(says(
+            param(1.51, Some(1.0), 1.5, 0.0),
+            "differ by a factor 1.51"
+        ));
+        assert!(says(
+            param(1.0, Some(1.51), 1.5, 0.0),
+            "differ by a factor 0.66"
+        ));
+        // [1, 4] about 2: 1 below, 2 above, a ratio of 2 is not "more than 2".
+        let shifted = |value: f64| McParam {
+            interval: [1.0, 4.0],
+            ..param(1.0, Some(1.0), value, 0.0)
+        };
+        assert!(disagreement(&shifted(2.0)).is_none());
+        assert!(disagreement(&shifted(3.0)).is_none());
+        assert!(says(shifted(1.9), "asymmetric"));
+        assert!(says(shifted(3.1), "asymmetric"));
+        // A best fit on an end of the interval is not judged by the ratio.
+        assert!(disagreement(&shifted(1.0)).is_none());
+        assert!(disagreement(&shifted(4.0)).is_none());
+    }
 
     #[test]
     fn shortest_interval_of_a_skewed_sample_hugs_the_mode() {

@@ -72,5 +72,27 @@ mod tests {
         assert_eq!(format_p(0.0), "p < 1e-300");
         assert_eq!(format_p(1.26e-9), "p = 1.3e-9");
         assert_eq!(format_p(0.0431), "p = 0.043");
+        // The thresholds are strict: 1e-300 and 1e-3 themselves are printed as numbers.
+        assert_eq!(format_p(1e-300), "p = 1.0e-300");
+        assert_eq!(format_p(1e-3), "p = 0.001");
+        assert_eq!(format_p(9.9e-4), "p = 9.9e-4");
+    }
+
+    /// The tails against closed forms written here: P(χ²₂ ≥ x) = exp(−x/2),
+    /// P(F(2, ν) ≥ f) = (1 + 2f/ν)^(−ν/2), and the tabulated 5 % points of χ²₁, χ²₁₀
+    /// and F(2, 10).
+    #[test]
+    fn tails_against_closed_forms_and_tables() {
+        assert!((consistency_p(4.0, 2) - (-2.0f64).exp()).abs() < 1e-12);
+        assert!((consistency_p(3.841458820694124, 1) - 0.05).abs() < 1e-9);
+        assert!((consistency_p(18.307038053275146, 10) - 0.05).abs() < 1e-9);
+        // Δχ² = 6 for 2 more parameters, χ²₁ = 20 on ν₁ = 10: F = 3/2.
+        let (f, p) = f_test(6.0, 2, 20.0, 10);
+        assert!((f - 1.5).abs() < 1e-12, "{f}");
+        assert!((p - 1.3f64.powf(-5.0)).abs() < 1e-10, "{p}");
+        // F(2, 10)'s 5 % point, 4.102821015130399.
+        let (_, p) = f_test(2.0 * 4.102821015130399, 2, 10.0, 10);
+        assert!((p - 0.05).abs() < 1e-9, "{p}");
+        assert_eq!(bic(10.0, 3, 100), 10.0 + 3.0 * 100f64.ln());
     }
 }

@@ -209,6 +209,26 @@ mod tests {
         );
     }
 
+    /// The progress callback gets the number of restarts still running after each
+    /// iteration: never more than the starts, never rising, and 0 once all have stopped.
+    #[test]
+    fn progress_counts_the_running_restarts() {
+        let mut d = decay(0.0, 0.0);
+        let starts = super::super::random_starts(3, 6, 3);
+        let mut seen = Vec::new();
+        minimize(
+            &mut d,
+            &starts,
+            &LmOptions::default(),
+            &|_, s| s,
+            &mut |n| seen.push(n),
+        )
+        .unwrap();
+        assert_eq!(seen.first(), Some(&6), "{seen:?}");
+        assert_eq!(seen.last(), Some(&0), "{seen:?}");
+        assert!(seen.windows(2).all(|w| w[1] <= w[0]), "{seen:?}");
+    }
+
     #[test]
     fn fits_an_exponential_decay_from_several_starts() {
         let mut d = decay(0.0, 0.0);

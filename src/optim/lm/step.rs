@@ -187,3 +187,288 @@ fn bounded_step(a: &DMatrix<f64>, g: &DVector<f64>, x: &[f64]) -> DVector<f64> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! One iteration's parts against steps solved by hand: 2 × 2 systems whose inverses
+    //! are written out, and restarts whose state is set by hand.
+    use super::*;
+    use crate::optim::BatchObjective;
+    use std::collections::VecDeque;
+
+    fn restart(x: [f64; 2], normal: NormalEquations, lambda: f64, scale: [f64; 2]) -> RestartState {
+        RestartState {
+            x: x.to_vec(),
+            ss: normal.ss,
+            normal,
+            lambda,
+            scale: scale.to_vec(),
+            stop: None,
+            iterations: 0,
+            evaluations: 3,
+            recent: VecDeque::new(),
+        }
+    }
+
+    fn ne(jtj: [f64; 4], jtr: [f64; 2], ss: f64) -> NormalEquations {
+        NormalEquations {
+            jtj: jtj.to_vec(),
+            jtr: jtr.to_vec(),
+            ss,
+        }
+    }
+
+    /// −A⁻¹g for a 2 × 2 A, by its adjugate.
+    fn solve2(a: [f64; 4], g: [f64; 2]) -> [f64; 2] {
+        let det = a[0] * a[3] - a[1] * a[2];
+        [
+            -(a[3] * g[0] - a[1] * g[1]) / det,
+            -(-a[2] * g[0] + a[0] * g[1]) / det,
+        ]
+    }
+
+    fn close(a: &[f64], b: &[f64]) -> bool {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12)
+    }
+
+    #[test]
+    fn forward_differences_step_back_only_where_forward_leaves_the_box() {
+        let h = 1e-6;
+        assert_eq!(
+            fd_steps(&[0.0, 0.5, 1.0 - 2e-6, 1.0 - 1e-7, 1.0], h),
+            [h, h, h, -h, -h]
+        );
+    }
+
+    /// The damped step −(JᵀJ + λD)⁻¹g, D = diag(max(scale_j, (JᵀJ)_jj, 1e-9·max_j (JᵀJ)_jj)).
+    #[test]
+    fn the_trial_point_is_the_damped_gauss_newton_step() {
+        let jtj = [4.0, 1.0, 1.0, 2.0];
+        let g = [0.4, -0.3];
+        // The running scale 5 beats (JᵀJ)₀₀ = 4; (JᵀJ)₁₁ = 2 beats its scale 1.
+        let s = restart([0.5, 0.5], ne(jtj, g, 1.0), 0.5, [5.0, 1.0]);
+        let a = [4.0 + 0.5 * 5.0, 1.0, 1.0, 2.0 + 0.5 * 2.0];
+        let d = solve2(a, g);
+        let x = s.trial_point(1e-10).unwrap();
+        assert!(close(&x, &[0.5 + d[0], 0.5 + d[1]]), "{x:?} vs {d:?}");
+        // A diagonal of JᵀJ that vanishes is damped by 1e-9 of the largest.
+        let jtj = [1e6, 0.0, 0.0, 0.0];
+        let s = restart([0.5, 0.5], ne(jtj, [1.0, 1e-6], 1.0), 2.0, [0.0, 0.0]);
+        let x = s.trial_point(1e-10).unwrap();
+        let want = [0.5 - 1.0 / (1e6 * 3.0), 0.5 - 1e-6 / (2.0 * 1e-3)];
+        assert!(close(&x, &want), "{x:?} vs {want:?}");
+        // Clipped to the box.
+        let s = restart(
+            [0.9, 0.1],
+            ne([1.0, 0.0, 0.0, 1.0], [-1.0, 1.0], 1.0),
+            0.0,
+            [1.0, 1.0],
+        );
+        assert_eq!(s.trial_point(1e-10).unwrap(), [1.0, 0.0]);
+    }
+
+    /// The Gauss–Newton model's decrease −2gᵀδ − δᵀJᵀJδ against ftol·Σr².
+    #[test]
+    fn a_step_whose_predicted_gain_is_below_ftol_is_not_taken() {
+        // JᵀJ = I, g = (−0.1, 0), λ = 0: δ = (0.1, 0), predicted 0.02 − 0.01 = 0.01.
+        let s = restart(
+            [0.5, 0.5],
+            ne([1.0, 0.0, 0.0, 1.0], [-0.1, 0.0], 1.0),
+            0.0,
+            [1.0; 2],
+        );
+        assert!(s.trial_point(0.0099).is_some());
+        assert!(s.trial_point(0.0101).is_none());
+        // Relative to Σr²: at Σr² = 100 the same step predicts 1e-4 of it.
+        let s = restart(
+            [0.5, 0.5],
+            ne([1.0, 0.0, 0.0, 1.0], [-0.1, 0.0], 100.0),
+            0.0,
+            [1.0; 2],
+        );
+        assert!(s.trial_point(0.99e-4).is_some());
+        assert!(s.trial_point(1.01e-4).is_none());
+        // No gradient, no gain.
+        let s = restart(
+            [0.5, 0.5],
+            ne([1.0, 0.0, 0.0, 1.0], [0.0, 0.0], 1.0),
+            0.0,
+            [1.0; 2],
+        );
+        assert!(s.trial_point(0.0).is_none());
+    }
+
+    #[test]
+    fn an_accepted_step_moves_and_lowers_lambda_a_rejected_one_raises_it() {
+        let old = ne([1.0, 0.0, 0.0, 1.0], [0.1, 0.1], 10.0);
+        let opts = LmOptions::default();
+        let mut s = restart([0.5, 0.5], old.clone(), 0.3, [1.0, 1.0]);
+        // The new diagonal of JᵀJ (4, 2) raises the running scale (1, 1) where larger.
+        s.take_step(
+            ne([4.0, 0.0, 0.0, 2.0], [0.2, 0.0], 6.0),
+            &[0.8, 0.1],
+            &opts,
+        );
+        assert_eq!(s.x, [0.8, 0.1]);
+        assert_eq!((s.ss, s.normal.ss, s.normal.jtr[0]), (6.0, 6.0, 0.2));
+        assert!((s.lambda - 0.1).abs() < 1e-15, "{}", s.lambda);
+        assert_eq!(s.scale, [4.0, 2.0]);
+        assert_eq!((s.iterations, s.evaluations, s.stop), (1, 6, None));
+        // Rejected (Σr² not lower): nothing moves but λ, times 4.
+        s.take_step(
+            ne([9.0, 0.0, 0.0, 9.0], [0.0, 0.0], 6.0),
+            &[0.7, 0.2],
+            &opts,
+        );
+        assert_eq!(
+            (s.x.as_slice(), s.ss, s.normal.jtj[0]),
+            (&[0.8, 0.1][..], 6.0, 4.0)
+        );
+        assert!((s.lambda - 0.4).abs() < 1e-15, "{}", s.lambda);
+        assert_eq!(s.scale, [4.0, 2.0]);
+        assert_eq!((s.iterations, s.evaluations), (2, 9));
+        // A NaN Σr² is a rejection; λ never falls below 1e-12.
+        s.take_step(
+            ne([1.0, 0.0, 0.0, 1.0], [0.0, 0.0], f64::NAN),
+            &[0.6, 0.2],
+            &opts,
+        );
+        assert_eq!((s.x.as_slice(), s.ss), (&[0.8, 0.1][..], 6.0));
+        s.lambda = 1e-12;
+        s.take_step(
+            ne([f64::NAN, 0.0, 0.0, 1.0], [0.0, 0.0], 3.0),
+            &[0.6, 0.2],
+            &opts,
+        );
+        assert_eq!(
+            (s.lambda, s.ss, s.scale.as_slice()),
+            (1e-12, 3.0, &[4.0, 2.0][..])
+        );
+    }
+
+    /// The gain (Σr² − Σr²_new)/Σr² and the step's length (Euclidean, unit box) reach
+    /// the termination test.
+    #[test]
+    fn gain_and_length_reach_the_termination_test() {
+        let opts = LmOptions::default();
+        let step = |ss_new: f64, to: [f64; 2]| {
+            let mut s = restart(
+                [0.5, 0.5],
+                ne([1.0, 0.0, 0.0, 1.0], [0.0; 2], 10.0),
+                1e-3,
+                [1.0; 2],
+            );
+            s.take_step(ne([1.0, 0.0, 0.0, 1.0], [0.0; 2], ss_new), &to, &opts);
+            s.stop
+        };
+        // Gains 5e-11 and 2e-10 of Σr² = 10.
+        assert_eq!(step(10.0 - 5e-10, [0.7, 0.7]), Some(Termination::SmallGain));
+        assert_eq!(step(10.0 - 2e-9, [0.7, 0.7]), None);
+        // Lengths √2·4e-10 < 1e-9 and 5e-10·√(1 + 16) > 1e-9.
+        assert_eq!(
+            step(5.0, [0.5 + 4e-10, 0.5 + 4e-10]),
+            Some(Termination::SmallStep)
+        );
+        assert_eq!(step(5.0, [0.5 + 5e-10, 0.5 - 2e-9]), None);
+        assert_eq!(
+            step(11.0, [0.5 + 4e-10, 0.5 + 4e-10]),
+            Some(Termination::SmallStep)
+        );
+    }
+
+    #[test]
+    fn a_bound_the_step_would_leave_holds_its_parameter() {
+        let a = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 2.0]);
+        let step = |g: [f64; 2], x: [f64; 2]| {
+            let d = bounded_step(&a, &DVector::from_column_slice(&g), &x);
+            [d[0], d[1]]
+        };
+        // Inside the box: −A⁻¹g = −(1, 1)/3.
+        let third = 1.0 / 3.0;
+        assert!(close(&step([1.0, 1.0], [0.5, 0.5]), &[-third, -third]));
+        // On the lower bound the first is held and the second solved alone: −1/2.
+        assert!(close(&step([1.0, 1.0], [0.0, 0.5]), &[0.0, -0.5]));
+        // On the upper bound, moving up: held likewise.
+        assert!(close(&step([-1.0, -1.0], [1.0, 0.5]), &[0.0, 0.5]));
+        // On a bound but moving into the box: free.
+        assert!(close(&step([-1.0, -1.0], [0.0, 0.5]), &[third, third]));
+        assert!(close(&step([1.0, 1.0], [1.0, 0.5]), &[-third, -third]));
+        // Both held: no step.
+        assert!(close(&step([1.0, 1.0], [0.0, 0.0]), &[0.0, 0.0]));
+        // Not positive definite: solved by LU, [[1, 2], [2, 1]]⁻¹ = [[−1, 2], [2, −1]]/3.
+        let indefinite = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+        let d = bounded_step(
+            &indefinite,
+            &DVector::from_column_slice(&[1.0, 0.0]),
+            &[0.5, 0.5],
+        );
+        assert!(close(d.as_slice(), &[third, -2.0 * third]), "{d}");
+        // Singular: no step.
+        let singular = DMatrix::from_element(2, 2, 1.0);
+        let d = bounded_step(
+            &singular,
+            &DVector::from_column_slice(&[1.0, 0.0]),
+            &[0.5, 0.5],
+        );
+        assert_eq!(d.as_slice(), [0.0, 0.0]);
+    }
+
+    /// r = x − (0.3, 0.6): Σr² is minimal at (0.3, 0.6).
+    struct Shifted;
+    impl BatchObjective for Shifted {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn costs(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
+            let r = self.residuals(pts)?;
+            Ok(r.chunks(2).map(|r| r[0] * r[0] + r[1] * r[1]).collect())
+        }
+    }
+    impl BatchResiduals for Shifted {
+        fn residuals(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
+            Ok(pts
+                .chunks(2)
+                .flat_map(|x| [x[0] - 0.3, x[1] - 0.6])
+                .collect())
+        }
+        fn residual_count(&self) -> usize {
+            2
+        }
+    }
+
+    /// A stopped restart takes no more steps, one whose Σr² is not finite stops as
+    /// such, and each running one moves to its own trial point.
+    #[test]
+    fn only_running_restarts_with_a_finite_sum_of_squares_step() {
+        let opts = LmOptions::default();
+        let starts = vec![
+            vec![0.9, 0.9],
+            vec![0.1, 0.2],
+            vec![0.5, 0.5],
+            vec![0.8, 0.1],
+        ];
+        let mut state = LmState::start(&mut Shifted, &starts, &opts).unwrap();
+        state.restarts[0].stop = Some(Termination::SmallGain);
+        state.restarts[2].ss = f64::NAN;
+        assert!(state.step(&mut Shifted, &opts).unwrap());
+        let r = &state.restarts;
+        assert_eq!((r[0].x.as_slice(), r[0].iterations), (&[0.9, 0.9][..], 0));
+        assert_eq!(r[0].stop, Some(Termination::SmallGain));
+        assert_eq!((r[2].x.as_slice(), r[2].iterations), (&[0.5, 0.5][..], 0));
+        assert_eq!(r[2].stop, Some(Termination::NotFinite));
+        for (i, s) in r.iter().enumerate().filter(|(i, _)| i % 2 == 1) {
+            assert_eq!(s.iterations, 1, "{i}");
+            // λ = 1e-3 on JᵀJ = I: a step of 1/(1 + 1e-3) of the way to the optimum.
+            for (x, (x0, t)) in s.x.iter().zip(starts[i].iter().zip([0.3, 0.6])) {
+                let want = x0 + (t - x0) / (1.0 + 1e-3);
+                assert!((x - want).abs() < 1e-6, "{i}: {x} vs {want}");
+            }
+        }
+        assert_eq!(state.running(), 2);
+        // Nothing left that can move: no step, nothing evaluated.
+        for s in &mut state.restarts {
+            s.stop_for(Termination::MaxIterations);
+        }
+        assert!(!state.step(&mut Shifted, &opts).unwrap());
+    }
+}
