@@ -4,10 +4,15 @@
 //! bound of its range, and at `fa(lambert)`'s null (k_s = 0, itself on a bound) the lobe's
 //! α and η are not identified.
 //!
+//! The number of replicates is adaptive (stopped early where the verdict at the level is
+//! settled, grown where it cannot be decided): the tests run the bootstrap as `diagnose`
+//! does, at the level α = 0.01.
+//!
 //! The long test (`cargo test --release --test bootstrap -- --ignored`) runs enough null
 //! data sets to measure the rate at α = 0.01; the reduced one in CI checks P(p ≤ x) = x at
-//! x = 0.1 … 0.4 on 400 sets, with bounds from the binomial distribution, and shows on the
-//! same sets that the check rejects the uncalibrated nominal F test.
+//! x = 0.1 … 0.4 on 400 sets, with bounds from the binomial distribution, shows on the
+//! same sets that the check rejects the uncalibrated nominal F test, and that the
+//! rejections at the level α itself stay within what a calibrated test allows.
 
 mod common;
 
@@ -34,7 +39,8 @@ fn rows() -> Vec<[f64; 4]> {
 }
 
 /// Nominal and calibrated p-values of extending `null` to `ext` on `sets` data sets drawn
-/// from `null` with `params` (2 % relative noise, one channel).
+/// from `null` with `params` (2 % relative noise, one channel), and the replicates each
+/// bootstrap drew.
 fn p_values(
     null: &str,
     params: &str,
@@ -42,7 +48,7 @@ fn p_values(
     sets: u64,
     replicates: usize,
     seed0: u64,
-) -> Vec<(f64, f64)> {
+) -> Vec<(f64, f64, usize)> {
     let backend = CpuBackend::new();
     let rows = rows();
     let mut out = Vec::new();
@@ -55,6 +61,7 @@ fn p_values(
                 replicates,
                 restarts: 2,
                 seed: seed0 ^ (set * 7919),
+                ..Default::default()
             },
             ..Default::default()
         };
@@ -67,6 +74,7 @@ fn p_values(
         let (_, nominal) = f_test(current.chi2 - fit.chi2, dp, fit.chi2, fit.dof);
         let c = bootstrap_p(&current, &fit, &data, &backend, &opts).unwrap();
         assert!(c.p.is_finite() && (0.0..=1.0).contains(&c.p), "p = {}", c.p);
+        assert!(c.level == 0.01 && c.batches.last() == Some(&c.replicates));
         assert!(
             c.fitted * 10 >= c.replicates * 9,
             "{} of {} replicates fitted",
@@ -83,12 +91,12 @@ fn p_values(
                 c.describe()
             );
         }
-        out.push((nominal, c.p));
+        out.push((nominal, c.p, c.replicates));
     }
     out
 }
 
-fn rate(ps: &[(f64, f64)], alpha: f64) -> (f64, f64) {
+fn rate(ps: &[(f64, f64, usize)], alpha: f64) -> (f64, f64) {
     let n = ps.len() as f64;
     (
         ps.iter().filter(|p| p.0 < alpha).count() as f64 / n,
@@ -163,6 +171,27 @@ fn bootstrap_p_values_are_calibrated_on_null_data_reduced() {
     }
     let nominal: Vec<f64> = all.iter().map(|p| p.0).collect();
     let bootstrap: Vec<f64> = all.iter().map(|p| p.1).collect();
+    let drawn: Vec<usize> = all.iter().map(|p| p.2).collect();
+    eprintln!(
+        "replicates drawn: mean {:.1}, fewer than planned in {} of {} tests, more in {}",
+        drawn.iter().sum::<usize>() as f64 / drawn.len() as f64,
+        drawn.iter().filter(|&&d| d < 59).count(),
+        drawn.len(),
+        drawn.iter().filter(|&&d| d > 59).count()
+    );
+    // The test's own level: rejections at α = 0.01 within the calibrated test's binomial
+    // 99.9 % range (the adaptive B must not buy decisions with false positives).
+    let rejected = bootstrap.iter().filter(|&&p| p < 0.01).count();
+    let (_, most) = binomial_range(all.len(), 0.01);
+    eprintln!(
+        "bootstrap: {rejected} of {} p-values < 0.01 (calibrated: at most {most})",
+        all.len()
+    );
+    assert!(
+        rejected <= most,
+        "{rejected} of {} null tests rejected at α = 0.01, above the binomial 99.9 % bound {most}",
+        all.len()
+    );
     for (x, count, (lo, hi)) in level_counts(&bootstrap) {
         eprintln!(
             "bootstrap: {count} of {} p-values ≤ {x} (calibrated: {lo}–{hi})",

@@ -726,6 +726,7 @@ fn bootstrap_calibrates_irregular_nulls() {
             replicates: 59,
             restarts: 2,
             seed: 11,
+            ..Default::default()
         },
         ..Default::default()
     };

@@ -530,6 +530,7 @@ fn diagnose_json(
                 replicates: bootstrap,
                 restarts: bootstrap_restarts,
                 seed,
+                ..Default::default()
             },
             constraints,
             explore,

@@ -42,9 +42,17 @@ pub struct DiagnoseArgs {
     /// whose null is irregular (a new parameter's null value on a bound of its range, e.g.
     /// σ = 0 or k_s = 0, or new parameters the null does not identify, e.g. the lobe's α
     /// when k_s = 0), where the F test's reference distribution does not hold. Run only
-    /// where the verdict depends on it; 0 keeps the nominal F test everywhere.
+    /// where the verdict depends on it; 0 keeps the nominal F test everywhere. These are
+    /// the planned replicates: the test stops earlier once its verdict at the level is
+    /// settled (enough replicates reach the observed statistic), and draws more, up to
+    /// --bootstrap-max, where they cannot decide (none reaches it and 1/(B + 1) is above
+    /// the level).
     #[arg(long, default_value_t = 99)]
     pub bootstrap: usize,
+    /// The most bootstrap replicates drawn where the planned ones cannot decide (a test
+    /// still undecided there says so); at most --bootstrap keeps B fixed.
+    #[arg(long, default_value_t = 999)]
+    pub bootstrap_max: usize,
     /// Random restarts per bootstrap refit, besides the carried-over optima.
     #[arg(long, default_value_t = 2)]
     pub bootstrap_restarts: usize,
@@ -108,6 +116,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         backtrack: !a.no_backtrack,
         bootstrap: crate::inference::bootstrap::BootstrapOptions {
             replicates: a.bootstrap,
+            max_replicates: a.bootstrap_max,
             restarts: a.bootstrap_restarts,
             seed: a.seed,
         },

@@ -39,12 +39,28 @@
 //! on the measured data (found by the thorough fit: without it, a few restarts may miss a
 //! many-parameter extension's optimum on the measured data and lose the test's power),
 //! and from screened random starts.
+//!
+//! How many replicates: B is not fixed but drawn in batches, the test stopping as soon
+//! as its verdict at the level is settled:
+//!
+//! - early, once h replicates reach T (h = max(10, ⌈level·(B + 1)⌉), B the planned
+//!   replicates): the sequential p-value h/l of Besag & Clifford (1991), l the replicates
+//!   drawn up to the h-th that reaches T, is exact, and it cannot fall below the level
+//!   — a candidate that is far from significant is settled after about 2h replicates;
+//! - at the planned B, by the count or the tail, the usual way;
+//! - beyond B, where the planned B could not decide: no replicate reaches T and the p-value
+//!   is only the bound 1/(B + 1) (too few positive replicates for a tail, or a tail below
+//!   the level capped at the bound) with the bound above the level. Then more replicates are
+//!   drawn, doubling B, up to a stated maximum, until the count or the tail decides;
+//!   a test still undecided there says so and why. Growing only when none reaches T keeps
+//!   the test valid: it rejects only where the test at the final B, run from the start,
+//!   would have.
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::engine::Backend;
-use crate::inference::fit::{fit_many, FitOptions, Optimizer};
+use crate::inference::fit::{fit_many, FitOptions, ManyStats, Optimizer, PhaseSeconds};
 use crate::inference::mc::ReplicaSource;
 use crate::math::chi2_sf;
 use serde::Serialize;
@@ -55,12 +71,22 @@ use std::time::Instant;
 const ZERO: f64 = 1e-3;
 /// Positive replicates needed to fit the tail.
 const MIN_POSITIVE: usize = 10;
+/// Replicates reaching T that stop the test early (at least; module doc).
+const SEQUENTIAL_H: usize = 10;
+/// Replicates of the first batch: a candidate far from significance is settled there.
+const FIRST_BATCH: usize = 24;
+/// Replicates refitted in one lockstep call at most (bounds the memory of a batch).
+const CHUNK: usize = 128;
 
 /// How the bootstrap runs.
 #[derive(Clone, Debug)]
 pub struct BootstrapOptions {
-    /// Replicates B (0: no bootstrap).
+    /// Planned replicates B (0: no bootstrap): the test stops before them where the
+    /// verdict is settled early, and goes beyond them only where they cannot decide.
     pub replicates: usize,
+    /// The most replicates drawn where the planned B cannot decide (module doc); at most
+    /// `replicates` keeps B fixed.
+    pub max_replicates: usize,
     /// Random restarts per replicate fit, besides the carried-over optima.
     pub restarts: usize,
     pub seed: u64,
@@ -70,9 +96,31 @@ impl Default for BootstrapOptions {
     fn default() -> Self {
         BootstrapOptions {
             replicates: 99,
+            max_replicates: 999,
             restarts: 2,
             seed: 1,
         }
+    }
+}
+
+impl BootstrapOptions {
+    /// The cumulative replicate counts after each batch: 24, then doubling up to the
+    /// planned B, then doubling up to the maximum.
+    pub fn schedule(&self) -> Vec<usize> {
+        let planned = self.replicates;
+        let mut out = vec![];
+        let mut n = FIRST_BATCH.min(planned);
+        while n < planned {
+            out.push(n);
+            n = (2 * n + 1).min(planned);
+        }
+        out.push(planned);
+        let mut n = planned;
+        while n < self.max_replicates {
+            n = (2 * n + 1).min(self.max_replicates);
+            out.push(n);
+        }
+        out
     }
 }
 
@@ -82,6 +130,8 @@ impl Default for BootstrapOptions {
 pub enum PSource {
     /// (1 + #{T*_b ≥ T}) / (B + 1).
     Empirical,
+    /// h/l: stopped early once h replicates reached T (Besag & Clifford 1991).
+    Sequential,
     /// π · P(χ²_ν ≥ T/a) fitted to the replicates.
     Tail,
     /// Too few positive replicates to fit a tail: the empirical bound 1/(B + 1) (or more).
@@ -105,15 +155,24 @@ pub struct Calibrated {
     /// fitted).
     pub positive_share: f64,
     pub tail: Option<(f64, f64)>,
+    /// The level the test was run for (its stopping rules depend on it).
+    pub level: f64,
+    /// The replicates drawn after each batch (the last is `replicates`).
+    pub batches: Vec<usize>,
+    /// Why the test could not decide at the level within the most replicates allowed
+    /// (its p-value is then a bound above the level).
+    pub undecided: Option<String>,
     pub seconds: f64,
     /// Model-sample evaluations of the refits (null and extension).
     pub evaluations: u64,
+    /// Where the refits' time went (the extension's and every null refit's).
+    pub phases: PhaseSeconds,
 }
 
 impl Calibrated {
-    /// "bootstrap, 99 replicates, 3 reach T" / "bootstrap tail (π = 0.52, 1.3·χ²_2.1)".
+    /// "bootstrap: 3 of 99 replicates reach T = …" and the like, per source.
     pub fn describe(&self) -> String {
-        match (self.source, self.tail) {
+        let head = match (self.source, self.tail) {
             (PSource::Tail, Some((a, nu))) => format!(
                 "bootstrap: {} of {} replicates reach T = {:.4}; tail {:.2}·{:.3}·χ²_{:.2} fitted to them",
                 self.exceeding, self.fitted, self.statistic, self.positive_share, a, nu
@@ -122,10 +181,18 @@ impl Calibrated {
                 "bootstrap: {} of {} replicates reach T = {:.4}, too few positive to fit a tail (p is a bound)",
                 self.exceeding, self.fitted, self.statistic
             ),
+            (PSource::Sequential, _) => format!(
+                "bootstrap: {} of {} replicates reach T = {:.4}; stopped early, p = h/l cannot fall below the level",
+                self.exceeding, self.fitted, self.statistic
+            ),
             _ => format!(
                 "bootstrap: {} of {} replicates reach T = {:.4}",
                 self.exceeding, self.fitted, self.statistic
             ),
+        };
+        match &self.undecided {
+            Some(why) => format!("{head}; undecided: {why}"),
+            None => head,
         }
     }
 }
@@ -169,27 +236,150 @@ pub fn p_value(t: f64, reps: &[f64]) -> (f64, PSource, f64, Option<(f64, f64)>) 
     (tail, PSource::Tail, share, Some((a, nu)))
 }
 
+/// The count l of replicates up to and including the h-th with T*_b ≥ t (in drawing
+/// order), if h of them reach t.
+pub fn hth_exceedance(t: f64, reps: &[f64], h: usize) -> Option<usize> {
+    let mut seen = 0;
+    for (i, &r) in reps.iter().enumerate() {
+        if r >= t {
+            seen += 1;
+            if seen == h {
+                return Some(i + 1);
+            }
+        }
+    }
+    None
+}
+
+/// The replicates reaching T that stop a test at `level` planned with `planned`
+/// replicates early: enough that h/l ≥ level for every l ≤ planned + 1.
+pub fn sequential_h(level: f64, planned: usize) -> usize {
+    SEQUENTIAL_H.max((level * (planned + 1) as f64).ceil() as usize)
+}
+
 /// Replicate data sets drawn from a fitted model's values with the stated uncertainties.
 pub fn null_replicates(data: &Dataset, values: &[f64], count: usize, seed: u64) -> Vec<Dataset> {
+    let source = with_values(data, values);
+    (1..=count).map(|i| replicate(&source, seed, i)).collect()
+}
+
+fn with_values(data: &Dataset, values: &[f64]) -> Dataset {
     let mut fitted = data.clone();
     for (s, &v) in fitted.samples.iter_mut().zip(values) {
         s.value = v;
     }
-    ReplicaSource::new(&fitted, chi2(), 0.0, seed).draw(count)
+    fitted
+}
+
+/// Replicate `i` (from 1) drawn about `source`'s values: its own seed, so that the
+/// replicates are the same however the batches cut them.
+fn replicate(source: &Dataset, seed: u64, i: usize) -> Dataset {
+    let seed = seed ^ (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    ReplicaSource::new(source, chi2(), 0.0, seed)
+        .draw(1)
+        .pop()
+        .expect("one replicate drawn")
 }
 
 fn chi2() -> Loss {
     Loss::new(Metric::Chi2, Weights::Uniform)
 }
 
-/// The null model refitted to the measured data (index 0) and to each replicate: the
+/// The null model refitted to the measured data (index 0) and to replicates drawn from
+/// its fit (1, 2, …), grown on demand and shared by the candidates of a round: the
 /// optima (physical) and χ² (non-finite where a fit failed).
+#[derive(Clone)]
 pub struct NullRefits {
-    pub replicates: Vec<Dataset>,
+    model: Model,
+    measured: Dataset,
+    /// The null's fitted values, which the replicates scatter about.
+    source: Dataset,
+    start: Vec<f64>,
+    seed: u64,
     pub flat: Vec<Vec<f64>>,
     pub chi2: Vec<f64>,
     pub seconds: f64,
     pub evaluations: u64,
+    pub phases: PhaseSeconds,
+}
+
+impl NullRefits {
+    /// No refit yet: the null `model` fitted at `flat` with values `values` on `data`.
+    pub fn new(model: &Model, flat: &[f64], values: &[f64], data: &Dataset, seed: u64) -> Self {
+        NullRefits {
+            model: model.clone(),
+            measured: data.clone(),
+            source: with_values(data, values),
+            start: flat.to_vec(),
+            seed,
+            flat: vec![],
+            chi2: vec![],
+            seconds: 0.0,
+            evaluations: 0,
+            phases: PhaseSeconds::default(),
+        }
+    }
+
+    /// Replicates refitted so far (the measured data not counted).
+    pub fn replicates(&self) -> usize {
+        self.chi2.len().saturating_sub(1)
+    }
+
+    /// Data set `i`: the measured data (0) or replicate `i`.
+    pub fn dataset(&self, i: usize) -> Dataset {
+        if i == 0 {
+            self.measured.clone()
+        } else {
+            replicate(&self.source, self.seed, i)
+        }
+    }
+
+    /// Refit the null to the measured data and to replicates up to `count`, those not yet
+    /// refitted, in lockstep.
+    pub fn grow(
+        &mut self,
+        count: usize,
+        backend: &dyn Backend,
+        base: &FitOptions,
+        boot: &BootstrapOptions,
+    ) -> anyhow::Result<()> {
+        let from = self.chi2.len();
+        if from > count {
+            return Ok(());
+        }
+        let t0 = Instant::now();
+        let opts = FitOptions {
+            initial_points: vec![self.start.clone()],
+            problem_points: vec![],
+            ..replicate_options(base, boot)
+        };
+        for chunk in chunks(from, count) {
+            let datas: Vec<Dataset> = chunk.clone().map(|i| self.dataset(i)).collect();
+            let (optima, stats) = refit(&self.model, &datas, backend, &opts)?;
+            self.flat.extend(optima.iter().map(|o| o.flat.clone()));
+            self.chi2.extend(optima.iter().map(|o| o.loss));
+            self.evaluations += stats.evaluations;
+            add_phases(&mut self.phases, &stats.phases);
+        }
+        self.seconds += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
+
+/// Indices `from..=to` in lockstep calls of at most [`CHUNK`].
+fn chunks(from: usize, to: usize) -> Vec<std::ops::RangeInclusive<usize>> {
+    (from..=to)
+        .step_by(CHUNK)
+        .map(|a| a..=(a + CHUNK - 1).min(to))
+        .collect()
+}
+
+fn add_phases(to: &mut PhaseSeconds, more: &PhaseSeconds) {
+    to.setup += more.setup;
+    to.screening += more.screening;
+    to.search += more.search;
+    to.polish += more.polish;
+    to.conclusions += more.conclusions;
 }
 
 /// Refits of replicates: Levenberg–Marquardt on χ², stopped once a step gains less than
@@ -216,18 +406,15 @@ fn refit(
     datas: &[Dataset],
     backend: &dyn Backend,
     opts: &FitOptions,
-) -> anyhow::Result<(
-    Vec<crate::inference::fit::Optimum>,
-    crate::inference::fit::ManyStats,
-)> {
+) -> anyhow::Result<(Vec<crate::inference::fit::Optimum>, ManyStats)> {
     let refs: Vec<&Dataset> = datas.iter().collect();
     let losses = vec![chi2(); refs.len()];
     let (optima, _, stats) = fit_many(model, &refs, &losses, backend, opts, &mut |_| {})?;
     Ok((optima, stats))
 }
 
-/// Draw the replicates from the null fit (`null_flat`, its model values `null_values`) and
-/// refit the null to each, all in lockstep.
+/// The null refitted to the measured data and to the planned replicates (a fixed-B
+/// bootstrap's first half; [`calibrate`] grows it further where it needs to).
 pub fn refit_null(
     null: &Model,
     null_flat: &[f64],
@@ -241,480 +428,158 @@ pub fn refit_null(
         boot.replicates >= 1,
         "the bootstrap needs at least 1 replicate"
     );
-    let t0 = Instant::now();
-    let mut replicates = vec![data.clone()];
-    replicates.extend(null_replicates(
-        data,
-        null_values,
-        boot.replicates,
-        boot.seed,
-    ));
-    let opts = FitOptions {
-        initial_points: vec![null_flat.to_vec()],
-        problem_points: vec![],
-        ..replicate_options(base, boot)
-    };
-    let (optima, stats) = refit(null, &replicates, backend, &opts)?;
-    Ok(NullRefits {
-        replicates,
-        flat: optima.iter().map(|o| o.flat.clone()).collect(),
-        chi2: optima.iter().map(|o| o.loss).collect(),
-        seconds: t0.elapsed().as_secs_f64(),
-        evaluations: stats.evaluations,
-    })
+    let mut nulls = NullRefits::new(null, null_flat, null_values, data, boot.seed);
+    nulls.grow(boot.replicates, backend, base, boot)?;
+    Ok(nulls)
 }
 
-/// The calibrated p-value of extending the null of `nulls` to `ext` (`dof_ext` = K − P of
-/// the extension): `ext` refitted to the measured data and to each replicate, T of the
-/// measured data against the replicates' (module doc). `embed` carries a null optimum
-/// into the extension's parameters; `ext_flat`, the extension's optimum on the measured
-/// data, is one more start of every refit.
+/// What a calibration has gathered so far: the observed T and the replicates' T*_b in
+/// drawing order (those whose two fits ended finite).
+struct Gathered {
+    observed: f64,
+    reps: Vec<f64>,
+    drawn: usize,
+}
+
+/// A settled test: p, its source, the share π of positive replicates, the fitted tail
+/// (a, ν), and why it could not decide, if it could not.
+type Settled = (f64, PSource, f64, Option<(f64, f64)>, Option<String>);
+
+/// The verdict of the replicates gathered so far, or None to draw more: the module doc's
+/// rules (`last`: no more may be drawn).
+fn settle(
+    g: &Gathered,
+    level: f64,
+    boot: &BootstrapOptions,
+    last: bool,
+) -> Option<Settled> {
+    let t = g.observed;
+    let h = sequential_h(level, boot.replicates);
+    // Besag & Clifford's rule within the planned replicates (beyond them the count
+    // decides at the first replicate that reaches T).
+    let within_plan = g.drawn <= boot.replicates;
+    if let Some(l) = hth_exceedance(t, &g.reps, h).filter(|_| within_plan) {
+        let share = g.reps.iter().filter(|&&r| r > ZERO).count() as f64 / g.reps.len() as f64;
+        return Some((h as f64 / l as f64, PSource::Sequential, share, None, None));
+    }
+    if g.drawn < boot.replicates && !last {
+        return None;
+    }
+    let (p, source, share, tail) = p_value(t, &g.reps);
+    // Where none reaches T, a fitted tail decides either way (p = min(tail, bound)); only
+    // the bare bound above the level leaves the verdict open.
+    let decided = p < level || source != PSource::EmpiricalBound;
+    if decided {
+        return Some((p, source, share, tail, None));
+    }
+    if !last {
+        return None;
+    }
+    let positive = g.reps.iter().filter(|&&r| r > ZERO).count();
+    let why = format!(
+        "no replicate of {} reaches T and only {positive} are positive (a tail needs {MIN_POSITIVE}), so p is only bounded by 1/(B + 1) = {p:.1e}, not below the level {level:.1e}; more than {} replicates could decide (--bootstrap-max)",
+        g.reps.len(),
+        (1.0 / level).ceil() as usize
+    );
+    Some((p, source, share, tail, Some(why)))
+}
+
+/// The calibrated p-value at `level` of extending the null of `nulls` to `ext` (`dof_ext`
+/// = K − P of the extension): `ext` refitted to the measured data and to replicates in
+/// batches until the verdict at the level is settled (module doc), T of the measured
+/// data against the replicates'. `embed` carries a null optimum into the extension's
+/// parameters; `ext_flat`, the extension's optimum on the measured data, is one more start
+/// of every refit. The null refits grow as the batches need them.
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     ext: &Model,
     ext_flat: &[f64],
     embed: &dyn Fn(&[f64]) -> Vec<f64>,
-    nulls: &NullRefits,
+    nulls: &mut NullRefits,
     dof_ext: usize,
+    level: f64,
     backend: &dyn Backend,
     base: &FitOptions,
     boot: &BootstrapOptions,
 ) -> anyhow::Result<Calibrated> {
+    anyhow::ensure!(
+        boot.replicates >= 1,
+        "the bootstrap needs at least 1 replicate"
+    );
     let t0 = Instant::now();
-    let opts = FitOptions {
-        initial_points: vec![ext_flat.to_vec()],
-        problem_points: nulls.flat.iter().map(|f| embed(f)).collect(),
-        ..replicate_options(base, boot)
+    let null_seconds = nulls.seconds;
+    let opts = replicate_options(base, boot);
+    let schedule = boot.schedule();
+    let mut g = Gathered {
+        observed: f64::NAN,
+        reps: vec![],
+        drawn: 0,
     };
-    let (optima, stats) = refit(ext, &nulls.replicates, backend, &opts)?;
-    anyhow::ensure!(
-        optima[0].loss.is_finite() && nulls.chi2[0].is_finite(),
-        "refitting {} or its null to the measured data ended non-finite",
-        ext.spec
-    );
-    let observed = statistic(nulls.chi2[0], optima[0].loss, dof_ext);
-    let reps: Vec<f64> = optima[1..]
-        .iter()
-        .zip(&nulls.chi2[1..])
-        .filter(|(o, c0)| o.loss.is_finite() && c0.is_finite())
-        .map(|(o, &c0)| statistic(c0, o.loss, dof_ext))
-        .collect();
-    anyhow::ensure!(
-        !reps.is_empty(),
-        "no bootstrap replicate of {} could be fitted",
-        ext.spec
-    );
-    let (p, source, positive_share, tail) = p_value(observed, &reps);
-    Ok(Calibrated {
-        p,
-        source,
-        statistic: observed,
-        replicates: nulls.replicates.len() - 1,
-        fitted: reps.len(),
-        exceeding: reps.iter().filter(|&&r| r >= observed).count(),
-        positive_share,
-        tail,
-        seconds: t0.elapsed().as_secs_f64() + nulls.seconds,
-        evaluations: stats.evaluations + nulls.evaluations,
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
-    use rand_distr::{Distribution, Normal};
-
-    /// Draws of ½χ²₀ + ½χ²₁ (the statistic of one parameter on a bound): beyond every
-    /// replicate the fitted tail must give the exact ½·P(χ²₁ ≥ t), within the sampling
-    /// error of 2,000 replicates' moments; inside their range the count gives it.
-    #[test]
-    fn tail_of_a_boundary_mixture() {
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let n = Normal::new(0.0, 1.0).unwrap();
-        let reps: Vec<f64> = (0..2000)
-            .map(|_| {
-                let z: f64 = n.sample(&mut rng);
-                z.max(0.0).powi(2)
-            })
-            .collect();
-        let max = reps.iter().copied().fold(0.0, f64::max);
-        for t in [max + 0.5, max + 5.0] {
-            let (p, source, share, tail) = p_value(t, &reps);
-            let exact = 0.5 * chi2_sf(t, 1.0);
-            assert_eq!(source, PSource::Tail, "t = {t}");
-            assert!((share - 0.5).abs() < 0.04, "π = {share}");
-            let (a, nu) = tail.unwrap();
-            assert!(
-                (a - 1.0).abs() < 0.2 && (nu - 1.0).abs() < 0.2,
-                "{a}·χ²_{nu}"
-            );
-            assert!(
-                (p / exact).ln().abs() < 0.7,
-                "t = {t}: p = {p:.3e}, exact {exact:.3e}"
-            );
-        }
-        // Inside the replicates' range the empirical count is used.
-        let (p, source, ..) = p_value(1.0, &reps);
-        assert!(p_value(max, &reps).1 == PSource::Empirical);
-        let exact = 0.5 * chi2_sf(1.0, 1.0);
-        assert_eq!(source, PSource::Empirical);
-        assert!((p - exact).abs() < 0.03, "{p} vs {exact}");
-    }
-
-    /// T = Δχ²/(χ²₁/ν₁), a worse extension counting as 0, and so does anything up to
-    /// [`ZERO`]; ν₁ = 0 counts as 1.
-    #[test]
-    fn the_statistic_is_delta_chi2_over_the_extensions_reduced_chi2() {
-        assert_eq!(statistic(120.0, 100.0, 50), 10.0);
-        assert_eq!(statistic(100.0, 120.0, 50), 0.0);
-        assert_eq!(statistic(100.0 + 5e-4, 100.0, 100), 0.0);
-        // Exactly 1e-3 (1/1000, correctly rounded) is "at or below".
-        assert_eq!(statistic(1001.0, 1000.0, 1), 0.0);
-        assert!((statistic(100.0 + 2e-3, 100.0, 100) - 2e-3).abs() < 1e-12);
-        assert_eq!(statistic(10.0, 5.0, 0), 1.0);
-    }
-
-    /// Each branch of the p-value against counts and tails worked out by hand.
-    #[test]
-    fn p_values_by_hand() {
-        // B = 10, three replicates at or above T = 3 (3.0 itself counts): (1 + 3)/11;
-        // six of ten positive.
-        let reps = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 0.0, 0.0, 0.0];
-        let (p, source, share, tail) = p_value(3.0, &reps);
-        assert_eq!(
-            (p, source, share, tail),
-            (4.0 / 11.0, PSource::Empirical, 0.6, None)
-        );
-        // None reaches T and only 9 are positive: the bound 1/(B + 1).
-        let mut reps = vec![0.5; 9];
-        reps.push(0.0);
-        let (p, source, share, tail) = p_value(1.0, &reps);
-        assert_eq!(
-            (p, source, share, tail),
-            (1.0 / 11.0, PSource::EmpiricalBound, 0.9, None)
-        );
-        // Positive replicates all equal: no variance to fit a tail to.
-        let (p, source, ..) = p_value(5.0, &[1.0; 12]);
-        assert_eq!((p, source), (1.0 / 13.0, PSource::EmpiricalBound));
-        // Ten positive replicates 2 ± d (mean 2, variance 10d²/9 = 2) and ten at 0:
-        // a = var/(2·mean) = 1/2, ν = 2·mean²/var = 4, π = 1/2, and
-        // P(χ²₄ ≥ x) = e^(−x/2)(1 + x/2): p = π·P(χ²₄ ≥ 2T) = ½e^(−T)(1 + T).
-        let d = 1.8f64.sqrt();
-        let mut reps: Vec<f64> = (0..10)
-            .map(|i| if i % 2 == 0 { 2.0 + d } else { 2.0 - d })
-            .collect();
-        reps.extend([0.0; 10]);
-        let (p, source, share, tail) = p_value(20.0, &reps);
-        let (a, nu) = tail.unwrap();
-        assert_eq!((source, share), (PSource::Tail, 0.5));
-        assert!(
-            (a - 0.5).abs() < 1e-12 && (nu - 4.0).abs() < 1e-12,
-            "{a} {nu}"
-        );
-        let want = 0.5 * (-20.0f64).exp() * 21.0;
-        assert!((p / want - 1.0).abs() < 1e-9, "{p} vs {want}");
-        // Just above every replicate the tail (½e^(−3.4)·4.4 = 0.073) is capped at 1/21.
-        let (p, source, ..) = p_value(3.4, &reps);
-        assert_eq!((p, source), (1.0 / 21.0, PSource::Tail));
-    }
-
-    /// A replicate statistic of exactly [`ZERO`] is not positive.
-    #[test]
-    fn a_replicate_at_zero_is_not_positive() {
-        let (_, _, share, _) = p_value(1.0, &[1e-3, 0.5, 2.0e-3, 0.0]);
-        assert_eq!(share, 0.5);
-    }
-
-    /// The replicate fits: LM stopped at 1e-7 of χ² within 100 iterations, at least one
-    /// restart, a seed of their own; everything else as the base options.
-    #[test]
-    fn replicate_fits_use_lm_with_a_looser_tolerance() {
-        let base = FitOptions {
-            optimizer: Optimizer::Compass,
-            restarts: 9,
-            screen: 5,
-            seed: 1,
-            ..FitOptions::default()
-        };
-        for restarts in [0, 3] {
-            let boot = BootstrapOptions {
-                replicates: 9,
-                restarts,
-                seed: 1,
+    let (mut evaluations, mut phases) = (0, PhaseSeconds::default());
+    let mut batches = vec![];
+    for (k, &upto) in schedule.iter().enumerate() {
+        nulls.grow(upto, backend, base, boot)?;
+        let from = if k == 0 { 0 } else { g.drawn + 1 };
+        for chunk in chunks(from, upto) {
+            let datas: Vec<Dataset> = chunk.clone().map(|i| nulls.dataset(i)).collect();
+            let opts = FitOptions {
+                initial_points: vec![ext_flat.to_vec()],
+                problem_points: chunk.clone().map(|i| embed(&nulls.flat[i])).collect(),
+                ..opts.clone()
             };
-            let o = replicate_options(&base, &boot);
-            assert_eq!(o.optimizer, Optimizer::Lm);
-            assert_eq!(o.restarts, restarts.max(1));
-            assert_eq!((o.lm.ftol, o.lm.max_iterations), (1e-7, 100));
-            assert_eq!((o.screen, o.lm.xtol), (5, base.lm.xtol));
-            assert_ne!(o.seed, boot.seed);
-        }
-    }
-
-    #[test]
-    fn descriptions_name_the_source_of_the_p_value() {
-        let mut c = Calibrated {
-            p: 0.05,
-            source: PSource::Empirical,
-            statistic: 3.25,
-            replicates: 99,
-            fitted: 98,
-            exceeding: 4,
-            positive_share: 0.5,
-            tail: None,
-            seconds: 1.0,
-            evaluations: 10,
-        };
-        assert_eq!(
-            c.describe(),
-            "bootstrap: 4 of 98 replicates reach T = 3.2500"
-        );
-        c.source = PSource::EmpiricalBound;
-        c.exceeding = 0;
-        assert!(c
-            .describe()
-            .ends_with("too few positive to fit a tail (p is a bound)"));
-        c.source = PSource::Tail;
-        c.tail = Some((1.25, 2.5));
-        assert!(
-            c.describe()
-                .ends_with("tail 0.50·1.250·χ²_2.50 fitted to them"),
-            "{}",
-            c.describe()
-        );
-    }
-
-    /// Lambert data (ρ = 0.46, 2 % noise) and its Oren–Nayar extension, whose null σ = 0
-    /// is irregular: the null refits start with the measured data, the replicates scatter
-    /// about the null's fitted values by their uncertainties, and the calibrated p-value
-    /// agrees with its own counts.
-    #[test]
-    fn a_calibration_counts_its_replicates_and_agrees_with_its_p_value() {
-        use crate::data::{Kind, RawRow, ReadOptions};
-        use crate::engine::cpu::CpuBackend;
-        use crate::workflows::diagnose::{embed, fit_model, DiagnoseOptions};
-        let f = 0.46 / std::f64::consts::PI;
-        let mut rows = Vec::new();
-        for ti in [10.0, 35.0, 60.0] {
-            for k in 0..=22 {
-                let to = -77.0 + 7.0 * k as f64;
-                if (to - ti).abs() > 0.5 {
-                    let i = rows.len();
-                    let wiggle = ((i * 7919) % 13) as f64 / 6.0 - 1.0;
-                    let row = RawRow {
-                        theta_i: ti,
-                        phi_i: 20.0,
-                        theta_o: to,
-                        phi_o: 20.0,
-                        wavelength_nm: 550.0,
-                        value: f * (1.0 + 0.02 * wiggle),
-                        uncertainty: 0.02 * f,
-                    };
-                    rows.push((i + 1, row));
+            let (optima, stats) = refit(ext, &datas, backend, &opts)?;
+            evaluations += stats.evaluations;
+            add_phases(&mut phases, &stats.phases);
+            for (i, o) in chunk.zip(&optima) {
+                let c0 = nulls.chi2[i];
+                if i == 0 {
+                    anyhow::ensure!(
+                        o.loss.is_finite() && c0.is_finite(),
+                        "refitting {} or its null to the measured data ended non-finite",
+                        ext.spec
+                    );
+                    g.observed = statistic(c0, o.loss, dof_ext);
+                } else if o.loss.is_finite() && c0.is_finite() {
+                    g.reps.push(statistic(c0, o.loss, dof_ext));
                 }
             }
         }
-        let data =
-            Dataset::from_rows(Kind::Brdf, "b", &rows, "b.csv", &ReadOptions::default()).unwrap();
-        let backend = CpuBackend::new();
-        let opts = DiagnoseOptions {
-            restarts: 4,
-            seed: 1,
-            ..Default::default()
-        };
-        let null = Model::for_data("lambert", &data).unwrap();
-        let ext = Model::for_data("on", &data).unwrap();
-        let current = fit_model(&null, &data, &backend, &opts, &[]).unwrap();
-        let start = embed(&null, &current.flat, &ext);
-        let fit = fit_model(&ext, &data, &backend, &opts, &[start]).unwrap();
-        let base = FitOptions {
-            optimizer: Optimizer::Lm,
-            restarts: 2,
-            screen: 1,
-            ..FitOptions::default()
-        };
-        let boot = BootstrapOptions {
-            replicates: 19,
-            restarts: 1,
-            seed: 3,
-        };
-        let nulls = refit_null(
-            &null,
-            &current.flat,
-            &current.values,
-            &data,
-            &backend,
-            &base,
-            &boot,
-        )
-        .unwrap();
-        assert_eq!(
-            (nulls.replicates.len(), nulls.flat.len(), nulls.chi2.len()),
-            (20, 20, 20)
-        );
-        for (a, b) in nulls.replicates[0].samples.iter().zip(&data.samples) {
-            assert_eq!(a.value, b.value);
+        g.drawn = upto;
+        batches.push(upto);
+        let last = k + 1 == schedule.len();
+        if g.reps.is_empty() {
+            anyhow::ensure!(
+                !last,
+                "no bootstrap replicate of {} could be fitted",
+                ext.spec
+            );
+            continue;
         }
-        let z: Vec<f64> = nulls.replicates[1..]
-            .iter()
-            .flat_map(|r| {
-                r.samples
-                    .iter()
-                    .zip(&current.values)
-                    .map(|(s, v)| (s.value - v) / s.uncertainty)
-            })
-            .collect();
-        let n = z.len() as f64;
-        let mean = z.iter().sum::<f64>() / n;
-        let sd = (z.iter().map(|z| (z - mean).powi(2)).sum::<f64>() / n).sqrt();
-        assert!(
-            z.len() == 19 * data.len() && mean.abs() < 0.15 && (sd - 1.0).abs() < 0.1,
-            "{mean} {sd}"
-        );
-        assert!(
-            (nulls.chi2[0] / current.chi2 - 1.0).abs() < 1e-6,
-            "{} {}",
-            nulls.chi2[0],
-            current.chi2
-        );
-
-        let c = calibrate(
-            &ext,
-            &fit.flat,
-            &|g| embed(&null, g, &ext),
-            &nulls,
-            fit.dof,
-            &backend,
-            &base,
-            &boot,
-        )
-        .unwrap();
-        assert_eq!(c.replicates, 19);
-        assert!(
-            c.fitted >= 17 && c.fitted <= 19 && c.exceeding <= c.fitted,
-            "{c:?}"
-        );
-        let t = statistic(current.chi2, fit.chi2, fit.dof);
-        assert!(
-            (c.statistic - t).abs() < 0.01 + 1e-3 * t,
-            "T {} vs {t}",
-            c.statistic
-        );
-        let bound = 1.0 / (c.fitted + 1) as f64;
-        match c.source {
-            PSource::Empirical => {
-                assert_eq!(
-                    c.p,
-                    (1 + c.exceeding) as f64 / (c.fitted + 1) as f64,
-                    "{c:?}"
-                )
-            }
-            PSource::EmpiricalBound => assert!(c.exceeding == 0 && c.p == bound, "{c:?}"),
-            PSource::Tail => assert!(c.exceeding == 0 && c.p <= bound, "{c:?}"),
-        }
-        assert!(
-            c.evaluations > nulls.evaluations && c.evaluations < 100 * nulls.evaluations,
-            "{c:?}"
-        );
-        assert!(c.seconds >= nulls.seconds);
-        // The refits are deterministic: the same calibration against null refits that
-        // report 1000 more evaluations reports 1000 more; against a non-finite null χ²
-        // of the measured data it is an error.
-        let again = |chi2_0: f64, extra: u64| NullRefits {
-            replicates: nulls.replicates.clone(),
-            flat: nulls.flat.clone(),
-            chi2: [&[chi2_0][..], &nulls.chi2[1..]].concat(),
-            seconds: nulls.seconds,
-            evaluations: nulls.evaluations + extra,
-        };
-        let embed_null = |g: &[f64]| embed(&null, g, &ext);
-        let more = again(nulls.chi2[0], 1000);
-        let c2 = calibrate(
-            &ext,
-            &fit.flat,
-            &embed_null,
-            &more,
-            fit.dof,
-            &backend,
-            &base,
-            &boot,
-        )
-        .unwrap();
-        assert_eq!(c2.evaluations, c.evaluations + 1000);
-        assert_eq!(
-            (c2.p, c2.statistic, c2.exceeding),
-            (c.p, c.statistic, c.exceeding)
-        );
-        // A replicate whose null refit is not finite is left out of the counts.
-        let mut one_failed = again(nulls.chi2[0], 0);
-        one_failed.chi2[5] = f64::NAN;
-        let c3 = calibrate(
-            &ext,
-            &fit.flat,
-            &embed_null,
-            &one_failed,
-            fit.dof,
-            &backend,
-            &base,
-            &boot,
-        )
-        .unwrap();
-        assert_eq!(c3.fitted, c.fitted - 1);
-        let nan = again(f64::NAN, 0);
-        assert!(calibrate(
-            &ext,
-            &fit.flat,
-            &embed_null,
-            &nan,
-            fit.dof,
-            &backend,
-            &base,
-            &boot
-        )
-        .is_err());
-    }
-
-    /// Replicates drawn from a model's values, not the data's: y* = y′ + u z.
-    #[test]
-    fn null_replicates_scatter_about_the_models_values() {
-        use crate::data::{Kind, RawRow, ReadOptions};
-        let rows: Vec<(usize, RawRow)> = (0..3)
-            .map(|i| {
-                let row = RawRow {
-                    theta_i: 10.0 * i as f64,
-                    phi_i: 0.0,
-                    theta_o: 30.0,
-                    phi_o: 180.0,
-                    wavelength_nm: 550.0,
-                    value: 1.0,
-                    uncertainty: 1e-6,
-                };
-                (i + 1, row)
-            })
-            .collect();
-        let data =
-            Dataset::from_rows(Kind::Brdf, "n", &rows, "n.csv", &ReadOptions::default()).unwrap();
-        let reps = null_replicates(&data, &[2.0, 3.0, 4.0], 5, 1);
-        assert_eq!(reps.len(), 5);
-        for r in &reps {
-            for (s, v) in r.samples.iter().zip([2.0, 3.0, 4.0]) {
-                assert!((s.value - v).abs() < 1e-4, "{} vs {v}", s.value);
-            }
+        if let Some((p, source, positive_share, tail, undecided)) = settle(&g, level, boot, last) {
+            add_phases(&mut phases, &nulls.phases);
+            return Ok(Calibrated {
+                p,
+                source,
+                statistic: g.observed,
+                replicates: g.drawn,
+                fitted: g.reps.len(),
+                exceeding: g.reps.iter().filter(|&&r| r >= g.observed).count(),
+                positive_share,
+                tail,
+                level,
+                batches,
+                undecided,
+                // The extension's refits and all the null refits it rests on (shared
+                // with the round's other candidates).
+                seconds: t0.elapsed().as_secs_f64() + null_seconds,
+                evaluations: evaluations + nulls.evaluations,
+                phases,
+            });
         }
     }
-
-    /// Without positive replicates no tail can be fitted: the p-value is the empirical
-    /// bound 1/(B + 1), never 0.
-    #[test]
-    fn all_zero_replicates_give_the_empirical_bound() {
-        let reps = vec![0.0; 99];
-        let (p, source, share, tail) = p_value(5.0, &reps);
-        assert_eq!(source, PSource::EmpiricalBound);
-        assert_eq!(p, 0.01);
-        assert_eq!(share, 0.0);
-        assert!(tail.is_none());
-        assert_eq!(p_value(0.0, &reps).0, 1.0);
-    }
+    anyhow::bail!("the bootstrap of {} drew no batch", ext.spec)
 }
+
+#[cfg(test)]
+#[path = "bootstrap_tests.rs"]
+mod tests;

@@ -226,8 +226,8 @@ pub(super) fn evidence_starts(
 }
 
 /// The bootstrap-calibrated p-value of extending the fit `current` to the fit `ext` on
-/// `data` (both fitted by [`fit_model`] with `opts`), whether or not its null is irregular:
-/// what [`calibrate_round`] does for one candidate.
+/// `data` (both fitted by [`fit_model`] with `opts`), at the level `opts.alpha`, whether or
+/// not its null is irregular: what [`calibrate_round`] does for one candidate.
 pub fn bootstrap_p(
     current: &FitResult,
     ext: &FitResult,
@@ -236,34 +236,36 @@ pub fn bootstrap_p(
     opts: &DiagnoseOptions,
 ) -> Result<bootstrap::Calibrated> {
     let boot = round_bootstrap(opts);
-    let nulls = refit_current(current, data, backend, opts, &boot)?;
-    calibrate_one(current, ext, &nulls, backend, opts, &boot)
+    anyhow::ensure!(
+        boot.replicates >= 1,
+        "the bootstrap needs at least 1 replicate"
+    );
+    let mut nulls = null_refits(current, data, &boot);
+    calibrate_one(current, ext, &mut nulls, opts.alpha, backend, opts, &boot)
 }
 
-/// The current model refitted to the measured data and the replicates drawn from its fit.
-fn refit_current(
+/// The current model's refits to the measured data and to replicates drawn from its fit
+/// (none made yet: the calibrations grow them as they need).
+fn null_refits(
     current: &FitResult,
     data: &Dataset,
-    backend: &dyn Backend,
-    opts: &DiagnoseOptions,
     boot: &BootstrapOptions,
-) -> Result<bootstrap::NullRefits> {
-    bootstrap::refit_null(
+) -> bootstrap::NullRefits {
+    bootstrap::NullRefits::new(
         &current.model,
         &current.flat,
         &current.values,
         data,
-        backend,
-        &fit_options(opts),
-        boot,
+        boot.seed,
     )
 }
 
-/// One candidate's calibrated p-value against the current model's refits.
+/// One candidate's calibrated p-value at `level` against the current model's refits.
 fn calibrate_one(
     current: &FitResult,
     ext: &FitResult,
-    nulls: &bootstrap::NullRefits,
+    nulls: &mut bootstrap::NullRefits,
+    level: f64,
     backend: &dyn Backend,
     opts: &DiagnoseOptions,
     boot: &BootstrapOptions,
@@ -274,6 +276,7 @@ fn calibrate_one(
         &|null_flat| embed(&current.model, null_flat, &ext.model),
         nulls,
         ext.dof,
+        level,
         backend,
         &fit_options(opts),
         boot,
@@ -290,8 +293,8 @@ fn round_bootstrap(opts: &DiagnoseOptions) -> BootstrapOptions {
 
 /// Calibrate by the parametric bootstrap the p-value of every candidate whose null is
 /// irregular and whose verdict depends on it ([`Scored::needs_calibration`]); the others
-/// keep the nominal F test and say why. The null is refitted to the replicates once per
-/// round, shared by the candidates.
+/// keep the nominal F test and say why. The null's refits to the replicates are shared by
+/// the round's candidates, grown as far as the most demanding one needs.
 pub(super) fn calibrate_round(
     scored: &mut [Scored],
     data: &Dataset,
@@ -321,24 +324,25 @@ pub(super) fn calibrate_round(
         let fit = s.fit.as_ref().expect("needs_calibration implies a fit");
         if nulls.is_none() {
             log(format!(
-                "    bootstrap: refitting {} to {} replicates drawn from its fit",
-                current.model.spec, boot.replicates
+                "    bootstrap: refitting {} to replicates drawn from its fit (planned {}, at most {})",
+                current.model.spec,
+                boot.replicates,
+                boot.max_replicates.max(boot.replicates)
             ));
-            nulls = Some(refit_current(current, data, backend, opts, &boot));
         }
-        let result = match nulls.as_ref().expect("set above") {
-            Ok(n) => calibrate_one(current, fit, n, backend, opts, &boot),
-            Err(e) => Err(anyhow::anyhow!("{e:#}")),
-        };
-        match result {
+        let n = nulls.get_or_insert_with(|| null_refits(current, data, &boot));
+        match calibrate_one(current, fit, n, s.level, backend, opts, &boot) {
             Ok(c) => {
                 log(format!(
-                    "    bootstrap of {}: p = {:.2e} ({}; {:.1} s)",
+                    "    bootstrap of {}: p = {:.2e} ({}; {} replicates in batches {:?}; {:.1} s)",
                     s.candidate.spec,
                     c.p,
                     c.describe(),
+                    c.replicates,
+                    c.batches,
                     c.seconds
                 ));
+                trace_phases(&s.candidate.spec, &c);
                 s.calibrated(c);
             }
             Err(e) => {
@@ -349,6 +353,16 @@ pub(super) fn calibrate_round(
                 s.p_test = PTest::FNominal(format!("the bootstrap failed: {e:#}"));
             }
         }
+    }
+}
+
+/// With `BSDFIT_TRACE` set: where a calibration's time went, on stderr.
+fn trace_phases(spec: &str, c: &bootstrap::Calibrated) {
+    if std::env::var_os("BSDFIT_TRACE").is_some() {
+        eprintln!(
+            "trace: bootstrap of {spec}: {:.1} s, {} evaluations, {:?}",
+            c.seconds, c.evaluations, c.phases
+        );
     }
 }
 
