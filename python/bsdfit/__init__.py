@@ -693,7 +693,7 @@ def diagnose(
     alpha: float = 0.01,
     max_steps: int = 4,
     bootstrap: int = 99,
-    bootstrap_restarts: int = 2,
+    bootstrap_restarts: int = 1,
     backend: str = "auto",
     fix: Any = None,
     bounds: Any = None,

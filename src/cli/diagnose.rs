@@ -53,8 +53,8 @@ pub struct DiagnoseArgs {
     /// still undecided there says so); at most --bootstrap keeps B fixed.
     #[arg(long, default_value_t = 999)]
     pub bootstrap_max: usize,
-    /// Random restarts per bootstrap refit, besides the carried-over optima.
-    #[arg(long, default_value_t = 2)]
+    /// Random restarts per bootstrap refit (at least 1), besides the carried-over optima.
+    #[arg(long, default_value_t = 1)]
     pub bootstrap_restarts: usize,
     #[command(flatten)]
     pub backend: BackendArgs,

@@ -87,7 +87,9 @@ pub struct BootstrapOptions {
     /// The most replicates drawn where the planned B cannot decide (module doc); at most
     /// `replicates` keeps B fixed.
     pub max_replicates: usize,
-    /// Random restarts per replicate fit, besides the carried-over optima.
+    /// Random restarts per replicate fit (at least 1), besides the carried-over optima.
+    /// One: on the calibration test's null sets a second moved no p-value by more than
+    /// sampling noise, and the carried-over optima find the replicates' optima.
     pub restarts: usize,
     pub seed: u64,
 }
@@ -97,7 +99,7 @@ impl Default for BootstrapOptions {
         BootstrapOptions {
             replicates: 99,
             max_replicates: 999,
-            restarts: 2,
+            restarts: 1,
             seed: 1,
         }
     }
