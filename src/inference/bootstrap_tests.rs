@@ -462,16 +462,43 @@ fn when_the_test_stops() {
     reps[150..160].fill(10.0);
     let (p, source, ..) = settle(&gathered(9.0, reps), 0.002, &boot, false).unwrap();
     assert_eq!((p, source), (11.0 / 200.0, PSource::Empirical));
-    // Twenty positive replicates (0.5 … 19.5) and none at T: the tail decides either
-    // way, with no more replicates drawn.
+    // Twenty positive replicates (0.5 … 19.5) and none at T: a tail far from the level
+    // decides either way with no more replicates drawn; one within a factor of ten of it
+    // does not, and at the last batch says why.
     let mut reps = vec![0.0; 99];
     for (i, r) in reps[..20].iter_mut().enumerate() {
         *r = 0.5 + i as f64;
     }
-    for t in [20.0, 200.0] {
-        let (p, source, _, _, why) =
-            settle(&gathered(t, reps.clone()), 0.002, &boot, false).unwrap();
-        assert_eq!((source, why), (PSource::Tail, None), "T = {t}");
-        assert_eq!(p < 0.002, t > 100.0, "T = {t}: p = {p}");
+    let tail_p = |t: f64| {
+        let (_, _, share, tail) = p_value(t, &reps);
+        let (a, nu) = tail.unwrap();
+        share * chi2_sf(t / a, nu)
+    };
+    let (mut near, mut far) = (0, 0);
+    for k in 0..=90 {
+        let t = 20.0 + 2.0 * k as f64;
+        let q = tail_p(t);
+        let settled = settle(&gathered(t, reps.clone()), 0.002, &boot, false);
+        if (2e-4..=2e-2).contains(&q) {
+            near += 1;
+            assert!(settled.is_none(), "T = {t}: tail {q:.1e} settled");
+            let (_, source, _, _, why) =
+                settle(&gathered(t, reps.clone()), 0.002, &boot, true).unwrap();
+            assert_eq!(source, PSource::Tail);
+            assert!(why.unwrap().contains("within a factor 10 of the level"));
+        } else {
+            far += 1;
+            let (p, source, _, _, why) = settled.expect("a far tail decides");
+            assert_eq!((source, why), (PSource::Tail, None), "T = {t}");
+            assert_eq!(p < 0.002, q < 2e-4, "T = {t}: p = {p}");
+        }
     }
+    assert!(near > 0 && far > 0, "{near} near, {far} far");
+    // Once the bound 1/(B + 1) is below the level, the count decides whatever the tail.
+    let mut reps = vec![0.0; 799];
+    for (i, r) in reps[..20].iter_mut().enumerate() {
+        *r = 0.5 + i as f64;
+    }
+    let (p, ..) = settle(&gathered(30.0, reps), 0.002, &boot, false).unwrap();
+    assert!(p <= 1.0 / 800.0, "{p}");
 }
