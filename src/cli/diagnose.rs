@@ -53,6 +53,11 @@ pub struct DiagnoseArgs {
     /// still undecided there says so); at most --bootstrap keeps B fixed.
     #[arg(long, default_value_t = 999)]
     pub bootstrap_max: usize,
+    /// Calibrate every irregular candidate whose own verdict depends on it, even where the
+    /// round adopts the same candidate whatever that verdict (by default such bootstraps are
+    /// deferred, and run only if a backtrack needs the candidate).
+    #[arg(long)]
+    pub calibrate_all: bool,
     /// Random restarts per bootstrap refit (at least 1), besides the carried-over optima.
     #[arg(long, default_value_t = 1)]
     pub bootstrap_restarts: usize,
@@ -120,6 +125,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
             restarts: a.bootstrap_restarts,
             seed: a.seed,
         },
+        calibrate_all: a.calibrate_all,
         constraints,
         explore: a.explore,
         ..Default::default()

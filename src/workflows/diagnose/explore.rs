@@ -143,6 +143,7 @@ pub(super) fn confirm(
             evidence,
             fit: full,
             candidates: step.candidates,
+            round_seconds: step.round_seconds,
         });
     }
     Ok(Diagnosis::of_steps(

@@ -305,7 +305,10 @@ pub(super) fn calibrate_round(
 ) {
     let boot = round_bootstrap(opts);
     let mut nulls = None;
-    for s in scored.iter_mut().filter(|s| s.irregular.is_some()) {
+    for s in scored
+        .iter_mut()
+        .filter(|s| s.irregular.is_some() && !s.is_deferred())
+    {
         if !s.needs_calibration() {
             let why = if s.delta_bic_scaled >= 0.0 {
                 "the BIC does not fall, so the candidate fails whatever its p-value".to_string()

@@ -31,6 +31,7 @@ impl Diagnosis {
                     json!({
                         "after_step": i,
                         "current": s.model,
+                        "seconds": s.round_seconds,
                         "candidates": s.candidates.iter().map(|c| json!({
                             "model": c.candidate.spec,
                             "effect": c.candidate.effect.name(),

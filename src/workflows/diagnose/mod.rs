@@ -91,6 +91,10 @@ pub struct DiagnoseOptions {
     /// The parametric bootstrap that calibrates the p-values of extensions whose null is
     /// irregular (`--bootstrap`, `--bootstrap-restarts`); 0 replicates: the nominal F test.
     pub bootstrap: crate::inference::bootstrap::BootstrapOptions,
+    /// Calibrate every candidate whose own verdict depends on its bootstrap, even where the
+    /// round adopts the same candidate whatever that verdict (by default such tests are
+    /// deferred, and run only if a backtrack needs them).
+    pub calibrate_all: bool,
     /// `--fix`, `--bounds`, `--prior`, applied to every model of the path that has the
     /// parameter named (a fixed value stays fixed in every extension).
     pub constraints: crate::inference::constraints::ConstraintSpec,
@@ -114,6 +118,7 @@ impl Default for DiagnoseOptions {
             backtrack: true,
             parallel: false,
             bootstrap: Default::default(),
+            calibrate_all: false,
             constraints: Default::default(),
             explore: 8000,
         }
@@ -132,6 +137,19 @@ pub struct Step {
     /// The candidates fitted after this step (empty when the workflow stopped here
     /// before fitting any).
     pub candidates: Vec<Scored>,
+    /// Where the time of that round of candidates went (None without a round).
+    pub round_seconds: Option<RoundSeconds>,
+}
+
+/// Wall-clock seconds of a round of candidates, by stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct RoundSeconds {
+    /// The candidates' multi-start fits (zero for those met before and cached).
+    pub fits: f64,
+    /// Scoring them: tests, BIC, identifiability (covariances), removal shares.
+    pub scoring: f64,
+    /// The bootstraps that calibrated irregular nulls.
+    pub bootstraps: f64,
 }
 
 /// The outcome of [`diagnose`].

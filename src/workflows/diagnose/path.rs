@@ -5,8 +5,8 @@ use super::fit::{calibrate_round, fit_all};
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
 use super::{
-    describe_regions, extensions, fit_model, Candidate, DiagnoseOptions, Diagnosis, FitResult,
-    Scored, Step,
+    describe_regions, extensions, fit_model, Candidate, DiagnoseOptions, Diagnosis, Effect,
+    FitResult, RoundSeconds, Scored, Step,
 };
 use crate::bsdf::Model;
 use crate::data::Dataset;
@@ -230,6 +230,7 @@ fn adopt_step(
         evidence,
         fit,
         candidates: vec![],
+        round_seconds: None,
     };
     (step, ok)
 }
@@ -279,8 +280,15 @@ fn extend_path(
             current.model.spec,
             backend.id()
         ));
-        let scored = score_round(data, backend, opts, log, cache, &current, cands);
+        let (scored, seconds) = score_round(data, backend, opts, log, cache, &current, cands);
         log_round(log, &scored);
+        steps.last_mut().unwrap().round_seconds = Some(seconds);
+        if std::env::var_os("BSDFIT_TRACE").is_some() {
+            eprintln!(
+                "trace: round after {}: fits {:.1} s, scoring {:.1} s, bootstraps {:.1} s",
+                current.model.spec, seconds.fits, seconds.scoring, seconds.bootstraps
+            );
+        }
         let best = match pick(&scored, data.len()) {
             Ok(best) => best,
             Err(why) => {
@@ -341,7 +349,8 @@ fn score_round(
     cache: &mut FitCache,
     current: &FitResult,
     cands: Vec<Candidate>,
-) -> Vec<Scored> {
+) -> (Vec<Scored>, RoundSeconds) {
+    let t0 = std::time::Instant::now();
     let flagged = flagged_regions(data, &current.z);
     let todo: Vec<Candidate> = cands
         .iter()
@@ -361,14 +370,103 @@ fn score_round(
             Err(e) => Err(anyhow::anyhow!("{e}")),
         })
         .collect();
+    let fitted = std::time::Instant::now();
     let m = cands.len();
     let mut scored: Vec<Scored> = cands
         .into_iter()
         .zip(fits)
         .map(|(c, f)| score(data, current, &flagged, c, f, m, opts))
         .collect();
+    let scored_at = std::time::Instant::now();
+    defer_undeciding(&mut scored, data.len(), opts, log);
     calibrate_round(&mut scored, data, backend, opts, current, log);
-    scored
+    let seconds = RoundSeconds {
+        fits: (fitted - t0).as_secs_f64(),
+        scoring: (scored_at - fitted).as_secs_f64(),
+        bootstraps: scored_at.elapsed().as_secs_f64(),
+    };
+    (scored, seconds)
+}
+
+/// Race the round before its bootstraps: where the round adopts the same candidate whether
+/// the candidates that need
+/// a bootstrap all turn out significant or none does, their tests cannot change the path,
+/// and they are deferred ([`Scored::defer`]). Checking the two extremes suffices: adding
+/// adoptable candidates can change the choice only by being chosen, by raising the best
+/// share of flagged misfit removed (which would have changed one extreme), or by being a
+/// rival (which the optimistic extreme sees).
+fn defer_undeciding(
+    scored: &mut [Scored],
+    samples: usize,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+) {
+    let pending: Vec<usize> = (0..scored.len())
+        .filter(|&i| scored[i].needs_calibration())
+        .collect();
+    if pending.is_empty() || opts.bootstrap.replicates == 0 || opts.calibrate_all {
+        return;
+    }
+    let outcome = |significant: bool| {
+        let mut v = scored.to_vec();
+        for &i in &pending {
+            v[i].significant = significant;
+        }
+        pick(&v, samples).map(|s| s.candidate.spec.clone())
+    };
+    let (Ok(with), Ok(without)) = (outcome(true), outcome(false)) else {
+        return;
+    };
+    if with != without {
+        return;
+    }
+    for &i in &pending {
+        log(format!(
+            "    bootstrap of {} deferred: the round adopts {with} whether or not it is significant",
+            scored[i].candidate.spec
+        ));
+        scored[i].defer(format!(
+            "the round adopts `{with}` whether or not this candidate is significant (calibrated if a backtrack needs it)"
+        ));
+    }
+}
+
+/// The candidate a backtrack tries at a round that adopted `adopted`: the adoptable one
+/// of another effect with the lowest ΔBIC, deferred tests calibrated now where they could
+/// be it (an index into `scored`).
+fn backtrack_alternative(
+    scored: &mut [Scored],
+    adopted: Option<Effect>,
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    current: &FitResult,
+    log: &mut dyn FnMut(String),
+) -> Option<usize> {
+    let mut order: Vec<usize> = (0..scored.len())
+        .filter(|&i| {
+            let s = &scored[i];
+            Some(s.candidate.effect) != adopted && (s.adoptable() || s.is_deferred())
+        })
+        .collect();
+    order.sort_by(|&a, &b| scored[a].delta_bic.total_cmp(&scored[b].delta_bic));
+    for i in order {
+        if scored[i].is_deferred() {
+            scored[i].undefer();
+            calibrate_round(
+                std::slice::from_mut(&mut scored[i]),
+                data,
+                backend,
+                opts,
+                current,
+                log,
+            );
+        }
+        if scored[i].adoptable() {
+            return Some(i);
+        }
+    }
+    None
 }
 
 /// The round's candidate table in the log: each candidate's fit, test, BIC, share of the
@@ -493,6 +591,7 @@ fn diagnose_path(
         evidence: format!("{text}. {}", capitalize(&regions)),
         fit: first,
         candidates: vec![],
+        round_seconds: None,
     };
     log_step(log, 0, &step0, data, opts);
     let mut cache = FitCache::new();
@@ -501,12 +600,20 @@ fn diagnose_path(
     if !ok && opts.backtrack {
         for r in 0..greedy.len().saturating_sub(1) {
             let adopted = greedy[r + 1].effect;
-            let scored = &greedy[r].candidates;
-            let alt = scored
-                .iter()
-                .filter(|s| s.adoptable() && Some(s.candidate.effect) != adopted)
-                .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
-            let Some(alt) = alt else { continue };
+            let mut scored = greedy[r].candidates.clone();
+            let Some(alt) = backtrack_alternative(
+                &mut scored,
+                adopted,
+                data,
+                backend,
+                opts,
+                &greedy[r].fit,
+                log,
+            ) else {
+                continue;
+            };
+            let scored = &scored;
+            let alt = &scored[alt];
             log(format!(
                 "  ↺ {} ended with χ²_red = {:.3}: trying {} [{}] instead of {} at step {}",
                 greedy.last().unwrap().model,
@@ -517,6 +624,7 @@ fn diagnose_path(
                 r + 1
             ));
             let mut steps: Vec<Step> = greedy[..=r].to_vec();
+            steps[r].candidates = scored.clone();
             let (step, _) = adopt_step(data, &steps[r].fit, alt, scored, opts);
             log_step(log, r + 1, &step, data, opts);
             steps.push(step);

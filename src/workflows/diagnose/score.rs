@@ -25,6 +25,9 @@ pub enum PTest {
     /// The nominal F test although the null is irregular, and why the bootstrap was not run
     /// (the verdict did not depend on it, or `--bootstrap 0`).
     FNominal(String),
+    /// Not tested: the round adopts the same candidate whether or not this one is
+    /// significant (why); calibrated later if a backtrack needs its verdict.
+    Deferred(String),
 }
 
 impl PTest {
@@ -38,6 +41,7 @@ impl PTest {
                 _ => "bootstrap",
             },
             PTest::FNominal(_) => "F nominal",
+            PTest::Deferred(_) => "deferred",
         }
     }
     /// The sentence the report gives.
@@ -49,6 +53,7 @@ impl PTest {
             }
             PTest::Bootstrap(c) => c.describe(),
             PTest::FNominal(why) => format!("nominal F test, not calibrated: {why}"),
+            PTest::Deferred(why) => format!("not tested: {why}"),
         }
     }
     pub fn to_json(&self) -> Value {
@@ -57,6 +62,7 @@ impl PTest {
             PTest::F => json!({"test": "F"}),
             PTest::Bootstrap(c) => json!({"test": "bootstrap", "bootstrap": c}),
             PTest::FNominal(why) => json!({"test": "F_nominal", "why": why}),
+            PTest::Deferred(why) => json!({"test": "deferred", "why": why}),
         }
     }
 }
@@ -497,6 +503,25 @@ impl Scored {
             && self.fit.is_some()
             && self.delta_bic_scaled < 0.0
             && self.p_nominal.is_some_and(|p| p >= SETTLED * self.level)
+    }
+
+    /// Leave the test undone (the round's choice does not depend on it): not significant
+    /// until a calibration says otherwise ([`Scored::undefer`]).
+    pub fn defer(&mut self, why: String) {
+        self.p_test = PTest::Deferred(why.clone());
+        self.significant = false;
+        self.verdict = format!("not tested: {why}");
+    }
+
+    /// Back to the nominal verdict, for the bootstrap to calibrate.
+    pub fn undefer(&mut self) {
+        self.p_test = PTest::FNominal("the bootstrap was not run".into());
+        self.p = self.p_nominal;
+        self.judge();
+    }
+
+    pub fn is_deferred(&self) -> bool {
+        matches!(self.p_test, PTest::Deferred(_))
     }
 
     /// Replace the p-value by a calibrated one and judge again.
