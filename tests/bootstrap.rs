@@ -252,3 +252,54 @@ fn bootstrap_false_positive_rate_at_alpha_001() {
         "bootstrap false-positive rate {cal:.4} at α = 0.01 outside [0.003, 0.02]"
     );
 }
+
+/// A test the planned replicates cannot decide, from the bundled diffuser D (two planes):
+/// adding absorption to `btdf(tr)+peraxis` gives T ≈ 9.4 at a level of 2.5e-3, where the
+/// tail fitted to 99 replicates lands within a factor of ten of the level. The bootstrap
+/// must draw beyond the planned 99 (doubling) until the count or a tail far from the
+/// level decides, and never past the maximum; with the maximum at the plan it must say
+/// why it could not decide instead.
+#[test]
+fn a_bootstrap_the_plan_cannot_decide_draws_more() {
+    use bsdfit::data::{Dataset, ReadOptions};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/diffuser-d.csv");
+    let data = Dataset::read(&path, &ReadOptions::default()).unwrap();
+    let backend = CpuBackend::new();
+    let run = |max_replicates: usize| {
+        let opts = DiagnoseOptions {
+            alpha: 2.5e-3,
+            seed: 1,
+            bootstrap: BootstrapOptions {
+                replicates: 99,
+                max_replicates,
+                seed: 1,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let null = Model::for_data("btdf(tr)+peraxis", &data).unwrap();
+        let ext = Model::for_data("btdf(tr)+peraxis+absorb", &data).unwrap();
+        let current = fit_model(&null, &data, &backend, &opts, &[]).unwrap();
+        let seed = embed(&null, &current.flat, &ext);
+        let fit = fit_model(&ext, &data, &backend, &opts, &[seed]).unwrap();
+        bootstrap_p(&current, &fit, &data, &backend, &opts).unwrap()
+    };
+    let grown = run(999);
+    eprintln!(
+        "{} ({} replicates, batches {:?})",
+        grown.describe(),
+        grown.replicates,
+        grown.batches
+    );
+    assert!(
+        grown.replicates > 99 && grown.replicates <= 999,
+        "{grown:?}"
+    );
+    assert_eq!(grown.batches.last(), Some(&grown.replicates));
+    assert!(grown.undecided.is_none(), "{grown:?}");
+    let fixed = run(99);
+    eprintln!("{} ({} replicates)", fixed.describe(), fixed.replicates);
+    assert_eq!(fixed.replicates, 99);
+    let why = fixed.undecided.expect("the planned 99 cannot decide");
+    assert!(why.contains("level") && fixed.p >= 2.5e-3, "{why}");
+}
