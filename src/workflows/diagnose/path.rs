@@ -670,3 +670,7 @@ fn capitalize(s: &str) -> String {
         None => String::new(),
     }
 }
+
+#[cfg(test)]
+#[path = "path_tests.rs"]
+mod tests;
