@@ -31,7 +31,7 @@ pub struct FitArgs {
     pub weights: String,
     /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
     /// every loss but smape — and compass search for smape.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choice::<Optimizer>())]
     pub optimizer: Option<Optimizer>,
     /// Number of random restarts (stepped in lockstep); the same default as `diagnose`.
     #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
