@@ -32,6 +32,8 @@ pub struct FitOutcome {
     pub within: usize,
     pub evaluations: u64,
     pub seconds: f64,
+    /// Why the best restart stopped.
+    pub stop: crate::optim::Stop,
 }
 
 /// χ², the covariance and the warnings at a problem's optimum, in f64 on the CPU
@@ -69,6 +71,7 @@ pub(super) fn conclude(
         chi2,
         cov,
         within: best.within,
+        stop: best.stop,
         evaluations: searched + eval.evaluations(),
         seconds: t0.elapsed().as_secs_f64(),
     })
