@@ -76,7 +76,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     eprintln!(
         "wrote {} ({}, {} channel(s): {:?} nm)",
         a.out.display(),
-        crate::data::count(p.data.len(), "sample", "samples"),
+        crate::text::plural_with(p.data.len(), "sample", "samples"),
         p.data.channel_count(),
         p.data.channels
     );

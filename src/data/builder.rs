@@ -5,10 +5,11 @@
 use super::channels::select_channels;
 use super::dataset::{plane_index, sample_key};
 use super::{
-    count, geometry_key, measurement_planes, normalise_angles, DataError, Dataset, Kind, RawRow,
+    geometry_key, measurement_planes, normalise_angles, DataError, Dataset, Kind, RawRow,
     ReadOptions, Sample, MAX_ABS_VALUE, MAX_PLANES, MAX_REPORTED_ERRORS, MIN_ABS_UNCERTAINTY,
     MIN_REL_UNCERTAINTY, UNCERTAINTY_FLOOR_ABS, UNCERTAINTY_FLOOR_REL,
 };
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 

@@ -2,7 +2,8 @@
 //! (`--wavelengths`, optionally averaged over `--band`), once its rows are read.
 
 use super::dataset::sample_key;
-use super::{count, DataError, ReadOptions, Sample, MAX_WAVELENGTH_GAP_NM};
+use super::{DataError, ReadOptions, Sample, MAX_WAVELENGTH_GAP_NM};
+use crate::text::plural_with as count;
 use std::collections::BTreeSet;
 
 /// Wavelengths for messages: "450, 550, 650".

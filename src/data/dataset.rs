@@ -190,17 +190,6 @@ fn fmt_lines(file: &str, errors: &[(usize, Option<usize>, String)], more: usize)
     s
 }
 
-/// "1 sample", "2 samples": `n` followed by the singular or plural noun (an empty noun
-/// gives the bare number).
-pub fn count(n: usize, singular: &str, plural: &str) -> String {
-    let noun = if n == 1 { singular } else { plural };
-    if noun.is_empty() {
-        n.to_string()
-    } else {
-        format!("{n} {noun}")
-    }
-}
-
 /// At most this many bad rows are listed in one error; the rest are counted.
 pub const MAX_REPORTED_ERRORS: usize = 20;
 /// Largest |value| accepted, sr⁻¹. Even a mirror-like BRDF measured with a 0.1° aperture

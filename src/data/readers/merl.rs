@@ -35,7 +35,8 @@
 //! e.g. a fitted BRDF evaluated at [`cell_directions`], so the reader gives it back.
 
 use super::{mark_assumed, require_assumption};
-use crate::data::{count, Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
+use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
+use crate::text::plural_with as count;
 use glam::DVec3;
 use rand::SeedableRng;
 use std::collections::BTreeMap;

@@ -488,7 +488,7 @@ fn sample_geometry(file: &str, opts: &ReadOptions) -> Result<(String, Vec<[f64; 
         .sample_geometry
         .clone()
         .unwrap_or_else(|| DEFAULT_GEOMETRY.to_string());
-    let (kind, rows) = crate::workflows::synth::geometry_expr(&expr)
+    let (kind, rows) = crate::data::geometries::geometry_expr(&expr)
         .map_err(|e| bad(file, format!("--sample-geometry: {e}")))?;
     if kind != Kind::Brdf {
         return Err(bad(

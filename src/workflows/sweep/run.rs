@@ -16,7 +16,7 @@ use crate::output::results::{
     read_results, results_csv_text, write_if_changed, write_summaries, Appender, DataFile, Key,
     Row, Skipped, DEFAULT_OUT, RESULTS_CSV,
 };
-use crate::output::text::{panic_text, plural, plural_with};
+use crate::text::{panic_text, plural, plural_with};
 use crate::workflows::checks::nonfinite_message;
 use crate::workflows::checks::{batch_bytes, batch_candidates, check_batch_memory};
 use anyhow::{Context, Result};

@@ -14,7 +14,7 @@
 use super::run::{read_cells, SweepConfig, SweepObserver};
 use crate::engine::BackendChoice;
 use crate::output::results::{fit_key, FitKey, Key};
-use crate::output::text::plural;
+use crate::text::plural;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;

@@ -92,9 +92,8 @@
 
 use super::v1::decode_line;
 use super::{mark_assumed, require_assumption, Progress};
-use crate::data::{
-    count, Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
-};
+use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES};
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;

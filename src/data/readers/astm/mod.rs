@@ -38,8 +38,9 @@ mod vars;
 use super::text::{blank_tokens, column_of, end_column, locate, number, LineReader};
 use super::{mark_assumed, require_assumption, Progress};
 use crate::data::{
-    count, Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
+    Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;

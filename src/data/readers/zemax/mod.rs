@@ -54,9 +54,9 @@ mod header;
 use super::text::{blank_tokens, end_column, locate, number, LineReader};
 use super::{mark_assumed, require_assumption, Progress};
 use crate::data::{
-    count, geometry_key, Builder, Cells, DataError, Dataset, RawRow, ReadOptions,
-    PROGRESS_EVERY_LINES,
+    geometry_key, Builder, Cells, DataError, Dataset, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
+use crate::text::plural_with as count;
 use geometry::{cell_geometry, incident_azimuth, table_integral, HORIZON_COS};
 pub use header::{Header, Spectral, Symmetry, MAX_ANGLES};
 use header::{HeaderLines, Pos};
