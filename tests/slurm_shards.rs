@@ -212,6 +212,28 @@ fn shards_from_array_variables_merge_to_the_unsharded_rows() {
     assert!(out.join("plan.json").exists());
     assert!(out.join("shards/1-of-3/results.csv").exists());
     assert!(out.join("shards/3-of-3/results.csv").exists());
+    // The sharded folder named as an input (without --shards): its shards are merged, and
+    // the note names --shards, which checks them against the plan.
+    let elsewhere = tmp.path().join("elsewhere");
+    let o = ok(
+        bsdfit_env(
+            &[
+                "merge",
+                out.to_str().unwrap(),
+                "--out",
+                elsewhere.to_str().unwrap(),
+                "--no-pictures",
+            ],
+            &[],
+        ),
+        "merge OUT --out X",
+    );
+    assert!(
+        stderr(&o).contains("merge --shards --out"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(rows(&elsewhere.join("results.csv")).len(), 12);
     // Merging now names shard 2's cells and fails, after writing what it has.
     let merge = [
         "merge",
