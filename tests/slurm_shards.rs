@@ -1,4 +1,4 @@
-//! Sweeps split by a Slurm job array (issue #33), without a cluster: `--shard auto` reads
+//! Sweeps split by a Slurm job array, without a cluster: `--shard auto` reads
 //! only Slurm's array variables, so setting them by hand is what a task sees. A real
 //! cluster runs the same scripts in `scripts/test-slurm.sh`.
 

@@ -7,7 +7,7 @@ use crate::data::Dataset;
 use crate::engine;
 use crate::inference::fit::{FitReport, Optimizer};
 use crate::output::files::write_result;
-use crate::workflows::fit::{FitOutcome, FitRequest, Stage};
+use crate::workflows::fit::{FitRequest, FitResponse, Stage};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -127,7 +127,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         if let Some(mut bar) = mc_progress {
             bar.finish();
         }
-        let FitOutcome {
+        let FitResponse {
             model,
             loss,
             report,

@@ -139,13 +139,6 @@ impl Progress {
         }
     }
 
-    pub fn set_total(&self, total: u64) {
-        self.shared.total.store(total, Ordering::Relaxed);
-        if let Some(b) = &self.bar {
-            b.set_length(total);
-        }
-    }
-
     pub fn set_position(&self, pos: u64) {
         self.shared.pos.store(pos, Ordering::Relaxed);
         if let Some(b) = &self.bar {

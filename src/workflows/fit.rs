@@ -101,7 +101,7 @@ pub enum Stage {
 }
 
 /// A fit and, where Monte Carlo was asked for and failed, why (the fit itself stands).
-pub struct FitOutcome {
+pub struct FitResponse {
     pub model: Model,
     pub loss: Loss,
     pub report: FitReport,
@@ -112,7 +112,7 @@ pub struct FitOutcome {
     pub fallback: Option<String>,
 }
 
-impl FitOutcome {
+impl FitResponse {
     /// The normalised residuals z = (y′ − y)/u of the best fit, one per sample of `data`
     /// (the data it was fitted to), computed in f64 on the CPU reference.
     pub fn residuals(&self, data: &Dataset) -> Result<Vec<f64>> {
@@ -202,13 +202,13 @@ impl FitRequest {
 
     /// Fit `data` on `backend`, then (with `mc`) refit its replicas. `progress` gets the
     /// number of restarts still active in each stage. Where the GPU is lost or hangs,
-    /// what it failed is re-run on the CPU reference ([`FitOutcome::fallback`]).
+    /// what it failed is re-run on the CPU reference ([`FitResponse::fallback`]).
     pub fn run(
         &self,
         data: &Dataset,
         backend: &dyn Backend,
         progress: &mut dyn FnMut(Stage, usize),
-    ) -> Result<FitOutcome> {
+    ) -> Result<FitResponse> {
         let (model, loss, opts) = self.prepare(data)?;
         let (mut report, mut fallback) =
             on_device_or_cpu(backend, "the fit was", &mut |b: &dyn Backend| {
@@ -259,7 +259,7 @@ impl FitRequest {
         if let Some(line) = &fallback {
             report.warnings.push(line.clone());
         }
-        Ok(FitOutcome {
+        Ok(FitResponse {
             model,
             loss,
             report,

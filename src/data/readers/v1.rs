@@ -2,7 +2,7 @@
 //! header naming the seven columns (in any order), then one row per sample, read as a
 //! stream straight into the dataset's [`Builder`].
 
-use crate::data::readers::Progress;
+use crate::data::readers::ReadProgress;
 use crate::data::{
     Builder, DataError, Dataset, Kind, RawRow, ReadOptions, COLUMNS, PROGRESS_EVERY_LINES,
 };
@@ -166,7 +166,7 @@ impl Dataset {
         mut reader: R,
         file: &str,
         opts: &ReadOptions,
-        progress: &mut dyn FnMut(Progress),
+        progress: &mut dyn FnMut(ReadProgress),
     ) -> Result<Dataset, DataError> {
         let mut meta = BTreeMap::new();
         let mut buf = Vec::with_capacity(256);
@@ -192,7 +192,7 @@ impl Dataset {
             line += 1;
             bytes += n as u64;
             if line % PROGRESS_EVERY_LINES == 0 {
-                progress(Progress {
+                progress(ReadProgress {
                     bytes,
                     rows: builder.as_ref().map_or(0, |b| b.len()),
                 });
@@ -252,7 +252,7 @@ impl Dataset {
                 msg: format!("no header line (expected: {})", COLUMNS.join(",")),
             });
         };
-        progress(Progress {
+        progress(ReadProgress {
             bytes,
             rows: b.len(),
         });

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 /// What a fit found, before it is dressed as a [`FitReport`](super::FitReport).
 #[derive(Clone, Debug)]
-pub struct FitOutcome {
+pub struct Conclusions {
     /// Best physical parameter vector.
     pub flat: Vec<f64>,
     /// Its loss.
@@ -51,7 +51,7 @@ pub(super) fn conclude(
     loss: Loss,
     best: Optimum,
     space: Constraints,
-) -> anyhow::Result<FitOutcome> {
+) -> anyhow::Result<Conclusions> {
     let t0 = Instant::now();
     let cpu = crate::engine::cpu::CpuBackend::new();
     let mut eval = cpu.prepare(Problem { model, data, loss })?;
@@ -61,7 +61,7 @@ pub(super) fn conclude(
     let chi2 = chi2(data, &values);
     let mut cov = covariance(model, data, loss, eval.as_mut(), &flat, &space)?;
     cov.warnings.extend(space.on_bound_warnings(&flat));
-    Ok(FitOutcome {
+    Ok(Conclusions {
         loss: best.loss,
         chi2_prior: space.prior_chi2(&flat),
         dof: data.len() + space.priors.len() - space.dim(),

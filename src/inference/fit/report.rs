@@ -1,6 +1,6 @@
 //! The JSON report of a fit (docs/output.md) and its human-readable summary.
 
-use super::{FitOptions, FitOutcome};
+use super::{Conclusions, FitOptions};
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::Loss;
@@ -121,7 +121,7 @@ pub(super) fn make_report(
     loss: Loss,
     opts: &FitOptions,
     backend: &dyn Backend,
-    o: FitOutcome,
+    o: Conclusions,
 ) -> FitReport {
     // χ²_red counts each prior as one observation (module doc of `constraints`).
     let chi2_red = (o.chi2 + o.chi2_prior) / o.dof as f64;

@@ -1,4 +1,4 @@
-//! `bsdfit sweep` and `bsdfit merge`: the benchmark as users run it (issue #5).
+//! `bsdfit sweep` and `bsdfit merge`: the benchmark as users run it.
 //!
 //! A sweep is a list of tasks — every data set × applicable model × loss × weighting ×
 //! optimizer — run one fit at a time on one backend. Each finished fit is appended to

@@ -3,7 +3,7 @@
 //! sweep`, `bench --sweep` and the Python module's `sweep()` all call [`run`].
 
 use super::lock::DirLock;
-use super::pool::{FitOutcome, Pool, PoolEvent, Runnable};
+use super::pool::{CellOutcome, Pool, PoolEvent, Runnable};
 use super::{expand_data, skipped_entry, slurm, tasks, write_skipped, Selection, Task};
 use crate::bsdf::Model;
 use crate::data::ReadOptions;
@@ -562,7 +562,7 @@ impl FitRun<'_> {
         &mut self,
         t: &Task,
         model: &Model,
-        outcome: FitOutcome,
+        outcome: CellOutcome,
         backend: &dyn engine::Backend,
         obs: &mut dyn SweepObserver,
     ) -> Result<Option<Row>> {

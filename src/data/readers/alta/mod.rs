@@ -91,7 +91,7 @@
 //! one that agrees is read as usual.
 
 use super::v1::decode_line;
-use super::{mark_assumed, require_assumption, Progress};
+use super::{mark_assumed, require_assumption, ReadProgress};
 use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES};
 use crate::text::plural_with as count;
 use std::collections::BTreeMap;
@@ -126,7 +126,7 @@ pub fn parse_reader<R: BufRead>(
     mut reader: R,
     file: &str,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let ferr = |msg: String| DataError::in_file(file, msg);
     let lerr = |line: usize, msg: String| DataError::at_line(file, line, msg);
@@ -146,7 +146,7 @@ pub fn parse_reader<R: BufRead>(
         line += 1;
         bytes += n as u64;
         if line % PROGRESS_EVERY_LINES == 0 {
-            progress(Progress {
+            progress(ReadProgress {
                 bytes,
                 rows: state.as_ref().map_or(0, |s| s.1.len()),
             });
@@ -192,7 +192,7 @@ pub fn parse_reader<R: BufRead>(
         header.parse(file, opts)?;
         return Err(ferr("no data rows".into()));
     };
-    progress(Progress {
+    progress(ReadProgress {
         bytes,
         rows: b.len(),
     });

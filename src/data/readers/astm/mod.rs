@@ -36,7 +36,7 @@
 mod vars;
 
 use super::text::{blank_tokens, column_of, end_column, locate, number, LineReader};
-use super::{mark_assumed, require_assumption, Progress};
+use super::{mark_assumed, require_assumption, ReadProgress};
 use crate::data::{
     Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
@@ -120,7 +120,7 @@ pub fn parse_reader<R: BufRead>(
     reader: R,
     file: &str,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let mut lines = LineReader::new(reader, file);
     let mut header = Header::default();
@@ -129,7 +129,7 @@ pub fn parse_reader<R: BufRead>(
         let line = lines.line;
         if line.is_multiple_of(PROGRESS_EVERY_LINES) {
             let rows = data.as_ref().map_or(0, |d| d.rows);
-            progress(Progress {
+            progress(ReadProgress {
                 bytes: lines.bytes,
                 rows,
             });
@@ -148,7 +148,7 @@ pub fn parse_reader<R: BufRead>(
             }
         }
     }
-    progress(Progress {
+    progress(ReadProgress {
         bytes: lines.bytes,
         rows: data.as_ref().map_or(0, |d| d.rows),
     });
