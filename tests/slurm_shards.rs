@@ -303,6 +303,16 @@ fn emitted_job_scripts_run_the_same_sweep() {
     let array = std::fs::read_to_string(dir.join("array.sbatch")).unwrap();
     assert!(array.contains("#SBATCH --array=1-2\n"), "{array}");
     assert!(array.contains("--shard auto"), "{array}");
+    // The tasks run the saved sweep, not a command line rebuilt from its options.
+    let config = dir.join("sweep.json");
+    assert!(
+        array.contains(&format!("sweep --config {} --shard auto", config.display())),
+        "{array}"
+    );
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
+    assert_eq!(saved["out"], serde_json::json!(out.to_str().unwrap()));
+    assert_eq!(saved["backend"], "cpu");
     assert!(!array.contains("--gres"), "no GPU asked for: {array}");
     assert!(array.contains("RAYON_NUM_THREADS=\"${SLURM_CPUS_PER_TASK:-1}\""));
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
@@ -338,5 +348,6 @@ fn emitted_job_scripts_run_the_same_sweep() {
     ok(bsdfit_env(&args, &[]), "emit gpu");
     let array = std::fs::read_to_string(gpu_out.join("slurm/array.sbatch")).unwrap();
     assert!(array.contains("#SBATCH --gres=gpu:1\n"), "{array}");
-    assert!(array.contains("--backend gpu"), "{array}");
+    let saved = std::fs::read_to_string(gpu_out.join("slurm/sweep.json")).unwrap();
+    assert!(saved.contains("\"backend\": \"gpu\""), "{saved}");
 }

@@ -17,6 +17,7 @@ import json
 import numbers
 import operator
 import os
+import shutil
 import sys
 import time
 import warnings as _warnings
@@ -933,6 +934,9 @@ def sweep(
     shard: Optional[str] = None,
     assume_uncertainty: Optional[Union[str, Tuple[float, float]]] = None,
     progress: ProgressArg = True,
+    emit_slurm: Optional[int] = None,
+    slurm_cpus: int = 1,
+    slurm_binary: Optional[PathLike] = None,
     weights: Optional[Union[str, Sequence[str]]] = None,
 ) -> str:
     """Run ``bsdfit sweep`` over data files or folders into ``out`` (the same folder the
@@ -942,7 +946,13 @@ def sweep(
     ``weighting``: the weightings to sweep (as ``fit``'s keyword; ``weights`` is its
     deprecated spelling). ``progress``: True (the default) for a bar on stderr with the
     command line's notes above it, False or None for silence, or a callable given a
-    :class:`ProgressEvent` as each fit ends."""
+    :class:`ProgressEvent` as each fit ends.
+
+    ``emit_slurm=N``: run nothing; write the job scripts ``bsdfit sweep --emit-slurm N``
+    writes into ``out/slurm/`` (an array of N tasks with ``slurm_cpus`` CPUs each, a merge
+    job, submit.sh, and the sweep they run saved as sweep.json; docs/cluster.md). The
+    tasks run the ``bsdfit`` command line: ``slurm_binary``, by default the one on the
+    PATH."""
     if weights is not None:
         _warnings.warn(
             "sweep(weights=...) is deprecated: use weighting=... (the keyword of fit and diagnose)",
@@ -963,6 +973,16 @@ def sweep(
         return [_text(name, g) for g in given]
 
     out_path = _path("out", out)
+    tasks = None if emit_slurm is None else _int("emit_slurm", emit_slurm, 1)
+    binary: Optional[str] = None
+    if tasks is not None:
+        found = shutil.which("bsdfit") if slurm_binary is None else _path("slurm_binary", slurm_binary)
+        if found is None:
+            raise ValueError(
+                "emit_slurm: the job scripts run the bsdfit command line, and there is none "
+                "on the PATH: give slurm_binary=PATH (cargo build --release builds it)"
+            )
+        binary = os.path.realpath(found)
     with _Progress(progress) as reports:
         _bsdfit.sweep(
             [_path("paths", p) for p in paths],
@@ -977,6 +997,9 @@ def sweep(
             None if shard is None else _text("shard", shard),
             _assume(assume_uncertainty),
             reports.native,
+            tasks,
+            _int("slurm_cpus", slurm_cpus, 1),
+            binary,
         )
     return out_path
 

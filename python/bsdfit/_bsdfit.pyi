@@ -146,8 +146,12 @@ def sweep(
     shard: Optional[str],
     assume_uncertainty: Optional[str],
     progress: Optional[ProgressCallback],
+    emit_slurm: Optional[int],
+    slurm_cpus: int,
+    slurm_binary: Optional[str],
 ) -> int:
-    """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added."""
+    """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added.
+    With ``emit_slurm``, write its Slurm job scripts instead (0 fits)."""
 
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""

@@ -673,9 +673,10 @@ fn diagnose_json(
 
 /// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does); the
 /// number of fits it added. `progress` (a callable or None) hears of each fit as it ends,
-/// and of the lines the command line prints.
+/// and of the lines the command line prints. With `emit_slurm`, write the sweep's Slurm
+/// job scripts instead (`sweep --emit-slurm`), which run `slurm_binary`.
 #[pyfunction]
-#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty, progress))]
+#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty, progress, emit_slurm, slurm_cpus, slurm_binary))]
 #[allow(clippy::too_many_arguments)]
 fn sweep(
     py: Python<'_>,
@@ -691,6 +692,9 @@ fn sweep(
     shard: Option<String>,
     assume_uncertainty: Option<String>,
     progress: Option<Py<PyAny>>,
+    emit_slurm: Option<usize>,
+    slurm_cpus: usize,
+    slurm_binary: Option<PathBuf>,
 ) -> PyResult<usize> {
     use bsdfit::workflows::sweep::{self, Selection, Shard, SweepConfig};
     let (added, observer) = compute(py, move || {
@@ -717,7 +721,14 @@ fn sweep(
             done: 0,
             total: 0,
         };
-        let added = sweep::run(&cfg, &mut observer)?.new_fits;
+        let added = match emit_slurm {
+            Some(tasks) => {
+                let binary = slurm_binary.as_deref();
+                sweep::slurm::emit(&cfg, tasks, slurm_cpus, binary, &mut observer)?;
+                0
+            }
+            None => sweep::run(&cfg, &mut observer)?.new_fits,
+        };
         Ok((added, observer))
     })?;
     observer.reporter.finish(added)

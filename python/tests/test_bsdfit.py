@@ -743,3 +743,29 @@ def test_sweep_takes_fits_keyword_and_warns_on_the_old_one(tmp_path):
         with open(tmp_path / run / "results.csv", encoding="utf-8") as f:
             rows = [r for r in csv.DictReader(l for l in f if not l.startswith("#"))]
         assert [r["weights"] for r in rows] == ["relunc"]
+
+
+def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
+    """bsdfit.sweep(..., emit_slurm=3) writes what `bsdfit sweep --emit-slurm 3` writes for
+    the same sweep (each naming its own folder), and runs nothing."""
+    binary = os.path.realpath(cli_command()[0])
+    data = DATA / "red-brick.csv"
+    run_cli("sweep", data, "--models", "lambert,on", "--losses", "chi2", "--restarts", 3,
+            "--backend", "cpu", "--out", tmp_path / "cli", "--emit-slurm", 3, "--slurm-cpus", 2,
+            cwd=tmp_path)
+    monkeypatch.chdir(tmp_path)  # the scripts run where they were written, as the CLI's
+    bsdfit.sweep([data], tmp_path / "py", models=["lambert", "on"], losses=["chi2"], restarts=3,
+                 backend="cpu", emit_slurm=3, slurm_cpus=2, slurm_binary=binary, progress=False)
+    cli_dir, py_dir = tmp_path / "cli" / "slurm", tmp_path / "py" / "slurm"
+    names = sorted(p.name for p in cli_dir.iterdir() if p.is_file())
+    assert names == ["array.sbatch", "merge.sbatch", "submit.sh", "sweep.json"]
+    assert sorted(p.name for p in py_dir.iterdir() if p.is_file()) == names
+    for name in names:
+        cli = (cli_dir / name).read_text()
+        py = (py_dir / name).read_text().replace(str(tmp_path / "py"), str(tmp_path / "cli"))
+        assert py == cli, name
+    assert not (tmp_path / "py" / "results.csv").exists()
+    # The library's message names Python's keywords.
+    with pytest.raises(ValueError, match="emit_slurm writes an array whose tasks use shard='auto'; leave shard out"):
+        bsdfit.sweep([data], tmp_path / "bad", shard="1/2", emit_slurm=2, slurm_binary=binary,
+                     progress=False)

@@ -210,7 +210,8 @@ pub const MAX_PLANES: usize = 32;
 pub const MAX_WAVELENGTH_GAP_NM: f64 = 50.0;
 
 /// Options that relax or shape reading.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct ReadOptions {
     /// Accept zero (or vanishingly small) uncertainties by replacing them with a floor
     /// (and saying so).

@@ -264,7 +264,7 @@ pub trait Evaluator {
 }
 
 /// Which backend a command should use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BackendChoice {
     /// The GPU when a Vulkan adapter exists, else the CPU (with a notice).

@@ -17,7 +17,8 @@
 use crate::bsdf::{Model, ParamDecl, Scale};
 
 /// The constraint options as given (`NAME=…` strings), before they meet a model.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct ConstraintSpec {
     pub fix: Vec<String>,
     pub bounds: Vec<String>,

@@ -91,7 +91,8 @@ fn parse_weights(w: &str, kind: Kind) -> Result<Weights> {
 }
 
 /// What a sweep runs on each data set; `None` means the default for the data's kind.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct Selection {
     pub models: Option<Vec<String>>,
     pub losses: Option<Vec<String>>,

@@ -52,8 +52,11 @@ impl Shard {
 }
 
 /// What a sweep runs and where it writes. [`SweepConfig::default`] is what `bsdfit sweep`
-/// does with no options.
-#[derive(Clone, Debug)]
+/// does with no options. It is saved as JSON (without the shard and the dry-run flag,
+/// which each run gives) for the tasks of a Slurm array to read ([`SweepConfig::save`],
+/// [`SweepConfig::load`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct SweepConfig {
     /// Data files or folders of *.csv (empty: the bundled data/ folder).
     pub data: Vec<PathBuf>,
@@ -67,11 +70,37 @@ pub struct SweepConfig {
     /// `--fix`, `--bounds`, `--prior`, lenient (a model without a parameter ignores it).
     pub constraints: ConstraintSpec,
     pub out: PathBuf,
+    #[serde(skip)]
     pub shard: Option<Shard>,
     /// Write the plots, renders and report.html (a sharded run leaves them to merge).
     pub pictures: bool,
     /// List the cells (and which are done) without locking, fitting or writing.
+    #[serde(skip)]
     pub dry_run: bool,
+}
+
+impl SweepConfig {
+    /// The configuration as the JSON a saved sweep file holds.
+    pub fn to_json(&self) -> Result<String> {
+        Ok(serde_json::to_string_pretty(self)? + "\n")
+    }
+
+    /// Write the configuration to `path` (atomically).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        crate::output::files::write_result(path, &self.to_json()?, false)
+    }
+
+    /// The configuration saved in `path`; every field missing from it takes its default.
+    pub fn load(path: &Path) -> Result<SweepConfig> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: not a saved sweep configuration (what `sweep --emit-slurm` writes)",
+                path.display()
+            )
+        })
+    }
 }
 
 impl Default for SweepConfig {

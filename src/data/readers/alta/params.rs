@@ -211,7 +211,8 @@ impl ParamOut {
 }
 
 /// What the values of an ALTA file without `#PARAM_OUT` are (`--alta-values`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum AltaValues {
     /// The values are the BRDF in sr⁻¹ (what `#PARAM_OUT INV_STERADIAN` says).
     Brdf,
