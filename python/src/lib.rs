@@ -186,7 +186,7 @@ impl NativeDataset {
 
     #[getter]
     fn notices(&self) -> Vec<String> {
-        self.data.notices.clone()
+        self.data.notices.iter().map(|n| n.text.clone()).collect()
     }
 
     #[getter]

@@ -35,6 +35,7 @@ pub mod v1;
 pub mod zemax;
 
 use crate::data::{DataError, Dataset, ReadOptions};
+use crate::data::{Notice, NoticeKind};
 use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -342,10 +343,13 @@ pub(crate) fn require_assumption(
 pub(crate) fn mark_assumed(ds: &mut Dataset, rel: f64, abs: f64) {
     ds.assumed_uncertainty = Some((rel, abs));
     ds.meta.insert("uncertainty".into(), assumed_note(rel, abs));
-    ds.notices.push(format!(
-        "{}: uncertainties {}",
-        ds.source.display(),
-        assumed_note(rel, abs)
+    ds.notices.push(Notice::new(
+        NoticeKind::AssumedUncertainty,
+        format!(
+            "{}: uncertainties {}",
+            ds.source.display(),
+            assumed_note(rel, abs)
+        ),
     ));
 }
 

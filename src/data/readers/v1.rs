@@ -6,6 +6,7 @@ use crate::data::readers::ReadProgress;
 use crate::data::{
     Builder, DataError, Dataset, Kind, RawRow, ReadOptions, COLUMNS, PROGRESS_EVERY_LINES,
 };
+use crate::data::{Notice, NoticeKind};
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
@@ -267,11 +268,17 @@ impl Dataset {
             .get("uncertainty")
             .and_then(|u| crate::data::readers::parse_assumed_note(u));
         if let (Some(_), Some(note)) = (assumed, meta.get("uncertainty")) {
-            b.notices.push(format!("{file}: uncertainties {note}"));
+            b.notices.push(Notice::new(
+                NoticeKind::AssumedUncertainty,
+                format!("{file}: uncertainties {note}"),
+            ));
         }
         if opts.assume_uncertainty.is_some() {
-            b.notices.push(format!(
-                "{file}: --assume-uncertainty ignored: the file gives its own uncertainties"
+            b.notices.push(Notice::new(
+                NoticeKind::AssumptionIgnored,
+                format!(
+                    "{file}: --assume-uncertainty ignored: the file gives its own uncertainties"
+                ),
             ));
         }
         let mut ds = b.finish(&material, meta)?;

@@ -93,6 +93,7 @@
 use super::v1::decode_line;
 use super::{mark_assumed, require_assumption, ReadProgress};
 use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES};
+use crate::data::{Notice, NoticeKind};
 use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -265,8 +266,8 @@ fn reading_notes(
     opts: &ReadOptions,
     assumed: Option<(f64, f64)>,
     grazing: usize,
-) -> Vec<String> {
-    let mut notes = vec![format!(
+) -> Vec<Notice> {
+    let mut notes = vec![Notice::from(format!(
         "{file}: ALTA {} converted to (θi, φi, θo, φo) with ωi = L, ωo = V{}",
         h.param_in.name(),
         if h.param_in.isotropic() {
@@ -274,44 +275,45 @@ fn reading_notes(
         } else {
             ""
         }
-    )];
+    ))];
     if let Some(v) = h.from_option {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: #PARAM_OUT not given: value kind taken from --alta-values {v} ({}; read as #PARAM_OUT {})",
             v.meaning(),
             h.param_out.name()
-        ));
+        )));
     }
     match h.param_out {
-        ParamOut::InvSteradianCosineFactor => notes.push(format!(
+        ParamOut::InvSteradianCosineFactor => notes.push(Notice::from(format!(
             "{file}: INV_STERADIAN_COSINE_FACTOR values divided by cos θo (the view direction's) to give the BRDF"
-        )),
-        ParamOut::RgbColor => notes.push(format!(
+        ))),
+        ParamOut::RgbColor => notes.push(Notice::from(format!(
             "{file}: RGB_COLOR outputs read as channels at nominal wavelengths R {} nm, G {} nm, B {} nm",
             NOMINAL_RGB_NM[0], NOMINAL_RGB_NM[1], NOMINAL_RGB_NM[2]
-        )),
+        ))),
         ParamOut::InvSteradian => {}
     }
     if h.param_out != ParamOut::RgbColor {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: ALTA gives no wavelength; the single channel is labelled {NOMINAL_MONO_NM} nm (nominal)"
-        ));
+        )));
     }
     if h.vs.iter().any(|&k| k > 0) {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: #VS intervals [y − a₋, y + a₊] taken as bounds of a rectangular distribution: u = (a₋ + a₊)/(2√3) (GUM 4.3.7)"
-        ));
+        )));
         if opts.assume_uncertainty.is_some() && assumed.is_none() {
-            notes.push(format!(
-                "{file}: --assume-uncertainty ignored: the file gives its own intervals"
+            notes.push(Notice::new(
+                NoticeKind::AssumptionIgnored,
+                format!("{file}: --assume-uncertainty ignored: the file gives its own intervals"),
             ));
         }
     }
     if grazing > 0 {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: {} at grazing θo (cos θo < {GRAZING_COS:e}) dropped: the cosine factor cannot be removed there",
             count(grazing, "row", "rows")
-        ));
+        )));
     }
     notes
 }

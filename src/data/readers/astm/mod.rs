@@ -37,6 +37,7 @@ mod vars;
 
 use super::text::{blank_tokens, column_of, end_column, locate, number, LineReader};
 use super::{mark_assumed, require_assumption, ReadProgress};
+use crate::data::Notice;
 use crate::data::{
     Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
@@ -517,7 +518,7 @@ impl<'a> Data<'a> {
         let notes = self.notes();
         let (material, meta) = self.material_and_meta();
         let mut b = self.b.take().expect("started above");
-        let mut all = notes;
+        let mut all: Vec<Notice> = notes.into_iter().map(Notice::from).collect();
         all.append(&mut b.notices);
         b.notices = all;
         let mut ds = b

@@ -53,6 +53,7 @@ mod header;
 
 use super::text::{blank_tokens, end_column, locate, number, LineReader};
 use super::{mark_assumed, require_assumption, ReadProgress};
+use crate::data::Notice;
 use crate::data::{
     geometry_key, Builder, Cells, DataError, Dataset, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
@@ -526,7 +527,11 @@ impl Reading<'_> {
                 ),
             ));
         }
-        let mut notes = self.notes(file, opts);
+        let mut notes: Vec<Notice> = self
+            .notes(file, opts)
+            .into_iter()
+            .map(Notice::from)
+            .collect();
         notes.append(&mut self.b.notices);
         self.b.notices = notes;
         let (material, meta) = self.material_and_meta(file, comments);
