@@ -102,9 +102,15 @@ impl FieldError {
                 break;
             };
             let inner = &rest[open + 1..open + close];
-            match inner.split_once('=') {
-                Some((name, value)) => out.push_str(&option(name, Some(value))),
-                None => out.push_str(&option(inner, None)),
+            let (name, value) = match inner.split_once('=') {
+                Some((name, value)) => (name, Some(value)),
+                None => (inner, None),
+            };
+            // Only `{name}` and `{name=value}` name options; other braces are text.
+            if !name.is_empty() && name.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
+                out.push_str(&option(name, value));
+            } else {
+                out.push_str(&rest[open..=open + close]);
             }
             rest = &rest[open + close + 1..];
         }
@@ -155,10 +161,11 @@ mod tests {
 
     #[test]
     fn field_errors_name_options_per_front_end() {
-        let e = super::FieldError::new("{mc_scale} needs {mc} above 0, and {loss=chi2} or {n=2}");
+        let e =
+            super::FieldError::new("{mc_scale} needs {mc} above 0, and {loss=chi2} or {n=2} {a b}");
         assert_eq!(
             e.to_string(),
-            "mc_scale needs mc above 0, and loss='chi2' or n=2"
+            "mc_scale needs mc above 0, and loss='chi2' or n=2 {a b}"
         );
         let flag = |name: &str, value: Option<&str>| {
             let flag = format!("--{}", name.replace('_', "-"));
@@ -166,7 +173,7 @@ mod tests {
         };
         assert_eq!(
             e.render(&flag),
-            "--mc-scale needs --mc above 0, and --loss chi2 or --n 2"
+            "--mc-scale needs --mc above 0, and --loss chi2 or --n 2 {a b}"
         );
     }
 
