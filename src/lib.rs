@@ -12,9 +12,12 @@
 //! - [`output`]: angular plots, sphere renders and the sweep's report.
 //! - [`cli`]: every command's options (shared groups flattened into each command).
 //!
-//! [`math`] holds the geometry and special functions every stage uses.
+//! [`math`] holds the geometry and special functions every stage uses; [`choice`] the
+//! word tables of options whose value is one of a few words; [`text`] the words of
+//! messages (counts with their nouns).
 
 pub mod bsdf;
+pub mod choice;
 pub mod cli;
 pub mod data;
 pub mod engine;
@@ -22,4 +25,5 @@ pub mod inference;
 pub mod math;
 pub mod optim;
 pub mod output;
+pub mod text;
 pub mod workflows;

@@ -123,3 +123,187 @@ fn no_spec_prefix_guesses() {
         }
     }
 }
+
+/// What each top-level module of `src/` may use of the crate: the layers of
+/// docs/architecture.md, lowest first. A module uses itself freely; `cli` may use
+/// everything, and nothing below it may use `cli`.
+const ALLOWED: &[(&str, &[&str])] = &[
+    ("choice", &[]),
+    ("text", &[]),
+    ("math", &[]),
+    ("optim", &["math"]),
+    ("data", &["choice", "math", "text"]),
+    ("bsdf", &["choice", "data", "math", "text"]),
+    (
+        "engine",
+        &["bsdf", "choice", "data", "math", "optim", "text"],
+    ),
+    (
+        "inference",
+        &["bsdf", "choice", "data", "engine", "math", "optim", "text"],
+    ),
+    (
+        "output",
+        &["bsdf", "choice", "data", "inference", "math", "text"],
+    ),
+    (
+        "workflows",
+        &[
+            "bsdf",
+            "choice",
+            "data",
+            "engine",
+            "inference",
+            "math",
+            "optim",
+            "output",
+            "text",
+        ],
+    ),
+    (
+        "cli",
+        &[
+            "bsdf",
+            "choice",
+            "data",
+            "engine",
+            "inference",
+            "math",
+            "optim",
+            "output",
+            "text",
+            "workflows",
+        ],
+    ),
+];
+
+/// The top-level modules `path` (under `src/`, or the Python crate's source) names as
+/// `{root}::MODULE` in its code: comment lines and `#[cfg(test)]` code (the tail of a file,
+/// and `*_tests.rs` files) left out. Each with its line.
+fn modules_used(text: &str, root: &str) -> Vec<(usize, String)> {
+    let code = text.split("#[cfg(test)]").next().unwrap_or("");
+    let mut out = Vec::new();
+    let prefix = format!("{root}::");
+    for (i, line) in code.lines().enumerate() {
+        if line.trim_start().starts_with("//") {
+            continue;
+        }
+        let mut rest = line;
+        while let Some(at) = rest.find(&prefix) {
+            // `bsdfit::` inside a longer name (`_bsdfit::`) is not the crate.
+            let before = rest[..at].chars().next_back();
+            rest = &rest[at + prefix.len()..];
+            if before.is_some_and(|c| c.is_alphanumeric() || c == '_') {
+                continue;
+            }
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_ascii_lowercase() || *c == '_')
+                .collect();
+            if !name.is_empty() {
+                out.push((i + 1, name));
+            }
+        }
+    }
+    out
+}
+
+/// The uses of `files` that `allowed(module of the file, module used)` refuses.
+fn layering_violations(
+    files: &[PathBuf],
+    root: &str,
+    module_of: &dyn Fn(&Path) -> Option<String>,
+    allowed: &dyn Fn(&str, &str) -> bool,
+) -> Vec<String> {
+    let mut bad = Vec::new();
+    for path in files {
+        if path.to_string_lossy().ends_with("_tests.rs") {
+            continue;
+        }
+        let Some(from) = module_of(path) else {
+            continue;
+        };
+        let text = std::fs::read_to_string(path).unwrap();
+        for (line, to) in modules_used(&text, root) {
+            if to != from && !allowed(&from, &to) {
+                bad.push(format!("{}:{line}: {from} uses {to}", path.display()));
+            }
+        }
+    }
+    bad
+}
+
+/// The top-level module of a file under `src/` (`None` for `lib.rs` and `main.rs`).
+fn src_module(path: &Path) -> Option<String> {
+    let rel = path
+        .strip_prefix(Path::new(env!("CARGO_MANIFEST_DIR")).join("src"))
+        .ok()?;
+    let first = rel.components().next()?.as_os_str().to_string_lossy();
+    let name = first.trim_end_matches(".rs").to_string();
+    (name != "lib" && name != "main").then_some(name)
+}
+
+fn allowed_in_src(from: &str, to: &str) -> bool {
+    ALLOWED
+        .iter()
+        .find(|(m, _)| *m == from)
+        .is_some_and(|(_, uses)| uses.contains(&to))
+}
+
+/// Every top-level module of `src/` is in the table (a new one must be placed in a layer).
+#[test]
+fn every_module_has_a_layer() {
+    let mut modules: Vec<String> = src("src").iter().filter_map(|p| src_module(p)).collect();
+    modules.sort();
+    modules.dedup();
+    let missing: Vec<&String> = modules
+        .iter()
+        .filter(|m| !ALLOWED.iter().any(|(n, _)| n == m))
+        .collect();
+    assert!(missing.is_empty(), "place these in ALLOWED: {missing:?}");
+}
+
+/// Each `crate::MODULE` a file of `src/` names is one its module may use (ALLOWED).
+#[test]
+fn modules_use_only_the_layers_below_them() {
+    let bad = layering_violations(&src("src"), "crate", &src_module, &allowed_in_src);
+    assert!(
+        bad.is_empty(),
+        "uses against the layers:\n{}",
+        bad.join("\n")
+    );
+}
+
+/// The Python module uses the library as a front end beside the command line: anything
+/// but `cli`.
+#[test]
+fn the_python_module_does_not_use_the_command_line() {
+    let bad = layering_violations(
+        &src("python/src"),
+        "bsdfit",
+        &|_| Some("python".to_string()),
+        &|_, to| to != "cli",
+    );
+    assert!(
+        bad.is_empty(),
+        "uses of the command line:\n{}",
+        bad.join("\n")
+    );
+}
+
+/// The checker sees a planted upward use, in each form the code writes one.
+#[test]
+fn the_layering_check_sees_an_upward_use() {
+    let planted = "use crate::data::Dataset;\nfn f() { crate::workflows::synth::geometry(\"hemi\"); }\n// crate::cli::main in a comment\n";
+    assert_eq!(
+        modules_used(planted, "crate"),
+        vec![(1, "data".to_string()), (2, "workflows".to_string())]
+    );
+    assert!(allowed_in_src("bsdf", "data"));
+    assert!(!allowed_in_src("data", "workflows"));
+    assert!(!allowed_in_src("workflows", "cli"));
+    assert_eq!(
+        modules_used("use bsdfit::cli::checks;\nlet x = _bsdfit::y;", "bsdfit"),
+        vec![(1, "cli".to_string())]
+    );
+}

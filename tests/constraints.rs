@@ -201,7 +201,7 @@ fn a_prior_needs_the_chi2_loss() {
     )
     .unwrap_err()
     .to_string();
-    assert!(err.contains("--prior needs --loss chi2"), "{err}");
+    assert!(err.contains("prior needs loss='chi2'"), "{err}");
 }
 
 /// The CLI: the options reach the fit, the JSON records them, bad names fail before work.

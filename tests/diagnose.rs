@@ -1,4 +1,4 @@
-//! The discrepancy workflow (issue #6, docs/diagnose.md): for every effect of the catalogue,
+//! The discrepancy workflow (docs/diagnose.md): for every effect of the catalogue,
 //! data in which the effect is present, a start model without it, and the assertion that
 //! `diagnose` names the effect and that χ²_red falls by ≥ 5× to below 3; controls with
 //! nothing missing must add no effect.

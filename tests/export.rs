@@ -69,6 +69,39 @@ fn saved(json: &Path) -> SavedFit {
 // ---------------------------------------------------------------------------------------
 // eval
 
+/// `eval --at` uses only the geometries of its file: a file with zero uncertainties is
+/// read with a floor the user did not ask for, and its notice is not shown; the notices
+/// about how the file was read are.
+#[test]
+fn eval_hides_the_notices_of_its_placeholder_uncertainties() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, json) = synth_and_fit(dir.path(), "lam", "lambert", "rho=0.5", "inplane10", "550");
+    // The same rows with every uncertainty 0 (the last column), and one row repeated.
+    let written = std::fs::read_to_string(&data).unwrap();
+    let mut zeroed: Vec<String> = written
+        .lines()
+        .map(|l| match l.rsplit_once(',') {
+            Some((head, _)) if !l.starts_with('#') && !l.starts_with("theta") => {
+                format!("{head},0")
+            }
+            _ => l.to_string(),
+        })
+        .collect();
+    let last = zeroed.last().unwrap().clone();
+    zeroed.push(last);
+    let at = dir.path().join("zero.csv");
+    std::fs::write(&at, zeroed.join("\n") + "\n").unwrap();
+    let out_csv = dir.path().join("eval.csv");
+    let out = bsdfit(&["eval", p(&json), "--at", p(&at), "--out", p(&out_csv)]);
+    assert_ok(&out, "eval --at");
+    let err = text(&out.stderr);
+    assert!(!err.contains("replaced by max("), "{err}");
+    assert!(
+        err.contains("note: ") && err.contains("1 geometry"),
+        "{err}"
+    );
+}
+
 #[test]
 fn eval_of_lambert_propagates_u_rho_over_pi_exactly_and_reads_back() {
     let dir = tempfile::tempdir().unwrap();

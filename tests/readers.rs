@@ -361,7 +361,8 @@ fn alta_without_intervals_is_refused_unless_assumed() {
     assert!(back
         .notices
         .iter()
-        .any(|n| n.contains("assumed, not measured")));
+        .any(|n| n.contains("assumed, not measured")
+            && n.kind == bsdfit::data::NoticeKind::AssumedUncertainty));
 }
 
 // ---------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-//! Sweeps split by a Slurm job array (issue #33), without a cluster: `--shard auto` reads
+//! Sweeps split by a Slurm job array, without a cluster: `--shard auto` reads
 //! only Slurm's array variables, so setting them by hand is what a task sees. A real
 //! cluster runs the same scripts in `scripts/test-slurm.sh`.
 
@@ -212,6 +212,28 @@ fn shards_from_array_variables_merge_to_the_unsharded_rows() {
     assert!(out.join("plan.json").exists());
     assert!(out.join("shards/1-of-3/results.csv").exists());
     assert!(out.join("shards/3-of-3/results.csv").exists());
+    // The sharded folder named as an input (without --shards): its shards are merged, and
+    // the note names --shards, which checks them against the plan.
+    let elsewhere = tmp.path().join("elsewhere");
+    let o = ok(
+        bsdfit_env(
+            &[
+                "merge",
+                out.to_str().unwrap(),
+                "--out",
+                elsewhere.to_str().unwrap(),
+                "--no-pictures",
+            ],
+            &[],
+        ),
+        "merge OUT --out X",
+    );
+    assert!(
+        stderr(&o).contains("merge --shards --out"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(rows(&elsewhere.join("results.csv")).len(), 12);
     // Merging now names shard 2's cells and fails, after writing what it has.
     let merge = [
         "merge",
@@ -281,6 +303,16 @@ fn emitted_job_scripts_run_the_same_sweep() {
     let array = std::fs::read_to_string(dir.join("array.sbatch")).unwrap();
     assert!(array.contains("#SBATCH --array=1-2\n"), "{array}");
     assert!(array.contains("--shard auto"), "{array}");
+    // The tasks run the saved sweep, not a command line rebuilt from its options.
+    let config = dir.join("sweep.json");
+    assert!(
+        array.contains(&format!("sweep --config {} --shard auto", config.display())),
+        "{array}"
+    );
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
+    assert_eq!(saved["out"], serde_json::json!(out.to_str().unwrap()));
+    assert_eq!(saved["backend"], "cpu");
     assert!(!array.contains("--gres"), "no GPU asked for: {array}");
     assert!(array.contains("RAYON_NUM_THREADS=\"${SLURM_CPUS_PER_TASK:-1}\""));
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
@@ -316,5 +348,6 @@ fn emitted_job_scripts_run_the_same_sweep() {
     ok(bsdfit_env(&args, &[]), "emit gpu");
     let array = std::fs::read_to_string(gpu_out.join("slurm/array.sbatch")).unwrap();
     assert!(array.contains("#SBATCH --gres=gpu:1\n"), "{array}");
-    assert!(array.contains("--backend gpu"), "{array}");
+    let saved = std::fs::read_to_string(gpu_out.join("slurm/sweep.json")).unwrap();
+    assert!(saved.contains("\"backend\": \"gpu\""), "{saved}");
 }

@@ -1,4 +1,4 @@
-//! `bsdfit sweep` / `merge` / `render` end to end (issue #5): a small sweep (2 data sets ×
+//! `bsdfit sweep` / `merge` / `render` end to end: a small sweep (2 data sets ×
 //! 2 models × 1 loss × 2 weightings, few restarts, CPU backend), then resumption, shards
 //! and merge, interruption, pictures and report.
 

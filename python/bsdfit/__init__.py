@@ -17,8 +17,12 @@ import json
 import numbers
 import operator
 import os
+import shutil
+import sys
+import time
+import warnings as _warnings
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -29,6 +33,7 @@ __all__ = [
     "Fit",
     "Diagnosis",
     "Step",
+    "ProgressEvent",
     "ModelInfo",
     "Parameter",
     "fit",
@@ -43,6 +48,102 @@ __version__: str = _bsdfit.__version__
 
 ArrayLike = Union[float, Sequence[float], np.ndarray]
 PathLike = Union[str, "os.PathLike[str]"]
+
+
+@dataclass(frozen=True)
+class ProgressEvent:
+    """What a long call reports as it runs, to a ``progress=`` callable.
+
+    ``stage``: ``"fit"`` (restarts converged of ``total``), ``"mc"`` (Monte Carlo replica
+    restarts), ``"diagnose"`` (``message`` is the line the command line prints; ``total``
+    is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last) or
+    ``"note"`` (a line the command line prints: a warning, a skipped file).
+    """
+
+    stage: str
+    done: int
+    total: Optional[int]
+    message: str
+
+
+ProgressArg = Union[None, bool, Callable[[ProgressEvent], Any]]
+
+
+class _Bar:
+    """A progress bar on stderr, one line redrawn in place (at most ten times a second),
+    with the lines of ``note`` events printed above it."""
+
+    def __init__(self) -> None:
+        self._shown = ""
+        self._last = 0.0
+
+    def __call__(self, event: ProgressEvent) -> None:
+        if event.stage == "note" or event.total is None:
+            self._clear()
+            print(f"{event.stage}: {event.message}" if event.stage != "note" else event.message,
+                  file=sys.stderr, flush=True)
+            return
+        now = time.monotonic()
+        if event.done < event.total and now - self._last < 0.1:
+            return
+        self._last = now
+        width = 30
+        filled = width * event.done // max(event.total, 1)
+        line = (f"{event.stage}: [{'#' * filled}{'.' * (width - filled)}] "
+                f"{event.done}/{event.total} {event.message}")[:100]
+        sys.stderr.write("\r" + line.ljust(len(self._shown)))
+        sys.stderr.flush()
+        self._shown = line
+
+    def _clear(self) -> None:
+        if self._shown:
+            sys.stderr.write("\r" + " " * len(self._shown) + "\r")
+            self._shown = ""
+
+    def close(self) -> None:
+        if self._shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            self._shown = ""
+
+
+class _Progress:
+    """A ``progress=`` argument as the native module's callable: None (no reports), a bar
+    on stderr (``True``), or the user's callable given a :class:`ProgressEvent`."""
+
+    def __init__(self, progress: ProgressArg) -> None:
+        self._bar: Optional[_Bar] = None
+        self._user: Optional[Callable[[ProgressEvent], Any]] = None
+        if progress is True:
+            self._bar = _Bar()
+        elif progress is None or progress is False:
+            pass
+        elif callable(progress):
+            self._user = progress
+        else:
+            raise TypeError(
+                f"progress: expected True, False, None or a callable, got {_short(progress)}"
+            )
+
+    @property
+    def native(self) -> Optional[Callable[[str, int, Optional[int], str], None]]:
+        if self._bar is None and self._user is None:
+            return None
+        return self._send
+
+    def _send(self, stage: str, done: int, total: Optional[int], message: str) -> None:
+        event = ProgressEvent(stage, done, total, message)
+        if self._bar is not None:
+            self._bar(event)
+        if self._user is not None:
+            self._user(event)
+
+    def __enter__(self) -> "_Progress":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._bar is not None:
+            self._bar.close()
 
 
 # The checks of the arguments' Python types and ranges, one function per kind of argument:
@@ -351,10 +452,10 @@ class Dataset:
         self._native.write_csv(_path("path", path))
 
 
-def _check_report(report: Any, name: str) -> None:
-    """Whether ``report`` (JSON data) is a fit report :class:`Fit` can use: the checks of
-    ``bsdfit eval``'s reader, and the best fit's χ²_red and loss; ValueError naming
-    ``name`` if not."""
+def _check_report(report: Any, name: str) -> "_bsdfit.NativeFit":
+    """``report`` (JSON data) read as the fit report :class:`Fit` evaluates, after the
+    checks of ``bsdfit eval``'s reader and of the best fit's χ²_red and loss; ValueError
+    naming ``name`` if it is not one."""
     if isinstance(report, dict) and "per_axis" in report:
         raise ValueError(
             f"{name}: a per-plane fit file (fit --per-axis) holds one fit per plane: "
@@ -364,7 +465,7 @@ def _check_report(report: Any, name: str) -> None:
         text = json.dumps(report, allow_nan=False)
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} is not a bsdfit fit report: not JSON data ({e})") from None
-    _bsdfit.check_fit_report(text, name)
+    native = _bsdfit.NativeFit(text, name)
     best = report.get("best")
     if not (
         isinstance(best, dict)
@@ -374,14 +475,18 @@ def _check_report(report: Any, name: str) -> None:
             f"{name} is not a bsdfit fit report: no 'best' with the numbers 'chi2_red' and "
             "'loss' (docs/output.md)"
         )
+    return native
 
 
 class Fit:
     """A fitted model: what ``bsdfit fit --json`` writes, with numpy views of it.
 
+    As scipy's ``least_squares`` result and lmfit's ``ModelResult``: ``x`` (the flat
+    parameter vector, in ``param_names`` order, the order of ``covariance``),
+    ``success``, ``status`` and ``message`` (why the optimizer stopped), ``nfev``,
+    ``nfree``, ``residual`` (normalised residuals), ``bic``, ``aic`` and ``summary()``.
     ``params`` maps each parameter to its value (an array for per-channel parameters),
-    ``std`` likewise (NaN where the data did not determine it, 0 where fixed);
-    ``covariance`` and ``correlation`` are over the flat vector named by ``param_names``.
+    ``std`` likewise (NaN where the data did not determine it, 0 where fixed).
     """
 
     def __init__(self, report: Dict[str, Any], warnings: Sequence[str] = ()) -> None:
@@ -389,9 +494,11 @@ class Fit:
         checked as ``bsdfit eval`` checks the file (ValueError if it is not one)."""
         if not isinstance(report, dict):
             raise TypeError(f"report: expected the dict of a fit report, got {_short(report)}")
-        _check_report(report, "Fit(report)")
+        self._native = _check_report(report, "Fit(report)")
         self.report: Dict[str, Any] = report
         self.warnings: List[str] = list(report.get("warnings", [])) + list(warnings)
+        self._residual: Optional[np.ndarray] = None
+        self._summary: Optional[str] = None
 
     @classmethod
     def load(cls, path: PathLike) -> "Fit":
@@ -445,6 +552,81 @@ class Fit:
     @property
     def channels(self) -> List[float]:
         return list(self.report["channels"])
+
+    @property
+    def x(self) -> np.ndarray:
+        """The best parameters as one flat array, in :attr:`param_names` order (the order
+        of :attr:`covariance` and :attr:`correlation`)."""
+        return self._flat("flat_params")
+
+    def _stop(self, key: str) -> Any:
+        stop = self.report.get("stop")
+        return stop.get(key) if isinstance(stop, dict) else None
+
+    @property
+    def success(self) -> bool:
+        """Whether the optimizer stopped because it converged (not out of iterations or
+        evaluations, nor at a non-finite cost). False for a report that does not say."""
+        return bool(self._stop("success"))
+
+    @property
+    def status(self) -> str:
+        """Why the optimizer stopped, as an identifier: ``small_gain``,
+        ``predicted_gain``, ``small_step``, ``damping``, ``stalled`` (Levenberg–Marquardt
+        converged), ``max_iterations``, ``not_finite``, ``step_below_minimum`` (compass
+        search converged), ``evaluation_budget``; ``unknown`` for a report that does not
+        say (docs/output.md)."""
+        return str(self._stop("status") or "unknown")
+
+    @property
+    def message(self) -> str:
+        """Why the optimizer stopped, in words."""
+        return str(self._stop("message") or "the report does not say why the optimizer stopped")
+
+    @property
+    def nfev(self) -> int:
+        """Model-sample evaluations the fit made (all restarts, the polish and the
+        covariance)."""
+        return int(self.report["evaluations"])
+
+    @property
+    def nfree(self) -> int:
+        """Degrees of freedom: samples + priors − fitted parameters (χ²_red's denominator)."""
+        return int(self.report["dof"])
+
+    @property
+    def nvarys(self) -> int:
+        """Fitted parameters (the flat vector's, less those fixed)."""
+        return int(self.report["n_params"])
+
+    @property
+    def residual(self) -> Optional[np.ndarray]:
+        """The normalised residuals (model − value)/uncertainty at the best fit, one per
+        sample of the data it was fitted to, in the data's order; None for a fit loaded
+        from a file (which does not hold the data)."""
+        return None if self._residual is None else self._residual.copy()
+
+    def _criterion(self, key: str) -> float:
+        v = self.report.get(key)
+        return float(v) if isinstance(v, (int, float)) else float("nan")
+
+    @property
+    def bic(self) -> float:
+        """Bayesian information criterion χ² + k·ln K (χ² with the priors' share, k fitted
+        parameters, K samples); lower is better between fits of the same data."""
+        return self._criterion("bic")
+
+    @property
+    def aic(self) -> float:
+        """Akaike information criterion χ² + 2k."""
+        return self._criterion("aic")
+
+    def summary(self) -> str:
+        """The text report ``bsdfit fit`` prints: the parameters with their standard
+        uncertainties, restarts, evaluations, why the optimizer stopped, warnings."""
+        if self._summary is None:
+            self._summary = _bsdfit.fit_summary(json.dumps(self.report), "the fit report")
+        return self._summary
 
     @property
     def monte_carlo(self) -> Optional[Dict[str, Any]]:
@@ -527,7 +709,7 @@ class Fit:
                 for a in arrays]
         if cols[0].size == 0:
             return np.zeros(shape), np.zeros(shape)
-        values, uncertainties, warnings = _bsdfit.eval_fit(json.dumps(self.report), *cols)
+        values, uncertainties, warnings = self._native.eval(*cols)
         for w in warnings:
             if w not in self.warnings:
                 self.warnings.append(w)
@@ -592,6 +774,7 @@ def fit(
     mc: int = 0,
     mc_scale: float = 0.0,
     mc_restarts: int = 3,
+    progress: ProgressArg = None,
 ) -> Fit:
     """Fit ``model`` (a spec such as ``"on"``, ``"fa(eon)"``, ``"btdf(gg)+scale"``) to the data.
 
@@ -601,7 +784,8 @@ def fit(
     ("lm" or "compass"; default by loss), ``fix`` ({name: value}), ``bounds``
     ({name: (lo, hi)}), ``prior`` ({name: (mean, sd)}), and Monte Carlo replicas ``mc``
     with ``mc_scale`` and ``mc_restarts``. The same data and seed give the same parameters
-    as the command line.
+    as the command line. ``progress``: True for a bar on stderr, or a callable given a
+    :class:`ProgressEvent` as restarts converge.
 
     Arguments of the wrong type raise TypeError, bad values ValueError, each naming the
     argument (``restarts`` ≥ 1, ``seed`` in [0, 2**64 − 1], ``backend`` one of "auto",
@@ -610,23 +794,27 @@ def fit(
     """
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
-    text, mc_error, notes = _bsdfit.fit_json(
-        dataset._native,
-        _text("model", model),
-        _text("loss", loss),
-        _text("weighting", weighting),
-        None if optimizer is None else _text("optimizer", optimizer),
-        _int("restarts", restarts, 1),
-        _int("seed", seed, 0),
-        _text("backend", backend),
-        _constraint_list("fix", fix),
-        _constraint_list("bounds", bounds),
-        _constraint_list("prior", prior),
-        _int("mc", mc, 0),
-        _real("mc_scale", mc_scale),
-        _int("mc_restarts", mc_restarts, 0),
-    )
+    with _Progress(progress) as reports:
+        text, mc_error, notes, residual, summary = _bsdfit.fit_json(
+            dataset._native,
+            _text("model", model),
+            _text("loss", loss),
+            _text("weighting", weighting),
+            None if optimizer is None else _text("optimizer", optimizer),
+            _int("restarts", restarts, 1),
+            _int("seed", seed, 0),
+            _text("backend", backend),
+            _constraint_list("fix", fix),
+            _constraint_list("bounds", bounds),
+            _constraint_list("prior", prior),
+            _int("mc", mc, 0),
+            _real("mc_scale", mc_scale),
+            _int("mc_restarts", mc_restarts, 0),
+            reports.native,
+        )
     result = Fit(json.loads(text), notes)
+    result._residual = residual
+    result._summary = summary
     if mc_error is not None:
         raise ValueError(f"mc: {mc_error} (the fit itself: {result!r})")
     return result
@@ -700,30 +888,35 @@ def diagnose(
     prior: Any = None,
     backtrack: bool = True,
     explore: int = 8000,
+    progress: ProgressArg = None,
 ) -> Diagnosis:
     """Find where ``model`` and the data disagree beyond the uncertainties, name the missing
-    effect, add it and repeat while the improvement is significant (``bsdfit diagnose``)."""
+    effect, add it and repeat while the improvement is significant (``bsdfit diagnose``).
+    ``progress``: True to print the steps on stderr as they are found, or a callable given
+    a :class:`ProgressEvent` per line."""
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
-    text, notes = _bsdfit.diagnose_json(
-        dataset._native,
-        _text("model", model),
-        _text("loss", loss),
-        _text("weighting", weighting),
-        _text("optimizer", optimizer),
-        _int("restarts", restarts, 1),
-        _int("seed", seed, 0),
-        _real("alpha", alpha),
-        _int("max_steps", max_steps, 0),
-        _int("bootstrap", bootstrap, 0),
-        _int("bootstrap_restarts", bootstrap_restarts, 0),
-        _text("backend", backend),
-        _constraint_list("fix", fix),
-        _constraint_list("bounds", bounds),
-        _constraint_list("prior", prior),
-        bool(backtrack),
-        _int("explore", explore, 0),
-    )
+    with _Progress(progress) as reports:
+        text, notes = _bsdfit.diagnose_json(
+            dataset._native,
+            _text("model", model),
+            _text("loss", loss),
+            _text("weighting", weighting),
+            _text("optimizer", optimizer),
+            _int("restarts", restarts, 1),
+            _int("seed", seed, 0),
+            _real("alpha", alpha),
+            _int("max_steps", max_steps, 0),
+            _int("bootstrap", bootstrap, 0),
+            _int("bootstrap_restarts", bootstrap_restarts, 0),
+            _text("backend", backend),
+            _constraint_list("fix", fix),
+            _constraint_list("bounds", bounds),
+            _constraint_list("prior", prior),
+            bool(backtrack),
+            _int("explore", explore, 0),
+            reports.native,
+        )
     return Diagnosis(json.loads(text), notes)
 
 
@@ -733,17 +926,42 @@ def sweep(
     *,
     models: Optional[Sequence[str]] = None,
     losses: Optional[Sequence[str]] = None,
-    weights: Optional[Sequence[str]] = None,
+    weighting: Optional[Union[str, Sequence[str]]] = None,
     restarts: int = 16,
     seed: int = 1,
     backend: str = "auto",
     pictures: bool = True,
     shard: Optional[str] = None,
     assume_uncertainty: Optional[Union[str, Tuple[float, float]]] = None,
+    progress: ProgressArg = True,
+    emit_slurm: Optional[int] = None,
+    slurm_cpus: int = 1,
+    slurm_binary: Optional[PathLike] = None,
+    weights: Optional[Union[str, Sequence[str]]] = None,
 ) -> str:
     """Run ``bsdfit sweep`` over data files or folders into ``out`` (the same folder the
     command line writes: results.csv, results.json, pictures, report.html; resumable).
-    Returns the path of ``out``."""
+    Returns the path of ``out``.
+
+    ``weighting``: the weightings to sweep (as ``fit``'s keyword; ``weights`` is its
+    deprecated spelling). ``progress``: True (the default) for a bar on stderr with the
+    command line's notes above it, False or None for silence, or a callable given a
+    :class:`ProgressEvent` as each fit ends.
+
+    ``emit_slurm=N``: run nothing; write the job scripts ``bsdfit sweep --emit-slurm N``
+    writes into ``out/slurm/`` (an array of N tasks with ``slurm_cpus`` CPUs each, a merge
+    job, submit.sh, and the sweep they run saved as sweep.json; docs/cluster.md). The
+    tasks run the ``bsdfit`` command line: ``slurm_binary``, by default the one on the
+    PATH."""
+    if weights is not None:
+        _warnings.warn(
+            "sweep(weights=...) is deprecated: use weighting=... (the keyword of fit and diagnose)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if weighting is not None:
+            raise TypeError("sweep: give weighting or its deprecated spelling weights, not both")
+        weighting = weights
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
 
@@ -755,19 +973,34 @@ def sweep(
         return [_text(name, g) for g in given]
 
     out_path = _path("out", out)
-    _bsdfit.sweep(
-        [_path("paths", p) for p in paths],
-        out_path,
-        listed("models", models),
-        listed("losses", losses),
-        listed("weights", weights),
-        _int("restarts", restarts, 1),
-        _int("seed", seed, 0),
-        _text("backend", backend),
-        bool(pictures),
-        None if shard is None else _text("shard", shard),
-        _assume(assume_uncertainty),
-    )
+    tasks = None if emit_slurm is None else _int("emit_slurm", emit_slurm, 1)
+    binary: Optional[str] = None
+    if tasks is not None:
+        found = shutil.which("bsdfit") if slurm_binary is None else _path("slurm_binary", slurm_binary)
+        if found is None:
+            raise ValueError(
+                "emit_slurm: the job scripts run the bsdfit command line, and there is none "
+                "on the PATH: give slurm_binary=PATH (cargo build --release builds it)"
+            )
+        binary = os.path.realpath(found)
+    with _Progress(progress) as reports:
+        _bsdfit.sweep(
+            [_path("paths", p) for p in paths],
+            out_path,
+            listed("models", models),
+            listed("losses", losses),
+            listed("weighting", weighting),
+            _int("restarts", restarts, 1),
+            _int("seed", seed, 0),
+            _text("backend", backend),
+            bool(pictures),
+            None if shard is None else _text("shard", shard),
+            _assume(assume_uncertainty),
+            reports.native,
+            tasks,
+            _int("slurm_cpus", slurm_cpus, 1),
+            binary,
+        )
     return out_path
 
 

@@ -7,12 +7,15 @@ its subclass for the cause (a file), ``ValueError`` (bad input, with the command
 message) or ``RuntimeError`` (a bug).
 """
 
-from typing import List, Optional, Tuple
+from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+
+# A progress callable: (stage, done, total or None, message).
+ProgressCallback = Callable[[str, int, Optional[int], str], None]
 
 class NativeDataset:
     """A dataset as the library holds it."""
@@ -83,25 +86,29 @@ def fit_json(
     mc: int,
     mc_scale: float,
     mc_restarts: int,
-) -> Tuple[str, Optional[str], List[str]]:
+    progress: Optional[ProgressCallback],
+) -> Tuple[str, Optional[str], List[str], npt.NDArray[np.float64], str]:
     """Fit one model: the report as ``bsdfit fit --json`` writes it, the Monte Carlo
-    error if the replicas failed (the fit itself stands), and the warnings the command
-    line prints on stderr."""
+    error if the replicas failed (the fit itself stands), the warnings the command line
+    prints on stderr, the normalised residuals of the best fit and its text summary."""
 
-def eval_fit(
-    fit_text: str,
-    theta_i: npt.NDArray[np.float64],
-    phi_i: npt.NDArray[np.float64],
-    theta_o: npt.NDArray[np.float64],
-    phi_o: npt.NDArray[np.float64],
-    wavelength_nm: npt.NDArray[np.float64],
-) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], List[str]]:
-    """A fit's values and propagated standard uncertainties at these geometries, in order,
-    with the warnings ``bsdfit eval`` prints."""
+def fit_summary(text: str, name: str) -> str:
+    """The text summary ``bsdfit fit`` prints, of a fit report's JSON text."""
 
-def check_fit_report(text: str, name: str) -> None:
-    """Raise ValueError (naming ``name``) unless ``text`` is a fit report ``bsdfit eval``
-    can use."""
+class NativeFit:
+    """A fit report read once (checked as ``bsdfit eval`` checks its file)."""
+
+    def __init__(self, text: str, name: str) -> None: ...
+    def eval(
+        self,
+        theta_i: npt.NDArray[np.float64],
+        phi_i: npt.NDArray[np.float64],
+        theta_o: npt.NDArray[np.float64],
+        phi_o: npt.NDArray[np.float64],
+        wavelength_nm: npt.NDArray[np.float64],
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], List[str]]:
+        """The fit's values and propagated standard uncertainties at these geometries, in
+        order, with the warnings ``bsdfit eval`` prints."""
 
 def diagnose_json(
     dataset: NativeDataset,
@@ -121,6 +128,7 @@ def diagnose_json(
     prior: List[str],
     backtrack: bool,
     explore: int,
+    progress: Optional[ProgressCallback],
 ) -> Tuple[str, List[str]]:
     """The diagnosis as ``bsdfit diagnose --json`` writes it, and the warnings the command
     line prints on stderr."""
@@ -137,8 +145,13 @@ def sweep(
     pictures: bool,
     shard: Optional[str],
     assume_uncertainty: Optional[str],
+    progress: Optional[ProgressCallback],
+    emit_slurm: Optional[int],
+    slurm_cpus: int,
+    slurm_binary: Optional[str],
 ) -> int:
-    """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added."""
+    """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added.
+    With ``emit_slurm``, write its Slurm job scripts instead (0 fits)."""
 
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""

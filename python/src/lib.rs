@@ -13,14 +13,14 @@
 // Each function takes the keyword arguments of its Python call, one Rust argument each.
 #![allow(clippy::too_many_arguments)]
 
+use bsdfit::choice::{Choice, ChoiceError};
 use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
 use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
 use bsdfit::engine::{self, BackendChoice};
 use bsdfit::inference::constraints::ConstraintSpec;
-use bsdfit::inference::fit::Optimizer;
+use bsdfit::inference::fit::{FitReport, Optimizer};
 use bsdfit::inference::saved::FitFile;
-use bsdfit::workflows::{diagnose, export, fit};
-use clap_value::parse_choice;
+use bsdfit::workflows::{checks, diagnose, export, fit};
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{
     PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
@@ -31,18 +31,13 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// Parse a command-line choice (`lm`, `brdf-cos`, …) with clap's own spelling rules.
-mod clap_value {
-    pub fn parse_choice<T: clap::ValueEnum>(what: &str, s: &str) -> anyhow::Result<T> {
-        T::from_str(s, true).map_err(|_| {
-            let names: Vec<String> = T::value_variants()
-                .iter()
-                .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
-                .collect();
-            let names: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
-            anyhow::anyhow!("{what}: '{s}' is not one of {}", names.join(", "))
-        })
-    }
+/// The value a keyword argument's word names (`lm`, `brdf-cos`, …), from the library's
+/// table of words; the message names the argument and lists the words.
+fn parse_choice<T: Choice>(what: &str, s: &str) -> anyhow::Result<T> {
+    T::parse_choice(s).map_err(|e| {
+        let e = ChoiceError { what: "", ..e };
+        anyhow::anyhow!("{what}{e}")
+    })
 }
 
 /// An error as Python sees it: `OSError` when a file could not be read or written (the
@@ -75,12 +70,81 @@ fn caught<T>(outcome: std::thread::Result<anyhow::Result<T>>) -> PyResult<T> {
     match outcome {
         Ok(result) => result.map_err(to_py),
         Err(panic) => {
-            let what = bsdfit::output::text::panic_text(panic.as_ref()).unwrap_or("unknown panic");
+            let what = bsdfit::text::panic_text(panic.as_ref()).unwrap_or("unknown panic");
             Err(PyRuntimeError::new_err(format!(
                 "bsdfit internal error (a bug, please report it): {what}"
             )))
         }
     }
+}
+
+/// A Python progress callable, called (with the GIL) from work that runs without it, as
+/// `callback(stage, done, total, message)`. The first exception it raises is kept and
+/// raised when the work ends; the callable is not called again meanwhile.
+struct Reporter {
+    callback: Option<Py<PyAny>>,
+    error: Option<PyErr>,
+}
+
+impl Reporter {
+    fn new(callback: Option<Py<PyAny>>) -> Reporter {
+        Reporter {
+            callback,
+            error: None,
+        }
+    }
+
+    fn send(&mut self, stage: &str, done: u64, total: Option<u64>, message: &str) {
+        let Some(callback) = &self.callback else {
+            return;
+        };
+        if self.error.is_some() {
+            return;
+        }
+        let sent = Python::attach(|py| {
+            callback
+                .call1(py, (stage, done, total, message))
+                .map(|_| ())
+        });
+        if let Err(e) = sent {
+            self.error = Some(e);
+        }
+    }
+
+    /// `value`, or the exception the callable raised.
+    fn finish<T>(self, value: T) -> PyResult<T> {
+        match self.error {
+            Some(e) => Err(e),
+            None => Ok(value),
+        }
+    }
+}
+
+/// A sweep's progress as calls of a Python callable (stage `sweep`).
+struct SweepReporter {
+    reporter: Reporter,
+    done: u64,
+    total: u64,
+}
+
+impl bsdfit::workflows::sweep::SweepObserver for SweepReporter {
+    fn note(&mut self, line: &str) {
+        self.reporter
+            .send("note", self.done, Some(self.total), line);
+    }
+    fn begin(&mut self, total: u64, done: u64) {
+        (self.total, self.done) = (total, done);
+        self.reporter.send("sweep", done, Some(total), "");
+    }
+    fn alert(&mut self, line: &str) {
+        self.note(line);
+    }
+    fn fit_ended(&mut self, what: &str) {
+        self.done += 1;
+        self.reporter
+            .send("sweep", self.done, Some(self.total), what);
+    }
+    fn end(&mut self) {}
 }
 
 /// A dataset as the library holds it (angles in radians inside, degrees across).
@@ -122,7 +186,7 @@ impl NativeDataset {
 
     #[getter]
     fn notices(&self) -> Vec<String> {
-        self.data.notices.clone()
+        self.data.notices.iter().map(|n| n.text.clone()).collect()
     }
 
     #[getter]
@@ -350,11 +414,14 @@ fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
 }
 
 /// Fit one model: the report as the JSON text `bsdfit fit --json` writes, the Monte Carlo
-/// error if its replicas failed, and the warnings the command line prints on stderr.
+/// error if its replicas failed, the warnings the command line prints on stderr, the
+/// normalised residuals of the best fit (one per sample) and the text summary the command
+/// line prints. `progress` (a callable or None) hears of the restarts as they converge.
 #[pyfunction]
-#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts))]
-fn fit_json(
-    py: Python<'_>,
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts, progress))]
+#[allow(clippy::type_complexity)]
+fn fit_json<'py>(
+    py: Python<'py>,
     dataset: &NativeDataset,
     model: String,
     loss: String,
@@ -369,9 +436,17 @@ fn fit_json(
     mc: usize,
     mc_scale: f64,
     mc_restarts: usize,
-) -> PyResult<(String, Option<String>, Vec<String>)> {
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(
+    String,
+    Option<String>,
+    Vec<String>,
+    Bound<'py, PyArray1<f64>>,
+    String,
+)> {
     let data = dataset.data.clone();
-    compute(py, move || {
+    let mut reporter = Reporter::new(progress);
+    let (text, mc_error, notes, residuals, summary, reporter) = compute(py, move || {
         let request = fit::FitRequest {
             model,
             loss,
@@ -389,7 +464,7 @@ fn fit_json(
         // Every check runs before the backend starts, as on the command line.
         let (model, _, _) = request.prepare(&data)?;
         let mut notes = Vec::new();
-        bsdfit::cli::checks::check_batch_memory(
+        checks::check_batch_memory(
             restarts,
             model.dim,
             data.len(),
@@ -397,12 +472,24 @@ fn fit_json(
             &mut |w| notes.push(w),
         )?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
-        let outcome = request.run(&data, backend.as_ref(), &mut |_, _| {})?;
+        let mc_total = request.mc_total() as u64;
+        let outcome = request.run(&data, backend.as_ref(), &mut |stage, active| {
+            let (name, total) = match stage {
+                fit::Stage::Fit => ("fit", restarts as u64),
+                fit::Stage::MonteCarlo => ("mc", mc_total),
+            };
+            reporter.send(name, total.saturating_sub(active as u64), Some(total), "");
+        })?;
+        // The last restarts stop without a report of their own: the stages end complete.
+        reporter.send("fit", restarts as u64, Some(restarts as u64), "");
+        if mc > 0 {
+            reporter.send("mc", mc_total, Some(mc_total), "");
+        }
         let report = &outcome.report;
         anyhow::ensure!(
             report.best.chi2_red.is_finite() && report.best.loss.is_finite(),
             "{}",
-            bsdfit::cli::checks::nonfinite_message(
+            checks::nonfinite_message(
                 &outcome.model,
                 &data,
                 outcome.loss,
@@ -412,73 +499,110 @@ fn fit_json(
                 backend.as_ref(),
             )
         );
+        let residuals = outcome.residuals(&data)?;
+        let summary = report.summary();
         let mc_error = outcome.mc_error.map(|e| format!("{e:#}"));
-        Ok((serde_json::to_string(&outcome.report)?, mc_error, notes))
-    })
-}
-
-/// Evaluate a fit (its JSON text) at the given geometries: values and their propagated
-/// standard uncertainties, in the order given, and the warnings `bsdfit eval` prints.
-#[pyfunction]
-#[pyo3(signature = (fit_text, theta_i, phi_i, theta_o, phi_o, wavelength_nm))]
-#[allow(clippy::type_complexity)]
-fn eval_fit<'py>(
-    py: Python<'py>,
-    fit_text: String,
-    theta_i: PyReadonlyArray1<'py, f64>,
-    phi_i: PyReadonlyArray1<'py, f64>,
-    theta_o: PyReadonlyArray1<'py, f64>,
-    phi_o: PyReadonlyArray1<'py, f64>,
-    wavelength_nm: PyReadonlyArray1<'py, f64>,
-) -> PyResult<(
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Vec<String>,
-)> {
-    let n = theta_i.len()?;
-    let zeros = vec![0.0; n];
-    let ones = vec![1.0; n];
-    let raw = rows(
-        slice("theta_i", &theta_i)?,
-        slice("phi_i", &phi_i)?,
-        slice("theta_o", &theta_o)?,
-        slice("phi_o", &phi_o)?,
-        slice("wavelength_nm", &wavelength_nm)?,
-        &zeros,
-        &ones,
-    )?;
-    let (values, uncertainties, warnings) = compute(py, move || {
-        let file = FitFile::parse(&fit_text, "the fit")?;
-        let kind = match &file {
-            FitFile::Single(f) => f.model.kind,
-            FitFile::PerAxis(v) => v[0].1.model.kind,
-        };
-        let opts = ReadOptions {
-            allow_zero_uncertainty: true,
-            ..Default::default()
-        };
-        let at = Dataset::from_rows(kind, "eval", &raw, "eval", &opts)?;
-        let p = export::predict(&file, "the fit", &at, "eval")?;
-        // Back to the caller's order: each sample keeps its row number.
-        let mut values = vec![f64::NAN; n];
-        let mut uncertainties = vec![f64::NAN; n];
-        for s in &p.data.samples {
-            values[s.line as usize - 1] = s.value;
-            uncertainties[s.line as usize - 1] = s.uncertainty;
-        }
-        Ok((values, uncertainties, p.warnings))
+        let text = serde_json::to_string(&outcome.report)?;
+        Ok((text, mc_error, notes, residuals, summary, reporter))
     })?;
-    Ok((
-        PyArray1::from_vec(py, values),
-        PyArray1::from_vec(py, uncertainties),
-        warnings,
+    reporter.finish((
+        text,
+        mc_error,
+        notes,
+        PyArray1::from_vec(py, residuals),
+        summary,
     ))
 }
 
-/// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
-/// and the warnings the command line prints on stderr.
+/// The text summary of a fit report (its JSON text), as `bsdfit fit` prints it.
 #[pyfunction]
-#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_restarts, backend, fix, bounds, prior, backtrack, explore))]
+fn fit_summary(text: &str, name: &str) -> PyResult<String> {
+    caught(catch_unwind(|| {
+        let report: FitReport = serde_json::from_str(text)
+            .map_err(|e| anyhow::anyhow!("{name}: not a complete fit report ({e})"))?;
+        Ok(report.summary())
+    }))
+}
+
+/// A fit report read once, checked as `bsdfit eval` checks its file, and evaluated at
+/// geometries without reading it again.
+#[pyclass(frozen, module = "bsdfit._bsdfit")]
+struct NativeFit {
+    file: FitFile,
+}
+
+#[pymethods]
+impl NativeFit {
+    /// The fit report in `text` (JSON); `name` names it in messages. Quick: it keeps the
+    /// GIL.
+    #[new]
+    fn new(text: &str, name: &str) -> PyResult<NativeFit> {
+        let file = caught(catch_unwind(|| FitFile::parse(text, name)))?;
+        Ok(NativeFit { file })
+    }
+
+    /// The fit at the given geometries: values and their propagated standard
+    /// uncertainties, in the order given, and the warnings `bsdfit eval` prints.
+    #[allow(clippy::type_complexity)]
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        theta_i: PyReadonlyArray1<'py, f64>,
+        phi_i: PyReadonlyArray1<'py, f64>,
+        theta_o: PyReadonlyArray1<'py, f64>,
+        phi_o: PyReadonlyArray1<'py, f64>,
+        wavelength_nm: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Vec<String>,
+    )> {
+        let n = theta_i.len()?;
+        let zeros = vec![0.0; n];
+        let ones = vec![1.0; n];
+        let raw = rows(
+            slice("theta_i", &theta_i)?,
+            slice("phi_i", &phi_i)?,
+            slice("theta_o", &theta_o)?,
+            slice("phi_o", &phi_o)?,
+            slice("wavelength_nm", &wavelength_nm)?,
+            &zeros,
+            &ones,
+        )?;
+        let file = &self.file;
+        let (values, uncertainties, warnings) = compute(py, move || {
+            let kind = match file {
+                FitFile::Single(f) => f.model.kind,
+                FitFile::PerAxis(v) => v[0].1.model.kind,
+            };
+            let opts = ReadOptions {
+                allow_zero_uncertainty: true,
+                ..Default::default()
+            };
+            let at = Dataset::from_rows(kind, "eval", &raw, "eval", &opts)?;
+            let p = export::predict(file, "the fit", &at, "eval")?;
+            // Back to the caller's order: each sample keeps its row number.
+            let mut values = vec![f64::NAN; n];
+            let mut uncertainties = vec![f64::NAN; n];
+            for s in &p.data.samples {
+                values[s.line as usize - 1] = s.value;
+                uncertainties[s.line as usize - 1] = s.uncertainty;
+            }
+            Ok((values, uncertainties, p.warnings))
+        })?;
+        Ok((
+            PyArray1::from_vec(py, values),
+            PyArray1::from_vec(py, uncertainties),
+            warnings,
+        ))
+    }
+}
+
+/// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
+/// and the warnings the command line prints on stderr. `progress` (a callable or None)
+/// hears each line the command line prints as the path is searched.
+#[pyfunction]
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_restarts, backend, fix, bounds, prior, backtrack, explore, progress))]
 fn diagnose_json(
     py: Python<'_>,
     dataset: &NativeDataset,
@@ -498,15 +622,17 @@ fn diagnose_json(
     prior: Vec<String>,
     backtrack: bool,
     explore: usize,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Vec<String>)> {
     let data = dataset.data.clone();
-    compute(py, move || {
+    let mut reporter = Reporter::new(progress);
+    let (text, notes, reporter) = compute(py, move || {
         let constraints = constraint_spec(fix, bounds, prior, true);
         let (loss, start) =
             diagnose::check_start(&data, &model, &loss, &weights, alpha, &constraints)?;
         // As `bsdfit diagnose`: extensions add a few parameters; estimate with three more.
         let mut notes = Vec::new();
-        bsdfit::cli::checks::check_batch_memory(
+        checks::check_batch_memory(
             restarts.saturating_add(1),
             start.dim + 3,
             data.len(),
@@ -536,15 +662,22 @@ fn diagnose_json(
             explore,
             ..Default::default()
         };
-        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &opts, &mut |_| {})?;
-        Ok((serde_json::to_string(&d.to_json())?, notes))
-    })
+        let mut lines = 0;
+        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &opts, &mut |line| {
+            lines += 1;
+            reporter.send("diagnose", lines, None, &line);
+        })?;
+        Ok((serde_json::to_string(&d.to_json())?, notes, reporter))
+    })?;
+    reporter.finish((text, notes))
 }
 
-/// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does, with its
-/// progress on stderr); the number of fits it added.
+/// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does); the
+/// number of fits it added. `progress` (a callable or None) hears of each fit as it ends,
+/// and of the lines the command line prints. With `emit_slurm`, write the sweep's Slurm
+/// job scripts instead (`sweep --emit-slurm`), which run `slurm_binary`.
 #[pyfunction]
-#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty))]
+#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty, progress, emit_slurm, slurm_cpus, slurm_binary))]
 #[allow(clippy::too_many_arguments)]
 fn sweep(
     py: Python<'_>,
@@ -559,9 +692,13 @@ fn sweep(
     pictures: bool,
     shard: Option<String>,
     assume_uncertainty: Option<String>,
+    progress: Option<Py<PyAny>>,
+    emit_slurm: Option<usize>,
+    slurm_cpus: usize,
+    slurm_binary: Option<PathBuf>,
 ) -> PyResult<usize> {
     use bsdfit::workflows::sweep::{self, Selection, Shard, SweepConfig};
-    compute(py, move || {
+    let (added, observer) = compute(py, move || {
         let defaults = SweepConfig::default();
         let cfg = SweepConfig {
             data: paths,
@@ -580,16 +717,22 @@ fn sweep(
             pictures,
             ..defaults
         };
-        let mut console = bsdfit::cli::progress::ConsoleObserver::new("sweep");
-        Ok(sweep::run(&cfg, &mut console)?.new_fits)
-    })
-}
-
-/// Check that `text` is a fit report `bsdfit eval` and `export` can use (the checks of
-/// their reader); `name` names it in the message. Quick: it keeps the GIL.
-#[pyfunction]
-fn check_fit_report(text: &str, name: &str) -> PyResult<()> {
-    caught(catch_unwind(|| FitFile::parse(text, name).map(|_| ())))
+        let mut observer = SweepReporter {
+            reporter: Reporter::new(progress),
+            done: 0,
+            total: 0,
+        };
+        let added = match emit_slurm {
+            Some(tasks) => {
+                let binary = slurm_binary.as_deref();
+                sweep::slurm::emit(&cfg, tasks, slurm_cpus, binary, &mut observer)?;
+                0
+            }
+            None => sweep::run(&cfg, &mut observer)?.new_fits,
+        };
+        Ok((added, observer))
+    })?;
+    observer.reporter.finish(added)
 }
 
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
@@ -597,7 +740,7 @@ fn check_fit_report(text: &str, name: &str) -> PyResult<()> {
 #[allow(clippy::type_complexity)]
 fn catalogue() -> PyResult<Vec<(String, String, Vec<(String, bool, f64, f64)>)>> {
     let mut out = Vec::new();
-    for spec in bsdfit::cli::models::listed_specs() {
+    for spec in bsdfit::bsdf::registry::listed_specs() {
         let model = bsdfit::bsdf::Model::parse(&spec, 1).map_err(|e| to_py(e.into()))?;
         let params = model
             .params
@@ -621,11 +764,11 @@ fn gpu_adapter(py: Python<'_>) -> (bool, String) {
 #[pymodule]
 fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeDataset>()?;
+    m.add_class::<NativeFit>()?;
     m.add_function(wrap_pyfunction!(read_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
-    m.add_function(wrap_pyfunction!(eval_fit, m)?)?;
-    m.add_function(wrap_pyfunction!(check_fit_report, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;

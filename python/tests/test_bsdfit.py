@@ -309,13 +309,13 @@ BAD_ARGUMENTS = [
     ("fit", dict(fix={"sigma": None}), TypeError, r"fix\['sigma'\]: .* got NoneType None"),
     ("fit", dict(bounds=3), TypeError, r"bounds: expected a mapping such as \{'alpha': \(0.01, 0.5\)\} or NAME=LO:HI strings"),
     ("fit", dict(bounds={"sigma": (0.1,)}), ValueError, r"bounds\['sigma'\]: expected \(lo, hi\)"),
-    ("fit", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "--bounds sigma=0.5:0.1: LO must be below HI"),
+    ("fit", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),
     ("fit", dict(bounds={"sigma": (0.1, 3.0)}), ValueError, "not inside sigma's declared range"),
     ("fit", dict(bounds={"alpha": (0.1, 0.2)}), ValueError, "no parameter 'alpha'"),
     ("fit", dict(prior={"sigma": (0.5, 0.1, 3.0)}), ValueError, r"prior\['sigma'\]: expected \(mean, sd\)"),
-    ("fit", dict(prior={"sigma": (0.5, 0.0)}), ValueError, "--prior sigma=0.5:0.0: SD must be positive"),
+    ("fit", dict(prior={"sigma": (0.5, 0.0)}), ValueError, "prior sigma=0.5:0.0: SD must be positive"),
     ("fit", dict(prior={"alpha": (0.5, 0.1)}), ValueError, "no parameter 'alpha'"),
-    ("fit", dict(prior={"sigma": (0.5, 0.1)}, loss="smape"), ValueError, "--prior needs --loss chi2"),
+    ("fit", dict(prior={"sigma": (0.5, 0.1)}, loss="smape"), ValueError, "prior needs loss='chi2'"),
     ("diagnose", dict(restarts=-1), ValueError, "restarts must be ≥ 1, got -1"),
     ("diagnose", dict(seed=-5), ValueError, "seed must be ≥ 0, got -5"),
     ("diagnose", dict(max_steps=-1), ValueError, "max_steps must be ≥ 0"),
@@ -323,7 +323,7 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),
     ("diagnose", dict(backend="cuda"), ValueError, "backend: 'cuda' is not one of"),
-    ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "--bounds sigma=0.5:0.1: LO must be below HI"),
+    ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),
     ("read", dict(max_samples=-1), ValueError, "max_samples must be ≥ 0, got -1"),
     ("read", dict(band="5"), TypeError, "band: expected a number, got str"),
     ("read", dict(wavelengths="550"), TypeError, "wavelengths: expected a number or a 1-D array of numbers, got str"),
@@ -671,3 +671,101 @@ def test_a_missing_dependency_fails_under_ci_and_is_skipped_elsewhere(monkeypatc
     assert isinstance(got, pytest.skip.Exception), repr(got)
     assert "bsdfit_no_such_module cannot be imported" in str(got), str(got)
     assert require_module("json") is json
+
+
+def test_a_fit_has_the_attributes_of_scipy_and_lmfit_results(tmp_path):
+    """x, success, status, message, nfev, nfree, residual, bic, aic and summary() say what
+    the report and the data say, and the summary is the command line's."""
+    path = DATA / "red-brick.csv"
+    data = bsdfit.Dataset.read(path, wavelengths=[550])
+    r = bsdfit.fit(data, "on", seed=3, backend="cpu", restarts=4)
+    np.testing.assert_array_equal(r.x, np.array(r.report["flat_params"]))
+    assert r.x.shape == (len(r.param_names),) == (r.covariance.shape[0],)
+    assert r.params["sigma"] == r.x[r.param_names.index("sigma")]
+    assert r.success is True and r.status in ("small_gain", "predicted_gain", "small_step", "damping", "stalled")
+    assert "converged" in r.message
+    assert r.nfev == r.report["evaluations"] > 0
+    assert r.nfree == len(data) - 2
+    # The residuals are (model − value)/u: their squares sum to χ² = χ²_red·ν.
+    assert r.residual is not None and r.residual.shape == (len(data),)
+    np.testing.assert_allclose(np.sum(r.residual ** 2), r.chi2_red * r.nfree, rtol=1e-9)
+    chi2 = r.chi2_red * r.nfree
+    assert math.isclose(r.bic, chi2 + 2 * math.log(len(data)), rel_tol=1e-9)
+    assert math.isclose(r.aic, chi2 + 4, rel_tol=1e-9)
+    # The summary is what `bsdfit fit` prints (the same lines but the timing's).
+    out = run_cli("fit", path, "--model", "on", "--seed", 3, "--restarts", 4, "--backend", "cpu",
+                  "--wavelengths", 550).stdout
+    strip = lambda text: [l for l in text.splitlines() if " s on " not in l]
+    assert strip(r.summary()) == strip(out)
+    assert f"lm stopped: {r.message}" in r.summary()
+    # A report read back keeps them all but the residuals (the file holds no data).
+    r.to_json(tmp_path / "on.json")
+    back = bsdfit.Fit.load(tmp_path / "on.json")
+    assert (back.success, back.status, back.nfev, back.bic) == (r.success, r.status, r.nfev, r.bic)
+    assert back.residual is None
+    assert strip(back.summary()) == strip(r.summary())
+
+
+def test_progress_reports_to_a_callable_and_draws_a_bar(capfd):
+    data = bsdfit.Dataset.read(DATA / "red-brick.csv", wavelengths=[550])
+    events = []
+    bsdfit.fit(data, "on", seed=1, backend="cpu", restarts=4, progress=events.append)
+    assert events and all(isinstance(e, bsdfit.ProgressEvent) for e in events)
+    assert {e.stage for e in events} == {"fit"} and all(e.total == 4 for e in events)
+    assert events[-1].done == 4
+    capfd.readouterr()
+    bsdfit.fit(data, "on", seed=1, backend="cpu", restarts=4, progress=True)
+    assert "fit: [" in capfd.readouterr().err
+    lines = []
+    bsdfit.diagnose(data, "lambert", backend="cpu", bootstrap=0, restarts=2, max_steps=1,
+                    progress=lines.append)
+    assert lines and all(e.stage == "diagnose" and e.total is None and e.message for e in lines)
+
+    def fails(event):
+        raise KeyboardInterrupt("stop")
+
+    with pytest.raises(KeyboardInterrupt):
+        bsdfit.fit(data, "on", seed=1, backend="cpu", restarts=4, progress=fails)
+    with pytest.raises(TypeError, match="progress"):
+        bsdfit.fit(data, "on", progress="yes")
+
+
+def test_sweep_takes_fits_keyword_and_warns_on_the_old_one(tmp_path):
+    events = []
+    bsdfit.sweep([DATA / "red-brick.csv"], tmp_path / "a", models=["lambert"], losses=["rmse"],
+                 weighting=["relunc"], restarts=2, backend="cpu", pictures=False,
+                 progress=events.append)
+    assert [e.done for e in events if e.stage == "sweep"][-1] == 1
+    with pytest.warns(DeprecationWarning, match="weighting"):
+        bsdfit.sweep([DATA / "red-brick.csv"], tmp_path / "b", models=["lambert"], losses=["rmse"],
+                     weights=["relunc"], restarts=2, backend="cpu", pictures=False, progress=False)
+    for run in ("a", "b"):
+        with open(tmp_path / run / "results.csv", encoding="utf-8") as f:
+            rows = [r for r in csv.DictReader(l for l in f if not l.startswith("#"))]
+        assert [r["weights"] for r in rows] == ["relunc"]
+
+
+def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
+    """bsdfit.sweep(..., emit_slurm=3) writes what `bsdfit sweep --emit-slurm 3` writes for
+    the same sweep (each naming its own folder), and runs nothing."""
+    binary = os.path.realpath(cli_command()[0])
+    data = DATA / "red-brick.csv"
+    run_cli("sweep", data, "--models", "lambert,on", "--losses", "chi2", "--restarts", 3,
+            "--backend", "cpu", "--out", tmp_path / "cli", "--emit-slurm", 3, "--slurm-cpus", 2,
+            cwd=tmp_path)
+    monkeypatch.chdir(tmp_path)  # the scripts run where they were written, as the CLI's
+    bsdfit.sweep([data], tmp_path / "py", models=["lambert", "on"], losses=["chi2"], restarts=3,
+                 backend="cpu", emit_slurm=3, slurm_cpus=2, slurm_binary=binary, progress=False)
+    cli_dir, py_dir = tmp_path / "cli" / "slurm", tmp_path / "py" / "slurm"
+    names = sorted(p.name for p in cli_dir.iterdir() if p.is_file())
+    assert names == ["array.sbatch", "merge.sbatch", "submit.sh", "sweep.json"]
+    assert sorted(p.name for p in py_dir.iterdir() if p.is_file()) == names
+    for name in names:
+        cli = (cli_dir / name).read_text()
+        py = (py_dir / name).read_text().replace(str(tmp_path / "py"), str(tmp_path / "cli"))
+        assert py == cli, name
+    assert not (tmp_path / "py" / "results.csv").exists()
+    # The library's message names Python's keywords.
+    with pytest.raises(ValueError, match="emit_slurm writes an array whose tasks use shard='auto'; leave shard out"):
+        bsdfit.sweep([data], tmp_path / "bad", shard="1/2", emit_slurm=2, slurm_binary=binary,
+                     progress=False)

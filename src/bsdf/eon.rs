@@ -8,7 +8,7 @@
 //! albedo E_F(μ) of FON (paper Eq. 9, "E_FON_exact"), its average Ē_F = A_F (1 + c2 r),
 //! c2 = 2/3 − 28/(15π), and ρ_ms = ρ² Ē_F / (1 − ρ (1 − Ē_F)):
 //! f_ms = ρ_ms/π · (1 − E_F(μo)) (1 − E_F(μi)) / (1 − Ē_F).
-//! Twin: `shaders/eon.wgsl`.
+//! Twin: `shaders/bsdf/eon.wgsl`.
 
 use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};

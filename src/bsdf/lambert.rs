@@ -1,4 +1,4 @@
-//! Lambertian reflection: f = ρ/π. Twin: `shaders/lambert.wgsl`.
+//! Lambertian reflection: f = ρ/π. Twin: `shaders/bsdf/lambert.wgsl`.
 
 use super::{
     each_direction, Bsdf, Channels, Children, Dir, Entry, MitsubaBsdf, MitsubaField, Node,

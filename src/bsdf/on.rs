@@ -5,7 +5,7 @@
 //! The angular factor is written with vectors: max(0, cos Δφ) sin θi sin θo = max(0, s) with
 //! s = ωi·ωo − μiμo, and sin α tan β / (sin θi sin θo) = 1/max(μi, μo), so the term is
 //! max(0, s)/max(μi, μo) — no trigonometric calls and no pole at the normal.
-//! Twin: `shaders/on.wgsl`.
+//! Twin: `shaders/bsdf/on.wgsl`.
 
 use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};

@@ -3,7 +3,7 @@
 //! A and D axis by axis (§2.3.2); this fits both planes at once with the index and scale
 //! shared. The node itself computes nothing: the layout (src/bsdf/mod.rs) gives the
 //! parameters below it one scalar view per (plane, channel) group.
-//! Twin: `shaders/peraxis.wgsl`.
+//! Twin: `shaders/bsdf/peraxis.wgsl`.
 
 use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};

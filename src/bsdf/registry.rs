@@ -277,3 +277,29 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
     out.dedup();
     out
 }
+/// The specs `bsdfit models` and Python's `bsdfit.models()` list: the default catalogue of each kind, then one example
+/// of each model outside it (a suffix with the first spec the registry derives with it).
+pub fn listed_specs() -> Vec<String> {
+    let mut examples: Vec<String> = catalogue(Kind::Brdf);
+    examples.extend(catalogue_for(Kind::Btdf, 2));
+    for e in all() {
+        if e.catalogue == InCatalogue::No {
+            match e.role {
+                // The first spec the registry derives with it (`lambert+retro`, or
+                // `lambert+retro+falloff` for a suffix that follows another).
+                Role::Suffix => {
+                    let tail = format!("+{}", e.name);
+                    let kind = e.kind.unwrap_or(Kind::Brdf);
+                    examples.push(
+                        every_spec(kind)
+                            .into_iter()
+                            .find(|s| s.ends_with(&tail))
+                            .unwrap_or_else(|| format!("{}{tail}", catalogue(kind)[0])),
+                    )
+                }
+                _ => examples.push(e.name.to_string()),
+            }
+        }
+    }
+    examples
+}

@@ -50,7 +50,7 @@
 //!   The switch between the two σ forms at r = (1 − e^{−1/4})² ≈ 0.0489 also jumps, by
 //!   ≤ 8e-4 in σ.
 //!
-//! Twin: `shaders/vmf.wgsl`.
+//! Twin: `shaders/bsdf/vmf.wgsl`.
 
 use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};

@@ -210,7 +210,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 .and_then(|data| measure(spec, &data, b.as_ref(), a.restarts, a.seconds));
             match row {
                 Ok(r) => rows.push(r),
-                Err(e) => progress.println(format!("skipping {spec} on {}: {e:#}", b.id())),
+                Err(e) => progress.println(format!(
+                    "skipping {spec} on {}: {}",
+                    b.id(),
+                    super::error_text(&e)
+                )),
             }
             progress.inc(1);
         }
@@ -472,9 +476,11 @@ fn scale_bench(a: &BenchArgs) -> Result<()> {
                 progress.set_message(format!("{spec}, {size} samples, {}", b.id()));
                 match measure_scale(spec, &data, b.as_ref(), a.seconds) {
                     Ok(r) => rows.push(r),
-                    Err(e) => {
-                        progress.println(format!("skipping {spec} at {size} on {}: {e:#}", b.id()))
-                    }
+                    Err(e) => progress.println(format!(
+                        "skipping {spec} at {size} on {}: {}",
+                        b.id(),
+                        super::error_text(&e)
+                    )),
                 }
                 progress.inc(1);
             }

@@ -1,7 +1,8 @@
 //! `bsdfit convert`.
 
 use super::DataArgs;
-use crate::data::{count, readers};
+use crate::data::readers;
+use crate::text::plural_with as count;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;

@@ -1,10 +1,11 @@
 //! `bsdfit diagnose`.
 
 use super::checks::check_batch_memory;
-use super::progress::{plural, Progress};
+use super::progress::Progress;
 use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::engine;
 use crate::inference::fit::Optimizer;
+use crate::text::plural;
 use crate::workflows::diagnose::{check_start, diagnose, write_report, DiagnoseOptions};
 use anyhow::Result;
 use clap::Args;
@@ -23,7 +24,7 @@ pub struct DiagnoseArgs {
     pub loss: String,
     #[arg(long, default_value = "uniform")]
     pub weights: String,
-    #[arg(long, value_enum, default_value = "lm")]
+    #[arg(long, value_parser = super::choice::<Optimizer>(), default_value = "lm")]
     pub optimizer: Optimizer,
     /// Random restarts per fit (plus the current optimum as one more start); the same
     /// default as `fit`.

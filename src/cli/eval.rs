@@ -2,6 +2,7 @@
 
 use super::DataArgs;
 use crate::data::readers;
+use crate::data::NoticeKind;
 use crate::inference::saved::FitFile;
 use crate::output::files::write_result;
 use crate::workflows::{export, synth};
@@ -49,10 +50,11 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             opts.allow_zero_uncertainty = true;
             let ds = readers::load_reporting(path, &opts)?;
             for n in &ds.notices {
-                let hidden = (placeholder
-                    && (n.contains("assumed, not measured")
-                        || n.contains("--assume-uncertainty ignored")))
-                    || (floor && n.contains("replaced by max("));
+                let hidden = match n.kind {
+                    NoticeKind::AssumedUncertainty | NoticeKind::AssumptionIgnored => placeholder,
+                    NoticeKind::UncertaintyFloor => floor,
+                    NoticeKind::Reading => false,
+                };
                 if !hidden {
                     eprintln!("note: {n}");
                 }
@@ -76,7 +78,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     eprintln!(
         "wrote {} ({}, {} channel(s): {:?} nm)",
         a.out.display(),
-        crate::data::count(p.data.len(), "sample", "samples"),
+        crate::text::plural_with(p.data.len(), "sample", "samples"),
         p.data.channel_count(),
         p.data.channels
     );

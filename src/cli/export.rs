@@ -294,7 +294,7 @@ fn write_tabulated(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> 
     eprintln!(
         "wrote {} ({} on {what})",
         a.out.display(),
-        crate::data::count(p.data.len(), "sample", "samples"),
+        crate::text::plural_with(p.data.len(), "sample", "samples"),
     );
     Ok(())
 }

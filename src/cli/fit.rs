@@ -7,7 +7,7 @@ use crate::data::Dataset;
 use crate::engine;
 use crate::inference::fit::{FitReport, Optimizer};
 use crate::output::files::write_result;
-use crate::workflows::fit::{FitOutcome, FitRequest, Stage};
+use crate::workflows::fit::{FitRequest, FitResponse, Stage};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -31,7 +31,7 @@ pub struct FitArgs {
     pub weights: String,
     /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
     /// every loss but smape — and compass search for smape.
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::choice::<Optimizer>())]
     pub optimizer: Option<Optimizer>,
     /// Number of random restarts (stepped in lockstep); the same default as `diagnose`.
     #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
@@ -127,7 +127,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         if let Some(mut bar) = mc_progress {
             bar.finish();
         }
-        let FitOutcome {
+        let FitResponse {
             model,
             loss,
             report,

@@ -3,6 +3,7 @@
 //! backend) are declared once here and flattened into each command, so every command
 //! accepts the same spelling of the same option.
 
+use crate::choice::{Choice, FieldError};
 use crate::data::readers::alta::AltaValues;
 use crate::data::readers::{self, merl, parse_assume_arg};
 use crate::data::{Dataset, ReadOptions};
@@ -36,6 +37,21 @@ pub fn parse_seed(s: &str) -> Result<u64, String> {
             u64::MAX
         )
     })
+}
+
+/// Value parser of an option whose value is one of a library [`Choice`]'s words: the
+/// words and their help come from the choice's table.
+pub fn choice<T: Choice + Send + Sync>() -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let values = T::TABLE.iter().map(|(_, name, help)| {
+        let value = PossibleValue::new(*name);
+        if help.is_empty() {
+            value
+        } else {
+            value.help(*help)
+        }
+    });
+    PossibleValuesParser::new(values).try_map(|word| T::parse_choice(&word))
 }
 
 /// Value parser of `--restarts`: a positive integer.
@@ -131,7 +147,7 @@ pub struct DataArgs {
     /// ALTA files without a #PARAM_OUT line: what their values are (such files are
     /// refused without it). A file whose #PARAM_OUT disagrees is refused; other formats
     /// ignore the option.
-    #[arg(long, value_enum, value_name = "KIND")]
+    #[arg(long, value_parser = choice::<AltaValues>(), value_name = "KIND")]
     pub alta_values: Option<AltaValues>,
     /// RGL .bsdf materials (which hold a function, not samples): sample them at this named
     /// geometry (`bsdfit models` lists them; e.g. hemi, grid:5). Default: grid:10. Other
@@ -206,7 +222,7 @@ impl ConstraintArgs {
 pub struct BackendArgs {
     /// auto: the GPU engine if a Vulkan adapter is found (lavapipe counts), else the CPU
     /// reference; gpu: the GPU engine or an error; cpu: the CPU reference.
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_parser = choice::<BackendChoice>(), default_value = "auto")]
     pub backend: BackendChoice,
 }
 
@@ -215,10 +231,31 @@ pub fn main() -> i32 {
     match dispatch(Cli::parse().command) {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_text(&e));
             1
         }
     }
+}
+
+/// An option as the command line spells it: `--mc-scale`, `--loss chi2`.
+fn flag(name: &str, value: Option<&str>) -> String {
+    let flag = format!("--{}", name.replace('_', "-"));
+    match value {
+        Some(v) => format!("{flag} {v}"),
+        None => flag,
+    }
+}
+
+/// An error as the command line prints it: its causes joined by ": ", with the library's
+/// option names ([`FieldError`]) written as flags.
+pub fn error_text(e: &anyhow::Error) -> String {
+    e.chain()
+        .map(|cause| match cause.downcast_ref::<FieldError>() {
+            Some(field) => field.render(&flag),
+            None => cause.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join(": ")
 }
 
 fn dispatch(command: Command) -> Result<()> {

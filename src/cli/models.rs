@@ -1,7 +1,6 @@
 //! `bsdfit models`.
 
 use crate::bsdf::{self, Model};
-use crate::data::Kind;
 use crate::workflows::synth;
 use anyhow::Result;
 
@@ -18,7 +17,7 @@ pub fn run() -> Result<()> {
             .unwrap_or_else(|| "any".into());
         println!("  {name:<8} {kind:<4} {:<13} {}", role_word(e.role), e.doc);
     }
-    let examples = listed_specs();
+    let examples = bsdf::registry::listed_specs();
     println!("\nCatalogue:");
     for spec in examples {
         match Model::parse(&spec, 3) {
@@ -48,33 +47,6 @@ pub fn run() -> Result<()> {
         println!("  {:<10} {:<5} {}", g.name, g.kind.to_string(), g.doc);
     }
     Ok(())
-}
-
-/// The specs `bsdfit models` lists: the default catalogue of each kind, then one example
-/// of each model outside it (a suffix with the first spec the registry derives with it).
-pub fn listed_specs() -> Vec<String> {
-    let mut examples: Vec<String> = bsdf::catalogue(Kind::Brdf);
-    examples.extend(bsdf::catalogue_for(Kind::Btdf, 2));
-    for e in bsdf::registry::all() {
-        if e.catalogue == bsdf::InCatalogue::No {
-            match e.role {
-                // The first spec the registry derives with it (`lambert+retro`, or
-                // `lambert+retro+falloff` for a suffix that follows another).
-                bsdf::Role::Suffix => {
-                    let tail = format!("+{}", e.name);
-                    let kind = e.kind.unwrap_or(Kind::Brdf);
-                    examples.push(
-                        bsdf::every_spec(kind)
-                            .into_iter()
-                            .find(|s| s.ends_with(&tail))
-                            .unwrap_or_else(|| format!("{}{tail}", bsdf::catalogue(kind)[0])),
-                    )
-                }
-                _ => examples.push(e.name.to_string()),
-            }
-        }
-    }
-    examples
 }
 
 fn role_word(r: bsdf::Role) -> &'static str {

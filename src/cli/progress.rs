@@ -4,7 +4,6 @@
 //! its bar, one line every ~10 s, e.g. `sweep: 120/603 fits, 2m10s elapsed, ETA 8m`, so a
 //! log shows the run is alive. `BSDFIT_PROGRESS_SECS` sets that interval (`0`: no lines).
 
-pub use crate::output::text::{plural, plural_with};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -140,13 +139,6 @@ impl Progress {
         }
     }
 
-    pub fn set_total(&self, total: u64) {
-        self.shared.total.store(total, Ordering::Relaxed);
-        if let Some(b) = &self.bar {
-            b.set_length(total);
-        }
-    }
-
     pub fn set_position(&self, pos: u64) {
         self.shared.pos.store(pos, Ordering::Relaxed);
         if let Some(b) = &self.bar {
@@ -259,6 +251,7 @@ impl crate::workflows::sweep::SweepObserver for ConsoleObserver {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::text::{plural, plural_with};
 
     #[test]
     fn words_and_times() {

@@ -39,9 +39,9 @@ pub struct RenderArgs {
     /// image plane; 135 = upper left).
     #[arg(long, default_value = "45,135")]
     pub light: String,
-    #[arg(long, value_enum, default_value = "idw")]
+    #[arg(long, value_parser = super::choice::<Lookup>(), default_value = "idw")]
     pub lookup: Lookup,
-    #[arg(long, value_enum, default_value = "smape")]
+    #[arg(long, value_parser = super::choice::<ErrorMetric>(), default_value = "smape")]
     pub error: ErrorMetric,
     /// Error at the top of the colour scale (default 0.5 for SMAPE, 0.1 for RMSE).
     #[arg(long)]

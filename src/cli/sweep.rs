@@ -79,7 +79,36 @@ pub struct SweepArgs {
     /// List the tasks (and which are done) without fitting.
     #[arg(long)]
     pub dry_run: bool,
+    /// Run the sweep saved in FILE (the JSON that `--emit-slurm` writes as
+    /// DIR/slurm/sweep.json for its array tasks); with it only --shard and --dry-run may
+    /// be given.
+    #[arg(long, value_name = "FILE", conflicts_with_all = CHOOSES_THE_SWEEP)]
+    pub config: Option<PathBuf>,
 }
+
+/// The options that choose a sweep, which a saved one (`--config`) already holds.
+const CHOOSES_THE_SWEEP: [&str; 20] = [
+    "data",
+    "models",
+    "losses",
+    "weights",
+    "optimizer",
+    "restarts",
+    "seed",
+    "backend",
+    "fix",
+    "bounds",
+    "prior",
+    "wavelengths",
+    "allow_zero_uncertainty",
+    "assume_uncertainty",
+    "band",
+    "max_samples",
+    "alta_values",
+    "sample_geometry",
+    "out",
+    "no_pictures",
+];
 
 /// `bsdfit merge` arguments.
 #[derive(Args, Debug, Clone)]
@@ -105,6 +134,13 @@ impl SweepArgs {
     /// The runner's configuration these options ask for.
     pub fn config(&self) -> Result<SweepConfig> {
         let shard = self.shard.as_deref().map(Shard::parse).transpose()?;
+        if let Some(path) = &self.config {
+            return Ok(SweepConfig {
+                shard,
+                dry_run: self.dry_run,
+                ..SweepConfig::load(path)?
+            });
+        }
         Ok(SweepConfig {
             data: self.data.clone(),
             read: self.data_args.read_options()?,
@@ -131,13 +167,7 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
     let cfg = args.config()?;
     let mut console = ConsoleObserver::new("sweep");
     if let Some(tasks) = args.emit_slurm {
-        slurm::emit(
-            &cfg,
-            tasks,
-            args.slurm_cpus,
-            &sweep_argv(args),
-            &mut console,
-        )?;
+        slurm::emit(&cfg, tasks, args.slurm_cpus, None, &mut console)?;
         return Ok(SweepStats::default());
     }
     let stats = sweep::run(&cfg, &mut console)?;
@@ -161,63 +191,4 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         pictures: !args.no_pictures,
     };
     sweep::merge(&cfg, &mut ConsoleObserver::new("merge"))
-}
-
-/// The arguments that make a sweep's task list, as `bsdfit sweep` takes them (without
-/// --out, --shard, --emit-slurm, --dry-run and --no-pictures, which the job scripts set).
-pub fn sweep_argv(a: &SweepArgs) -> Vec<String> {
-    let mut v: Vec<String> = a.data.iter().map(|p| p.display().to_string()).collect();
-    let mut opt = |name: &str, value: String| {
-        v.push(format!("--{name}"));
-        v.push(value);
-    };
-    for (name, list) in [
-        ("models", &a.models),
-        ("losses", &a.losses),
-        ("weights", &a.weights),
-    ] {
-        if let Some(list) = list {
-            opt(name, list.join(","));
-        }
-    }
-    opt("optimizer", a.optimizer.join(","));
-    opt("restarts", a.restarts.to_string());
-    opt("seed", a.seed.to_string());
-    opt("backend", a.backend.backend.name().to_string());
-    for f in &a.constraints.fix {
-        opt("fix", f.clone());
-    }
-    for b in &a.constraints.bounds {
-        opt("bounds", b.clone());
-    }
-    for p in &a.constraints.prior {
-        opt("prior", p.clone());
-    }
-    let d = &a.data_args;
-    if let Some(w) = &d.wavelengths {
-        opt(
-            "wavelengths",
-            w.iter()
-                .map(|x| x.to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-        );
-    }
-    if let Some(u) = &d.assume_uncertainty {
-        opt("assume-uncertainty", u.clone());
-    }
-    if let Some(b) = d.band {
-        opt("band", b.to_string());
-    }
-    opt("max-samples", d.max_samples.to_string());
-    if let Some(k) = d.alta_values {
-        opt("alta-values", k.name().to_string());
-    }
-    if let Some(g) = &d.sample_geometry {
-        opt("sample-geometry", g.clone());
-    }
-    if d.allow_zero_uncertainty {
-        v.push("--allow-zero-uncertainty".into());
-    }
-    v
 }

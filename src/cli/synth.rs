@@ -98,8 +98,8 @@ pub fn run(a: SynthArgs) -> Result<()> {
     eprintln!(
         "wrote {} ({}, {}, geometry {geometry})",
         a.out.display(),
-        super::progress::plural(ds.len(), "sample"),
-        super::progress::plural(ds.channel_count(), "channel")
+        crate::text::plural(ds.len(), "sample"),
+        crate::text::plural(ds.channel_count(), "channel")
     );
     Ok(())
 }
@@ -113,7 +113,7 @@ fn write_merl(ds: &crate::data::Dataset, out: &std::path::Path, geometry: &str) 
         "--out {}: a MERL table holds three BRDF channels (R, G, B); this is {} data in {}",
         out.display(),
         ds.kind,
-        super::progress::plural(ds.channel_count(), "channel")
+        crate::text::plural(ds.channel_count(), "channel")
     );
     let mut cells: Vec<Option<[f64; 3]>> = vec![None; merl::CELLS];
     for s in &ds.samples {
@@ -128,7 +128,7 @@ fn write_merl(ds: &crate::data::Dataset, out: &std::path::Path, geometry: &str) 
         "wrote {} (MERL table: {filled} of {} cells from {}, geometry {geometry}; no uncertainties: read it with --assume-uncertainty)",
         out.display(),
         merl::CELLS,
-        super::progress::plural(ds.len(), "sample")
+        crate::text::plural(ds.len(), "sample")
     );
     Ok(())
 }

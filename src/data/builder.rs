@@ -5,10 +5,12 @@
 use super::channels::select_channels;
 use super::dataset::{plane_index, sample_key};
 use super::{
-    count, geometry_key, measurement_planes, normalise_angles, DataError, Dataset, Kind, RawRow,
+    geometry_key, measurement_planes, normalise_angles, DataError, Dataset, Kind, RawRow,
     ReadOptions, Sample, MAX_ABS_VALUE, MAX_PLANES, MAX_REPORTED_ERRORS, MIN_ABS_UNCERTAINTY,
     MIN_REL_UNCERTAINTY, UNCERTAINTY_FLOOR_ABS, UNCERTAINTY_FLOOR_REL,
 };
+use super::{Notice, NoticeKind};
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -111,7 +113,7 @@ pub(crate) struct Builder<'a> {
     more_errors: usize,
     floored: usize,
     /// Notices of the reader (printed before the builder's own).
-    pub(crate) notices: Vec<String>,
+    pub(crate) notices: Vec<Notice>,
 }
 
 impl<'a> Builder<'a> {
@@ -310,15 +312,18 @@ impl<'a> Builder<'a> {
         let mut notices = std::mem::take(&mut self.notices);
         self.repeated_geometries(&mut notices);
         if self.floored > 0 {
-            notices.push(format!(
-                "{file}: {} replaced by max({}·|value|, {} sr⁻¹)",
-                count(
-                    self.floored,
-                    "zero uncertainty (or vanishingly small)",
-                    "zero uncertainties (or vanishingly small ones)"
+            notices.push(Notice::new(
+                NoticeKind::UncertaintyFloor,
+                format!(
+                    "{file}: {} replaced by max({}·|value|, {} sr⁻¹)",
+                    count(
+                        self.floored,
+                        "zero uncertainty (or vanishingly small)",
+                        "zero uncertainties (or vanishingly small ones)"
+                    ),
+                    UNCERTAINTY_FLOOR_REL,
+                    UNCERTAINTY_FLOOR_ABS
                 ),
-                UNCERTAINTY_FLOOR_REL,
-                UNCERTAINTY_FLOOR_ABS
             ));
         }
         let mut samples = std::mem::take(&mut self.samples);
@@ -337,10 +342,10 @@ impl<'a> Builder<'a> {
         if axes.len() > MAX_PLANES {
             // Out-of-plane data (MERL tables, dense ALTA scans): one "plane" per azimuth
             // is no measurement plane; per-plane fits and checks would multiply by them.
-            notices.push(format!(
+            notices.push(Notice::from(format!(
                 "{file}: {} distinct outgoing azimuths (mod 180°): the data are not scans on a few planes, so they are treated as one (no per-plane analysis)",
                 axes.len()
-            ));
+            )));
             axes = vec![0.0];
             for s in &mut samples {
                 s.axis = 0;
@@ -366,7 +371,7 @@ impl<'a> Builder<'a> {
 
     /// A geometry measured more than once is a set of independent samples (docs/conventions.md);
     /// say how many there are, and warn about rows repeated byte for byte.
-    fn repeated_geometries(&mut self, notices: &mut Vec<String>) {
+    fn repeated_geometries(&mut self, notices: &mut Vec<Notice>) {
         let mut keys = std::mem::take(&mut self.keys);
         keys.sort_unstable_by_key(|k| (k.geometry, k.index));
         let (mut geometries, mut members) = (0usize, 0usize);
@@ -420,7 +425,7 @@ impl<'a> Builder<'a> {
         }
         let file = self.file;
         if geometries > 0 {
-            notices.push(format!(
+            notices.push(Notice::from(format!(
                 "{file}: {} measured more than once ({} in all), kept as independent samples",
                 count(
                     geometries,
@@ -428,7 +433,7 @@ impl<'a> Builder<'a> {
                     "geometries (and wavelengths)"
                 ),
                 count(members, "sample", "samples")
-            ));
+            )));
         }
         if identical_count > 0 {
             let mut s = format!(
@@ -441,7 +446,7 @@ impl<'a> Builder<'a> {
             if identical_count > identical.len() {
                 s += &format!(" … and {} more", identical_count - identical.len());
             }
-            notices.push(s.trim_end_matches(';').to_string());
+            notices.push(Notice::from(s.trim_end_matches(';').to_string()));
         }
     }
 }

@@ -2,7 +2,9 @@
 //! (`--wavelengths`, optionally averaged over `--band`), once its rows are read.
 
 use super::dataset::sample_key;
-use super::{count, DataError, ReadOptions, Sample, MAX_WAVELENGTH_GAP_NM};
+use super::Notice;
+use super::{DataError, ReadOptions, Sample, MAX_WAVELENGTH_GAP_NM};
+use crate::text::plural_with as count;
 use std::collections::BTreeSet;
 
 /// Wavelengths for messages: "450, 550, 650".
@@ -20,7 +22,7 @@ pub(super) fn select_channels(
     samples: &mut Vec<Sample>,
     file: &str,
     opts: &ReadOptions,
-    notices: &mut Vec<String>,
+    notices: &mut Vec<Notice>,
 ) -> Result<Vec<f64>, DataError> {
     let ferr = |msg: String| DataError::File {
         file: file.into(),
@@ -64,20 +66,20 @@ pub(super) fn select_channels(
             .filter(|m| m.1 == ch)
             .map(|m| m.0)
             .collect();
-        notices.push(format!(
+        notices.push(Notice::from(format!(
             "{file}: --band ±{band} nm: channel {c} nm averages {} nm",
             list(&members)
-        ));
+        )));
     }
     if n_max > 0 {
-        notices.push(format!(
+        notices.push(Notice::from(format!(
             "{file}: --band: {} per geometry averaged (value = mean, u = sqrt(Σu²)/n)",
             if n_min == n_max {
                 count(n_min, "sample", "samples")
             } else {
                 format!("{n_min} to {n_max} samples")
             }
-        ));
+        )));
     }
     Ok(chosen)
 }
@@ -101,7 +103,7 @@ fn nearest_present(
     wanted: &[f64],
     present: &[f64],
     file: &str,
-    notices: &mut Vec<String>,
+    notices: &mut Vec<Notice>,
 ) -> Result<Vec<f64>, String> {
     if wanted.is_empty() {
         return Err("--wavelengths selects no channel".into());
@@ -141,9 +143,9 @@ fn nearest_present(
             ));
         }
         if nearest != w {
-            notices.push(format!(
+            notices.push(Notice::from(format!(
                 "{file}: wavelength {w} nm → nearest present {nearest} nm"
-            ));
+            )));
         }
         chosen.push(nearest);
     }

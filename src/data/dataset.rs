@@ -111,8 +111,9 @@ pub struct Dataset {
     pub axes: Vec<f64>,
     /// Where the data came from (for messages); empty for in-memory data.
     pub source: PathBuf,
-    /// Human-readable notices produced while reading (e.g. uncertainty floors applied).
-    pub notices: Vec<String>,
+    /// What the reader wants the user to know (e.g. uncertainty floors applied), each
+    /// with its kind.
+    pub notices: Vec<Notice>,
     /// `Some((REL, ABS))` when the file carried no uncertainties and they were assumed,
     /// u = sqrt((REL·|value|)² + ABS²) ([`crate::data::readers::assumed_uncertainty`]); every
     /// output derived from such data must say so.
@@ -190,14 +191,59 @@ fn fmt_lines(file: &str, errors: &[(usize, Option<usize>, String)], more: usize)
     s
 }
 
-/// "1 sample", "2 samples": `n` followed by the singular or plural noun (an empty noun
-/// gives the bare number).
-pub fn count(n: usize, singular: &str, plural: &str) -> String {
-    let noun = if n == 1 { singular } else { plural };
-    if noun.is_empty() {
-        n.to_string()
-    } else {
-        format!("{n} {noun}")
+/// What a notice is about, for a caller that shows some and not others.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoticeKind {
+    /// The uncertainties were assumed (`assume_uncertainty`, or a v1 file saying so).
+    AssumedUncertainty,
+    /// `assume_uncertainty` was given for a file with uncertainties of its own.
+    AssumptionIgnored,
+    /// Zero uncertainties were replaced by a floor (`allow_zero_uncertainty`).
+    UncertaintyFloor,
+    /// Anything else about how the file was read (conversions, channels, repeats).
+    Reading,
+}
+
+/// One line the reader wants the user to know, with what it is about.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Notice {
+    pub kind: NoticeKind,
+    pub text: String,
+}
+
+impl Notice {
+    pub fn new(kind: NoticeKind, text: impl Into<String>) -> Notice {
+        Notice {
+            kind,
+            text: text.into(),
+        }
+    }
+}
+
+/// A notice about how the file was read ([`NoticeKind::Reading`]).
+impl From<String> for Notice {
+    fn from(text: String) -> Notice {
+        Notice::new(NoticeKind::Reading, text)
+    }
+}
+
+/// A notice reads as its text (`notice.contains(…)`, `notices.join("\n")`).
+impl std::ops::Deref for Notice {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.text
+    }
+}
+
+impl std::borrow::Borrow<str> for Notice {
+    fn borrow(&self) -> &str {
+        &self.text
+    }
+}
+
+impl std::fmt::Display for Notice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
     }
 }
 
@@ -221,7 +267,8 @@ pub const MAX_PLANES: usize = 32;
 pub const MAX_WAVELENGTH_GAP_NM: f64 = 50.0;
 
 /// Options that relax or shape reading.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct ReadOptions {
     /// Accept zero (or vanishingly small) uncertainties by replacing them with a floor
     /// (and saying so).

@@ -1,9 +1,10 @@
 //! Measurements in: the in-memory [`Dataset`], the v1 CSV format and its validation,
-//! channel selection, and [`readers`] for the other formats (ALTA text, MERL binary),
-//! chosen by content.
+//! channel selection, [`readers`] for the other formats (ALTA text, MERL binary, …),
+//! chosen by content, and the named [`geometries`] of synthetic and sampled data.
 mod builder;
 mod channels;
 mod dataset;
+pub mod geometries;
 pub mod readers;
 pub(crate) use builder::{Builder, Cells};
 pub use dataset::*;

@@ -26,13 +26,11 @@
 //! **Throughput.** On an RGB `fa(lambert)` set of 381 directions × 3 channels = 1,143
 //! rows (`bsdfit synth --model 'fa(lambert)' --geometry hemi`), `RAYON_NUM_THREADS=1
 //! bsdfit bench --backend cpu --models 'fa(lambert)' --data FILE --seconds 3` measures
-//! 4.8–6.3e7 evaluations per CPU-second on an "AMD EPYC" (`lscpu`; Zen 3 at 2.25 GHz,
-//! 2 cores shared with other jobs), against 8.3–9.4e6 for the evaluator this replaced
-//! (one `Node::eval` per sample and channel, the geometry recomputed for each channel).
-//! At 2.25 GHz that is 36–47 cycles per row, most of them (`perf`) in the lobe's
-//! shared factors: three square roots and two divisions per direction, shared by its
-//! three rows. Measured again with the current code (the same command): 1.6e8 per
-//! CPU-second, 14 cycles per row, 3–4× BBM's rate.
+//! 1.6e8 evaluations per CPU-second on an "AMD EPYC" (`lscpu`; Zen 3 at 2.25 GHz, 2 cores
+//! shared with other jobs): 14 cycles per row, 3–4× BBM's rate, most of them (`perf`) in
+//! the lobe's shared factors (square roots and divisions per direction, shared by its
+//! three rows). Evaluating per direction rather than per sample and channel is what
+//! makes it so: the geometry is computed once for all channels.
 //!
 //! **Streamed.** A problem's rows are cut into windows of at most [`WINDOW_ROWS`] rows
 //! (whole blocks). Costs are summed per (candidate, window) and normal equations per

@@ -264,7 +264,7 @@ pub trait Evaluator {
 }
 
 /// Which backend a command should use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BackendChoice {
     /// The GPU when a Vulkan adapter exists, else the CPU (with a notice).
@@ -275,23 +275,40 @@ pub enum BackendChoice {
     Cpu,
 }
 
+impl crate::choice::Choice for BackendChoice {
+    const WHAT: &'static str = "backend";
+    const TABLE: &'static [(Self, &'static str, &'static str)] = &[
+        (
+            BackendChoice::Auto,
+            "auto",
+            "The GPU when a Vulkan adapter exists, else the CPU (with a notice)",
+        ),
+        (
+            BackendChoice::Gpu,
+            "gpu",
+            "The GPU engine; an error when no adapter exists",
+        ),
+        (BackendChoice::Cpu, "cpu", "The CPU reference"),
+    ];
+}
+crate::choice::named_choice!(BackendChoice);
+
 impl BackendChoice {
-    /// The `--backend` value that names it, which is also the id of the backend it
-    /// selects ([`Backend::id`]) for `gpu` and `cpu`.
+    /// The word that names it, which is also the id of the backend it selects
+    /// ([`Backend::id`]) for `gpu` and `cpu`.
     pub fn name(self) -> &'static str {
-        match self {
-            BackendChoice::Auto => "auto",
-            BackendChoice::Gpu => "gpu",
-            BackendChoice::Cpu => "cpu",
-        }
+        crate::choice::Choice::name(self)
     }
 
     /// The choice named `name` (`auto`, `gpu`, `cpu`).
     pub fn from_name(name: &str) -> Option<BackendChoice> {
-        [BackendChoice::Auto, BackendChoice::Gpu, BackendChoice::Cpu]
-            .into_iter()
-            .find(|c| c.name() == name)
+        name.parse().ok()
     }
+}
+
+/// `text` as literal text inside a [`crate::choice::FieldError`] template.
+fn escape_braces(text: &str) -> String {
+    text.replace('{', "(").replace('}', ")")
 }
 
 /// Pick a backend. `notice` receives one-line messages for the user (which adapter, or
@@ -303,7 +320,12 @@ pub fn select(
     match choice {
         BackendChoice::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
         BackendChoice::Gpu => {
-            let g = gpu::GpuBackend::new().map_err(|e| anyhow::anyhow!("--backend gpu: {e}"))?;
+            let g = gpu::GpuBackend::new().map_err(|e| {
+                crate::choice::field_error(format!(
+                    "{{backend=gpu}}: {}",
+                    escape_braces(&e.to_string())
+                ))
+            })?;
             notice(format!("using {}", g.name()));
             Ok(Box::new(g))
         }
@@ -337,12 +359,10 @@ mod tests {
         assert_eq!(log.seconds_total, 2.0);
     }
 
-    /// `BackendChoice::name` is the spelling `--backend` accepts, and names round-trip.
+    /// Names round-trip, and `gpu` and `cpu` name the backends they select.
     #[test]
     fn backend_choice_names_are_the_option_values() {
         for c in [BackendChoice::Auto, BackendChoice::Gpu, BackendChoice::Cpu] {
-            let value = clap::ValueEnum::to_possible_value(&c).unwrap();
-            assert_eq!(c.name(), value.get_name());
             assert_eq!(BackendChoice::from_name(c.name()), Some(c));
         }
         assert_eq!(BackendChoice::from_name("tpu"), None);

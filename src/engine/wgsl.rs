@@ -32,7 +32,7 @@ pub struct Shape {
     /// where every problem has a table (at most `MU_TABLE_LEN` distinct cosines; none
     /// for, say, a MERL subsample) and one thread walks all of a candidate's records
     /// (`slices` = 1), since each slice's thread would fill the tables again. Without it
-    /// the models compute those factors per record, as before; the fallback is compiled
+    /// the models compute those factors per record; the fallback is compiled
     /// out where the tables are used, its mere presence in the record loop costing as
     /// much as the loop itself.
     pub mu_tables: bool,
@@ -358,29 +358,121 @@ fn prepared_nodes(model: &Model) -> Vec<(&'static str, Vec<usize>)> {
     out
 }
 
+/// The constants every generated module declares, with what each is; the kernels
+/// (shaders/engine/*.wgsl) use them by these names.
+const MODULE_CONSTANTS: &[(&str, &str, &str)] = &[
+    (
+        "S",
+        "u32",
+        "scalars of one parameter group's view (`Model::scalar_count`)",
+    ),
+    (
+        "G",
+        "u32",
+        "parameter groups: channels, times planes under `+peraxis`",
+    ),
+    (
+        "CB",
+        "u32",
+        "channel slots per sample record (`record_channels`)",
+    ),
+    (
+        "TPR",
+        "u32",
+        "texels per record in the records texture (`record_texels`)",
+    ),
+    (
+        "RPR",
+        "u32",
+        "records per row of the records texture (`RECORDS_PER_ROW`)",
+    ),
+    (
+        "GP",
+        "u32",
+        "groups the private parameter array holds (`padded_groups`)",
+    ),
+    (
+        "FIXED_BASE",
+        "bool",
+        "every record starts at group 0 (`fixed_base`)",
+    ),
+    (
+        "MU_TABLES",
+        "bool",
+        "models look up their μ-only factors in tables (`Shape::mu_tables`)",
+    ),
+    (
+        "CL",
+        "u32",
+        "candidate lanes per workgroup (`Shape::lanes`)",
+    ),
+    ("SL", "u32", "record slices per workgroup (`Shape::slices`)"),
+    ("TERM", "u32", "the loss's per-sample term (`term_code`)"),
+    ("PD", "u32", "P, the parameters per candidate"),
+    ("NJJ", "u32", "entries of JᵀJ's upper triangle, P(P + 1)/2"),
+    (
+        "NE",
+        "u32",
+        "numbers the normal pass writes per group of P + 1 candidates (`normal_entries`)",
+    ),
+    (
+        "EL",
+        "u32",
+        "threads along the rows of one normal workgroup (`normal_lanes`)",
+    ),
+    (
+        "NB",
+        "u32",
+        "blocks of EL rows covering the P + 1 rows of the Gram matrix",
+    ),
+];
+
+/// The values of [`MODULE_CONSTANTS`] for `model`, `term` and `shape`, in its order, as
+/// (name, WGSL type, WGSL literal).
+fn module_constants(
+    model: &Model,
+    term: Term,
+    shape: Shape,
+) -> Vec<(&'static str, &'static str, String)> {
+    let p = model.dim;
+    let u = |v: usize| format!("{v}u");
+    let values = [
+        u(model.scalar_count()),
+        u(model.groups()),
+        u(record_channels(model)),
+        u(record_texels(record_channels(model))),
+        u(RECORDS_PER_ROW),
+        u(padded_groups(model)),
+        fixed_base(model).to_string(),
+        shape.mu_tables.to_string(),
+        format!("{}u", shape.lanes),
+        format!("{}u", shape.slices),
+        format!("{}u", term_code(term)),
+        u(p),
+        u(p * (p + 1) / 2),
+        u(normal_entries(p)),
+        format!("{}u", normal_lanes(p, shape)),
+        u((p + 1).div_ceil(normal_lanes(p, shape) as usize)),
+    ];
+    MODULE_CONSTANTS
+        .iter()
+        .zip(values)
+        .map(|(&(name, ty, _), value)| (name, ty, value))
+        .collect()
+}
+
 /// The full module for a model and a loss shape.
 pub fn compose(model: &Model, term: Term, shape: Shape) -> String {
     let s = model.scalar_count();
-    // G counts scalar-view groups: channels, times planes under `+peraxis`.
-    let g = model.groups();
-    let p = model.dim;
     let mut src = format!(
-        "// bsdfit kernel module for `{}`, {} channel(s)\nconst S: u32 = {s}u;\nconst G: u32 = {g}u;\nconst CB: u32 = {}u;\nconst TPR: u32 = {}u;\nconst RPR: u32 = {}u;\nconst GP: u32 = {}u;\nconst FIXED_BASE: bool = {};\nconst MU_TABLES: bool = {};\nconst CL: u32 = {}u;\nconst SL: u32 = {}u;\nconst TERM: u32 = {}u;\nconst PD: u32 = {p}u;\nconst NJJ: u32 = {}u;\nconst NE: u32 = {}u;\nconst EL: u32 = {}u;\nconst NB: u32 = {}u;\nvar<private> P: array<f32, {}>;\n\n",
-        model.spec,
-        model.channels,
-        record_channels(model),
-        record_texels(record_channels(model)),
-        RECORDS_PER_ROW,
-        padded_groups(model),
-        fixed_base(model),
-        shape.mu_tables,
-        shape.lanes,
-        shape.slices,
-        term_code(term),
-        p * (p + 1) / 2,
-        normal_entries(p),
-        normal_lanes(p, shape),
-        (p + 1).div_ceil(normal_lanes(p, shape) as usize),
+        "// bsdfit kernel module for `{}`, {} channel(s)\n",
+        model.spec, model.channels
+    );
+    for (name, ty, value) in module_constants(model, term, shape) {
+        src += &format!("const {name}: {ty} = {value};\n");
+    }
+    src += &format!(
+        "var<private> P: array<f32, {}>;\n\n",
         (s * padded_groups(model)).max(1)
     );
     src += &super::gpu::bindings::wgsl_declarations();

@@ -17,7 +17,8 @@
 use crate::bsdf::{Model, ParamDecl, Scale};
 
 /// The constraint options as given (`NAME=…` strings), before they meet a model.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct ConstraintSpec {
     pub fix: Vec<String>,
     pub bounds: Vec<String>,
@@ -38,13 +39,13 @@ impl ConstraintSpec {
             s.split_once('=').map_or(s, |(n, _)| n).trim()
         }
         let mut v = Vec::new();
-        v.extend(self.fix.iter().map(|s| ("--fix", name(s).to_string())));
+        v.extend(self.fix.iter().map(|s| ("{fix}", name(s).to_string())));
         v.extend(
             self.bounds
                 .iter()
-                .map(|s| ("--bounds", name(s).to_string())),
+                .map(|s| ("{bounds}", name(s).to_string())),
         );
-        v.extend(self.priors.iter().map(|s| ("--prior", name(s).to_string())));
+        v.extend(self.priors.iter().map(|s| ("{prior}", name(s).to_string())));
         v
     }
 
@@ -54,14 +55,20 @@ impl ConstraintSpec {
         for (option, name) in self.names() {
             if !models.iter().any(|m| resolve(m, &name).is_ok()) {
                 let specs: Vec<&str> = models.iter().map(|m| m.spec.as_str()).collect();
-                anyhow::bail!(
+                return Err(crate::choice::field_error(format!(
                     "{option} {name}: no model of this run has a parameter '{name}' (models: {})",
                     specs.join(", ")
-                );
+                )));
             }
         }
         Ok(())
     }
+}
+
+/// An error of the checks of [`Constraints::resolve`], whose messages name the options
+/// as `{fix}`, `{bounds}`, `{prior}`, as a [`crate::choice::FieldError`].
+fn as_field_error(e: anyhow::Error) -> anyhow::Error {
+    crate::choice::field_error(format!("{e:#}"))
 }
 
 /// A Gaussian prior on one flat parameter.
@@ -180,6 +187,16 @@ impl Constraints {
         spec: &ConstraintSpec,
         lenient: bool,
     ) -> anyhow::Result<Constraints> {
+        Constraints::resolve_options(model, spec, lenient).map_err(as_field_error)
+    }
+
+    /// [`Constraints::resolve`], its messages naming the options as `{fix}`, `{bounds}`,
+    /// `{prior}`.
+    fn resolve_options(
+        model: &Model,
+        spec: &ConstraintSpec,
+        lenient: bool,
+    ) -> anyhow::Result<Constraints> {
         let mut c = Constraints::none(model);
         let lookup = |option: &str, item: &str, name: &str| -> anyhow::Result<Option<Vec<usize>>> {
             match resolve(model, name) {
@@ -189,17 +206,17 @@ impl Constraints {
             }
         };
         for item in &spec.bounds {
-            let (name, rest) = split_item(item, "--bounds", "NAME=LO:HI")?;
-            let (lo, hi) = pair(rest, "--bounds", item, "NAME=LO:HI", ["LO", "HI"])?;
-            let Some(ix) = lookup("--bounds", item, name)? else {
+            let (name, rest) = split_item(item, "{bounds}", "NAME=LO:HI")?;
+            let (lo, hi) = pair(rest, "{bounds}", item, "NAME=LO:HI", ["LO", "HI"])?;
+            let Some(ix) = lookup("{bounds}", item, name)? else {
                 continue;
             };
             for j in ix {
                 let d = &mut c.decls[j];
-                anyhow::ensure!(lo < hi, "--bounds {item}: LO must be below HI");
+                anyhow::ensure!(lo < hi, "{{bounds}} {item}: LO must be below HI");
                 anyhow::ensure!(
                     lo >= d.lo && hi <= d.hi,
-                    "--bounds {item}: [{lo}, {hi}] is not inside {}'s declared range [{}, {}] (the model is not defined beyond it)",
+                    "{{bounds}} {item}: [{lo}, {hi}] is not inside {}'s declared range [{}, {}] (the model is not defined beyond it)",
                     c.names[j],
                     d.lo,
                     d.hi
@@ -215,17 +232,17 @@ impl Constraints {
             }
         }
         for item in &spec.fix {
-            let (name, rest) = split_item(item, "--fix", "NAME=VALUE")?;
+            let (name, rest) = split_item(item, "{fix}", "NAME=VALUE")?;
             let values: Vec<f64> = rest
                 .split(':')
-                .map(|v| number(v, "VALUE", "--fix", item))
+                .map(|v| number(v, "VALUE", "{fix}", item))
                 .collect::<anyhow::Result<_>>()?;
-            let Some(ix) = lookup("--fix", item, name)? else {
+            let Some(ix) = lookup("{fix}", item, name)? else {
                 continue;
             };
             anyhow::ensure!(
                 values.len() == 1 || values.len() == ix.len(),
-                "--fix {item}: {name} has {} entries; give 1 value or {} separated by ':'",
+                "{{fix}} {item}: {name} has {} entries; give 1 value or {} separated by ':'",
                 ix.len(),
                 ix.len()
             );
@@ -238,7 +255,7 @@ impl Constraints {
                 let d = &c.decls[j];
                 anyhow::ensure!(
                     v >= d.lo && v <= d.hi,
-                    "--fix {item}: {} = {v} is outside its range [{}, {}]",
+                    "{{fix}} {item}: {} = {v} is outside its range [{}, {}]",
                     c.names[j],
                     d.lo,
                     d.hi
@@ -247,16 +264,16 @@ impl Constraints {
             }
         }
         for item in &spec.priors {
-            let (name, rest) = split_item(item, "--prior", "NAME=MEAN:SD")?;
-            let (mean, sd) = pair(rest, "--prior", item, "NAME=MEAN:SD", ["MEAN", "SD"])?;
-            anyhow::ensure!(sd > 0.0, "--prior {item}: SD must be positive");
-            let Some(ix) = lookup("--prior", item, name)? else {
+            let (name, rest) = split_item(item, "{prior}", "NAME=MEAN:SD")?;
+            let (mean, sd) = pair(rest, "{prior}", item, "NAME=MEAN:SD", ["MEAN", "SD"])?;
+            anyhow::ensure!(sd > 0.0, "{{prior}} {item}: SD must be positive");
+            let Some(ix) = lookup("{prior}", item, name)? else {
                 continue;
             };
             for j in ix {
                 anyhow::ensure!(
                     c.fixed[j].is_none(),
-                    "--prior {item}: {} is fixed by --fix; a prior on it would change nothing",
+                    "{{prior}} {item}: {} is fixed by {{fix}}; a prior on it would change nothing",
                     c.names[j]
                 );
                 c.priors.push(Prior {
@@ -270,7 +287,7 @@ impl Constraints {
         c.free = (0..model.dim).filter(|&j| c.fixed[j].is_none()).collect();
         anyhow::ensure!(
             !c.free.is_empty(),
-            "--fix leaves no parameter of {} to fit",
+            "{{fix}} leaves no parameter of {} to fit",
             model.spec
         );
         Ok(c)
@@ -440,13 +457,13 @@ mod tests {
     fn malformed_options_are_errors_naming_the_option() {
         let m = Model::parse("lambert", 1).unwrap();
         for (s, want) in [
-            (spec(&["rho"], &[], &[]), "--fix 'rho': expected NAME=VALUE"),
+            (spec(&["rho"], &[], &[]), "fix 'rho': expected NAME=VALUE"),
             (spec(&["rho=x"], &[], &[]), "VALUE 'x' is not a number"),
             (spec(&[], &[], &["rho=0.5"]), "expected NAME=MEAN:SD"),
             (spec(&[], &[], &["rho=0.5:0"]), "SD must be positive"),
             (
                 spec(&["rho=0.5"], &[], &["rho=0.5:0.1"]),
-                "is fixed by --fix",
+                "is fixed by fix;",
             ),
             (spec(&["rho=2"], &[], &[]), "outside its range"),
             (spec(&["rho=0.5"], &[], &[]), "leaves no parameter"),

@@ -16,6 +16,7 @@
 //! summary warns: the linear error is then not a coverage interval.
 
 use crate::bsdf::Model;
+use crate::choice::field_error;
 use crate::data::Dataset;
 use crate::engine::loss::{Loss, Term};
 use crate::engine::Backend;
@@ -115,12 +116,15 @@ pub fn monte_carlo(
     mc: &McOptions,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<McSummary> {
-    anyhow::ensure!(mc.replicas >= 2, "--mc needs at least 2 replicas");
-    anyhow::ensure!(
-        mc.scale_rel.is_finite() && (0.0..1.0).contains(&mc.scale_rel),
-        "--mc-scale must be a relative uncertainty in [0, 1), got {}",
-        mc.scale_rel
-    );
+    if mc.replicas < 2 {
+        return Err(field_error("{mc} needs at least 2 replicas"));
+    }
+    if !(mc.scale_rel.is_finite() && (0.0..1.0).contains(&mc.scale_rel)) {
+        return Err(field_error(format!(
+            "{{mc_scale}} must be a relative uncertainty in [0, 1), got {}",
+            mc.scale_rel
+        )));
+    }
     let t0 = Instant::now();
     let mut rep_opts = opts.clone();
     rep_opts.restarts = mc.restarts.max(1);

@@ -24,6 +24,12 @@ pub fn bic(chi2: f64, params: usize, samples: usize) -> f64 {
     chi2 + params as f64 * (samples as f64).ln()
 }
 
+/// The Akaike information criterion of a fit with χ² `chi2` and `params` fitted
+/// parameters: χ² + 2k (the Gaussian likelihood's, up to a constant).
+pub fn aic(chi2: f64, params: usize) -> f64 {
+    chi2 + 2.0 * params as f64
+}
+
 /// BIC(extension) − BIC(current) on the same K samples, both χ² divided by `scale`
 /// (1: as is; max(1, χ²_red) of the extension: a misfit both models share does not
 /// inflate the difference).

@@ -3,7 +3,7 @@
 //! else halve Δ; stop when Δ < Δ_min or the budget is spent. Every poll of every active
 //! restart goes to the objective as one batch.
 
-use super::{sanitize, BatchObjective, RestartResult};
+use super::{sanitize, BatchObjective, RestartResult, Stop};
 
 #[derive(Clone, Debug)]
 pub struct CompassOptions {
@@ -48,6 +48,7 @@ pub fn minimize(
             cost: sanitize(c),
             iterations: 0,
             evaluations: 1,
+            stop: Stop::StepBelowMinimum,
         })
         .collect();
     let mut step = vec![opts.initial_step; starts.len()];
@@ -105,8 +106,12 @@ pub fn minimize(
                 }
                 _ => step[r] *= 0.5,
             }
-            if step[r] < opts.min_step || st.evaluations >= opts.max_evaluations {
+            if step[r] < opts.min_step {
                 active[r] = false;
+                st.stop = Stop::StepBelowMinimum;
+            } else if st.evaluations >= opts.max_evaluations {
+                active[r] = false;
+                st.stop = Stop::EvaluationBudget;
             }
         }
         progress(active.iter().filter(|a| **a).count());
@@ -156,6 +161,25 @@ mod tests {
         // Lockstep: one batch per iteration for all restarts, not one per restart.
         let max_iter = out.iter().map(|r| r.iterations).max().unwrap();
         assert_eq!(q.calls, max_iter + 1);
+        assert!(out.iter().all(|r| r.stop == Stop::StepBelowMinimum));
+        assert!(Stop::StepBelowMinimum.converged());
+    }
+
+    /// A restart that uses its evaluation budget says so, and that it did not converge.
+    #[test]
+    fn a_spent_budget_is_the_stop_reason() {
+        let mut q = Quadratic {
+            centre: vec![0.3, 0.71, 0.05],
+            calls: 0,
+        };
+        let opts = CompassOptions {
+            max_evaluations: 20,
+            ..Default::default()
+        };
+        let out = minimize(&mut q, &[vec![0.9, 0.1, 0.9]], &opts, &mut |_| {}).unwrap();
+        assert_eq!(out[0].stop, Stop::EvaluationBudget);
+        assert!(!out[0].stop.converged());
+        assert_eq!(out[0].stop.status(), "evaluation_budget");
     }
 
     #[test]

@@ -185,6 +185,65 @@ pub struct RestartResult {
     pub iterations: usize,
     /// Candidate points evaluated for this restart.
     pub evaluations: usize,
+    /// Why it stopped.
+    pub stop: Stop,
+}
+
+/// Why a restart stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// Levenberg–Marquardt's reason.
+    Lm(lm::Termination),
+    /// Compass search: the step fell below its minimum (converged).
+    StepBelowMinimum,
+    /// Compass search: the restart used its evaluation budget.
+    EvaluationBudget,
+}
+
+impl Stop {
+    /// A short identifier (`small_gain`, `max_iterations`, …).
+    pub fn status(self) -> &'static str {
+        use lm::Termination as T;
+        match self {
+            Stop::Lm(T::NotFinite) => "not_finite",
+            Stop::Lm(T::PredictedGain) => "predicted_gain",
+            Stop::Lm(T::SmallGain) => "small_gain",
+            Stop::Lm(T::SmallStep) => "small_step",
+            Stop::Lm(T::Damping) => "damping",
+            Stop::Lm(T::Stalled) => "stalled",
+            Stop::Lm(T::MaxIterations) => "max_iterations",
+            Stop::StepBelowMinimum => "step_below_minimum",
+            Stop::EvaluationBudget => "evaluation_budget",
+        }
+    }
+
+    /// Whether the optimizer stopped because it converged, not because it ran out of
+    /// iterations or evaluations or met a non-finite cost.
+    pub fn converged(self) -> bool {
+        use lm::Termination as T;
+        !matches!(
+            self,
+            Stop::Lm(T::NotFinite) | Stop::Lm(T::MaxIterations) | Stop::EvaluationBudget
+        )
+    }
+
+    /// Why it stopped, in words.
+    pub fn message(self) -> &'static str {
+        use lm::Termination as T;
+        match self {
+            Stop::Lm(T::NotFinite) => "the cost is not finite at the point reached",
+            Stop::Lm(T::PredictedGain) => {
+                "the next step's predicted gain is below the tolerance (converged)"
+            }
+            Stop::Lm(T::SmallGain) => "the last step gained less than the tolerance (converged)",
+            Stop::Lm(T::SmallStep) => "the step became shorter than the tolerance (converged)",
+            Stop::Lm(T::Damping) => "no step lowered the cost however damped (converged)",
+            Stop::Lm(T::Stalled) => "the cost stopped falling over the last iterations (converged)",
+            Stop::Lm(T::MaxIterations) => "the iteration limit was reached before convergence",
+            Stop::StepBelowMinimum => "the poll step fell below its minimum (converged)",
+            Stop::EvaluationBudget => "the evaluation budget ran out before convergence",
+        }
+    }
 }
 
 /// Seeded uniform starting points in the unit box.

@@ -4,6 +4,5 @@ pub mod plot;
 pub mod render;
 pub mod report;
 pub mod results;
-pub mod text;
 
 pub use files::{check_writable_dir, check_writable_file, write_atomic};

@@ -19,14 +19,22 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+/// How the tabulated baseline finds a pixel's value among the samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Lookup {
     Nearest,
     Idw,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+impl crate::choice::Choice for Lookup {
+    const WHAT: &'static str = "lookup";
+    const TABLE: &'static [(Self, &'static str, &'static str)] =
+        &[(Lookup::Nearest, "nearest", ""), (Lookup::Idw, "idw", "")];
+}
+crate::choice::named_choice!(Lookup);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ErrorMetric {
     /// |m − b| / (|m| + |b| + ε) per pixel, averaged over channels, in [0, 1].
@@ -34,6 +42,23 @@ pub enum ErrorMetric {
     /// sqrt(mean over channels of (m − b)²) in displayed units (1 = white).
     Rmse,
 }
+
+impl crate::choice::Choice for ErrorMetric {
+    const WHAT: &'static str = "error";
+    const TABLE: &'static [(Self, &'static str, &'static str)] = &[
+        (
+            ErrorMetric::Smape,
+            "smape",
+            "|m − b| / (|m| + |b| + ε) per pixel, averaged over channels, in [0, 1]",
+        ),
+        (
+            ErrorMetric::Rmse,
+            "rmse",
+            "sqrt(mean over channels of (m − b)²) in displayed units (1 = white)",
+        ),
+    ];
+}
+crate::choice::named_choice!(ErrorMetric);
 
 #[derive(Clone, Debug, Serialize)]
 pub struct RenderOptions {

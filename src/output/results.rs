@@ -651,8 +651,3 @@ fn rankings_markdown(rows: &[Row]) -> String {
     }
     s
 }
-
-/// Convenience for callers: write a file atomically, creating its directory.
-pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::output::files::write_atomic(path, bytes)
-}

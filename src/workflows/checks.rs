@@ -150,7 +150,7 @@ pub fn nonfinite_cause(
         (
             format!(
                 "{} with a non-finite (y′ − y)/u or {} loss term",
-                crate::cli::progress::plural(bad.len(), "sample"),
+                crate::text::plural(bad.len(), "sample"),
                 loss.metric
             ),
             bad,

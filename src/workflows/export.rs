@@ -7,8 +7,9 @@
 
 use crate::bsdf::MitsubaField;
 use crate::data::readers::merl;
-use crate::data::{count, Dataset, Kind, RawRow, ReadOptions, Sample};
+use crate::data::{Dataset, Kind, RawRow, ReadOptions, Sample};
 use crate::inference::saved::{same_plane, FitFile, Propagated, Propagator, SavedFit};
+use crate::text::plural_with as count;
 use anyhow::Result;
 use rayon::prelude::*;
 use std::collections::BTreeMap;

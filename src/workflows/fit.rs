@@ -4,6 +4,7 @@
 //! whoever asks.
 
 use crate::bsdf::Model;
+use crate::choice::field_error;
 use crate::data::{Dataset, Kind};
 use crate::engine::cpu::CpuBackend;
 use crate::engine::loss::{Loss, Metric, Weights};
@@ -11,7 +12,7 @@ use crate::engine::{device_fault, Backend};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
 use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
 use crate::inference::mc::{monte_carlo, McOptions};
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 /// Random restarts per fit of `fit`, `diagnose` and `sweep` (one default for all).
 pub const DEFAULT_RESTARTS: usize = 16;
@@ -58,19 +59,27 @@ impl Default for FitRequest {
 pub fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
     let metric: Metric = loss
         .parse()
-        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+        .map_err(|e: String| field_error(format!("{{loss}}: {e}")))?;
     let weights: Weights = weights
         .parse()
-        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))?;
-    anyhow::ensure!(
-        metric.applies_to(kind),
-        "--loss {metric} is not defined for {kind} data (use one of {:?} or chi2)",
-        Metric::for_kind(kind)
-            .iter()
-            .map(|m| m.to_string())
-            .collect::<Vec<_>>()
-    );
+        .map_err(|e: String| field_error(format!("{{weights}}: {e}")))?;
+    if !metric.applies_to(kind) {
+        return Err(field_error(format!(
+            "{{loss={metric}}} is not defined for {kind} data (use one of {:?} or chi2)",
+            Metric::for_kind(kind)
+                .iter()
+                .map(|m| m.to_string())
+                .collect::<Vec<_>>()
+        )));
+    }
     Ok(Loss::new(metric, weights))
+}
+
+/// A model spec that does not parse or does not suit the data, as an error of the `model`
+/// option.
+pub fn model_error(e: &dyn std::fmt::Display) -> anyhow::Error {
+    let text = e.to_string().replace('{', "(").replace('}', ")");
+    field_error(format!("{{model}}: {text}"))
 }
 
 /// The optimizer asked for, or the default for the loss: LM where it applies.
@@ -92,7 +101,7 @@ pub enum Stage {
 }
 
 /// A fit and, where Monte Carlo was asked for and failed, why (the fit itself stands).
-pub struct FitOutcome {
+pub struct FitResponse {
     pub model: Model,
     pub loss: Loss,
     pub report: FitReport,
@@ -101,6 +110,21 @@ pub struct FitOutcome {
     /// re-run on the CPU reference: what happened, in one line (also among the report's
     /// warnings; the report's `backend` is the one that produced it).
     pub fallback: Option<String>,
+}
+
+impl FitResponse {
+    /// The normalised residuals z = (y′ − y)/u of the best fit, one per sample of `data`
+    /// (the data it was fitted to), computed in f64 on the CPU reference.
+    pub fn residuals(&self, data: &Dataset) -> Result<Vec<f64>> {
+        let cpu = CpuBackend::new();
+        let mut eval = cpu.prepare(crate::engine::Problem {
+            model: &self.model,
+            data,
+            loss: self.loss,
+        })?;
+        let values = eval.values(&self.report.flat_params)?;
+        Ok(crate::engine::loss::normalised_residuals(data, &values))
+    }
 }
 
 /// `work` on `backend`; where its device fails it (lost or hung, [`device_fault`]),
@@ -128,25 +152,29 @@ fn on_device_or_cpu<T>(
 impl FitRequest {
     /// The checks that need no data: Monte Carlo options.
     pub fn check(&self) -> Result<()> {
-        anyhow::ensure!(
-            self.restarts >= 1,
-            "--restarts takes a positive integer, got {}",
-            self.restarts
-        );
-        anyhow::ensure!(
-            self.mc == 0 || self.mc >= 2,
-            "--mc {}: a distribution needs at least 2 replicas (0 turns Monte Carlo off)",
-            self.mc
-        );
-        anyhow::ensure!(
-            self.mc_scale.is_finite() && (0.0..1.0).contains(&self.mc_scale),
-            "--mc-scale {}: a relative uncertainty in [0, 1)",
-            self.mc_scale
-        );
-        anyhow::ensure!(
-            self.mc > 0 || self.mc_scale == 0.0,
-            "--mc-scale needs --mc N (the number of replicas)"
-        );
+        if self.restarts < 1 {
+            return Err(field_error(format!(
+                "{{restarts}} takes a positive integer, got {}",
+                self.restarts
+            )));
+        }
+        if !(self.mc == 0 || self.mc >= 2) {
+            return Err(field_error(format!(
+                "{{mc={}}}: a distribution needs at least 2 replicas (0 turns Monte Carlo off)",
+                self.mc
+            )));
+        }
+        if !(self.mc_scale.is_finite() && (0.0..1.0).contains(&self.mc_scale)) {
+            return Err(field_error(format!(
+                "{{mc_scale={}}}: a relative uncertainty in [0, 1)",
+                self.mc_scale
+            )));
+        }
+        if !(self.mc > 0 || self.mc_scale == 0.0) {
+            return Err(field_error(
+                "{mc_scale} needs {mc}, the number of replicas, to be at least 2",
+            ));
+        }
         Ok(())
     }
 
@@ -160,7 +188,7 @@ impl FitRequest {
     pub fn prepare(&self, data: &Dataset) -> Result<(Model, Loss, FitOptions)> {
         self.check()?;
         let loss = parse_loss(&self.loss, &self.weights, data.kind)?;
-        let model = Model::for_data(&self.model, data).context("--model")?;
+        let model = Model::for_data(&self.model, data).map_err(|e| model_error(&e))?;
         Constraints::resolve(&model, &self.constraints, false)?;
         let opts = FitOptions {
             optimizer: optimizer_for(self.optimizer, loss),
@@ -174,13 +202,13 @@ impl FitRequest {
 
     /// Fit `data` on `backend`, then (with `mc`) refit its replicas. `progress` gets the
     /// number of restarts still active in each stage. Where the GPU is lost or hangs,
-    /// what it failed is re-run on the CPU reference ([`FitOutcome::fallback`]).
+    /// what it failed is re-run on the CPU reference ([`FitResponse::fallback`]).
     pub fn run(
         &self,
         data: &Dataset,
         backend: &dyn Backend,
         progress: &mut dyn FnMut(Stage, usize),
-    ) -> Result<FitOutcome> {
+    ) -> Result<FitResponse> {
         let (model, loss, opts) = self.prepare(data)?;
         let (mut report, mut fallback) =
             on_device_or_cpu(backend, "the fit was", &mut |b: &dyn Backend| {
@@ -231,7 +259,7 @@ impl FitRequest {
         if let Some(line) = &fallback {
             report.warnings.push(line.clone());
         }
-        Ok(FitOutcome {
+        Ok(FitResponse {
             model,
             loss,
             report,

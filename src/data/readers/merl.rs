@@ -35,7 +35,9 @@
 //! e.g. a fitted BRDF evaluated at [`cell_directions`], so the reader gives it back.
 
 use super::{mark_assumed, require_assumption};
-use crate::data::{count, Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
+use crate::data::Notice;
+use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
+use crate::text::plural_with as count;
 use glam::DVec3;
 use rand::SeedableRng;
 use std::collections::BTreeMap;
@@ -160,7 +162,7 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
     };
     let chosen = subsample(&valid, keep);
     let mut b = Builder::new(Kind::Brdf, file, opts);
-    b.notices.push(format!(
+    b.notices.push(Notice::from(format!(
         "{file}: MERL table: {} of {CELLS} ({unmeasured} unmeasured, {below} below the horizon at the cell centre); {} kept{}",
         count(valid.len(), "measured cell", "measured cells"),
         keep,
@@ -169,11 +171,11 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
         } else {
             ""
         }
-    ));
-    b.notices.push(format!(
+    )));
+    b.notices.push(Notice::from(format!(
         "{file}: MERL channels R, G, B at nominal wavelengths {} nm, {} nm, {} nm; cells read at their centres",
         NOMINAL_NM[0], NOMINAL_NM[1], NOMINAL_NM[2]
-    ));
+    )));
     for &idx in &chosen {
         push_cell(&mut b, bytes, idx as usize, rel, abs);
     }

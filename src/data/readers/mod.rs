@@ -35,13 +35,14 @@ pub mod v1;
 pub mod zemax;
 
 use crate::data::{DataError, Dataset, ReadOptions};
+use crate::data::{Notice, NoticeKind};
 use std::io::{BufRead, BufReader, IsTerminal, Read, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// Progress of a streaming read, reported every few ten thousand lines and at the end.
+/// The progress of a streaming read, reported every few ten thousand lines and at the end.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Progress {
+pub struct ReadProgress {
     /// Bytes consumed so far.
     pub bytes: u64,
     /// Rows accepted so far.
@@ -176,7 +177,7 @@ pub fn load_reporting(path: &Path, opts: &ReadOptions) -> Result<Dataset, DataEr
 pub fn load_with_progress(
     path: &Path,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let file = path.display().to_string();
     let f = std::fs::File::open(path).map_err(|e| cannot_read(&file, e))?;
@@ -211,7 +212,7 @@ pub fn load_with_progress(
             reader
                 .read_to_end(&mut bytes)
                 .map_err(|e| cannot_read(&file, e))?;
-            progress(Progress {
+            progress(ReadProgress {
                 bytes: bytes.len() as u64,
                 rows: 0,
             });
@@ -342,10 +343,13 @@ pub(crate) fn require_assumption(
 pub(crate) fn mark_assumed(ds: &mut Dataset, rel: f64, abs: f64) {
     ds.assumed_uncertainty = Some((rel, abs));
     ds.meta.insert("uncertainty".into(), assumed_note(rel, abs));
-    ds.notices.push(format!(
-        "{}: uncertainties {}",
-        ds.source.display(),
-        assumed_note(rel, abs)
+    ds.notices.push(Notice::new(
+        NoticeKind::AssumedUncertainty,
+        format!(
+            "{}: uncertainties {}",
+            ds.source.display(),
+            assumed_note(rel, abs)
+        ),
     ));
 }
 
@@ -375,11 +379,11 @@ impl StderrProgress {
         }
     }
 
-    pub fn update(&mut self, p: Progress) {
+    pub fn update(&mut self, p: ReadProgress) {
         self.update_at(p, Instant::now());
     }
 
-    fn update_at(&mut self, p: Progress, now: Instant) {
+    fn update_at(&mut self, p: ReadProgress, now: Instant) {
         if now.duration_since(self.start) < Duration::from_secs(1) {
             return;
         }
@@ -464,7 +468,7 @@ mod tests {
         p.terminal = false;
         p.sink = Box::new(out.clone());
         let at = |s: f64| t0 + Duration::from_secs_f64(s);
-        let step = |bytes: u64| Progress {
+        let step = |bytes: u64| ReadProgress {
             bytes,
             rows: (bytes / 50) as usize,
         };

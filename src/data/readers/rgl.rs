@@ -10,6 +10,7 @@
 
 use super::tensor::TensorFile;
 use super::{mark_assumed, require_assumption};
+use crate::data::Notice;
 use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions};
 use glam::DVec3;
 use std::collections::BTreeMap;
@@ -422,7 +423,7 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
     let (expr, rows) = sample_geometry(file, opts)?;
     let channels = channels(&material, spectral, file, opts)?;
     let mut b = Builder::new(Kind::Brdf, file, opts);
-    b.notices.push(format!(
+    b.notices.push(Notice::from(format!(
         "{file}: RGL measured material{} ({} incidence angles), sampled on geometry {expr} ({} directions){}",
         material
             .description
@@ -446,7 +447,7 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
                 NOMINAL_NM[0], NOMINAL_NM[1], NOMINAL_NM[2]
             )
         }
-    ));
+    )));
     // Rows first (validated and normalised as any file's), then each sample's value from
     // its own stored directions: normalisation may re-express an azimuth (at θ = 0).
     for (k, r) in rows.iter().enumerate() {
@@ -488,7 +489,7 @@ fn sample_geometry(file: &str, opts: &ReadOptions) -> Result<(String, Vec<[f64; 
         .sample_geometry
         .clone()
         .unwrap_or_else(|| DEFAULT_GEOMETRY.to_string());
-    let (kind, rows) = crate::workflows::synth::geometry_expr(&expr)
+    let (kind, rows) = crate::data::geometries::geometry_expr(&expr)
         .map_err(|e| bad(file, format!("--sample-geometry: {e}")))?;
     if kind != Kind::Brdf {
         return Err(bad(
@@ -580,10 +581,10 @@ fn evaluate(
         s.uncertainty = super::assumed_uncertainty(value, rel, abs);
     }
     if clamped > 0 {
-        ds.notices.push(format!(
+        ds.notices.push(Notice::from(format!(
             "{file}: {clamped} of {} sampled values were negative in the material's table (colours outside the gamut of an RGB file) and are read as 0",
             ds.samples.len()
-        ));
+        )));
     }
     Ok(())
 }

@@ -2,10 +2,11 @@
 //! header naming the seven columns (in any order), then one row per sample, read as a
 //! stream straight into the dataset's [`Builder`].
 
-use crate::data::readers::Progress;
+use crate::data::readers::ReadProgress;
 use crate::data::{
     Builder, DataError, Dataset, Kind, RawRow, ReadOptions, COLUMNS, PROGRESS_EVERY_LINES,
 };
+use crate::data::{Notice, NoticeKind};
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
@@ -166,7 +167,7 @@ impl Dataset {
         mut reader: R,
         file: &str,
         opts: &ReadOptions,
-        progress: &mut dyn FnMut(Progress),
+        progress: &mut dyn FnMut(ReadProgress),
     ) -> Result<Dataset, DataError> {
         let mut meta = BTreeMap::new();
         let mut buf = Vec::with_capacity(256);
@@ -192,7 +193,7 @@ impl Dataset {
             line += 1;
             bytes += n as u64;
             if line % PROGRESS_EVERY_LINES == 0 {
-                progress(Progress {
+                progress(ReadProgress {
                     bytes,
                     rows: builder.as_ref().map_or(0, |b| b.len()),
                 });
@@ -252,7 +253,7 @@ impl Dataset {
                 msg: format!("no header line (expected: {})", COLUMNS.join(",")),
             });
         };
-        progress(Progress {
+        progress(ReadProgress {
             bytes,
             rows: b.len(),
         });
@@ -267,11 +268,17 @@ impl Dataset {
             .get("uncertainty")
             .and_then(|u| crate::data::readers::parse_assumed_note(u));
         if let (Some(_), Some(note)) = (assumed, meta.get("uncertainty")) {
-            b.notices.push(format!("{file}: uncertainties {note}"));
+            b.notices.push(Notice::new(
+                NoticeKind::AssumedUncertainty,
+                format!("{file}: uncertainties {note}"),
+            ));
         }
         if opts.assume_uncertainty.is_some() {
-            b.notices.push(format!(
-                "{file}: --assume-uncertainty ignored: the file gives its own uncertainties"
+            b.notices.push(Notice::new(
+                NoticeKind::AssumptionIgnored,
+                format!(
+                    "{file}: --assume-uncertainty ignored: the file gives its own uncertainties"
+                ),
             ));
         }
         let mut ds = b.finish(&material, meta)?;

@@ -5,7 +5,7 @@
 
 /// What a binding is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
+pub enum BindingKind {
     /// The [`Dims`] block.
     Uniform,
     /// A storage buffer of `array<T>`.
@@ -20,7 +20,7 @@ pub struct Binding {
     pub slot: u32,
     /// Its name in the WGSL modules.
     pub name: &'static str,
-    pub kind: Kind,
+    pub kind: BindingKind,
     /// Its WGSL type.
     pub wgsl_type: &'static str,
     /// What it holds (emitted as a comment above its declaration).
@@ -32,56 +32,56 @@ pub const BINDINGS: [Binding; 8] = [
     Binding {
         slot: 0,
         name: "dims",
-        kind: Kind::Uniform,
+        kind: BindingKind::Uniform,
         wgsl_type: "Dims",
         about: "sizes of this pass (src/engine/gpu/bindings.rs, `Dim`)",
     },
     Binding {
         slot: 1,
         name: "records",
-        kind: Kind::Texture { uint: false },
+        kind: BindingKind::Texture { uint: false },
         wgsl_type: "texture_2d<f32>",
         about: "the sample records of the bound segment (kernel.wgsl, `record_texel`)",
     },
     Binding {
         slot: 2,
         name: "tables",
-        kind: Kind::Storage { read_only: true },
+        kind: BindingKind::Storage { read_only: true },
         wgsl_type: "array<u32>",
         about: "per problem: its records and samples, then its μ table",
     },
     Binding {
         slot: 3,
         name: "params",
-        kind: Kind::Storage { read_only: true },
+        kind: BindingKind::Storage { read_only: true },
         wgsl_type: "array<f32>",
         about: "the candidates' flat parameter vectors",
     },
     Binding {
         slot: 4,
         name: "out",
-        kind: Kind::Storage { read_only: false },
+        kind: BindingKind::Storage { read_only: false },
         wgsl_type: "array<f32>",
         about: "partial costs per (candidate, tile), or model values per record slot",
     },
     Binding {
         slot: 5,
         name: "LUT",
-        kind: Kind::Texture { uint: false },
+        kind: BindingKind::Texture { uint: false },
         wgsl_type: "texture_2d<f32>",
         about: "the model's lookup table (GG's Smith Λ), LUT_WIDTH entries a row",
     },
     Binding {
         slot: 6,
         name: "owners",
-        kind: Kind::Storage { read_only: true },
+        kind: BindingKind::Storage { read_only: true },
         wgsl_type: "array<u32>",
         about: "per candidate: its problem, and where its values start in `out`",
     },
     Binding {
         slot: 7,
         name: "normal_out",
-        kind: Kind::Storage { read_only: false },
+        kind: BindingKind::Storage { read_only: false },
         wgsl_type: "array<f32>",
         about: "LM's normal-equation sums per (group, tile) (normal.wgsl)",
     },
@@ -162,10 +162,10 @@ pub fn wgsl_declarations() -> String {
     src += "}\n";
     for b in all() {
         let var = match b.kind {
-            Kind::Uniform => "var<uniform>".to_string(),
-            Kind::Storage { read_only: true } => "var<storage, read>".to_string(),
-            Kind::Storage { read_only: false } => "var<storage, read_write>".to_string(),
-            Kind::Texture { .. } => "var".to_string(),
+            BindingKind::Uniform => "var<uniform>".to_string(),
+            BindingKind::Storage { read_only: true } => "var<storage, read>".to_string(),
+            BindingKind::Storage { read_only: false } => "var<storage, read_write>".to_string(),
+            BindingKind::Texture { .. } => "var".to_string(),
         };
         src += &format!(
             "// {}\n@group(0) @binding({}) {var} {}: {};\n",
@@ -182,17 +182,17 @@ pub fn layout_entries() -> Vec<wgpu::BindGroupLayoutEntry> {
             binding: b.slot,
             visibility: wgpu::ShaderStages::COMPUTE,
             ty: match b.kind {
-                Kind::Uniform => wgpu::BindingType::Buffer {
+                BindingKind::Uniform => wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: false,
                     min_binding_size: None,
                 },
-                Kind::Storage { read_only } => wgpu::BindingType::Buffer {
+                BindingKind::Storage { read_only } => wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Storage { read_only },
                     has_dynamic_offset: false,
                     min_binding_size: None,
                 },
-                Kind::Texture { uint } => wgpu::BindingType::Texture {
+                BindingKind::Texture { uint } => wgpu::BindingType::Texture {
                     sample_type: if uint {
                         wgpu::TextureSampleType::Uint
                     } else {
@@ -231,10 +231,10 @@ pub fn bind_group(
             anyhow::bail!("binding `{}` given {} times", b.name, found.len());
         };
         let resource = match (r, b.kind) {
-            (Resource::Buffer(buf), Kind::Uniform | Kind::Storage { .. }) => {
+            (Resource::Buffer(buf), BindingKind::Uniform | BindingKind::Storage { .. }) => {
                 buf.as_entire_binding()
             }
-            (Resource::Texture(view), Kind::Texture { .. }) => {
+            (Resource::Texture(view), BindingKind::Texture { .. }) => {
                 wgpu::BindingResource::TextureView(view)
             }
             _ => anyhow::bail!("binding `{}` given the wrong kind of resource", b.name),

@@ -53,7 +53,7 @@ use anyhow::{anyhow, Result};
 use device::Device;
 pub use evaluator::GpuEvaluator;
 pub use fault::{device_fault, DeviceFault, FaultPlan};
-use pipelines::{Entry, PipelineCache};
+use pipelines::{EntryPoint, PipelineCache};
 use std::collections::HashMap;
 use std::sync::Mutex;
 
@@ -280,7 +280,7 @@ impl Backend for GpuBackend {
         // For the usual batch: data with μ tables (a few dozen polar angles at most).
         let pipes = self.value_pipelines(model, self.shape.for_batch(true))?;
         self.pipelines
-            .entry(&self.device, &pipes, Entry::Values)
+            .entry(&self.device, &pipes, EntryPoint::Values)
             .map(|_| ())
     }
     fn prepare_many<'a>(&'a self, problems: &[Problem<'a>]) -> Result<Box<dyn Evaluator + 'a>> {

@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 /// The kernels' entry points.
 #[derive(Clone, Copy, Debug)]
-pub enum Entry {
+pub enum EntryPoint {
     /// A partial sum of loss terms per (candidate, tile).
     Costs,
     /// Model values per record slot.
@@ -125,12 +125,12 @@ impl PipelineCache {
         &self,
         device: &Device,
         pipes: &'p Pipelines,
-        which: Entry,
+        which: EntryPoint,
     ) -> Result<&'p wgpu::ComputePipeline> {
         let (cell, name) = match which {
-            Entry::Costs => (&pipes.costs, "costs"),
-            Entry::Values => (&pipes.values, "values"),
-            Entry::Normal => (&pipes.normal, pipes.normal_entry),
+            EntryPoint::Costs => (&pipes.costs, "costs"),
+            EntryPoint::Values => (&pipes.values, "values"),
+            EntryPoint::Normal => (&pipes.normal, pipes.normal_entry),
         };
         let mut made = false;
         let pipeline = cell.get_or_init(|| {

@@ -10,7 +10,7 @@
 //! data set takes as many as its size needs, and memory stays one window's outputs.
 
 use super::bindings::{self, Dim, Dims, Resource};
-use super::pipelines::{Entry, Pipelines};
+use super::pipelines::{EntryPoint, Pipelines};
 use super::recorder::{Dispatch, Recorder};
 use super::records::Records;
 use super::{GpuBackend, MAX_GROUPS_X, MIN_TILE};
@@ -320,9 +320,9 @@ impl<'a> Runner<'a> {
             &self.gpu.device,
             &evaluate_pipes,
             if pass == Pass::Costs {
-                Entry::Costs
+                EntryPoint::Costs
             } else {
-                Entry::Values
+                EntryPoint::Values
             },
         )?;
         let normal_pipes = match pass {
@@ -333,7 +333,7 @@ impl<'a> Runner<'a> {
             Some(pipes) => Some(self.gpu.pipelines.entry(
                 &self.gpu.device,
                 pipes,
-                Entry::Normal,
+                EntryPoint::Normal,
             )?),
             None => None,
         };

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 /// What a fit found, before it is dressed as a [`FitReport`](super::FitReport).
 #[derive(Clone, Debug)]
-pub struct FitOutcome {
+pub struct Conclusions {
     /// Best physical parameter vector.
     pub flat: Vec<f64>,
     /// Its loss.
@@ -32,6 +32,8 @@ pub struct FitOutcome {
     pub within: usize,
     pub evaluations: u64,
     pub seconds: f64,
+    /// Why the best restart stopped.
+    pub stop: crate::optim::Stop,
 }
 
 /// χ², the covariance and the warnings at a problem's optimum, in f64 on the CPU
@@ -49,7 +51,7 @@ pub(super) fn conclude(
     loss: Loss,
     best: Optimum,
     space: Constraints,
-) -> anyhow::Result<FitOutcome> {
+) -> anyhow::Result<Conclusions> {
     let t0 = Instant::now();
     let cpu = crate::engine::cpu::CpuBackend::new();
     let mut eval = cpu.prepare(Problem { model, data, loss })?;
@@ -59,7 +61,7 @@ pub(super) fn conclude(
     let chi2 = chi2(data, &values);
     let mut cov = covariance(model, data, loss, eval.as_mut(), &flat, &space)?;
     cov.warnings.extend(space.on_bound_warnings(&flat));
-    Ok(FitOutcome {
+    Ok(Conclusions {
         loss: best.loss,
         chi2_prior: space.prior_chi2(&flat),
         dof: data.len() + space.priors.len() - space.dim(),
@@ -69,6 +71,7 @@ pub(super) fn conclude(
         chi2,
         cov,
         within: best.within,
+        stop: best.stop,
         evaluations: searched + eval.evaluations(),
         seconds: t0.elapsed().as_secs_f64(),
     })

@@ -5,11 +5,12 @@ use super::polish::{polish_in_f64, search_options};
 use super::starts::screened_starts;
 use super::{FitOptions, Optimizer, UnitBox};
 use crate::bsdf::Model;
+use crate::choice::field_error;
 use crate::data::Dataset;
 use crate::engine::loss::{Finisher, Loss};
 use crate::engine::{Backend, Evaluator, Problem};
 use crate::inference::constraints::Constraints;
-use crate::optim::{compass, lm, RestartResult};
+use crate::optim::{compass, lm, RestartResult, Stop};
 use std::ops::Range;
 use std::time::Instant;
 
@@ -24,6 +25,8 @@ pub struct Optimum {
     pub within: usize,
     /// Model-sample evaluations made for this problem.
     pub evaluations: u64,
+    /// Why the best restart stopped.
+    pub stop: Stop,
 }
 
 /// What [`fit_many`] did besides the optima.
@@ -121,28 +124,30 @@ fn check_request(
             data.source.display(),
             data.kind
         );
-        anyhow::ensure!(
-            space.priors.is_empty() || loss.metric == crate::engine::loss::Metric::Chi2,
-            "--prior needs --loss chi2: a prior is a χ² term, and {} is not in χ²'s units",
-            loss.metric
-        );
+        if !(space.priors.is_empty() || loss.metric == crate::engine::loss::Metric::Chi2) {
+            return Err(field_error(format!(
+                "{{prior}} needs {{loss=chi2}}: a prior is a χ² term, and {} is not in χ²'s units",
+                loss.metric
+            )));
+        }
         anyhow::ensure!(
             data.len() + space.priors.len() > space.dim(),
             "{}: {} cannot determine the {} parameters of {}",
             data.source.display(),
-            crate::data::count(data.len(), "sample", "samples"),
+            crate::text::plural_with(data.len(), "sample", "samples"),
             space.dim(),
             model.spec
         );
-        if opts.optimizer == Optimizer::Lm {
-            anyhow::ensure!(
-                loss.is_sum_of_squares(),
-                "--optimizer lm needs a sum-of-squares loss; {} is not one (use compass)",
+        if opts.optimizer == Optimizer::Lm && !loss.is_sum_of_squares() {
+            return Err(field_error(format!(
+                "{{optimizer=lm}} needs a sum-of-squares loss; {} is not one (use compass)",
                 loss.metric
-            );
+            )));
         }
     }
-    anyhow::ensure!(opts.restarts > 0, "--restarts must be at least 1");
+    if opts.restarts == 0 {
+        return Err(field_error("{restarts} must be at least 1"));
+    }
     anyhow::ensure!(
         opts.initial_points
             .iter()
@@ -345,6 +350,7 @@ impl Batch<'_> {
                 .filter(|r| r.cost <= best.cost + tol)
                 .count(),
             evaluations,
+            stop: best.stop,
         }
     }
 }

@@ -14,7 +14,7 @@ mod report;
 mod starts;
 mod unit_box;
 
-pub use conclude::FitOutcome;
+pub use conclude::Conclusions;
 pub use many::{fit_many, ManyStats, Optimum, PhaseSeconds};
 pub use options::{FitOptions, Optimizer};
 pub use polish::{POLISHED_SEARCH_FD_STEP, POLISHED_SEARCH_FTOL, POLISHED_SEARCH_STALL};
@@ -51,7 +51,7 @@ pub fn fit_outcome(
     backend: &dyn Backend,
     opts: &FitOptions,
     progress: &mut dyn FnMut(usize),
-) -> anyhow::Result<FitOutcome> {
+) -> anyhow::Result<Conclusions> {
     let t0 = Instant::now();
     let (optima, space, stats) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
     if std::env::var_os("BSDFIT_TRACE").is_some() {

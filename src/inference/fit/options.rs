@@ -5,7 +5,7 @@ use crate::inference::constraints::ConstraintSpec;
 use crate::optim::{compass, lm};
 use serde::Serialize;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Optimizer {
     /// Compass search (Kolda, Lewis, Torczon 2003), BBM's optimizer; any loss.
@@ -14,14 +14,22 @@ pub enum Optimizer {
     Lm,
 }
 
-impl std::fmt::Display for Optimizer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Optimizer::Compass => "compass",
-            Optimizer::Lm => "lm",
-        })
-    }
+impl crate::choice::Choice for Optimizer {
+    const WHAT: &'static str = "optimizer";
+    const TABLE: &'static [(Self, &'static str, &'static str)] = &[
+        (
+            Optimizer::Compass,
+            "compass",
+            "Compass search (Kolda, Lewis, Torczon 2003), BBM's optimizer; any loss",
+        ),
+        (
+            Optimizer::Lm,
+            "lm",
+            "Levenberg–Marquardt; sum-of-squares losses only",
+        ),
+    ];
 }
+crate::choice::named_choice!(Optimizer);
 
 #[derive(Clone, Debug)]
 pub struct FitOptions {

@@ -103,6 +103,7 @@ pub(super) fn polish_in_f64(
         if r.cost.is_finite() {
             results[i].x = r.x;
             results[i].cost = r.cost;
+            results[i].stop = r.stop;
         }
     }
     Ok(best.iter().enumerate().map(|(q, &i)| i - q * per).collect())

@@ -1,17 +1,20 @@
 //! The JSON report of a fit (docs/output.md) and its human-readable summary.
 
-use super::{FitOptions, FitOutcome};
+use super::{Conclusions, FitOptions};
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::Loss;
 use crate::engine::Backend;
-use serde::Serialize;
+use crate::inference::mc_summary::{nan_if_null, nans_if_null};
+use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 /// The best parameters of a fit (docs/output.md `best`).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Best {
+    #[serde(deserialize_with = "nan_if_null")]
     pub loss: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub chi2_red: f64,
     /// Parameter name → value (an array per channel for rgb parameters).
     pub params: Map<String, Value>,
@@ -20,7 +23,8 @@ pub struct Best {
 }
 
 /// The JSON report of one fit (docs/output.md), with extras after the contract's fields.
-#[derive(Clone, Debug, Serialize)]
+/// It reads back from the JSON it writes (for [`FitReport::summary`] of a saved report).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FitReport {
     pub model: String,
     pub loss: String,
@@ -29,6 +33,7 @@ pub struct FitReport {
     pub backend: String,
     pub restarts: usize,
     pub evaluations: u64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub seconds: f64,
     pub best: Best,
     pub data: String,
@@ -42,6 +47,7 @@ pub struct FitReport {
     pub restarts_within_1pct: usize,
     /// Parameter names of the flat vector (rgb parameters as `name[c]`).
     pub flat_names: Vec<String>,
+    #[serde(deserialize_with = "nans_if_null")]
     pub flat_params: Vec<f64>,
     pub flat_std: Vec<Option<f64>>,
     /// Correlation matrix of the flat parameters (null entries where undetermined).
@@ -54,12 +60,59 @@ pub struct FitReport {
     /// What `--fix`, `--bounds` and `--prior` imposed (absent when nothing was):
     /// `{fixed: {name: value}, bounds: {name: [lo, hi]}, priors: [{name, index, mean, sd}],
     /// chi2_prior}`. Fixed parameters have a standard uncertainty of 0.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub constraints: Option<Value>,
     /// `--mc N`: the parameters' distribution over N refitted replicas of the data
     /// (absent without it).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<crate::inference::mc_summary::McSummary>,
+    /// Why the optimizer stopped on the best restart (the f64 polish's reason where it
+    /// ran).
+    #[serde(default = "StopReport::unknown")]
+    pub stop: StopReport,
+    /// The Bayesian and Akaike information criteria of the fit, χ² + k·ln K and χ² + 2k
+    /// (χ² with the priors' share, k fitted parameters, K samples): lower is better
+    /// between fits of the same data.
+    #[serde(default = "not_a_number", deserialize_with = "nan_if_null")]
+    pub bic: f64,
+    #[serde(default = "not_a_number", deserialize_with = "nan_if_null")]
+    pub aic: f64,
+}
+
+/// Why the optimizer stopped (docs/output.md `stop`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq)]
+pub struct StopReport {
+    /// A short identifier: `small_gain`, `max_iterations`, `step_below_minimum`, …
+    pub status: String,
+    /// Whether it converged (not out of iterations or evaluations, nor at a non-finite cost).
+    pub success: bool,
+    /// The reason in words.
+    pub message: String,
+}
+
+impl StopReport {
+    /// What a report that does not say why its optimizer stopped reads back as.
+    fn unknown() -> StopReport {
+        StopReport {
+            status: "unknown".into(),
+            success: false,
+            message: "the report does not say why the optimizer stopped".into(),
+        }
+    }
+}
+
+fn not_a_number() -> f64 {
+    f64::NAN
+}
+
+impl From<crate::optim::Stop> for StopReport {
+    fn from(s: crate::optim::Stop) -> StopReport {
+        StopReport {
+            status: s.status().to_string(),
+            success: s.converged(),
+            message: s.message().to_string(),
+        }
+    }
 }
 
 pub(super) fn make_report(
@@ -68,7 +121,7 @@ pub(super) fn make_report(
     loss: Loss,
     opts: &FitOptions,
     backend: &dyn Backend,
-    o: FitOutcome,
+    o: Conclusions,
 ) -> FitReport {
     // χ²_red counts each prior as one observation (module doc of `constraints`).
     let chi2_red = (o.chi2 + o.chi2_prior) / o.dof as f64;
@@ -141,6 +194,9 @@ pub(super) fn make_report(
         n_params: o.constraints.dim(),
         constraints,
         monte_carlo: None,
+        stop: o.stop.into(),
+        bic: crate::inference::stats::bic(o.chi2 + o.chi2_prior, o.constraints.dim(), data.len()),
+        aic: crate::inference::stats::aic(o.chi2 + o.chi2_prior, o.constraints.dim()),
     }
 }
 
@@ -184,6 +240,7 @@ impl FitReport {
             "  {} restarts ({} within 1% of best), {} evaluations, {:.2} s on {}\n",
             self.restarts, self.restarts_within_1pct, self.evaluations, self.seconds, self.backend
         );
+        s += &format!("  {} stopped: {}\n", self.optimizer, self.stop.message);
         if let Some(priors) = self
             .constraints
             .as_ref()
@@ -197,7 +254,7 @@ impl FitReport {
                 .and_then(|c| c["chi2_prior"].as_f64());
             s += &format!(
                 "  {} in χ² (their share: {:.3}); χ²_red = (χ² + priors)/(samples + priors − fitted) with {} degrees of freedom\n",
-                crate::data::count(priors.len(), "prior", "priors"),
+                crate::text::plural_with(priors.len(), "prior", "priors"),
                 chi2_prior.unwrap_or(f64::NAN),
                 self.dof
             );

@@ -207,6 +207,29 @@ mod tests {
             why.iter().all(|&w| w == Termination::MaxIterations),
             "{why:?}"
         );
+        // `minimize` hands each restart's reason on with its result.
+        let results = minimize(
+            &mut decay(0.01, 3e-7),
+            &starts,
+            &noisy,
+            &|_, s| s,
+            &mut |_| {},
+        )
+        .unwrap();
+        let stop = crate::optim::Stop::Lm(Termination::PredictedGain);
+        assert!(results.iter().all(|r| r.stop == stop), "{results:?}");
+        assert!(stop.converged() && stop.status() == "predicted_gain");
+        let results = minimize(
+            &mut decay(0.01, 0.0),
+            &starts,
+            &short,
+            &|_, s| s,
+            &mut |_| {},
+        )
+        .unwrap();
+        let stop = crate::optim::Stop::Lm(Termination::MaxIterations);
+        assert!(results.iter().all(|r| r.stop == stop), "{results:?}");
+        assert!(!stop.converged());
     }
 
     /// The progress callback gets the number of restarts still running after each

@@ -106,6 +106,7 @@ impl LmState {
                 x: s.x,
                 iterations: s.iterations,
                 evaluations: s.evaluations,
+                stop: crate::optim::Stop::Lm(s.stop.unwrap_or(Termination::MaxIterations)),
             })
             .collect()
     }

@@ -12,7 +12,7 @@ use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::Backend;
 use crate::inference::stats::{bic, format_p};
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 /// Every candidate fitted so far in a diagnosis, by spec (a failed fit by its error).
 type FitCache = std::collections::HashMap<String, std::result::Result<FitResult, String>>;
@@ -572,7 +572,7 @@ fn diagnose_path(
     opts: &DiagnoseOptions,
     log: &mut dyn FnMut(String),
 ) -> Result<Diagnosis> {
-    let model = Model::for_data(start, data).context("--model")?;
+    let model = Model::for_data(start, data).map_err(|e| crate::workflows::fit::model_error(&e))?;
     anyhow::ensure!(
         model.kind == data.kind,
         "model {} is a {} model but the data is {}",

@@ -9,7 +9,7 @@ use crate::output::results::{
     read_results, results_csv_text, write_if_changed, write_summaries, FitKey, Key, Row, Skipped,
     RESULTS_CSV, SKIPPED_JSON,
 };
-use crate::output::text::plural;
+use crate::text::plural;
 use anyhow::{Context, Result};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -24,6 +24,36 @@ pub struct MergeConfig {
     /// Output folder; rows already in its results.csv are kept.
     pub out: PathBuf,
     pub pictures: bool,
+}
+
+/// The inputs, each folder a `sweep --shard auto` wrote (its plan.json and shards/) with
+/// its shard folders after it, said in a note; other inputs as they are.
+fn with_shard_folders(inputs: &[PathBuf], obs: &mut dyn SweepObserver) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for input in inputs {
+        if !(input.is_dir() && input.join(slurm::PLAN_JSON).exists()) {
+            out.push(input.clone());
+            continue;
+        }
+        let shards = slurm::shard_dirs(input)?;
+        anyhow::ensure!(
+            !shards.is_empty() || input.join(RESULTS_CSV).exists(),
+            "{}: the folder of a `sweep --shard auto` whose tasks have written no rows yet; merge when they have (`bsdfit merge --shards --out {}` then checks them against its plan)",
+            input.display(),
+            input.display()
+        );
+        obs.note(&format!(
+            "note: {} is the folder of a `sweep --shard auto`: merging its {} (`bsdfit merge --shards --out {}` merges them there and checks them against its plan)",
+            input.display(),
+            plural(shards.len(), "shard folder"),
+            input.display()
+        ));
+        if input.join(RESULTS_CSV).exists() {
+            out.push(input.clone());
+        }
+        out.extend(shards);
+    }
+    Ok(out)
 }
 
 /// The rows merged so far and the skipped entries met on the way.
@@ -45,7 +75,7 @@ pub fn merge(cfg: &MergeConfig, obs: &mut dyn SweepObserver) -> Result<()> {
         rows,
         skipped: Vec::new(),
     };
-    let mut inputs = cfg.inputs.clone();
+    let mut inputs = with_shard_folders(&cfg.inputs, obs)?;
     let plan = if cfg.shards {
         let plan = slurm::Plan::read(&cfg.out)?.with_context(|| {
             format!(
@@ -106,7 +136,11 @@ impl Merged {
                 input.parent().map(Path::to_path_buf).unwrap_or_default(),
             )
         };
-        anyhow::ensure!(csv.exists(), "{} not found", csv.display());
+        anyhow::ensure!(
+            csv.exists(),
+            "{} not found: give a folder a sweep wrote (`bsdfit sweep --out`), or its {RESULTS_CSV}",
+            csv.display()
+        );
         if csv.canonicalize().ok() == out_csv.canonicalize().ok() {
             return Ok(());
         }

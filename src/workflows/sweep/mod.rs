@@ -1,4 +1,4 @@
-//! `bsdfit sweep` and `bsdfit merge`: the benchmark as users run it (issue #5).
+//! `bsdfit sweep` and `bsdfit merge`: the benchmark as users run it.
 //!
 //! A sweep is a list of tasks — every data set × applicable model × loss × weighting ×
 //! optimizer — run one fit at a time on one backend. Each finished fit is appended to
@@ -22,6 +22,7 @@ pub use merge::{merge, MergeConfig};
 pub use run::{run, Shard, SweepConfig, SweepObserver, SweepStats};
 
 use crate::bsdf;
+use crate::choice::field_error;
 use crate::data::Kind;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;
@@ -68,17 +69,22 @@ pub struct Task {
 
 /// Parse `I/N` (1 ≤ I ≤ N).
 pub fn parse_shard(s: &str) -> Result<(usize, usize)> {
+    let word = s.replace(['{', '}'], "");
+    let bad = |why: &str| field_error(format!("{{shard}} '{word}': {why}"));
     let (i, n) = s
         .split_once('/')
-        .context("--shard: expected I/N, e.g. 1/2")?;
+        .ok_or_else(|| bad("expected I/N, e.g. 1/2"))?;
     let (i, n): (usize, usize) = (
-        i.trim().parse().context("--shard: I")?,
-        n.trim().parse().context("--shard: N")?,
+        i.trim()
+            .parse()
+            .map_err(|_| bad("I is not a whole number"))?,
+        n.trim()
+            .parse()
+            .map_err(|_| bad("N is not a whole number"))?,
     );
-    anyhow::ensure!(
-        n >= 1 && (1..=n).contains(&i),
-        "--shard {s}: need 1 ≤ I ≤ N"
-    );
+    if !(n >= 1 && (1..=n).contains(&i)) {
+        return Err(bad("need 1 ≤ I ≤ N"));
+    }
     Ok((i, n))
 }
 
@@ -87,11 +93,12 @@ fn parse_weights(w: &str, kind: Kind) -> Result<Weights> {
         return Ok(Weights::uncertainty_for(kind));
     }
     w.parse()
-        .map_err(|e: String| anyhow::anyhow!("--weights: {e}"))
+        .map_err(|e: String| field_error(format!("{{weights}}: {}", e.replace(['{', '}'], ""))))
 }
 
 /// What a sweep runs on each data set; `None` means the default for the data's kind.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct Selection {
     pub models: Option<Vec<String>>,
     pub losses: Option<Vec<String>>,
@@ -125,9 +132,9 @@ pub fn tasks(files: &[DataFile], args: &Selection) -> Result<Vec<Task>> {
             Some(list) => {
                 let mut v = Vec::new();
                 for l in list {
-                    let m: Metric = l
-                        .parse()
-                        .map_err(|e: String| anyhow::anyhow!("--losses: {e}"))?;
+                    let m: Metric = l.parse().map_err(|e: String| {
+                        field_error(format!("{{losses}}: {}", e.replace(['{', '}'], "")))
+                    })?;
                     if m.applies_to(kind) && !v.contains(&m) {
                         v.push(m);
                     }

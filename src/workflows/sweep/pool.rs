@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering::SeqCst};
 use std::sync::Mutex;
 
 /// How one fit ended: a report, an error, or a panic caught on its worker.
-pub type FitOutcome = std::thread::Result<Result<FitReport>>;
+pub type CellOutcome = std::thread::Result<Result<FitReport>>;
 
 /// A cell the pool can fit: its task and its model, built for the task's data.
 pub type Runnable<'a> = (&'a Task, Model);
@@ -33,7 +33,7 @@ pub enum PoolEvent {
         fault: DeviceFault,
     },
     /// A cell's fit ended (on the fallback backend where a `Rerun` named it).
-    Landed(usize, Box<FitOutcome>),
+    Landed(usize, Box<CellOutcome>),
 }
 
 /// What the pool needs besides its cells: the data, the backend and the fit options
@@ -182,7 +182,7 @@ impl Pool<'_> {
 
     /// The device fault behind a failed fit: its error's, or the backend's own where the
     /// fit failed (an error or a panic) after the device had one.
-    fn device_failed(&self, outcome: &FitOutcome) -> Option<DeviceFault> {
+    fn device_failed(&self, outcome: &CellOutcome) -> Option<DeviceFault> {
         match outcome {
             Ok(Ok(_)) => None,
             Ok(Err(e)) => device_fault(e).cloned().or_else(|| self.backend.fault()),
@@ -200,7 +200,7 @@ impl Pool<'_> {
         cells: &[usize],
         backend: &dyn Backend,
         phases: &Mutex<PhaseSeconds>,
-    ) -> Vec<FitOutcome> {
+    ) -> Vec<CellOutcome> {
         let (first, model) = &runnable[cells[0]];
         let opts = FitOptions {
             optimizer: first.optimizer,

@@ -3,7 +3,7 @@
 //! sweep`, `bench --sweep` and the Python module's `sweep()` all call [`run`].
 
 use super::lock::DirLock;
-use super::pool::{FitOutcome, Pool, PoolEvent, Runnable};
+use super::pool::{CellOutcome, Pool, PoolEvent, Runnable};
 use super::{expand_data, skipped_entry, slurm, tasks, write_skipped, Selection, Task};
 use crate::bsdf::Model;
 use crate::data::ReadOptions;
@@ -16,7 +16,7 @@ use crate::output::results::{
     read_results, results_csv_text, write_if_changed, write_summaries, Appender, DataFile, Key,
     Row, Skipped, DEFAULT_OUT, RESULTS_CSV,
 };
-use crate::output::text::{panic_text, plural, plural_with};
+use crate::text::{panic_text, plural, plural_with};
 use crate::workflows::checks::nonfinite_message;
 use crate::workflows::checks::{batch_bytes, batch_candidates, check_batch_memory};
 use anyhow::{Context, Result};
@@ -52,8 +52,11 @@ impl Shard {
 }
 
 /// What a sweep runs and where it writes. [`SweepConfig::default`] is what `bsdfit sweep`
-/// does with no options.
-#[derive(Clone, Debug)]
+/// does with no options. It is saved as JSON (without the shard and the dry-run flag,
+/// which each run gives) for the tasks of a Slurm array to read ([`SweepConfig::save`],
+/// [`SweepConfig::load`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct SweepConfig {
     /// Data files or folders of *.csv (empty: the bundled data/ folder).
     pub data: Vec<PathBuf>,
@@ -67,11 +70,37 @@ pub struct SweepConfig {
     /// `--fix`, `--bounds`, `--prior`, lenient (a model without a parameter ignores it).
     pub constraints: ConstraintSpec,
     pub out: PathBuf,
+    #[serde(skip)]
     pub shard: Option<Shard>,
     /// Write the plots, renders and report.html (a sharded run leaves them to merge).
     pub pictures: bool,
     /// List the cells (and which are done) without locking, fitting or writing.
+    #[serde(skip)]
     pub dry_run: bool,
+}
+
+impl SweepConfig {
+    /// The configuration as the JSON a saved sweep file holds.
+    pub fn to_json(&self) -> Result<String> {
+        Ok(serde_json::to_string_pretty(self)? + "\n")
+    }
+
+    /// Write the configuration to `path` (atomically).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        crate::output::files::write_result(path, &self.to_json()?, false)
+    }
+
+    /// The configuration saved in `path`; every field missing from it takes its default.
+    pub fn load(path: &Path) -> Result<SweepConfig> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: not a saved sweep configuration (what `sweep --emit-slurm` writes)",
+                path.display()
+            )
+        })
+    }
 }
 
 impl Default for SweepConfig {
@@ -562,7 +591,7 @@ impl FitRun<'_> {
         &mut self,
         t: &Task,
         model: &Model,
-        outcome: FitOutcome,
+        outcome: CellOutcome,
         backend: &dyn engine::Backend,
         obs: &mut dyn SweepObserver,
     ) -> Result<Option<Row>> {

@@ -12,9 +12,10 @@
 //! merge holds `OUT`'s lock.
 
 use super::run::{read_cells, SweepConfig, SweepObserver};
+use crate::choice::field_error;
 use crate::engine::BackendChoice;
 use crate::output::results::{fit_key, FitKey, Key};
-use crate::output::text::plural;
+use crate::text::plural;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -218,8 +219,8 @@ pub struct JobScripts<'a> {
     pub workdir: &'a Path,
     /// The sweep's folder (absolute).
     pub out: &'a Path,
-    /// `sweep`'s arguments without `--out`, `--shard` and `--emit-slurm`.
-    pub sweep_args: &'a [String],
+    /// The saved sweep configuration the tasks run ([`SWEEP_JSON`] in OUT/slurm/).
+    pub config: &'a Path,
     pub tasks: usize,
     pub cpus_per_task: usize,
     /// Ask each task for one GPU (`--gres=gpu:1`).
@@ -232,7 +233,6 @@ impl JobScripts<'_> {
     pub fn files(&self) -> Vec<(&'static str, String, bool)> {
         let q = |p: &Path| shell_quote(&p.display().to_string());
         let logs = self.out.join("slurm").join("logs");
-        let args: Vec<String> = self.sweep_args.iter().map(|a| shell_quote(a)).collect();
         let gres = if self.gpu {
             "#SBATCH --gres=gpu:1\n"
         } else {
@@ -251,7 +251,7 @@ impl JobScripts<'_> {
 set -euo pipefail
 # The CPU reference uses the CPUs Slurm gave the task.
 export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-1}}\"
-exec {bin} sweep {args} --out {outq} --shard auto
+exec {bin} sweep --config {config} --shard auto
 ",
             n = self.tasks,
             out = self.out.display(),
@@ -259,8 +259,7 @@ exec {bin} sweep {args} --out {outq} --shard auto
             wd = q(self.workdir),
             logs = q(&logs),
             bin = q(self.binary),
-            args = args.join(" "),
-            outq = q(self.out),
+            config = q(self.config),
         );
         let merge = format!(
             "#!/bin/bash
@@ -303,40 +302,57 @@ echo \"submitted array job $array ({n} tasks) and merge job $merge; results in {
     }
 }
 
-/// `sweep --emit-slurm TASKS`: the job scripts of the sweep `cfg` in OUT/slurm/, an array
-/// of `tasks` tasks of `cpus_per_task` CPUs each running `bsdfit sweep SWEEP_ARGS --shard
-/// auto`. The data and the selection are read now, so a mistake fails here and not on
-/// the cluster.
+/// The saved sweep configuration the job scripts' tasks read, in OUT/slurm/.
+pub const SWEEP_JSON: &str = "sweep.json";
+
+/// `sweep --emit-slurm TASKS`: the job scripts of the sweep `cfg` in OUT/slurm/, with the
+/// sweep saved there as [`SWEEP_JSON`]: an array of `tasks` tasks of `cpus_per_task` CPUs
+/// each running `BINARY sweep --config OUT/slurm/sweep.json --shard auto`, BINARY the
+/// given one or this process's ([`bsdfit_binary`]). The data and the selection are read
+/// now, so a mistake fails here and not on the cluster.
 pub fn emit(
     cfg: &SweepConfig,
     tasks: usize,
     cpus_per_task: usize,
-    sweep_args: &[String],
+    binary: Option<&Path>,
     obs: &mut dyn SweepObserver,
 ) -> Result<()> {
-    anyhow::ensure!(
-        tasks >= 1,
-        "--emit-slurm {tasks}: the array needs at least one task"
-    );
-    anyhow::ensure!(
-        cpus_per_task >= 1,
-        "--slurm-cpus {cpus_per_task}: at least one CPU per task"
-    );
-    anyhow::ensure!(
-        cfg.shard.is_none(),
-        "--emit-slurm writes an array whose tasks use --shard auto; leave --shard out"
-    );
+    if tasks < 1 {
+        return Err(field_error(format!(
+            "{{emit_slurm={tasks}}}: the array needs at least one task"
+        )));
+    }
+    if cpus_per_task < 1 {
+        return Err(field_error(format!(
+            "{{slurm_cpus={cpus_per_task}}}: at least one CPU per task"
+        )));
+    }
+    if cfg.shard.is_some() {
+        return Err(field_error(
+            "{emit_slurm} writes an array whose tasks use {shard=auto}; leave {shard} out",
+        ));
+    }
     let (_, all) = read_cells(cfg)?;
     let workdir = std::env::current_dir().context("cannot read the current folder")?;
     let out = workdir.join(&cfg.out);
     let dir = out.join("slurm");
     std::fs::create_dir_all(dir.join("logs"))
         .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
+    let saved = SweepConfig {
+        out: out.clone(),
+        ..cfg.clone()
+    };
+    let config = dir.join(SWEEP_JSON);
+    saved.save(&config)?;
+    let binary = match binary {
+        Some(b) => b.to_path_buf(),
+        None => bsdfit_binary()?,
+    };
     let scripts = JobScripts {
-        binary: &bsdfit_binary()?,
+        binary: &binary,
         workdir: &workdir,
         out: &out,
-        sweep_args,
+        config: &config,
         tasks,
         cpus_per_task,
         gpu: cfg.backend == BackendChoice::Gpu,
@@ -355,7 +371,7 @@ pub fn emit(
         let _ = executable;
     }
     obs.note(&format!(
-        "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch and {0}/submit.sh; submit with: sh {0}/submit.sh",
+        "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch, {0}/submit.sh and the sweep they run, {0}/{SWEEP_JSON}; submit with: sh {0}/submit.sh",
         dir.display(),
         plural(all.len(), "cell"),
     ));

@@ -91,10 +91,10 @@
 //! one that agrees is read as usual.
 
 use super::v1::decode_line;
-use super::{mark_assumed, require_assumption, Progress};
-use crate::data::{
-    count, Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
-};
+use super::{mark_assumed, require_assumption, ReadProgress};
+use crate::data::{Builder, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES};
+use crate::data::{Notice, NoticeKind};
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
@@ -127,7 +127,7 @@ pub fn parse_reader<R: BufRead>(
     mut reader: R,
     file: &str,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let ferr = |msg: String| DataError::in_file(file, msg);
     let lerr = |line: usize, msg: String| DataError::at_line(file, line, msg);
@@ -147,7 +147,7 @@ pub fn parse_reader<R: BufRead>(
         line += 1;
         bytes += n as u64;
         if line % PROGRESS_EVERY_LINES == 0 {
-            progress(Progress {
+            progress(ReadProgress {
                 bytes,
                 rows: state.as_ref().map_or(0, |s| s.1.len()),
             });
@@ -193,7 +193,7 @@ pub fn parse_reader<R: BufRead>(
         header.parse(file, opts)?;
         return Err(ferr("no data rows".into()));
     };
-    progress(Progress {
+    progress(ReadProgress {
         bytes,
         rows: b.len(),
     });
@@ -266,8 +266,8 @@ fn reading_notes(
     opts: &ReadOptions,
     assumed: Option<(f64, f64)>,
     grazing: usize,
-) -> Vec<String> {
-    let mut notes = vec![format!(
+) -> Vec<Notice> {
+    let mut notes = vec![Notice::from(format!(
         "{file}: ALTA {} converted to (θi, φi, θo, φo) with ωi = L, ωo = V{}",
         h.param_in.name(),
         if h.param_in.isotropic() {
@@ -275,44 +275,45 @@ fn reading_notes(
         } else {
             ""
         }
-    )];
+    ))];
     if let Some(v) = h.from_option {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: #PARAM_OUT not given: value kind taken from --alta-values {v} ({}; read as #PARAM_OUT {})",
             v.meaning(),
             h.param_out.name()
-        ));
+        )));
     }
     match h.param_out {
-        ParamOut::InvSteradianCosineFactor => notes.push(format!(
+        ParamOut::InvSteradianCosineFactor => notes.push(Notice::from(format!(
             "{file}: INV_STERADIAN_COSINE_FACTOR values divided by cos θo (the view direction's) to give the BRDF"
-        )),
-        ParamOut::RgbColor => notes.push(format!(
+        ))),
+        ParamOut::RgbColor => notes.push(Notice::from(format!(
             "{file}: RGB_COLOR outputs read as channels at nominal wavelengths R {} nm, G {} nm, B {} nm",
             NOMINAL_RGB_NM[0], NOMINAL_RGB_NM[1], NOMINAL_RGB_NM[2]
-        )),
+        ))),
         ParamOut::InvSteradian => {}
     }
     if h.param_out != ParamOut::RgbColor {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: ALTA gives no wavelength; the single channel is labelled {NOMINAL_MONO_NM} nm (nominal)"
-        ));
+        )));
     }
     if h.vs.iter().any(|&k| k > 0) {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: #VS intervals [y − a₋, y + a₊] taken as bounds of a rectangular distribution: u = (a₋ + a₊)/(2√3) (GUM 4.3.7)"
-        ));
+        )));
         if opts.assume_uncertainty.is_some() && assumed.is_none() {
-            notes.push(format!(
-                "{file}: --assume-uncertainty ignored: the file gives its own intervals"
+            notes.push(Notice::new(
+                NoticeKind::AssumptionIgnored,
+                format!("{file}: --assume-uncertainty ignored: the file gives its own intervals"),
             ));
         }
     }
     if grazing > 0 {
-        notes.push(format!(
+        notes.push(Notice::from(format!(
             "{file}: {} at grazing θo (cos θo < {GRAZING_COS:e}) dropped: the cosine factor cannot be removed there",
             count(grazing, "row", "rows")
-        ));
+        )));
     }
     notes
 }

@@ -211,7 +211,8 @@ impl ParamOut {
 }
 
 /// What the values of an ALTA file without `#PARAM_OUT` are (`--alta-values`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum AltaValues {
     /// The values are the BRDF in sr⁻¹ (what `#PARAM_OUT INV_STERADIAN` says).
     Brdf,
@@ -221,13 +222,27 @@ pub enum AltaValues {
     BrdfCos,
 }
 
+impl crate::choice::Choice for AltaValues {
+    const WHAT: &'static str = "alta_values";
+    const TABLE: &'static [(Self, &'static str, &'static str)] = &[
+        (
+            AltaValues::Brdf,
+            "brdf",
+            "The values are the BRDF in sr⁻¹ (what `#PARAM_OUT INV_STERADIAN` says)",
+        ),
+        (
+            AltaValues::BrdfCos,
+            "brdf-cos",
+            "The values are BRDF × cos θo, θo the outgoing (view) direction's polar angle; they are divided by cos θo, rows at grazing θo dropped (what `#PARAM_OUT INV_STERADIAN_COSINE_FACTOR` says)",
+        ),
+    ];
+}
+crate::choice::named_choice!(AltaValues);
+
 impl AltaValues {
-    /// The option's spelling of the value.
+    /// The word that names the value.
     pub fn name(self) -> &'static str {
-        match self {
-            AltaValues::Brdf => "brdf",
-            AltaValues::BrdfCos => "brdf-cos",
-        }
+        crate::choice::Choice::name(self)
     }
 
     /// What the values are, in words.
@@ -242,11 +257,5 @@ impl From<AltaValues> for ParamOut {
             AltaValues::Brdf => ParamOut::InvSteradian,
             AltaValues::BrdfCos => ParamOut::InvSteradianCosineFactor,
         }
-    }
-}
-
-impl std::fmt::Display for AltaValues {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
     }
 }

@@ -36,10 +36,12 @@
 mod vars;
 
 use super::text::{blank_tokens, column_of, end_column, locate, number, LineReader};
-use super::{mark_assumed, require_assumption, Progress};
+use super::{mark_assumed, require_assumption, ReadProgress};
+use crate::data::Notice;
 use crate::data::{
-    count, Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
+    Builder, Cells, DataError, Dataset, Kind, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
+use crate::text::plural_with as count;
 use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
@@ -119,7 +121,7 @@ pub fn parse_reader<R: BufRead>(
     reader: R,
     file: &str,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let mut lines = LineReader::new(reader, file);
     let mut header = Header::default();
@@ -128,7 +130,7 @@ pub fn parse_reader<R: BufRead>(
         let line = lines.line;
         if line.is_multiple_of(PROGRESS_EVERY_LINES) {
             let rows = data.as_ref().map_or(0, |d| d.rows);
-            progress(Progress {
+            progress(ReadProgress {
                 bytes: lines.bytes,
                 rows,
             });
@@ -147,7 +149,7 @@ pub fn parse_reader<R: BufRead>(
             }
         }
     }
-    progress(Progress {
+    progress(ReadProgress {
         bytes: lines.bytes,
         rows: data.as_ref().map_or(0, |d| d.rows),
     });
@@ -516,7 +518,7 @@ impl<'a> Data<'a> {
         let notes = self.notes();
         let (material, meta) = self.material_and_meta();
         let mut b = self.b.take().expect("started above");
-        let mut all = notes;
+        let mut all: Vec<Notice> = notes.into_iter().map(Notice::from).collect();
         all.append(&mut b.notices);
         b.notices = all;
         let mut ds = b

@@ -52,11 +52,12 @@ pub mod geometry;
 mod header;
 
 use super::text::{blank_tokens, end_column, locate, number, LineReader};
-use super::{mark_assumed, require_assumption, Progress};
+use super::{mark_assumed, require_assumption, ReadProgress};
+use crate::data::Notice;
 use crate::data::{
-    count, geometry_key, Builder, Cells, DataError, Dataset, RawRow, ReadOptions,
-    PROGRESS_EVERY_LINES,
+    geometry_key, Builder, Cells, DataError, Dataset, RawRow, ReadOptions, PROGRESS_EVERY_LINES,
 };
+use crate::text::plural_with as count;
 use geometry::{cell_geometry, incident_azimuth, table_integral, HORIZON_COS};
 pub use header::{Header, Spectral, Symmetry, MAX_ANGLES};
 use header::{HeaderLines, Pos};
@@ -158,7 +159,7 @@ pub fn parse_reader<R: BufRead>(
     reader: R,
     file: &str,
     opts: &ReadOptions,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut dyn FnMut(ReadProgress),
 ) -> Result<Dataset, DataError> {
     let mut lines = LineReader::new(reader, file);
     let mut header = HeaderLines::default();
@@ -168,7 +169,7 @@ pub fn parse_reader<R: BufRead>(
         let line = lines.line;
         if line.is_multiple_of(PROGRESS_EVERY_LINES) {
             let rows = state.as_ref().map_or(0, |s| s.b.len());
-            progress(Progress {
+            progress(ReadProgress {
                 bytes: lines.bytes,
                 rows,
             });
@@ -201,7 +202,7 @@ pub fn parse_reader<R: BufRead>(
         header.finish(file, at)?;
         return Err(DataError::at(file, at.0, at.1, "no data: the header is not followed by a spectral indicator (Monochrome, TristimulusX…), DataBegin and the tables".into()));
     };
-    progress(Progress {
+    progress(ReadProgress {
         bytes: lines.bytes,
         rows: s.b.len(),
     });
@@ -526,7 +527,11 @@ impl Reading<'_> {
                 ),
             ));
         }
-        let mut notes = self.notes(file, opts);
+        let mut notes: Vec<Notice> = self
+            .notes(file, opts)
+            .into_iter()
+            .map(Notice::from)
+            .collect();
         notes.append(&mut self.b.notices);
         self.b.notices = notes;
         let (material, meta) = self.material_and_meta(file, comments);

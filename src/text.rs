@@ -1,4 +1,5 @@
-//! Words of messages shared by the command line and the workflows.
+//! Words of messages shared by every layer: counts with their nouns, and the text of a
+//! caught panic.
 
 /// "1 fit", "2 fits": `n` and the noun, plural when n ≠ 1 (nouns ending in s get "es"
 /// only if given; pass the plural form for irregular ones via [`plural_with`]).
@@ -10,12 +11,14 @@ pub fn plural(n: usize, noun: &str) -> String {
     }
 }
 
-/// `n` with the singular or the given plural noun.
+/// `n` with the singular or the given plural noun ("1 sample", "2 samples"); an empty
+/// noun gives the bare number.
 pub fn plural_with(n: usize, one: &str, many: &str) -> String {
-    if n == 1 {
-        format!("1 {one}")
+    let noun = if n == 1 { one } else { many };
+    if noun.is_empty() {
+        n.to_string()
     } else {
-        format!("{n} {many}")
+        format!("{n} {noun}")
     }
 }
 
