@@ -881,7 +881,9 @@ def diagnose(
     alpha: float = 0.01,
     max_steps: int = 4,
     bootstrap: int = 99,
+    bootstrap_max: int = 999,
     bootstrap_restarts: int = 1,
+    calibrate_all: bool = False,
     backend: str = "auto",
     fix: Any = None,
     bounds: Any = None,
@@ -893,7 +895,10 @@ def diagnose(
     """Find where ``model`` and the data disagree beyond the uncertainties, name the missing
     effect, add it and repeat while the improvement is significant (``bsdfit diagnose``).
     ``progress``: True to print the steps on stderr as they are found, or a callable given
-    a :class:`ProgressEvent` per line."""
+    a :class:`ProgressEvent` per line. ``bootstrap`` replicates are planned for each
+    calibrated test: it stops earlier once its verdict is settled and draws more, up to
+    ``bootstrap_max``, where they cannot decide; ``calibrate_all`` runs the tests that
+    cannot change a round's choice too (they are deferred by default)."""
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
     with _Progress(progress) as reports:
@@ -908,7 +913,9 @@ def diagnose(
             _real("alpha", alpha),
             _int("max_steps", max_steps, 0),
             _int("bootstrap", bootstrap, 0),
+            _int("bootstrap_max", bootstrap_max, 0),
             _int("bootstrap_restarts", bootstrap_restarts, 0),
+            bool(calibrate_all),
             _text("backend", backend),
             _constraint_list("fix", fix),
             _constraint_list("bounds", bounds),

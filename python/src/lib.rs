@@ -602,7 +602,7 @@ impl NativeFit {
 /// and the warnings the command line prints on stderr. `progress` (a callable or None)
 /// hears each line the command line prints as the path is searched.
 #[pyfunction]
-#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_restarts, backend, fix, bounds, prior, backtrack, explore, progress))]
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_max, bootstrap_restarts, calibrate_all, backend, fix, bounds, prior, backtrack, explore, progress))]
 fn diagnose_json(
     py: Python<'_>,
     dataset: &NativeDataset,
@@ -615,7 +615,9 @@ fn diagnose_json(
     alpha: f64,
     max_steps: usize,
     bootstrap: usize,
+    bootstrap_max: usize,
     bootstrap_restarts: usize,
+    calibrate_all: bool,
     backend: String,
     fix: Vec<String>,
     bounds: Vec<String>,
@@ -654,10 +656,11 @@ fn diagnose_json(
             backtrack,
             bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
                 replicates: bootstrap,
+                max_replicates: bootstrap_max,
                 restarts: bootstrap_restarts,
                 seed,
-                ..Default::default()
             },
+            calibrate_all,
             constraints,
             explore,
             ..Default::default()

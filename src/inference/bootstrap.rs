@@ -486,12 +486,12 @@ fn settle(g: &Gathered, level: f64, boot: &BootstrapOptions, last: bool) -> Opti
     let need = (1.0 / level).ceil() as usize;
     let why = match uncapped {
         Some(q) => format!(
-            "no replicate of {} reaches T; the tail fitted to them gives {q:.1e}, within a factor {TAIL_MARGIN} of the level {level:.1e}, and the count bounds p only by 1/(B + 1) = {:.1e}; more than {need} replicates could decide (--bootstrap-max)",
+            "no replicate of {} reaches T; the tail fitted to them gives {q:.1e}, within a factor {TAIL_MARGIN} of the level {level:.1e}, and the count bounds p only by 1/(B + 1) = {:.1e}; more than {need} replicates could decide (raise the maximum: --bootstrap-max, or bootstrap_max in Python)",
             g.reps.len(),
             bound
         ),
         None => format!(
-            "no replicate of {} reaches T and only {positive} are positive (a tail needs {MIN_POSITIVE}), so p is only bounded by 1/(B + 1) = {p:.1e}, not below the level {level:.1e}; more than {need} replicates could decide (--bootstrap-max)",
+            "no replicate of {} reaches T and only {positive} are positive (a tail needs {MIN_POSITIVE}), so p is only bounded by 1/(B + 1) = {p:.1e}, not below the level {level:.1e}; more than {need} replicates could decide (raise the maximum: --bootstrap-max, or bootstrap_max in Python)",
             g.reps.len()
         ),
     };
