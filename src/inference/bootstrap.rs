@@ -495,7 +495,9 @@ fn settle(g: &Gathered, level: f64, boot: &BootstrapOptions, last: bool) -> Opti
             g.reps.len()
         ),
     };
-    Some((p, source, share, tail, Some(why)))
+    // Undecided: the count's bound stands (the candidate is not significant), whatever a
+    // tail near the level said.
+    Some((p.max(bound), source, share, tail, Some(why)))
 }
 
 /// The calibrated p-value at `level` of extending the null of `nulls` to `ext` (`dof_ext`

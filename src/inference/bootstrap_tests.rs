@@ -482,9 +482,9 @@ fn when_the_test_stops() {
         if (2e-4..=2e-2).contains(&q) {
             near += 1;
             assert!(settled.is_none(), "T = {t}: tail {q:.1e} settled");
-            let (_, source, _, _, why) =
+            let (p, source, _, _, why) =
                 settle(&gathered(t, reps.clone()), 0.002, &boot, true).unwrap();
-            assert_eq!(source, PSource::Tail);
+            assert_eq!((source, p), (PSource::Tail, 0.01), "T = {t}: tail {q:.1e}");
             assert!(why.unwrap().contains("within a factor 10 of the level"));
         } else {
             far += 1;
