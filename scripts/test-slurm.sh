@@ -32,7 +32,13 @@ mkdir -p "$WORK"/{state,spool,log,run,runs}
 PIDS=()
 cleanup() {
     for p in "${PIDS[@]}"; do $SUDO kill "$p" 2>/dev/null || true; done
-    if [ "${KEEP:-0}" = 0 ]; then rm -rf "$WORK"; else echo "kept $WORK"; fi
+    # slurmctld may still be writing its state as it stops: retry once, and never let the
+    # clean-up change the test's exit status.
+    if [ "${KEEP:-0}" = 0 ]; then
+        rm -rf "$WORK" 2>/dev/null || { sleep 1; rm -rf "$WORK" 2>/dev/null || true; }
+    else
+        echo "kept $WORK"
+    fi
 }
 trap cleanup EXIT
 
