@@ -839,3 +839,19 @@ fn alta_values_option_reads_files_without_param_out() {
         .unwrap()
         .contains("from --alta-values brdf-cos"));
 }
+
+/// `fit --per-axis` on data measured on one plane says what to do instead.
+#[test]
+fn per_axis_on_one_plane_names_the_next_step() {
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/data/black-velvet.csv");
+    let out = bsdfit(&[
+        "fit",
+        data,
+        "--model",
+        "lambert",
+        "--per-axis",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["is measured on a single plane", "drop --per-axis"]);
+}

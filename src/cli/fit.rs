@@ -166,7 +166,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         // The paper's approach for anisotropic samples (§2.3.2): one fit per φ plane.
         anyhow::ensure!(
             data.axes.len() > 1,
-            "--per-axis: {} is measured on a single plane (φ = {}°)",
+            "--per-axis: {} is measured on a single plane (φ = {}°), so the fit without --per-axis is that plane's fit: drop --per-axis",
             a.data.display(),
             data.axes[0]
         );
