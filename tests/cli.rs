@@ -839,3 +839,60 @@ fn alta_values_option_reads_files_without_param_out() {
         .unwrap()
         .contains("from --alta-values brdf-cos"));
 }
+
+/// `fit --per-axis` on data measured on one plane says what to do instead.
+#[test]
+fn per_axis_on_one_plane_names_the_next_step() {
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/data/black-velvet.csv");
+    let out = bsdfit(&[
+        "fit",
+        data,
+        "--model",
+        "lambert",
+        "--per-axis",
+        "--backend",
+        "cpu",
+    ]);
+    assert_clear_error(&out, &["is measured on a single plane", "drop --per-axis"]);
+}
+
+/// `render --fit results.json` that matches no row says what the rows hold.
+#[test]
+fn render_without_a_matching_row_lists_what_the_results_hold() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/data/black-velvet.csv");
+    let results = tmp.path().join("results.json");
+    let row =
+        |data: &str, model: &str| serde_json::json!({"data": data, "model": model, "params": {}});
+    let write =
+        |rows: Vec<Value>| std::fs::write(&results, Value::Array(rows).to_string()).unwrap();
+    let out_dir = tmp.path().join("r");
+    let render = |model: &str| {
+        bsdfit(&[
+            "render",
+            data,
+            "--fit",
+            p(&results),
+            "--model",
+            model,
+            "--out",
+            p(&out_dir),
+        ])
+    };
+    write(vec![
+        row("red-brick", "lambert"),
+        row("white-standard", "on"),
+    ]);
+    assert_clear_error(
+        &render("lambert"),
+        &[
+            "is for data 'black-velvet'",
+            "the rows are for: red-brick, white-standard",
+        ],
+    );
+    write(vec![
+        row("black-velvet", "on"),
+        row("black-velvet", "fa(lambert)"),
+    ]);
+    assert_clear_error(&render("lambert"), &["its rows' models: fa(lambert), on"]);
+}

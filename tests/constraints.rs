@@ -121,10 +121,9 @@ fn bounds_confine_the_search_and_a_bound_hit_is_reported() {
         "alpha = {a_out}, bounds 0.3:0.5"
     );
     assert!(
-        outside
-            .warnings
-            .iter()
-            .any(|w| w.contains("alpha") && w.contains("lower bound") && w.contains("--bounds")),
+        outside.warnings.iter().any(|w| w.contains("alpha")
+            && w.contains("lower bound")
+            && w.contains("the bounds given")),
         "{:?}",
         outside.warnings
     );

@@ -105,8 +105,8 @@ fn array_indices_map_to_shards_for_any_base_and_step() {
         .unwrap_err()
         .to_string()
         .contains("SLURM_ARRAY_TASK_ID=x"));
-    // Outside an array: the message says what it looked for.
-    let e = shard_of(&[]).unwrap_err().to_string();
+    // Outside an array: the message says what it looked for (as the command line prints it).
+    let e = bsdfit::cli::error_text(&shard_of(&[]).unwrap_err());
     for v in [
         "SLURM_ARRAY_TASK_ID",
         "SLURM_ARRAY_TASK_MIN",
@@ -350,4 +350,34 @@ fn emitted_job_scripts_run_the_same_sweep() {
     assert!(array.contains("#SBATCH --gres=gpu:1\n"), "{array}");
     let saved = std::fs::read_to_string(gpu_out.join("slurm/sweep.json")).unwrap();
     assert!(saved.contains("\"backend\": \"gpu\""), "{saved}");
+}
+
+/// The `shard = auto` messages name the option as each front end spells it: `--shard auto`
+/// on the command line, `shard='auto'` in Python (the library error's own text).
+#[test]
+fn shard_auto_messages_name_the_option_per_front_end() {
+    let e = shard_of(&[]).unwrap_err();
+    let cli = bsdfit::cli::error_text(&e);
+    assert!(
+        cli.starts_with("--shard auto: SLURM_ARRAY_TASK_ID is not set")
+            && cli.contains("(--shard auto reads SLURM_ARRAY_TASK_ID,")
+            && cli.ends_with("or give --shard I/N"),
+        "{cli}"
+    );
+    let python = e.to_string();
+    assert!(
+        python.starts_with("shard='auto': SLURM_ARRAY_TASK_ID is not set")
+            && python.ends_with("or give shard='I/N'"),
+        "{python}"
+    );
+    let e = shard_of(&[("SLURM_ARRAY_TASK_ID", "x{y}")]).unwrap_err();
+    assert_eq!(
+        bsdfit::cli::error_text(&e),
+        "--shard auto: SLURM_ARRAY_TASK_ID=x(y) is not an index: invalid digit found in string"
+    );
+    let e = shard_of(&[("SLURM_ARRAY_TASK_ID", "2")]).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "shard='auto': SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MIN is not"
+    );
 }

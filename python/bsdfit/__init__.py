@@ -869,27 +869,31 @@ class Diagnosis:
         return f"<bsdfit.Diagnosis {self.final_model}: effects {self.effects}, χ²_red {path}>"
 
 
+# The library's defaults of diagnose (DiagnoseOptions::default()), shown in its signature.
+_DIAGNOSE_DEFAULTS: Dict[str, Any] = _bsdfit.diagnose_defaults()
+
+
 def diagnose(
     dataset: Dataset,
     model: str,
     *,
-    loss: str = "chi2",
-    weighting: str = "uniform",
-    optimizer: str = "lm",
-    restarts: int = 16,
-    seed: int = 1,
-    alpha: float = 0.01,
-    max_steps: int = 4,
-    bootstrap: int = 99,
-    bootstrap_max: int = 999,
-    bootstrap_restarts: int = 1,
-    calibrate_all: bool = False,
+    loss: str = _DIAGNOSE_DEFAULTS["loss"],
+    weighting: str = _DIAGNOSE_DEFAULTS["weighting"],
+    optimizer: str = _DIAGNOSE_DEFAULTS["optimizer"],
+    restarts: int = _DIAGNOSE_DEFAULTS["restarts"],
+    seed: int = _DIAGNOSE_DEFAULTS["seed"],
+    alpha: float = _DIAGNOSE_DEFAULTS["alpha"],
+    max_steps: int = _DIAGNOSE_DEFAULTS["max_steps"],
+    bootstrap: int = _DIAGNOSE_DEFAULTS["bootstrap"],
+    bootstrap_max: int = _DIAGNOSE_DEFAULTS["bootstrap_max"],
+    bootstrap_restarts: int = _DIAGNOSE_DEFAULTS["bootstrap_restarts"],
+    calibrate_all: bool = _DIAGNOSE_DEFAULTS["calibrate_all"],
     backend: str = "auto",
     fix: Any = None,
     bounds: Any = None,
     prior: Any = None,
-    backtrack: bool = True,
-    explore: int = 8000,
+    backtrack: bool = _DIAGNOSE_DEFAULTS["backtrack"],
+    explore: int = _DIAGNOSE_DEFAULTS["explore"],
     progress: ProgressArg = None,
 ) -> Diagnosis:
     """Find where ``model`` and the data disagree beyond the uncertainties, name the missing
@@ -902,27 +906,27 @@ def diagnose(
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
     with _Progress(progress) as reports:
+        options = {
+            "loss": _text("loss", loss),
+            "weighting": _text("weighting", weighting),
+            "optimizer": _text("optimizer", optimizer),
+            "restarts": _int("restarts", restarts, 1),
+            "seed": _int("seed", seed, 0),
+            "alpha": _real("alpha", alpha),
+            "max_steps": _int("max_steps", max_steps, 0),
+            "bootstrap": _int("bootstrap", bootstrap, 0),
+            "bootstrap_max": _int("bootstrap_max", bootstrap_max, 0),
+            "bootstrap_restarts": _int("bootstrap_restarts", bootstrap_restarts, 0),
+            "calibrate_all": bool(calibrate_all),
+            "backend": _text("backend", backend),
+            "fix": _constraint_list("fix", fix),
+            "bounds": _constraint_list("bounds", bounds),
+            "prior": _constraint_list("prior", prior),
+            "backtrack": bool(backtrack),
+            "explore": _int("explore", explore, 0),
+        }
         text, notes = _bsdfit.diagnose_json(
-            dataset._native,
-            _text("model", model),
-            _text("loss", loss),
-            _text("weighting", weighting),
-            _text("optimizer", optimizer),
-            _int("restarts", restarts, 1),
-            _int("seed", seed, 0),
-            _real("alpha", alpha),
-            _int("max_steps", max_steps, 0),
-            _int("bootstrap", bootstrap, 0),
-            _int("bootstrap_max", bootstrap_max, 0),
-            _int("bootstrap_restarts", bootstrap_restarts, 0),
-            bool(calibrate_all),
-            _text("backend", backend),
-            _constraint_list("fix", fix),
-            _constraint_list("bounds", bounds),
-            _constraint_list("prior", prior),
-            bool(backtrack),
-            _int("explore", explore, 0),
-            reports.native,
+            dataset._native, _text("model", model), options, reports.native
         )
     return Diagnosis(json.loads(text), notes)
 

@@ -7,7 +7,7 @@ its subclass for the cause (a file), ``ValueError`` (bad input, with the command
 message) or ``RuntimeError`` (a bug).
 """
 
-from typing import Callable, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -110,26 +110,13 @@ class NativeFit:
         """The fit's values and propagated standard uncertainties at these geometries, in
         order, with the warnings ``bsdfit eval`` prints."""
 
+def diagnose_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.diagnose`` and the library's defaults of them."""
+
 def diagnose_json(
     dataset: NativeDataset,
     model: str,
-    loss: str,
-    weights: str,
-    optimizer: str,
-    restarts: int,
-    seed: int,
-    alpha: float,
-    max_steps: int,
-    bootstrap: int,
-    bootstrap_max: int,
-    bootstrap_restarts: int,
-    calibrate_all: bool,
-    backend: str,
-    fix: List[str],
-    bounds: List[str],
-    prior: List[str],
-    backtrack: bool,
-    explore: int,
+    options: Dict[str, Any],
     progress: Optional[ProgressCallback],
 ) -> Tuple[str, List[str]]:
     """The diagnosis as ``bsdfit diagnose --json`` writes it, and the warnings the command

@@ -27,6 +27,7 @@ use pyo3::exceptions::{
     PyValueError,
 };
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -598,44 +599,126 @@ impl NativeFit {
     }
 }
 
+/// The keywords of `bsdfit.diagnose` and their defaults, the library's
+/// (`DiagnoseOptions::default()`): the Python signature shows these, so that no default is
+/// written twice.
+#[pyfunction]
+fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = diagnose::DiagnoseOptions::default();
+    let dict = PyDict::new(py);
+    dict.set_item("loss", d.loss.metric.to_string())?;
+    dict.set_item("weighting", d.loss.weights.to_string())?;
+    dict.set_item("optimizer", d.optimizer.to_string())?;
+    dict.set_item("restarts", d.restarts)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("alpha", d.alpha)?;
+    dict.set_item("max_steps", d.max_steps)?;
+    dict.set_item("bootstrap", d.bootstrap.replicates)?;
+    dict.set_item("bootstrap_max", d.bootstrap.max_replicates)?;
+    dict.set_item("bootstrap_restarts", d.bootstrap.restarts)?;
+    dict.set_item("calibrate_all", d.calibrate_all)?;
+    dict.set_item("backtrack", d.backtrack)?;
+    dict.set_item("explore", d.explore)?;
+    Ok(dict)
+}
+
+/// A diagnosis as `bsdfit.diagnose` asks for it: its keyword arguments, read once. The
+/// words (loss, weighting, optimizer, backend) are checked where the command line checks
+/// them, so that errors come in the same order.
+struct DiagnoseRequest {
+    /// Every option but the loss and the optimizer, which are set from the words below.
+    options: diagnose::DiagnoseOptions,
+    loss: String,
+    weights: String,
+    optimizer: String,
+    backend: String,
+}
+
+impl DiagnoseRequest {
+    /// The request of a dict keyed by `bsdfit.diagnose`'s keywords (values already of
+    /// their types); a keyword left out takes the library's default.
+    fn of_dict(dict: &Bound<'_, PyDict>) -> PyResult<DiagnoseRequest> {
+        let mut o = diagnose::DiagnoseOptions::default();
+        let mut loss = o.loss.metric.to_string();
+        let mut weights = o.loss.weights.to_string();
+        let mut optimizer = o.optimizer.to_string();
+        let mut backend = BackendChoice::Auto.to_string();
+        let (mut fix, mut bounds, mut prior) = (Vec::new(), Vec::new(), Vec::new());
+        for (key, value) in dict.iter() {
+            let key: String = key.extract()?;
+            match key.as_str() {
+                "loss" => loss = value.extract()?,
+                "weighting" => weights = value.extract()?,
+                "optimizer" => optimizer = value.extract()?,
+                "backend" => backend = value.extract()?,
+                "restarts" => o.restarts = value.extract()?,
+                "seed" => o.seed = value.extract()?,
+                "alpha" => o.alpha = value.extract()?,
+                "max_steps" => o.max_steps = value.extract()?,
+                "bootstrap" => o.bootstrap.replicates = value.extract()?,
+                "bootstrap_max" => o.bootstrap.max_replicates = value.extract()?,
+                "bootstrap_restarts" => o.bootstrap.restarts = value.extract()?,
+                "calibrate_all" => o.calibrate_all = value.extract()?,
+                "backtrack" => o.backtrack = value.extract()?,
+                "explore" => o.explore = value.extract()?,
+                "fix" => fix = value.extract()?,
+                "bounds" => bounds = value.extract()?,
+                "prior" => prior = value.extract()?,
+                _ => {
+                    return Err(PyValueError::new_err(format!(
+                        "diagnose: no option '{key}'"
+                    )))
+                }
+            }
+        }
+        o.bootstrap.seed = o.seed;
+        o.constraints = constraint_spec(fix, bounds, prior, true);
+        Ok(DiagnoseRequest {
+            options: o,
+            loss,
+            weights,
+            optimizer,
+            backend,
+        })
+    }
+}
+
 /// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
-/// and the warnings the command line prints on stderr. `progress` (a callable or None)
+/// and the warnings the command line prints on stderr. `options`: `bsdfit.diagnose`'s
+/// keyword arguments (see [`DiagnoseRequest::of_dict`]). `progress` (a callable or None)
 /// hears each line the command line prints as the path is searched.
 #[pyfunction]
-#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_max, bootstrap_restarts, calibrate_all, backend, fix, bounds, prior, backtrack, explore, progress))]
+#[pyo3(signature = (dataset, model, options, progress))]
 fn diagnose_json(
     py: Python<'_>,
     dataset: &NativeDataset,
     model: String,
-    loss: String,
-    weights: String,
-    optimizer: String,
-    restarts: usize,
-    seed: u64,
-    alpha: f64,
-    max_steps: usize,
-    bootstrap: usize,
-    bootstrap_max: usize,
-    bootstrap_restarts: usize,
-    calibrate_all: bool,
-    backend: String,
-    fix: Vec<String>,
-    bounds: Vec<String>,
-    prior: Vec<String>,
-    backtrack: bool,
-    explore: usize,
+    options: &Bound<'_, PyDict>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Vec<String>)> {
     let data = dataset.data.clone();
+    let request = DiagnoseRequest::of_dict(options)?;
     let mut reporter = Reporter::new(progress);
     let (text, notes, reporter) = compute(py, move || {
-        let constraints = constraint_spec(fix, bounds, prior, true);
-        let (loss, start) =
-            diagnose::check_start(&data, &model, &loss, &weights, alpha, &constraints)?;
+        let DiagnoseRequest {
+            mut options,
+            loss,
+            weights,
+            optimizer,
+            backend,
+        } = request;
+        let (loss, start) = diagnose::check_start(
+            &data,
+            &model,
+            &loss,
+            &weights,
+            options.alpha,
+            &options.constraints,
+        )?;
         // As `bsdfit diagnose`: extensions add a few parameters; estimate with three more.
         let mut notes = Vec::new();
         checks::check_batch_memory(
-            restarts.saturating_add(1),
+            options.restarts.saturating_add(1),
             start.dim + 3,
             data.len(),
             &format!(
@@ -646,27 +729,10 @@ fn diagnose_json(
             &mut |w| notes.push(w),
         )?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
-        let opts = diagnose::DiagnoseOptions {
-            loss,
-            optimizer: parse_choice("optimizer", &optimizer)?,
-            restarts,
-            seed,
-            alpha,
-            max_steps,
-            backtrack,
-            bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
-                replicates: bootstrap,
-                max_replicates: bootstrap_max,
-                restarts: bootstrap_restarts,
-                seed,
-            },
-            calibrate_all,
-            constraints,
-            explore,
-            ..Default::default()
-        };
+        options.loss = loss;
+        options.optimizer = parse_choice("optimizer", &optimizer)?;
         let mut lines = 0;
-        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &opts, &mut |line| {
+        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &options, &mut |line| {
             lines += 1;
             reporter.send("diagnose", lines, None, &line);
         })?;
@@ -772,6 +838,7 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
     m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;

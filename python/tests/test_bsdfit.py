@@ -769,3 +769,24 @@ def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="emit_slurm writes an array whose tasks use shard='auto'; leave shard out"):
         bsdfit.sweep([data], tmp_path / "bad", shard="1/2", emit_slurm=2, slurm_binary=binary,
                      progress=False)
+
+
+def test_diagnose_defaults_are_the_library_and_cli_defaults():
+    """bsdfit.diagnose's keyword defaults are the library's (DiagnoseOptions::default()),
+    and `bsdfit diagnose --help` shows the same ones."""
+    import inspect
+    import re
+
+    native = bsdfit._bsdfit.diagnose_defaults()
+    signature = inspect.signature(bsdfit.diagnose).parameters
+    for name, value in native.items():
+        assert signature[name].default == value, name
+    help_text = run_cli("diagnose", "--help").stdout
+    flags = {"weighting": "weights"}
+    for name, value in native.items():
+        if isinstance(value, bool):
+            continue  # flags (--calibrate-all, --no-backtrack) show no default
+        flag = "--" + flags.get(name, name).replace("_", "-")
+        m = re.search(r"(?<![\w-])" + re.escape(flag) + r" <[^>]+>\n.*?\[default: ([^\]]+)\]", help_text, re.S)
+        assert m, flag
+        assert type(value)(m.group(1)) == value, flag

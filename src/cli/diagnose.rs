@@ -4,6 +4,9 @@ use super::checks::check_batch_memory;
 use super::progress::Progress;
 use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::engine;
+use crate::engine::loss::Loss;
+use crate::inference::bootstrap::BootstrapOptions;
+use crate::inference::constraints::ConstraintSpec;
 use crate::inference::fit::Optimizer;
 use crate::text::plural;
 use crate::workflows::diagnose::{check_start, diagnose, write_report, DiagnoseOptions};
@@ -20,24 +23,24 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub model: String,
     /// Loss that drives each fit (the statistics always use χ²).
-    #[arg(long, default_value = "chi2")]
+    #[arg(long, default_value_t = DiagnoseOptions::default().loss.metric.to_string())]
     pub loss: String,
-    #[arg(long, default_value = "uniform")]
+    #[arg(long, default_value_t = DiagnoseOptions::default().loss.weights.to_string())]
     pub weights: String,
-    #[arg(long, value_parser = super::choice::<Optimizer>(), default_value = "lm")]
+    #[arg(long, value_parser = super::choice::<Optimizer>(), default_value_t = DiagnoseOptions::default().optimizer)]
     pub optimizer: Optimizer,
     /// Random restarts per fit (plus the current optimum as one more start); the same
     /// default as `fit`.
-    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().restarts, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
     /// Seed of the random restarts (a non-negative integer).
-    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().seed, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     /// Significance level (consistency test; F tests at α / number of candidates).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().alpha)]
     pub alpha: f64,
     /// Most effects to add.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().max_steps)]
     pub max_steps: usize,
     /// Replicates of the parametric bootstrap that calibrates the p-value of an extension
     /// whose null is irregular (a new parameter's null value on a bound of its range, e.g.
@@ -48,11 +51,11 @@ pub struct DiagnoseArgs {
     /// settled (enough replicates reach the observed statistic), and draws more, up to
     /// --bootstrap-max, where they cannot decide (none reaches it and 1/(B + 1) is above
     /// the level).
-    #[arg(long, default_value_t = 99)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().bootstrap.replicates)]
     pub bootstrap: usize,
     /// The most bootstrap replicates drawn where the planned ones cannot decide (a test
     /// still undecided there says so); at most --bootstrap keeps B fixed.
-    #[arg(long, default_value_t = 999)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().bootstrap.max_replicates)]
     pub bootstrap_max: usize,
     /// Calibrate every irregular candidate whose own verdict depends on it, even where the
     /// round adopts the same candidate whatever that verdict (by default such bootstraps are
@@ -60,7 +63,7 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     pub calibrate_all: bool,
     /// Random restarts per bootstrap refit (at least 1), besides the carried-over optima.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = DiagnoseOptions::default().bootstrap.restarts)]
     pub bootstrap_restarts: usize,
     #[command(flatten)]
     pub backend: BackendArgs,
@@ -88,8 +91,35 @@ pub struct DiagnoseArgs {
     /// stratified subsample of N samples, then refit its models on all the data and keep
     /// the steps the full data confirm (F test and BIC again there). 0: always search on
     /// all the data.
-    #[arg(long, value_name = "N", default_value_t = 8000)]
+    #[arg(long, value_name = "N", default_value_t = DiagnoseOptions::default().explore)]
     pub explore: usize,
+}
+
+impl DiagnoseArgs {
+    /// The diagnosis options these arguments ask for, given the loss and constraints
+    /// already checked against the data.
+    fn options(&self, loss: Loss, constraints: ConstraintSpec) -> DiagnoseOptions {
+        DiagnoseOptions {
+            loss,
+            optimizer: self.optimizer,
+            restarts: self.restarts,
+            seed: self.seed,
+            alpha: self.alpha,
+            max_steps: self.max_steps,
+            parallel: self.parallel,
+            backtrack: !self.no_backtrack,
+            bootstrap: BootstrapOptions {
+                replicates: self.bootstrap,
+                max_replicates: self.bootstrap_max,
+                restarts: self.bootstrap_restarts,
+                seed: self.seed,
+            },
+            calibrate_all: self.calibrate_all,
+            constraints,
+            explore: self.explore,
+            ..Default::default()
+        }
+    }
 }
 
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
@@ -111,26 +141,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         &mut |w| eprintln!("{w}"),
     )?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
-    let opts = DiagnoseOptions {
-        loss,
-        optimizer: a.optimizer,
-        restarts: a.restarts,
-        seed: a.seed,
-        alpha: a.alpha,
-        max_steps: a.max_steps,
-        parallel: a.parallel,
-        backtrack: !a.no_backtrack,
-        bootstrap: crate::inference::bootstrap::BootstrapOptions {
-            replicates: a.bootstrap,
-            max_replicates: a.bootstrap_max,
-            restarts: a.bootstrap_restarts,
-            seed: a.seed,
-        },
-        calibrate_all: a.calibrate_all,
-        constraints,
-        explore: a.explore,
-        ..Default::default()
-    };
+    let opts = a.options(loss, constraints);
     println!(
         "diagnose {} ({}, {}, {}) from {}",
         data.material,
@@ -180,4 +191,29 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         eprintln!("wrote {}", dir.join("index.html").display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    /// `bsdfit diagnose` without options asks for the library's default diagnosis: the
+    /// command line writes no default of its own.
+    #[test]
+    fn cli_defaults_are_the_library_defaults() {
+        let cli =
+            super::super::Cli::try_parse_from(["bsdfit", "diagnose", "d.csv", "--model", "on"])
+                .expect("parses");
+        let super::super::Command::Diagnose(a) = cli.command else {
+            panic!("not diagnose");
+        };
+        let loss = Loss::new(
+            a.loss.parse().expect("loss"),
+            a.weights.parse().expect("weights"),
+        );
+        let library = DiagnoseOptions::default();
+        let cli = a.options(loss, library.constraints.clone());
+        assert_eq!(format!("{cli:?}"), format!("{library:?}"));
+    }
 }

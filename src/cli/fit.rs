@@ -23,21 +23,21 @@ pub struct FitArgs {
     /// data file carries a standard uncertainty per value, so χ² weighs each sample by
     /// what it is worth. The paper's losses remain: smape rmse ngan low (BRDF), f cosf
     /// logf logcosf (BTDF).
-    #[arg(long, default_value = "chi2")]
+    #[arg(long, default_value_t = FitRequest::default().loss)]
     pub loss: String,
     /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2). chi2
     /// already weighs by 1/u².
-    #[arg(long, default_value = "uniform")]
+    #[arg(long, default_value_t = FitRequest::default().weights)]
     pub weights: String,
     /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
     /// every loss but smape — and compass search for smape.
     #[arg(long, value_parser = super::choice::<Optimizer>())]
     pub optimizer: Option<Optimizer>,
     /// Number of random restarts (stepped in lockstep); the same default as `diagnose`.
-    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = FitRequest::default().restarts, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
     /// Seed of the random restarts (a non-negative integer).
-    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = FitRequest::default().seed, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     #[command(flatten)]
     pub backend: BackendArgs,
@@ -55,40 +55,47 @@ pub struct FitArgs {
     /// N(value, u²), all replicas stepped together; reports per parameter the mean, σ and
     /// 95 % shortest coverage interval, the correlations, and the linearized σ beside them
     /// (with a warning where they disagree). 0: off.
-    #[arg(long, default_value_t = 0, value_name = "N")]
+    #[arg(long, default_value_t = FitRequest::default().mc, value_name = "N")]
     pub mc: usize,
     /// With --mc: an instrument's fully correlated relative scale uncertainty (e.g. 0.01):
     /// every value of a replica is multiplied by one draw of N(1, REL²).
     #[arg(
         long,
-        default_value_t = 0.0,
+        default_value_t = FitRequest::default().mc_scale,
         value_name = "REL",
         allow_hyphen_values = true
     )]
     pub mc_scale: f64,
     /// With --mc: random restarts per replica, besides starting from the best fit.
-    #[arg(long, default_value_t = 3, value_name = "R")]
+    #[arg(long, default_value_t = FitRequest::default().mc_restarts, value_name = "R")]
     pub mc_restarts: usize,
     #[command(flatten)]
     pub data_args: DataArgs,
+}
+
+impl FitArgs {
+    /// The fit these arguments ask for.
+    fn request(&self) -> FitRequest {
+        FitRequest {
+            model: self.model.clone(),
+            loss: self.loss.clone(),
+            weights: self.weights.clone(),
+            optimizer: self.optimizer,
+            restarts: self.restarts,
+            seed: self.seed,
+            constraints: self.constraints.spec(false),
+            mc: self.mc,
+            mc_scale: self.mc_scale,
+            mc_restarts: self.mc_restarts,
+        }
+    }
 }
 
 pub fn run(a: FitArgs) -> Result<()> {
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
-    let request = FitRequest {
-        model: a.model.clone(),
-        loss: a.loss.clone(),
-        weights: a.weights.clone(),
-        optimizer: a.optimizer,
-        restarts: a.restarts,
-        seed: a.seed,
-        constraints: a.constraints.spec(false),
-        mc: a.mc,
-        mc_scale: a.mc_scale,
-        mc_restarts: a.mc_restarts,
-    };
+    let request = a.request();
     request.check()?;
     anyhow::ensure!(
         !(a.mc > 0 && a.per_axis),
@@ -159,7 +166,7 @@ pub fn run(a: FitArgs) -> Result<()> {
         // The paper's approach for anisotropic samples (§2.3.2): one fit per φ plane.
         anyhow::ensure!(
             data.axes.len() > 1,
-            "--per-axis: {} is measured on a single plane (φ = {}°)",
+            "--per-axis: {} is measured on a single plane (φ = {}°), so the fit without --per-axis is that plane's fit: drop --per-axis",
             a.data.display(),
             data.axes[0]
         );
@@ -182,4 +189,26 @@ pub fn run(a: FitArgs) -> Result<()> {
         return Err(e.context("--mc"));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    /// `bsdfit fit` without options asks for the library's default fit: the command line
+    /// writes no default of its own.
+    #[test]
+    fn cli_defaults_are_the_library_defaults() {
+        let cli = super::super::Cli::try_parse_from(["bsdfit", "fit", "d.csv", "--model", "on"])
+            .expect("parses");
+        let super::super::Command::Fit(a) = cli.command else {
+            panic!("not fit");
+        };
+        let library = FitRequest {
+            model: "on".into(),
+            ..FitRequest::default()
+        };
+        assert_eq!(format!("{:?}", a.request()), format!("{library:?}"));
+    }
 }

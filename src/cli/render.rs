@@ -140,6 +140,35 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// Why no row of results.json matches, with what the rows hold: the data names when none
+/// is for `stem`, else that data's models.
+fn no_row(rows: &[serde_json::Value], stem: &str) -> anyhow::Error {
+    let field =
+        |o: &serde_json::Value, k: &str| o.get(k).and_then(|v| v.as_str()).map(String::from);
+    let listed = |mut names: Vec<String>| {
+        names.sort();
+        names.dedup();
+        names.join(", ")
+    };
+    let models: Vec<String> = rows
+        .iter()
+        .filter(|o| field(o, "data").as_deref() == Some(stem))
+        .filter_map(|o| field(o, "model"))
+        .collect();
+    if models.is_empty() {
+        let data = rows.iter().filter_map(|o| field(o, "data")).collect();
+        anyhow::anyhow!(
+            "no row of the results is for data '{stem}' (the rows are for: {}); give the data file the sweep fitted",
+            listed(data)
+        )
+    } else {
+        anyhow::anyhow!(
+            "no row of the results for data '{stem}' matches (--model/--loss/--weights/--optimizer); its rows' models: {}",
+            listed(models)
+        )
+    }
+}
+
 /// The (model, params) of a fit JSON: a `fit --json` report, or a row of results.json.
 fn pick_fit(
     v: &serde_json::Value,
@@ -180,7 +209,7 @@ fn pick_fit(
                 })
                 .collect();
             match hits.len() {
-                0 => anyhow::bail!("no row of the results for data '{stem}' matches (--model/--loss/--weights/--optimizer)"),
+                0 => Err(no_row(rows, &stem)),
                 1 => get(hits[0]).context("malformed row"),
                 n => anyhow::bail!("{n} rows match for data '{stem}' ({}); narrow with --model/--loss/--weights/--optimizer", data.label()),
             }

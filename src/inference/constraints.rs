@@ -352,7 +352,7 @@ impl Constraints {
             };
             if let Some((which, at)) = edge {
                 let how = if self.narrowed.contains(&j) {
-                    "the --bounds given"
+                    "the bounds given"
                 } else {
                     "its declared range"
                 };
@@ -450,7 +450,10 @@ mod tests {
         assert!(err.contains("LO must be below HI"), "{err}");
         // An end on a narrowed bound is reported as such.
         let w = c.on_bound_warnings(&c.from_unit(&[0.5, 1.0, 0.5]));
-        assert!(w.len() == 1 && w[0].contains("--bounds"), "{w:?}");
+        assert!(
+            w.len() == 1 && w[0].contains("(the bounds given)") && !w[0].contains("--"),
+            "{w:?}"
+        );
     }
 
     #[test]

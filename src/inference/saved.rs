@@ -19,6 +19,7 @@
 //! that dependence so that callers can say where.
 
 use crate::bsdf::Model;
+use crate::choice::field_error;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use serde::Deserialize;
@@ -124,24 +125,26 @@ impl FitFile {
         Ok(FitFile::Single(Box::new(SavedFit::from_value(&v, file)?)))
     }
 
-    /// The single fit, or the fit of plane `plane` (degrees) of a per-axis file.
+    /// The single fit, or the fit of plane `plane` (degrees) of a per-axis file. The
+    /// errors name the option as a field (`{plane}`): `--plane` on the command line.
     pub fn select(self, plane: Option<f64>, file: &str) -> Result<SavedFit> {
+        let file = file.replace('{', "(").replace('}', ")");
         match (self, plane) {
             (FitFile::Single(f), None) => Ok(*f),
-            (FitFile::Single(_), Some(p)) => anyhow::bail!(
-                "--plane {p}: {file} holds one fit, not one per plane (`fit --per-axis`); omit --plane"
-            ),
+            (FitFile::Single(_), Some(p)) => Err(field_error(format!(
+                "{{plane={p}}}: {file} holds one fit, not one per plane (`fit --per-axis`); omit {{plane}}"
+            ))),
             (FitFile::PerAxis(fits), Some(p)) => {
                 let planes = planes_list(&fits);
                 fits.into_iter()
                     .find(|(phi, _)| same_plane(*phi, p))
                     .map(|(_, f)| f)
-                    .ok_or_else(|| anyhow::anyhow!("--plane {p}: {file} has fits for φ = {planes}° only"))
+                    .ok_or_else(|| field_error(format!("{{plane={p}}}: {file} has fits for φ = {planes}° only")))
             }
-            (FitFile::PerAxis(fits), None) => anyhow::bail!(
-                "{file} holds one fit per measurement plane (`fit --per-axis`), for φ = {}°: choose one with --plane PHI",
+            (FitFile::PerAxis(fits), None) => Err(field_error(format!(
+                "{file} holds one fit per measurement plane (`fit --per-axis`), for φ = {}°: choose one with {{plane=PHI}}",
                 planes_list(&fits)
-            ),
+            ))),
         }
     }
 }
@@ -418,6 +421,42 @@ mod tests {
             "flat_std": vec![0.01; p],
             "correlation": (0..p).map(|a| (0..p).map(|b| if a == b { 1.0 } else { 0.0 }).collect::<Vec<_>>()).collect::<Vec<_>>(),
         })
+    }
+
+    /// The plane errors name the option as a field: `--plane` on the command line,
+    /// `plane` in Python.
+    #[test]
+    fn plane_errors_name_the_option_per_front_end() {
+        let fit = || SavedFit::from_value(&report("on"), "x.json").unwrap();
+        let flag = |name: &str, value: Option<&str>| {
+            let flag = format!("--{name}");
+            value.map_or(flag.clone(), |v| format!("{flag} {v}"))
+        };
+        let field = |e: anyhow::Error| e.downcast::<crate::choice::FieldError>().unwrap();
+        let e = field(
+            FitFile::Single(Box::new(fit()))
+                .select(Some(30.0), "x.json")
+                .unwrap_err(),
+        );
+        assert_eq!(
+            e.render(&flag),
+            "--plane 30: x.json holds one fit, not one per plane (`fit --per-axis`); omit --plane"
+        );
+        assert!(
+            e.to_string().starts_with("plane=30: x.json") && e.to_string().ends_with("omit plane")
+        );
+        let per_axis = || FitFile::PerAxis(vec![(0.0, fit()), (90.0, fit())]);
+        let e = field(per_axis().select(Some(45.0), "x.json").unwrap_err());
+        assert_eq!(
+            e.render(&flag),
+            "--plane 45: x.json has fits for φ = 0°, 90° only"
+        );
+        let e = field(per_axis().select(None, "x.json").unwrap_err());
+        assert!(
+            e.render(&flag).ends_with("choose one with --plane PHI"),
+            "{}",
+            e.render(&flag)
+        );
     }
 
     #[test]

@@ -87,10 +87,11 @@ impl Records {
         let laid = lay_out(cb, floats, model, problems, terms)?;
         let problem_records = laid.problem_records;
         let n_records = laid.records.len() / floats;
-        anyhow::ensure!(
-            n_records < u32::MAX as usize / cb,
-            "{n_records} GPU records are more than one batch numbers (use --backend cpu)"
-        );
+        if n_records >= u32::MAX as usize / cb {
+            return Err(crate::choice::field_error(format!(
+                "{n_records} GPU records are more than one batch numbers (use {{backend=cpu}})"
+            )));
+        }
         let rows = problem_records
             .iter()
             .zip(terms)

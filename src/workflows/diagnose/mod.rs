@@ -109,7 +109,7 @@ impl Default for DiagnoseOptions {
         DiagnoseOptions {
             loss: Loss::new(Metric::Chi2, Weights::Uniform),
             optimizer: Optimizer::Lm,
-            restarts: 16,
+            restarts: crate::workflows::fit::DEFAULT_RESTARTS,
             seed: 1,
             screen: 8,
             alpha: 0.01,

@@ -41,38 +41,43 @@ const ARRAY_VARS: [&str; 5] = [
 /// N = COUNT (or (MAX − MIN)/STEP + 1). A list of indices that is not such a range
 /// (`--array=1,4,5`) cannot be numbered from the variables and is refused.
 pub fn shard_from_env(get: &dyn Fn(&str) -> Option<String>) -> Result<(usize, usize)> {
+    // The messages name the option as a field (`{shard=auto}`): `--shard auto` on the
+    // command line, `shard='auto'` in Python.
     let num = |name: &str| -> Result<Option<u64>> {
         match get(name) {
             None => Ok(None),
             Some(v) if v.trim().is_empty() => Ok(None),
-            Some(v) => v
-                .trim()
-                .parse::<u64>()
-                .map(Some)
-                .with_context(|| format!("--shard auto: {name}={v} is not an index")),
+            Some(v) => v.trim().parse::<u64>().map(Some).map_err(|e| {
+                let v = v.replace('{', "(").replace('}', ")");
+                field_error(format!("{{shard=auto}}: {name}={v} is not an index: {e}"))
+            }),
         }
     };
     let Some(id) = num("SLURM_ARRAY_TASK_ID")? else {
-        anyhow::bail!(
-            "--shard auto: SLURM_ARRAY_TASK_ID is not set, so this is not a task of a Slurm job array (--shard auto reads {}). Submit with `sbatch --array=1-N`, or give --shard I/N",
+        return Err(field_error(format!(
+            "{{shard=auto}}: SLURM_ARRAY_TASK_ID is not set, so this is not a task of a Slurm job array ({{shard=auto}} reads {}). Submit with `sbatch --array=1-N`, or give {{shard=I/N}}",
             ARRAY_VARS.join(", ")
-        );
+        )));
     };
-    let min = num("SLURM_ARRAY_TASK_MIN")?
-        .context("--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MIN is not")?;
-    let max = num("SLURM_ARRAY_TASK_MAX")?
-        .context("--shard auto: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MAX is not")?;
+    let min = num("SLURM_ARRAY_TASK_MIN")?.ok_or_else(|| {
+        field_error("{shard=auto}: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MIN is not")
+    })?;
+    let max = num("SLURM_ARRAY_TASK_MAX")?.ok_or_else(|| {
+        field_error("{shard=auto}: SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_MAX is not")
+    })?;
     let step = num("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
-    anyhow::ensure!(
-        min <= id && id <= max,
-        "--shard auto: SLURM_ARRAY_TASK_ID={id} is outside SLURM_ARRAY_TASK_MIN..MAX = {min}..{max}"
-    );
+    if !(min <= id && id <= max) {
+        return Err(field_error(format!(
+            "{{shard=auto}}: SLURM_ARRAY_TASK_ID={id} is outside SLURM_ARRAY_TASK_MIN..MAX = {min}..{max}"
+        )));
+    }
     let span = (max - min) / step + 1;
     let count = num("SLURM_ARRAY_TASK_COUNT")?.unwrap_or(span);
-    anyhow::ensure!(
-        (max - min) % step == 0 && count == span && (id - min) % step == 0,
-        "--shard auto: the array's indices ({min}..{max}, step {step}, {count} tasks) are not one range MIN-MAX[:STEP], so task {id} cannot be numbered; submit with --array=1-{count} (or give --shard I/N)"
-    );
+    if !((max - min) % step == 0 && count == span && (id - min) % step == 0) {
+        return Err(field_error(format!(
+            "{{shard=auto}}: the array's indices ({min}..{max}, step {step}, {count} tasks) are not one range MIN-MAX[:STEP], so task {id} cannot be numbered; submit with --array=1-{count} (or give {{shard=I/N}})"
+        )));
+    }
     Ok((((id - min) / step + 1) as usize, count as usize))
 }
 
