@@ -107,3 +107,92 @@ fn only_tests_that_cannot_change_the_choice_are_deferred() {
     defer_undeciding(&mut round, 1000, &all, &mut |_| {});
     assert!(!round[1].is_deferred());
 }
+
+/// A backtrack that would try a deferred candidate runs its bootstrap first: Lambertian
+/// data with a little backscatter (`on`, σ = 0.1, in-plane: its nominal p needs the bootstrap), `on` scored against `lambert`
+/// and deferred, is calibrated by the backtrack's choice and judged on that test.
+#[test]
+fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
+    use crate::engine::cpu::CpuBackend;
+    use crate::workflows::diagnose::{fit_model, Candidate};
+    let mut rows = Vec::new();
+    for ti in [10.0, 40.0, 65.0] {
+        for k in 0..=16 {
+            let to = -80.0 + 10.0 * k as f64;
+            if (to - ti).abs() > 0.5 {
+                rows.push([ti, 0.0, to, 0.0]);
+            }
+        }
+    }
+    let truth_model = Model::parse("on", 1).unwrap();
+    let truth = truth_model
+        .params_from_assignments("rho=0.5,sigma=0.1")
+        .unwrap();
+    let noise = crate::workflows::synth::Noise {
+        rel: 0.02,
+        abs: 1e-4,
+    };
+    let data = crate::workflows::synth::synthesize(
+        &truth_model,
+        &truth,
+        &rows,
+        &[550.0],
+        noise,
+        5,
+        "synthetic on",
+    )
+    .unwrap();
+    let backend = CpuBackend::new();
+    let opts = DiagnoseOptions {
+        restarts: 4,
+        bootstrap: crate::inference::bootstrap::BootstrapOptions {
+            replicates: 39,
+            max_replicates: 39,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let null = Model::for_data("lambert", &data).unwrap();
+    let current = fit_model(&null, &data, &backend, &opts, &[]).unwrap();
+    let ext = Model::for_data("on", &data).unwrap();
+    let start = super::super::embed(&null, &current.flat, &ext);
+    let fit = fit_model(&ext, &data, &backend, &opts, &[start]);
+    let candidate = Candidate {
+        spec: "on".into(),
+        effect: Effect::Backscatter,
+        nested: true,
+    };
+    let mut s = super::super::score::score(&data, &current, &[], candidate, fit, 1, &opts);
+    assert!(s.irregular.is_some(), "σ = 0 is on a bound");
+    s.defer("test".into());
+    let mut round = vec![s];
+    let picked = backtrack_alternative(
+        &mut round,
+        Some(Effect::SpecularLobe),
+        &data,
+        &backend,
+        &opts,
+        &current,
+        &mut |_| {},
+    );
+    assert!(!round[0].is_deferred(), "{:?}", round[0].p_test);
+    assert!(
+        matches!(round[0].p_test, PTest::Bootstrap(_)),
+        "{:?} (nominal p {:?})",
+        round[0].p_test,
+        round[0].p_nominal
+    );
+    assert_eq!(picked.is_some(), round[0].adoptable());
+    // The same candidate of the adopted effect is never an alternative.
+    round[0].defer("test".into());
+    let same = backtrack_alternative(
+        &mut round,
+        Some(Effect::Backscatter),
+        &data,
+        &backend,
+        &opts,
+        &current,
+        &mut |_| {},
+    );
+    assert!(same.is_none() && round[0].is_deferred());
+}
