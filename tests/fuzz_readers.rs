@@ -11,18 +11,20 @@
 //! (docs/reliability.md): this is the slice of the fuzzing that CI runs.
 
 /// The fuzz targets' own library (fuzz/src/lib.rs, plain Rust over bsdfit): the option
-/// sets every input is read with, shared so the CI slice reads as the targets do.
+/// sets every input is read with and the contract every read is held to, shared so the
+/// CI slice reads and checks as the targets do.
 #[path = "../fuzz/src/lib.rs"]
 #[allow(dead_code)]
 mod fuzz_contract;
 
 use bsdfit::data::readers::{self, alta, astm, merl, rgl, zemax};
 use bsdfit::data::{DataError, Dataset, ReadOptions};
+use fuzz_contract::{contract, located};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, FileFailurePersistence, RngAlgorithm, TestRng, TestRunner};
 use std::path::{Path, PathBuf};
 
-const FILE: &str = "fuzz-input.dat";
+use fuzz_contract::FILE;
 
 /// Where failing cases are saved.
 const REGRESSIONS: &str = concat!(
@@ -38,59 +40,6 @@ fn opts(assume: bool, allow_zero: bool) -> ReadOptions {
         // RGL materials: a small geometry (about 50 directions) keeps cases fast.
         sample_geometry: Some("grid:30".into()),
         ..Default::default()
-    }
-}
-
-/// The contract, as a message when broken: an error names `file`, a dataset is well
-/// formed (samples, finite values, positive finite uncertainties, indices in range, unit
-/// directions).
-fn contract(result: Result<Dataset, DataError>, file: &str) -> Result<(), String> {
-    match result {
-        Err(e) => {
-            let msg = e.to_string();
-            if !msg.contains(file) {
-                return Err(format!("error without the file name: {msg}"));
-            }
-        }
-        Ok(d) => {
-            if d.samples.is_empty() {
-                return Err("a dataset without samples".into());
-            }
-            for s in &d.samples {
-                if !(s.value.is_finite() && s.uncertainty.is_finite() && s.uncertainty > 0.0) {
-                    return Err(format!("sample {s:?}: value or uncertainty"));
-                }
-                if !(s.channel < d.channels.len() && s.axis < d.axes.len()) {
-                    return Err(format!("sample {s:?}: channel or axis out of range"));
-                }
-                if !((s.wi().length() - 1.0).abs() < 1e-9 && (s.wo().length() - 1.0).abs() < 1e-9) {
-                    return Err(format!("sample {s:?}: directions not unit"));
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Whether every place an error message names is `file:line:column:` — the contract of
-/// the Zemax and ASTM readers (one error, or "N bad rows in file:" and one per line).
-fn located(msg: &str, file: &str) -> bool {
-    let place = |l: &str| {
-        let Some(rest) = l.strip_prefix(file).and_then(|r| r.strip_prefix(':')) else {
-            return false;
-        };
-        let mut parts = rest.splitn(3, ':');
-        let num = |x: Option<&str>| {
-            x.is_some_and(|x| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit()))
-        };
-        num(parts.next()) && num(parts.next()) && parts.next().is_some()
-    };
-    let mut lines = msg.lines();
-    let first = lines.next().unwrap_or("");
-    if first.ends_with(&format!("bad rows in {file}:")) {
-        lines.all(|l| l.starts_with("… and ") || place(l))
-    } else {
-        place(first)
     }
 }
 
@@ -1222,4 +1171,24 @@ fn fuzz_corpus_and_reproducers_replay() {
         ));
     }
     eprintln!("{}", report.join("; "));
+}
+
+/// The located-error check itself: it accepts `file:line:column:` places (one, or a
+/// "bad rows" list) and rejects a message without one, so the Zemax and ASTM properties
+/// can fail.
+#[test]
+fn the_located_check_tells_a_place_from_none() {
+    assert!(located(&format!("{FILE}:3:7: no DataBegin"), FILE));
+    assert!(located(
+        &format!("2 bad rows in {FILE}:\n{FILE}:4:1: x\n… and 1 more"),
+        FILE
+    ));
+    assert!(!located(&format!("{FILE}: no DataBegin"), FILE));
+    assert!(!located(&format!("{FILE}:3: no column"), FILE));
+    assert!(!located(&format!("2 bad rows in {FILE}:\n{FILE}: x"), FILE));
+    let elsewhere = DataError::File {
+        file: "other.dat".into(),
+        msg: "x".into(),
+    };
+    assert!(contract(Err(elsewhere), FILE).is_err());
 }

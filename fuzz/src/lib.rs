@@ -37,40 +37,64 @@ pub fn option_sets() -> [ReadOptions; 3] {
     ]
 }
 
-/// The contract: an error names the file; a dataset is well formed (samples, finite
-/// values, positive finite uncertainties, indices in range, unit directions). A
-/// violation panics, which libFuzzer reports as a crash.
-pub fn check(result: Result<Dataset, DataError>, file: &str) {
+/// The contract, as a message when broken: an error names `file`; a dataset is well
+/// formed (samples, finite values, positive finite uncertainties, indices in range, unit
+/// directions).
+pub fn contract(result: Result<Dataset, DataError>, file: &str) -> Result<(), String> {
     match result {
         Err(e) => {
             let msg = e.to_string();
-            assert!(msg.contains(file), "error without the file name: {msg}");
-        }
-        Ok(d) => {
-            assert!(!d.samples.is_empty(), "a dataset without samples");
-            for s in &d.samples {
-                assert!(
-                    s.value.is_finite() && s.uncertainty.is_finite() && s.uncertainty > 0.0,
-                    "value {} ± {}",
-                    s.value,
-                    s.uncertainty
-                );
-                assert!(
-                    s.channel < d.channels.len() && s.axis < d.axes.len(),
-                    "channel {} of {}, axis {} of {}",
-                    s.channel,
-                    d.channels.len(),
-                    s.axis,
-                    d.axes.len()
-                );
-                assert!(
-                    (s.wi().length() - 1.0).abs() < 1e-9 && (s.wo().length() - 1.0).abs() < 1e-9,
-                    "directions {:?} {:?}",
-                    s.wi(),
-                    s.wo()
-                );
+            if !msg.contains(file) {
+                return Err(format!("error without the file name: {msg}"));
             }
         }
+        Ok(d) => {
+            if d.samples.is_empty() {
+                return Err("a dataset without samples".into());
+            }
+            for s in &d.samples {
+                if !(s.value.is_finite() && s.uncertainty.is_finite() && s.uncertainty > 0.0) {
+                    return Err(format!("sample {s:?}: value or uncertainty"));
+                }
+                if !(s.channel < d.channels.len() && s.axis < d.axes.len()) {
+                    return Err(format!("sample {s:?}: channel or axis out of range"));
+                }
+                if !((s.wi().length() - 1.0).abs() < 1e-9 && (s.wo().length() - 1.0).abs() < 1e-9) {
+                    return Err(format!("sample {s:?}: directions not unit"));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether every place an error message names is `file:line:column:` — the contract of
+/// the Zemax and ASTM readers (one error, or "N bad rows in file:" and one per line).
+pub fn located(msg: &str, file: &str) -> bool {
+    let place = |l: &str| {
+        let Some(rest) = l.strip_prefix(file).and_then(|r| r.strip_prefix(':')) else {
+            return false;
+        };
+        let mut parts = rest.splitn(3, ':');
+        let num = |x: Option<&str>| {
+            x.is_some_and(|x| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit()))
+        };
+        num(parts.next()) && num(parts.next()) && parts.next().is_some()
+    };
+    let mut lines = msg.lines();
+    let first = lines.next().unwrap_or("");
+    if first.ends_with(&format!("bad rows in {file}:")) {
+        lines.all(|l| l.starts_with("… and ") || place(l))
+    } else {
+        place(first)
+    }
+}
+
+/// [`contract`] as the fuzz targets need it: a violation panics, which libFuzzer reports
+/// as a crash.
+pub fn check(result: Result<Dataset, DataError>, file: &str) {
+    if let Err(why) = contract(result, file) {
+        panic!("{why}");
     }
 }
 
@@ -79,24 +103,7 @@ pub fn check(result: Result<Dataset, DataError>, file: &str) {
 pub fn check_located(result: Result<Dataset, DataError>, file: &str) {
     if let Err(e) = &result {
         let msg = e.to_string();
-        let place = |l: &str| {
-            let Some(rest) = l.strip_prefix(file).and_then(|r| r.strip_prefix(':')) else {
-                return false;
-            };
-            let mut parts = rest.splitn(3, ':');
-            let num = |x: Option<&str>| {
-                x.is_some_and(|x| !x.is_empty() && x.bytes().all(|b| b.is_ascii_digit()))
-            };
-            num(parts.next()) && num(parts.next()) && parts.next().is_some()
-        };
-        let mut lines = msg.lines();
-        let first = lines.next().unwrap_or("");
-        let ok = if first.ends_with(&format!("bad rows in {file}:")) {
-            lines.all(|l| l.starts_with("… and ") || place(l))
-        } else {
-            place(first)
-        };
-        assert!(ok, "error without file:line:column: {msg}");
+        assert!(located(&msg, file), "error without file:line:column: {msg}");
     }
     check(result, file);
 }
