@@ -211,7 +211,17 @@ fn zemax_refusals() -> Vec<(String, &'static str, &'static str)> {
         (
             with(4, "Symmetry  Radial"),
             "x.bsdf:4:11:",
-            "not PlaneSymmetrical",
+            "Symmetry 'Radial' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D",
+        ),
+        (
+            with(5, "SpectralContent  RGB"),
+            "x.bsdf:5:18:",
+            "SpectralContent 'RGB' is not Monochrome or XYZ",
+        ),
+        (
+            with(6, "ScatterType  BSDF"),
+            "x.bsdf:6:14:",
+            "ScatterType 'BSDF' is not BRDF or BTDF",
         ),
         (with(10, "10\t95"), "x.bsdf:10:4:", "outside [0, 90]"),
         (

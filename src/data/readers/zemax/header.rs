@@ -149,37 +149,15 @@ impl HeaderLines {
                 once(&mut self.source, (rest, at), "Source", file)?;
             }
             "symmetry" => {
-                let v = one_word(&tokens, text, line, file, "Symmetry")?;
-                let s = match v.text.to_ascii_lowercase().as_str() {
-                    "planesymmetrical" => Symmetry::PlaneSymmetrical,
-                    "asymmetrical" => Symmetry::Asymmetrical,
-                    "asymmetrical4d" => Symmetry::Asymmetrical4D,
-                    _ => return Err(err(file, (line, v.column), format!(
-                        "Symmetry '{}' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D", v.text
-                    ))),
-                };
+                let s = one_of(&tokens, text, line, file, "Symmetry", SYMMETRIES)?;
                 once(&mut self.symmetry, (s, at), "Symmetry", file)?;
             }
             "spectralcontent" => {
-                let v = one_word(&tokens, text, line, file, "SpectralContent")?;
-                let s = match v.text.to_ascii_lowercase().as_str() {
-                    "monochrome" => Spectral::Monochrome,
-                    "xyz" => Spectral::Xyz,
-                    _ => return Err(err(file, (line, v.column), format!(
-                        "SpectralContent '{}' is not Monochrome or XYZ", v.text
-                    ))),
-                };
+                let s = one_of(&tokens, text, line, file, "SpectralContent", SPECTRA)?;
                 once(&mut self.spectral, (s, at), "SpectralContent", file)?;
             }
             "scattertype" => {
-                let v = one_word(&tokens, text, line, file, "ScatterType")?;
-                let k = match v.text.to_ascii_lowercase().as_str() {
-                    "brdf" => Kind::Brdf,
-                    "btdf" => Kind::Btdf,
-                    _ => return Err(err(file, (line, v.column), format!(
-                        "ScatterType '{}' is not BRDF or BTDF", v.text
-                    ))),
-                };
+                let k = one_of(&tokens, text, line, file, "ScatterType", SCATTER_TYPES)?;
                 once(&mut self.kind, (k, at), "ScatterType", file)?;
             }
             "tis" | "dataend" => {
@@ -393,6 +371,44 @@ fn once<T>(
     }
     *slot = Some(v);
     Ok(())
+}
+
+/// The words of the enumerated keywords, as the format spells them (matched without case).
+const SYMMETRIES: &[(&str, Symmetry)] = &[
+    ("PlaneSymmetrical", Symmetry::PlaneSymmetrical),
+    ("Asymmetrical", Symmetry::Asymmetrical),
+    ("Asymmetrical4D", Symmetry::Asymmetrical4D),
+];
+const SPECTRA: &[(&str, Spectral)] =
+    &[("Monochrome", Spectral::Monochrome), ("XYZ", Spectral::Xyz)];
+const SCATTER_TYPES: &[(&str, Kind)] = &[("BRDF", Kind::Brdf), ("BTDF", Kind::Btdf)];
+
+/// The single word after a keyword, one of `words`: "Symmetry 'X' is not A, B or C"
+/// otherwise.
+fn one_of<T: Copy>(
+    tokens: &[Token<'_>],
+    text: &str,
+    line: usize,
+    file: &str,
+    name: &str,
+    words: &[(&str, T)],
+) -> Result<T, DataError> {
+    let v = one_word(tokens, text, line, file, name)?;
+    if let Some((_, value)) = words.iter().find(|(w, _)| w.eq_ignore_ascii_case(v.text)) {
+        return Ok(*value);
+    }
+    let names: Vec<&str> = words.iter().map(|(w, _)| *w).collect();
+    let (last, rest) = names.split_last().expect("a keyword has words");
+    let list = if rest.is_empty() {
+        last.to_string()
+    } else {
+        format!("{} or {last}", rest.join(", "))
+    };
+    Err(err(
+        file,
+        (line, v.column),
+        format!("{name} '{}' is not {list}", v.text),
+    ))
 }
 
 /// The single word after a keyword.
