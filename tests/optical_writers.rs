@@ -709,3 +709,18 @@ impl ReadOptionsAllowZero {
         }
     }
 }
+
+/// `export --geometry`'s symmetry word: any case of the format's words, and a clear
+/// refusal of anything else.
+#[test]
+fn the_geometry_symmetry_is_one_of_the_formats_words() {
+    use bsdfit::data::readers::zemax::Symmetry;
+    use bsdfit::workflows::optical::zemax::ZemaxGrid;
+    let g = ZemaxGrid::parse("symmetry=asymmetrical4D", Symmetry::PlaneSymmetrical).unwrap();
+    assert_eq!(g.symmetry, Symmetry::Asymmetrical4D);
+    let e = ZemaxGrid::parse("symmetry=Radial", Symmetry::PlaneSymmetrical).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "--geometry: symmetry 'radial' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D"
+    );
+}

@@ -4,7 +4,7 @@
 //! ∫ f cos θ dω over the whole hemisphere ([`super::tis`]), not the table's sum.
 
 use super::{nearest_channel, provenance, tis::tis, Planes};
-use crate::data::readers::zemax::{self, geometry, Header, Symmetry, NOMINAL_XYZ_NM};
+use crate::data::readers::zemax::{self, geometry, Header, Symmetry, NOMINAL_XYZ_NM, SYMMETRIES};
 use crate::data::Kind;
 use crate::inference::saved::FitFile;
 use anyhow::Result;
@@ -82,12 +82,17 @@ impl ZemaxGrid {
                 .ok_or_else(|| anyhow::anyhow!("--geometry: '{item}' is not key=list"))?;
             let k = k.trim().to_ascii_lowercase();
             if k == "symmetry" {
-                symmetry = match v.trim().to_ascii_lowercase().as_str() {
-                    "planesymmetrical" => Symmetry::PlaneSymmetrical,
-                    "asymmetrical" => Symmetry::Asymmetrical,
-                    "asymmetrical4d" => Symmetry::Asymmetrical4D,
-                    other => anyhow::bail!("--geometry: symmetry '{other}' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D"),
-                };
+                let word = v.trim();
+                symmetry = SYMMETRIES
+                    .iter()
+                    .find(|(w, _)| w.eq_ignore_ascii_case(word))
+                    .map(|(_, s)| *s)
+                    .ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "--geometry: symmetry '{}' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D",
+                            word.to_ascii_lowercase()
+                        )
+                    })?;
                 continue;
             }
             let slot = match k.as_str() {

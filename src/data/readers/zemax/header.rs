@@ -373,8 +373,9 @@ fn once<T>(
     Ok(())
 }
 
-/// The words of the enumerated keywords, as the format spells them (matched without case).
-const SYMMETRIES: &[(&str, Symmetry)] = &[
+/// The words of the enumerated keywords, as the format spells them (matched without case;
+/// the symmetries also name `export --geometry`'s).
+pub const SYMMETRIES: &[(&str, Symmetry)] = &[
     ("PlaneSymmetrical", Symmetry::PlaneSymmetrical),
     ("Asymmetrical", Symmetry::Asymmetrical),
     ("Asymmetrical4D", Symmetry::Asymmetrical4D),

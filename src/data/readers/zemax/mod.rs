@@ -59,7 +59,7 @@ use crate::data::{
 };
 use crate::text::plural_with as count;
 use geometry::{cell_geometry, incident_azimuth, table_integral, HORIZON_COS};
-pub use header::{Header, Spectral, Symmetry, MAX_ANGLES};
+pub use header::{Header, Spectral, Symmetry, MAX_ANGLES, SYMMETRIES};
 use header::{HeaderLines, Pos};
 use std::collections::{BTreeMap, HashMap};
 use std::io::BufRead;
