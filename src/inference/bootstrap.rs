@@ -332,7 +332,9 @@ impl NullRefits {
         self.chi2.len().saturating_sub(1)
     }
 
-    /// Data set `i`: the measured data (0) or replicate `i`.
+    /// Data set `i`: the measured data (0) or replicate `i`, drawn again from its own seed
+    /// on each call (cheap beside its refits, and lighter than holding up to 999 copies of
+    /// the data).
     pub fn dataset(&self, i: usize) -> Dataset {
         if i == 0 {
             self.measured.clone()
@@ -366,7 +368,7 @@ impl NullRefits {
             self.flat.extend(optima.iter().map(|o| o.flat.clone()));
             self.chi2.extend(optima.iter().map(|o| o.loss));
             self.evaluations += stats.evaluations;
-            add_phases(&mut self.phases, &stats.phases);
+            self.phases += stats.phases;
         }
         self.seconds += t0.elapsed().as_secs_f64();
         Ok(())
@@ -379,14 +381,6 @@ fn chunks(from: usize, to: usize) -> Vec<std::ops::RangeInclusive<usize>> {
         .step_by(CHUNK)
         .map(|a| a..=(a + CHUNK - 1).min(to))
         .collect()
-}
-
-fn add_phases(to: &mut PhaseSeconds, more: &PhaseSeconds) {
-    to.setup += more.setup;
-    to.screening += more.screening;
-    to.search += more.search;
-    to.polish += more.polish;
-    to.conclusions += more.conclusions;
 }
 
 /// Refits of replicates: Levenberg–Marquardt on χ², stopped once a step gains less than
@@ -545,7 +539,7 @@ pub fn calibrate(
             };
             let (optima, stats) = refit(ext, &datas, backend, &opts)?;
             evaluations += stats.evaluations;
-            add_phases(&mut phases, &stats.phases);
+            phases += stats.phases;
             for (i, o) in chunk.zip(&optima) {
                 let c0 = nulls.chi2[i];
                 if i == 0 {
@@ -572,7 +566,7 @@ pub fn calibrate(
             continue;
         }
         if let Some((p, source, positive_share, tail, undecided)) = settle(&g, level, boot, last) {
-            add_phases(&mut phases, &nulls.phases);
+            phases += nulls.phases;
             return Ok(Calibrated {
                 p,
                 source,
