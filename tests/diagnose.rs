@@ -406,15 +406,16 @@ fn hidden_long_tail_is_found() {
     );
 }
 
-/// anisotropy: different roughness on two measurement planes (φ = 20° and 110°, not the
-/// PTB's 0/90°). Identifiable only because both planes are measured, at 1.5° steps; at
-/// normal incidence S and η_t are not (the workflow must not add them).
+/// anisotropy: an anisotropic surface (α_u = 0.07 along φ0 = 20°, α_v = 0.16 across)
+/// measured on the planes of its axes (φ = 20° and 110°, not the PTB's 0/90°).
+/// Identifiable only because both planes are measured, at 1.5° steps; at normal incidence
+/// S and η_t are not (the workflow must not add them).
 #[test]
 fn hidden_anisotropy_is_found() {
     let rows = btdf_rows(&[0.0], &steps(-33.0, 33.0, 1.5), &[20.0, 110.0]);
     let data = synth(
-        "btdf(tr)+peraxis",
-        "alpha=0.07:0.16,eta=1.5",
+        "btdf(tr)+aniso",
+        "alpha_u=0.07,alpha_v=0.16,phi0=20,eta=1.5",
         &rows,
         (0.02, 1e-4),
         4909,

@@ -34,7 +34,7 @@ use crate::math::fresnel_transmittance;
 use glam::DVec3;
 use std::f64::consts::PI;
 
-const BTDF_WGSL: (&str, &str) = ("btdf", include_str!("../../shaders/bsdf/btdf.wgsl"));
+pub(crate) const BTDF_WGSL: (&str, &str) = ("btdf", include_str!("../../shaders/bsdf/btdf.wgsl"));
 
 /// Below this ‖i + η o‖² the configuration is the degenerate straight-through ray of an
 /// index-matched interface: returned as 0 (also keeps f32 far from overflow).
@@ -239,6 +239,9 @@ impl Bsdf for Btdf {
             sources: vec![MICROFACET_WGSL, BTDF_WGSL],
             function: format!("btdf_{}_eval", self.ndf.name()),
         }
+    }
+    fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        super::aniso::btdf(self.ndf)
     }
     fn lut(&self) -> Option<Vec<f32>> {
         match self.ndf {

@@ -60,6 +60,9 @@ impl Bsdf for Coat {
             }
         });
     }
+    fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::aniso::coat())
+    }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("coat", include_str!("../../shaders/bsdf/coat.wgsl"))
     }

@@ -62,6 +62,10 @@ pub struct ParamDecl {
     pub per_axis: bool,
     /// What the parameter is to a lobe ([`LobePart`]).
     pub lobe: LobePart,
+    /// Determined only by data on two or more planes through the normal (or off-plane):
+    /// an anisotropic lobe's two roughnesses and its frame, of which one plane sees a
+    /// single combination.
+    pub needs_planes: bool,
 }
 
 impl ParamDecl {
@@ -83,6 +87,7 @@ impl ParamDecl {
             neutral: None,
             per_axis: false,
             lobe: LobePart::Other,
+            needs_planes: false,
         }
     }
     /// One value per channel.
@@ -143,6 +148,13 @@ impl ParamDecl {
     pub const fn per_axis(self) -> Self {
         ParamDecl {
             per_axis: true,
+            ..self
+        }
+    }
+    /// Determined only across planes ([`ParamDecl::needs_planes`]).
+    pub const fn needs_planes(self) -> Self {
+        ParamDecl {
+            needs_planes: true,
             ..self
         }
     }

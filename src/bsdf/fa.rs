@@ -75,6 +75,9 @@ impl Bsdf for FresnelAggregate {
             });
         }
     }
+    fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::aniso::fa())
+    }
     fn wgsl(&self) -> WgslFn {
         WgslFn {
             sources: vec![

@@ -103,6 +103,9 @@ impl Bsdf for Ggx {
             }
         });
     }
+    fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::aniso::ggx())
+    }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))
     }

@@ -53,6 +53,7 @@ models! {
     falloff => [ENTRY],
     btdf => [ENTRY, SCALE_ENTRY, ABSORB_ENTRY, DIFFUSE_ENTRY],
     peraxis => [ENTRY],
+    aniso => [ENTRY],
 }
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]
@@ -258,6 +259,11 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
             }
         });
     }
+    /// The node's anisotropic form (two roughnesses and a tangent azimuth in place of
+    /// its roughness), which `+aniso` puts in its place; `None` where it has none.
+    fn anisotropic(&self) -> Option<Arc<dyn Bsdf>> {
+        None
+    }
     /// Whether f(i, o) = f(o, i) holds (tests check it where claimed).
     fn reciprocal(&self) -> bool {
         true
@@ -354,7 +360,7 @@ impl Node {
         self.bsdf
             .eval_channels(p.node(self.offset, self.nparams), dirs, children, out);
     }
-    fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
+    pub fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
         f(self);
         for c in &self.children {
             c.visit(f);

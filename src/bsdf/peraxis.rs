@@ -5,7 +5,6 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/bsdf/peraxis.wgsl`.
 
-use super::effect::{Adds, Effect};
 use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
@@ -18,11 +17,9 @@ pub const ENTRY: Entry = Entry::suffix(
     InCatalogue::MultiPlaneAfter("scale"),
     "parameters declared per-plane (roughness) get one value per measured phi plane",
     build,
-)
-// Equal values on every plane are M. Only the transmission roughness is declared per plane.
-.adding(&[Adds::appended(Effect::Anisotropy)
-    .on_planes(2)
-    .for_kind(Kind::Btdf)]);
+);
+// It adds no effect for diagnose: it describes the planes, not the surface, so diagnose
+// names anisotropy through `+aniso`, whose lobes also predict directions between planes.
 
 #[derive(Debug, Clone, Copy)]
 pub struct PerAxis {

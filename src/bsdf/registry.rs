@@ -274,6 +274,42 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
             }
         }
     }
+    // A suffix that changes the nodes of another suffix (`+aniso` turns `+coat`'s lobe
+    // anisotropic) makes node functions no spec above has: after each such suffix, on
+    // the first core model it follows.
+    let functions = |spec: &str| -> Vec<String> {
+        let mut v = Vec::new();
+        if let Ok(node) = Ast::parse(spec)
+            .map_err(|e| e.to_string())
+            .and_then(|a| build(&a))
+        {
+            node.visit(&mut |n| v.push(n.bsdf.wgsl().function));
+        }
+        v
+    };
+    let mut covered: Vec<String> = out.iter().flat_map(|s| functions(s)).collect();
+    for e in extra
+        .iter()
+        .filter(|e| matches!(e.build, Builder::Suffix(_)))
+    {
+        for t in extra
+            .iter()
+            .filter(|t| matches!(t.build, Builder::Suffix(_)))
+        {
+            let Some(c) = cores.iter().find(|c| builds(&format!("{c}+{}", t.name))) else {
+                continue;
+            };
+            let s = format!("{c}+{}+{}", t.name, e.name);
+            let new: Vec<String> = functions(&s)
+                .into_iter()
+                .filter(|f| !covered.contains(f))
+                .collect();
+            if !new.is_empty() && !out.contains(&s) {
+                covered.extend(new);
+                out.push(s);
+            }
+        }
+    }
     out.dedup();
     out
 }

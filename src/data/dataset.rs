@@ -514,6 +514,27 @@ pub(super) fn plane_index(planes: &[f64], theta_deg: f64, phi_deg: f64) -> usize
 }
 
 impl Dataset {
+    /// How many planes through the normal hold the data's directions: the distinct
+    /// azimuths of ωi and ωo (θ > 0) modulo 180°, to 0.01°; [`MAX_PLANES`] + 1 when
+    /// there are more (out-of-plane data). A surface's anisotropy shows only across planes:
+    /// in one plane the data see one combination of its two roughnesses.
+    pub fn direction_planes(&self) -> usize {
+        let mut planes = BTreeSet::new();
+        for s in &self.samples {
+            for (theta, phi) in [(s.theta_i, s.phi_i), (s.theta_o, s.phi_o)] {
+                if theta > 1e-9 {
+                    planes.insert(
+                        (phi.to_degrees().rem_euclid(180.0) * 100.0).round() as i64 % 18000,
+                    );
+                    if planes.len() > MAX_PLANES {
+                        return MAX_PLANES + 1;
+                    }
+                }
+            }
+        }
+        planes.len().max(1)
+    }
+
     /// The samples of one measurement plane (and those at θo = 0, which lie on every
     /// plane), as a dataset of its own with that single axis.
     pub fn axis_subset(&self, axis: usize) -> Dataset {

@@ -206,17 +206,34 @@ pub fn covariance(
         warnings: vec![],
         ridges: vec![],
     };
-    let (inv, undetermined) = match pseudo_inverse(&jtj) {
+    let (inv, singular) = match pseudo_inverse(&jtj) {
         Ok(found) => found,
         Err(why) => {
             out.warnings.push(why.into());
             return Ok(expand(out, free, model.dim));
         }
     };
+    // In one plane an anisotropic lobe shows one combination of its roughnesses and
+    // frame: the normal matrix may still be regular (the plane's width, height and
+    // masking weigh them differently), but their values would be one of many sets.
+    let mut undetermined = singular.clone();
+    if data.direction_planes() < 2 {
+        let names_in_plane: Vec<&str> = (0..p)
+            .filter(|&c| free_decls[c].needs_planes)
+            .inspect(|&c| undetermined[c] = true)
+            .map(|c| names[c])
+            .collect();
+        if !names_in_plane.is_empty() {
+            out.warnings.push(format!(
+                "not determined by data in one plane of incidence: {} (one plane sees an anisotropic lobe along that plane only, one combination of its two roughnesses and its frame); measure a second plane or out of plane",
+                names_in_plane.join(", ")
+            ));
+        }
+    }
     let cov = &inv * meat * &inv * birge;
     out.ridges = ridges(&jtj, birge, free, flat, decls);
     set_std_and_correlation(&mut out, &cov, &undetermined);
-    let warnings = determinacy_warnings(&out, &undetermined, &names, &free_decls);
+    let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
     Ok(expand(out, free, model.dim))
 }

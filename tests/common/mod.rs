@@ -287,7 +287,7 @@ pub fn synth_geometry(
     noise: (f64, f64),
     seed: u64,
 ) -> (Model, Vec<f64>, bsdfit::data::Dataset) {
-    let (_, rows) = bsdfit::workflows::synth::geometry(geometry)
+    let (_, rows) = bsdfit::workflows::synth::geometry_expr(geometry)
         .unwrap_or_else(|e| panic!("geometry {geometry}: {e}"));
     synth_rows(spec, params, &rows, wavelengths, noise, seed)
 }

@@ -57,7 +57,7 @@ pub fn extensions(spec: &str, data: &Dataset) -> Result<Vec<Candidate>> {
     let clean: String = spec.chars().filter(|c| !c.is_whitespace()).collect();
     let ast = Ast::parse(&clean)?;
     let (core, suffixes) = peel(&ast);
-    let planes = data.axes.len().max(1);
+    let planes = data.direction_planes();
     let mut out: Vec<Candidate> = Vec::new();
     for effect in Effect::all() {
         for rule in effect.rules() {
@@ -126,7 +126,8 @@ fn make(rule: &Rule, core: &Ast, suffixes: &[String]) -> Vec<String> {
 
 /// The extension's parameters at which it reproduces the current model (or a good start
 /// for a swap): shared names are copied (a wrapped base's `base.x` from `x`, a lobe's
-/// `lobe.x` from `x`), per-plane copies replicate a shared value, and the new parameters
+/// `lobe.x` from `x`, an anisotropic lobe's `x_u` and `x_v` from `x`), per-plane copies
+/// replicate a shared value, and the new parameters
 /// take their neutral values (σ = r = 0, k_s = 0 and η = 1, k_r = 0, S = 1, τ = 0,
 /// k_d = 0, γ = 2, τ0 at its lower bound with Lambertian-like grains (η_g = 1) as bright
 /// as the base).
@@ -141,12 +142,29 @@ pub fn embed(old: &Model, old_flat: &[f64], new: &Model) -> Vec<f64> {
             _ => None,
         }
     };
+    // An anisotropic lobe's two roughnesses both start from the isotropic one (α_u = α_v
+    // is the isotropic lobe for any φ0).
+    let isotropic = |name: &str| -> Option<String> {
+        let base = name
+            .strip_suffix("_u")
+            .or_else(|| name.strip_suffix("_v"))?;
+        Some(base.to_string())
+    };
+    let lookup = |name: &str| {
+        find(name)
+            .or_else(|| name.strip_prefix("base.").and_then(find))
+            .or_else(|| name.strip_prefix("lobe.").and_then(find))
+            .or_else(|| alias(name).and_then(find))
+    };
     for p in &new.params {
         let w = p.width(ch);
-        let mut source = find(&p.name)
-            .or_else(|| p.name.strip_prefix("base.").and_then(find))
-            .or_else(|| p.name.strip_prefix("lobe.").and_then(find))
-            .or_else(|| alias(&p.name).and_then(find));
+        let mut source = lookup(&p.name).or_else(|| {
+            let iso = isotropic(&p.name)?;
+            lookup(&iso).or_else(|| {
+                let leaf = iso.rsplit('.').next().unwrap_or(&iso);
+                alias(leaf).and_then(find)
+            })
+        });
         if p.name == "rho_g" && source.is_none() {
             // Grains as bright as the base: dmg(lambert) is then lambert for any τ0.
             source = find("rho").or_else(|| find("base.rho"));
@@ -186,9 +204,10 @@ mod tests {
         let brdf = dataset(Kind::Brdf, &geometry("inplane10"), 3);
         let btdf = dataset(Kind::Btdf, &geometry("oblique"), 1);
         let two = dataset(Kind::Btdf, &geometry("ptb1"), 1);
+        let hemi = dataset(Kind::Brdf, &geometry("hemi"), 3);
         // The candidates in the order of the catalogue (the order of candidates.json).
         type Want = &'static [(&'static str, Effect)];
-        let cases: [(&str, &Dataset, Want); 7] = [
+        let cases: [(&str, &Dataset, Want); 8] = [
             (
                 "lambert",
                 &brdf,
@@ -265,7 +284,21 @@ mod tests {
                     ("btdf(gtr)+scale", LongTail),
                     ("btdf(tr)+scale+absorb", Absorption),
                     ("btdf(tr)+scale+diffuse", DiffuseFloor),
-                    ("btdf(tr)+scale+peraxis", Anisotropy),
+                    ("btdf(tr)+scale+aniso", Anisotropy),
+                ],
+            ),
+            // Off-plane: the lobe may be anisotropic.
+            (
+                "ggx",
+                &hemi,
+                &[
+                    ("ggx+coat", SpecularLobe),
+                    ("fa(lambert)", DiffuseFloor),
+                    ("dmg(ggx)", GrazingDecay),
+                    ("rmg(ggx)", GrazingDecay),
+                    ("ggx+retro", RetroLobe),
+                    ("ggx+mrm82", RetroLobe),
+                    ("ggx+aniso", Anisotropy),
                 ],
             ),
         ];
