@@ -67,8 +67,8 @@ GLOSSY='base.rho=0.79:0.80:0.81,base.r=0.2,lobe.eta=1.5,lobe.ks=1'
 "$B" synth --model 'btdf(gg)+scale' --params 'beta=0.35,p=3,eta=1.5,scale=0.9' \
   --geometry ptb1 --noise 0.015,0.001 --angular-unc 0.05 --seed 504 \
   --material 'Diffuser A (square-shaped, 1.5 mm)' --out "$D/diffuser-a.csv"
-# D: elliptical Gaussian, 2 mm: Beckmann with one roughness per φ plane (+peraxis:
-# α = 0.15 on φ = 0°, 0.35 on φ = 90°), index and scale shared.
-"$B" synth --model 'btdf(beckmann)+scale+peraxis' --params 'alpha=0.15:0.35,eta=1.5,scale=0.9' \
+# D: elliptical Gaussian, 2 mm: one anisotropic Beckmann surface (+aniso: α_u = 0.15
+# along φ = 0°, α_v = 0.35 along φ = 90°), measured on the planes of its axes.
+"$B" synth --model 'btdf(beckmann)+scale+aniso' --params 'alpha_u=0.15,alpha_v=0.35,phi0=0,eta=1.5,scale=0.9' \
   --geometry ptb1 --noise 0.015,0.001 --angular-unc 0.05 --seed 505 \
   --material 'Diffuser D (elliptical Gaussian, 2 mm)' --out "$D/diffuser-d.csv"

@@ -92,6 +92,8 @@ fn the_registry_derives_every_anisotropic_form() {
         ("lambert+aniso", "needs a microfacet lobe"),
         ("btdf(gtr)+aniso", "needs a microfacet lobe"),
         ("ggx+aniso+aniso", "given twice"),
+        ("btdf(tr)+peraxis+aniso", "not both"),
+        ("btdf(tr)+aniso+peraxis", "per-plane"),
     ] {
         let e = Model::parse(spec, 1).unwrap_err().to_string();
         assert!(e.contains(needle), "{spec}: {e}");
@@ -428,4 +430,84 @@ fn diagnose_names_the_highlight_and_its_anisotropy() {
     );
     let last = d.steps.last().unwrap();
     assert!(last.chi2_red < 1.5, "{:#}", d.to_json());
+}
+
+// ---------------------------------------------------------------------------------------
+// The bundled elliptical diffuser
+
+/// Diffuser D, measured at normal incidence on the planes φ = 0° and 90°, is one
+/// anisotropic surface: `+aniso` fits it at least as well as one roughness per plane
+/// (χ²_red within 10 % of `+peraxis`'s, or better), and predicts the plane at 45°
+/// between them, with a propagated uncertainty, where `+peraxis` has nothing to say. The
+/// frame is fixed along the planes (φ0 = 0: the diffuser was measured along its axes):
+/// at normal incidence two planes see two widths, which leave φ0 free along a ridge.
+#[test]
+fn the_bundled_elliptical_diffuser_is_one_anisotropic_surface() {
+    use bsdfit::data::{Dataset, ReadOptions};
+    use bsdfit::engine::cpu::CpuBackend;
+    use bsdfit::engine::loss::{Loss, Metric, Weights};
+    use bsdfit::inference::constraints::ConstraintSpec;
+    use bsdfit::inference::fit::{fit, FitOptions};
+    use bsdfit::inference::saved::{Propagator, SavedFit};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/diffuser-d.csv");
+    let data = Dataset::read(&path, &ReadOptions::default()).unwrap();
+    assert_eq!(data.axes, vec![0.0, 90.0]);
+    let run = |spec: &str, fix: &[&str]| {
+        let model = Model::for_data(spec, &data).unwrap();
+        let opts = FitOptions {
+            restarts: 16,
+            seed: 1,
+            constraints: ConstraintSpec {
+                fix: fix.iter().map(|s| s.to_string()).collect(),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let loss = Loss::new(Metric::Chi2, Weights::Uniform);
+        let rep = fit(&model, &data, loss, &CpuBackend::new(), &opts, &mut |_| {}).unwrap();
+        eprintln!("{spec} {fix:?}: χ²_red {:.3}", rep.best.chi2_red);
+        (model, rep)
+    };
+    let (_, per_plane) = run("btdf(beckmann)+scale+peraxis", &[]);
+    let (_, free) = run("btdf(beckmann)+scale+aniso", &[]);
+    let (model, fixed) = run("btdf(beckmann)+scale+aniso", &["phi0=0"]);
+    for rep in [&free, &fixed] {
+        assert!(
+            rep.best.chi2_red <= 1.1 * per_plane.best.chi2_red,
+            "+aniso χ²_red {} vs +peraxis {}",
+            rep.best.chi2_red,
+            per_plane.best.chi2_red
+        );
+    }
+    let saved = SavedFit::from_value(&serde_json::to_value(&fixed).unwrap(), "fit").unwrap();
+    let p = Propagator::new(&saved);
+    let wi = DVec3::Z;
+    // The half width at half maximum of the transmitted lobe in the plane φ.
+    let profile = |phi: f64| -> (f64, Vec<bsdfit::inference::saved::Propagated>) {
+        let at = |t: f64| {
+            let mut wo = dir(t.to_radians(), phi.to_radians());
+            wo.z = -wo.z;
+            p.eval(0, wi, wo)
+        };
+        let peak = at(0.0).value;
+        let mut t = 0.0;
+        while at(t).value > 0.5 * peak && t < 60.0 {
+            t += 0.05;
+        }
+        (t, (0..=20).map(|k| at(k as f64)).collect())
+    };
+    let (w0, _) = profile(0.0);
+    let (w90, _) = profile(90.0);
+    let (w45, mid) = profile(45.0);
+    eprintln!("half widths: φ 0° {w0:.2}°, 45° {w45:.2}°, 90° {w90:.2}°");
+    assert!(w0.min(w90) < w45 && w45 < w0.max(w90), "{w0} {w45} {w90}");
+    for e in &mid {
+        assert!(
+            e.value > 0.0 && e.uncertainty.is_finite() && e.uncertainty > 0.0,
+            "{e:?}"
+        );
+        assert!(!e.depends_on_undetermined, "{e:?}");
+    }
+    assert!(mid[0].uncertainty < 0.1 * mid[0].value, "{:?}", mid[0]);
+    assert_eq!(model.axes, vec![0.0]);
 }

@@ -253,7 +253,8 @@ fn bootstrap_false_positive_rate_at_alpha_001() {
     );
 }
 
-/// A test the planned replicates cannot decide, from the bundled diffuser D (two planes):
+/// A test the planned replicates cannot decide, from the first bundled diffuser D (two
+/// planes, one Beckmann roughness per plane, kept as a fixture for this test):
 /// adding absorption to `btdf(tr)+peraxis` gives T ≈ 9.4 at a level of 2.5e-3, where the
 /// tail fitted to 99 replicates lands within a factor of ten of the level. The bootstrap
 /// must draw beyond the planned 99 (doubling) until the count or a tail far from the
@@ -262,7 +263,8 @@ fn bootstrap_false_positive_rate_at_alpha_001() {
 #[test]
 fn a_bootstrap_the_plan_cannot_decide_draws_more() {
     use bsdfit::data::{Dataset, ReadOptions};
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/diffuser-d.csv");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/diffuser-d-per-plane.csv");
     let data = Dataset::read(&path, &ReadOptions::default()).unwrap();
     let backend = CpuBackend::new();
     let run = |max_replicates: usize| {

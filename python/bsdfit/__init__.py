@@ -41,6 +41,7 @@ __all__ = [
     "sweep",
     "models",
     "gpu_available",
+    "evaluate",
     "__version__",
 ]
 
@@ -1042,3 +1043,44 @@ def gpu_available() -> Tuple[bool, str]:
     """Whether the GPU engine can start (a Vulkan adapter, lavapipe included): (yes, its
     name) or (no, why not)."""
     return _bsdfit.gpu_adapter()
+
+
+def evaluate(
+    model: str,
+    params: Union[str, Mapping[str, Union[float, Sequence[float]]]],
+    theta_i: ArrayLike,
+    phi_i: ArrayLike,
+    theta_o: ArrayLike,
+    phi_o: ArrayLike,
+    *,
+    backend: str = "cpu",
+) -> np.ndarray:
+    """The model ``model`` at the parameters ``params`` and the geometries (degrees,
+    broadcast together; θo is the transmission angle of a BTDF, measured from −n), at
+    one wavelength: an array shaped like the broadcast inputs.
+
+    ``params`` maps names (``bsdfit.models()`` lists them) to values, or is the command
+    line's ``"name=value,…"``; parameters not named keep their defaults. ``backend`` is
+    ``"cpu"`` (the f64 reference), ``"gpu"`` (the f32 engine) or ``"auto"``. Any azimuth
+    is allowed, so an anisotropic fit's planes between the measured ones can be drawn.
+    """
+    if isinstance(params, str):
+        text = params
+    elif isinstance(params, Mapping):
+        parts = []
+        for name, value in params.items():
+            values = np.atleast_1d(_numbers(f"params[{name!r}]", value, max_ndim=1, allow_empty=False))
+            parts.append(f"{_text('params', name)}=" + ":".join(repr(float(v)) for v in values))
+        text = ",".join(parts)
+    else:
+        raise TypeError(f"params: expected a mapping of names to values or a string, got {_short(params)}")
+    arrays = [_numbers(k, v, max_ndim=None, allow_empty=True) for k, v in
+              zip(("theta_i", "phi_i", "theta_o", "phi_o"), (theta_i, phi_i, theta_o, phi_o))]
+    try:
+        shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    except ValueError:
+        raise ValueError("the geometry arrays do not broadcast to one shape") from None
+    cols = [np.ascontiguousarray(np.broadcast_to(a, shape), dtype=np.float64).ravel()
+            for a in arrays]
+    values = _bsdfit.evaluate(_text("model", model), text, *cols, _text("backend", backend))
+    return np.asarray(values).reshape(shape)

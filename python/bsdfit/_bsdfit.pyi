@@ -145,5 +145,16 @@ def sweep(
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""
 
+def evaluate(
+    model: str,
+    params: str,
+    theta_i: np.ndarray,
+    phi_i: np.ndarray,
+    theta_o: np.ndarray,
+    phi_o: np.ndarray,
+    backend: str,
+) -> np.ndarray:
+    """The model at ``name=value,…`` parameters and the geometries (degrees)."""
+
 def gpu_adapter() -> Tuple[bool, str]:
     """Whether a Vulkan adapter can be opened: (True, its name) or (False, why not)."""

@@ -515,6 +515,43 @@ fn fit_json<'py>(
     ))
 }
 
+/// A model at given parameters (`name=value,…`) and geometries (degrees), evaluated by
+/// the chosen backend: one value per geometry.
+#[pyfunction]
+#[pyo3(signature = (model, params, theta_i, phi_i, theta_o, phi_o, backend))]
+#[allow(clippy::too_many_arguments)]
+fn evaluate<'py>(
+    py: Python<'py>,
+    model: String,
+    params: String,
+    theta_i: PyReadonlyArray1<'_, f64>,
+    phi_i: PyReadonlyArray1<'_, f64>,
+    theta_o: PyReadonlyArray1<'_, f64>,
+    phi_o: PyReadonlyArray1<'_, f64>,
+    backend: String,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let cols = [
+        slice("theta_i", &theta_i)?,
+        slice("phi_i", &phi_i)?,
+        slice("theta_o", &theta_o)?,
+        slice("phi_o", &phi_o)?,
+    ];
+    let n = cols[0].len();
+    if cols.iter().any(|c| c.len() != n) {
+        return Err(PyValueError::new_err(
+            "theta_i, phi_i, theta_o and phi_o have different lengths",
+        ));
+    }
+    let geometry: Vec<[f64; 4]> = (0..n)
+        .map(|k| [cols[0][k], cols[1][k], cols[2][k], cols[3][k]])
+        .collect();
+    let values = compute(py, move || {
+        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
+        bsdfit::workflows::synth::evaluate(&model, &params, &geometry, backend.as_ref())
+    })?;
+    Ok(PyArray1::from_vec(py, values))
+}
+
 /// The text summary of a fit report (its JSON text), as `bsdfit fit` prints it.
 #[pyfunction]
 fn fit_summary(text: &str, name: &str) -> PyResult<String> {
@@ -843,6 +880,7 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -44,11 +44,13 @@ use std::sync::Arc;
 
 const ANISO_WGSL: (&str, &str) = ("aniso", include_str!("../../shaders/bsdf/aniso.wgsl"));
 
-/// Registry entry: a suffix of either kind, outside the default catalogue.
+/// Registry entry: a suffix of either kind.
 pub const ENTRY: Entry = Entry::suffix(
     "aniso",
     None,
-    InCatalogue::No,
+    // For data on several planes, beside `+peraxis`: the scaled BTDFs as one anisotropic
+    // surface.
+    InCatalogue::MultiPlaneAfter("scale"),
     "anisotropic microfacet lobes: alpha_u, alpha_v and the tangent azimuth phi0 (ggx, fa, +coat, btdf tr/beckmann/gg)",
     build,
 )
@@ -545,7 +547,7 @@ impl Bsdf for Aniso {
 /// it, and wrap the result in the pass-through `+aniso` node.
 pub fn build(inner: Node) -> Result<Node, String> {
     fn swap(node: Node, count: &mut usize, twice: &mut bool) -> Node {
-        *twice |= node.bsdf.name() == ENTRY.name;
+        *twice |= node.bsdf.name() == ENTRY.name || node.bsdf.name() == super::peraxis::ENTRY.name;
         let children = node
             .children
             .into_iter()
@@ -570,7 +572,10 @@ pub fn build(inner: Node) -> Result<Node, String> {
     let (mut count, mut twice) = (0, false);
     let swapped = swap(inner, &mut count, &mut twice);
     if twice {
-        return Err("+aniso given twice".into());
+        return Err(
+            "+aniso given twice, or with +peraxis (one surface, or one roughness per plane: not both)"
+                .into(),
+        );
     }
     if count == 0 {
         return Err(

@@ -364,6 +364,9 @@ pub struct Fitted<'a> {
     pub label: String,
     pub model: &'a Model,
     pub flat: &'a [f64],
+    /// The fit's covariance propagated to model values, where known: an anisotropic
+    /// BTDF's prediction between the measured planes is drawn with its ±1σ band.
+    pub propagator: Option<&'a crate::inference::saved::Propagator<'a>>,
 }
 
 /// Signed in-plane angle of a BRDF sample's θo relative to its φi (None if out of plane).
@@ -629,6 +632,9 @@ pub fn btdf_panel(data: &Dataset, fits: &[Fitted], title: &str) -> Panel {
             });
         }
     }
+    if let [fit] = fits {
+        series.extend(between_planes(data, fit, &groups, lo, hi));
+    }
     Panel {
         title: title.to_string(),
         x_label: format!(
@@ -638,6 +644,87 @@ pub fn btdf_panel(data: &Dataset, fits: &[Fitted], title: &str) -> Panel {
         y_label: "BTDF (sr⁻¹)".into(),
         series,
         log_y: None,
+    }
+}
+
+/// An anisotropic fit (`+aniso`) on data measured on two or more planes predicts the
+/// plane halfway between the first two (45° between planes at 0° and 90°): its curve at
+/// each incidence, and the ±1σ band propagated from the fit's covariance where known.
+fn between_planes(
+    data: &Dataset,
+    fit: &Fitted,
+    groups: &[(f64, usize)],
+    lo: f64,
+    hi: f64,
+) -> Vec<Series> {
+    let anisotropic = fit.model.params.iter().any(|p| p.decl.needs_planes);
+    if !anisotropic || data.axes.len() < 2 || fit.model.axes.len() > 1 {
+        return Vec::new();
+    }
+    let plane = 0.5 * (data.axes[0] + data.axes[1]);
+    let mut incidences: Vec<f64> = groups.iter().map(|g| g.0).collect();
+    incidences.dedup();
+    let color = (90, 90, 90);
+    let mut out = Vec::new();
+    for (k, &ti) in incidences.iter().enumerate() {
+        let at = ti_label(&incidences, ti);
+        let wi = direction(ti.to_radians(), 0.0);
+        let mut lower_bound = false;
+        let points: Vec<(f64, f64, f64)> = curve_xs(lo, hi, 0.25)
+            .into_iter()
+            .map(|x| {
+                let phi = if x < 0.0 { plane + 180.0 } else { plane };
+                let mut wo = direction(x.abs().to_radians(), phi.to_radians());
+                wo.z = -wo.z;
+                match fit.propagator {
+                    Some(p) => {
+                        let e = p.eval(0, wi, wo);
+                        lower_bound |= e.depends_on_undetermined;
+                        (x, e.value, e.uncertainty)
+                    }
+                    None => (x, fit.model.eval(fit.flat, 0, wi, wo), f64::NAN),
+                }
+            })
+            .collect();
+        // A parameter the data do not determine (φ0 at normal incidence on the planes of
+        // the axes) has no σ: the band is then a lower bound, and says so.
+        let bound = if lower_bound {
+            " (a lower bound: it depends on undetermined parameters)"
+        } else {
+            ""
+        };
+        out.push(Series {
+            label: if k == 0 {
+                format!("predicted, φ = {plane}°{at}")
+            } else {
+                String::new()
+            },
+            color,
+            curve: points.iter().map(|&(x, y, _)| (x, y)).collect(),
+            dash: Dash::nth(3),
+            ..Default::default()
+        });
+        if points.iter().all(|p| p.2.is_finite()) {
+            let label = format!("±1σ (propagated), φ = {plane}°{bound}");
+            for (sign, label) in [(1.0, label), (-1.0, String::new())] {
+                out.push(Series {
+                    label: if k == 0 { label } else { String::new() },
+                    color: lighten(color, 0.5),
+                    curve: points.iter().map(|&(x, y, u)| (x, y + sign * u)).collect(),
+                    dash: Dash::nth(1),
+                    ..Default::default()
+                });
+            }
+        }
+    }
+    out
+}
+
+fn ti_label(incidences: &[f64], ti: f64) -> String {
+    if incidences.len() > 1 {
+        format!(", θi = {ti}°")
+    } else {
+        String::new()
     }
 }
 

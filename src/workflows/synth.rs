@@ -216,3 +216,38 @@ fn describe(
     );
     ds.meta.insert("synth_seed".into(), seed.to_string());
 }
+
+/// The model `spec` with the parameters `params` (`name=value,…`, as `synth`; the others at
+/// their defaults) at the geometries `rows` (signed θi, φi, θo, φo in degrees; θo the
+/// transmission angle for a BTDF), at one wavelength, evaluated by `backend`: one value per
+/// row, in order. The rows are checked as a data file's are (angles in range, finite).
+pub fn evaluate(
+    spec: &str,
+    params: &str,
+    rows: &[[f64; 4]],
+    backend: &dyn crate::engine::Backend,
+) -> anyhow::Result<Vec<f64>> {
+    use crate::engine::loss::{Loss, Metric, Weights};
+    let kind = crate::bsdf::spec_kind(spec)?;
+    if rows.is_empty() {
+        return Ok(Vec::new());
+    }
+    const WAVELENGTH: f64 = 550.0;
+    let raw = placeholder_rows(rows, &[WAVELENGTH]);
+    let data = Dataset::from_rows(kind, "evaluate", &raw, "geometry", &ReadOptions::default())?;
+    let model = Model::for_data(spec, &data)?;
+    let flat = model.params_from_assignments(params)?;
+    let loss = Loss::new(Metric::Chi2, Weights::Uniform);
+    let mut eval = backend.prepare(crate::engine::Problem {
+        model: &model,
+        data: &data,
+        loss,
+    })?;
+    let values = eval.values(&flat)?;
+    // Samples keep their row's 1-based line: put each value back in its row's place.
+    let mut out = vec![f64::NAN; rows.len()];
+    for (s, v) in data.samples.iter().zip(values) {
+        out[s.line as usize - 1] = v;
+    }
+    Ok(out)
+}

@@ -6,6 +6,7 @@ use super::featured::Featured;
 use super::inputs::{compile, dataset, Compiled, DataInfo};
 use super::{plot_rel, render_rel, safe_name, slug};
 use crate::data::{Dataset, Kind};
+use crate::inference::saved::{Propagator, SavedFit};
 use crate::output::files::write_atomic;
 use crate::output::plot::{self, Fitted, Panel};
 use crate::output::render::{self, RenderOptions, RenderStats};
@@ -20,7 +21,54 @@ fn fitted<'c>(r: &Row, c: &'c Compiled) -> Fitted<'c> {
         label: r.model.clone(),
         model: &c.model,
         flat: &c.flat,
+        propagator: None,
     }
+}
+
+/// An anisotropic BTDF fit on data from several planes with its covariance (recomputed
+/// on the CPU reference from the data, the row's loss and its fitted parameters), so that
+/// the plot can draw the uncertainty of its prediction between the planes. None for other
+/// fits, and for fits made under constraints (their free parameters are not in the row).
+fn with_covariance(r: &Row, c: &Compiled, ds: &Dataset) -> Option<SavedFit> {
+    use crate::engine::loss::{Loss, Metric, Weights};
+    use crate::engine::{Backend, Problem};
+    use crate::inference::constraints::Constraints;
+    let anisotropic = c.model.params.iter().any(|p| p.decl.needs_planes);
+    if !anisotropic || ds.kind != Kind::Btdf || ds.axes.len() < 2 || !r.constraints.is_empty() {
+        return None;
+    }
+    let loss = Loss::new(
+        r.loss.parse::<Metric>().ok()?,
+        r.weights.parse::<Weights>().ok()?,
+    );
+    let cpu = crate::engine::cpu::CpuBackend::new();
+    let mut eval = cpu
+        .prepare(Problem {
+            model: &c.model,
+            data: ds,
+            loss,
+        })
+        .ok()?;
+    let space = Constraints::none(&c.model);
+    let cov = crate::inference::covariance::covariance(
+        &c.model,
+        ds,
+        loss,
+        eval.as_mut(),
+        &c.flat,
+        &space,
+    )
+    .ok()?;
+    Some(SavedFit {
+        model: c.model.clone(),
+        flat: c.flat.clone(),
+        std: cov.std,
+        correlation: cov.correlation,
+        channels: ds.channels.clone(),
+        material: ds.material.clone(),
+        data: r.data.clone(),
+        warnings: cov.warnings,
+    })
 }
 
 /// Rebuild the fits of `rows`, all or none.
@@ -54,7 +102,11 @@ pub(super) fn fit_plots(
         };
         match compile(r, ds) {
             Ok(c) => {
-                let panel = plot::fit_panel(ds, &fitted(r, &c), &fit_title(r));
+                let saved = with_covariance(r, &c, ds);
+                let propagator = saved.as_ref().map(Propagator::new);
+                let mut f = fitted(r, &c);
+                f.propagator = propagator.as_ref();
+                let panel = plot::fit_panel(ds, &f, &fit_title(r));
                 plot::write_svg(&out.join(plot_rel(r)), &[panel], (640, 440))?;
                 n_plots += 1;
             }

@@ -22,7 +22,7 @@
 use super::extensions::{embed, extensions};
 use super::score::new_param_indices;
 use super::{diagnose, DiagnoseOptions, Effect};
-use crate::bsdf::{every_spec, LobePart, Model, ParamDecl};
+use crate::bsdf::{every_spec, LobePart, Model, ParamDecl, Scale};
 use crate::data::{Dataset, Kind};
 use crate::engine::Backend;
 use crate::workflows::synth::{synthesize, Noise};
@@ -371,12 +371,18 @@ fn probe_data(m: &Measurement, seed: u64) -> Result<Dataset> {
 }
 
 /// Every (start S0, truth S1) pair the catalogue offers on the probe's rows: each model of
-/// `kind` that fits there, with each of its extensions that adds `hidden`
+/// `kind` that fits there (and that its rows determine: no anisotropic lobe on data in
+/// one plane), with each of its extensions that adds `hidden`
 /// ([`extensions`]), or itself for a null case.
 fn start_truth_pairs(kind: Kind, hidden: Option<Effect>, probe: &Dataset) -> Vec<(String, String)> {
     let mut pairs: Vec<(String, String)> = Vec::new();
+    let one_plane = probe.direction_planes() < 2;
     for s0 in every_spec(kind) {
-        if Model::for_data(&s0, probe).is_err() {
+        let Ok(m0) = Model::for_data(&s0, probe) else {
+            continue;
+        };
+        // A start model the data can determine: not an anisotropic lobe in one plane.
+        if one_plane && m0.params.iter().any(|p| p.decl.needs_planes) {
             continue;
         }
         match hidden {
@@ -426,7 +432,22 @@ impl Blend {
         let fresh = new_param_indices(m0, m1);
         let narrow = rng.random::<f64>() < 0.3;
         let mut drawn = base.clone();
-        for &j in &fresh {
+        // An anisotropic lobe's two roughnesses (pairs of new parameters determined only
+        // across planes, on a log scale): a ratio up to 4 either way about the isotropic
+        // value, so that the effect is the anisotropy and not a change of the mean width
+        // that S0 absorbs when it is refitted.
+        let mut paired = Vec::new();
+        for w in fresh.windows(2) {
+            let (a, b) = (&decls[w[0]], &decls[w[1]]);
+            if a.needs_planes && b.needs_planes && a.scale == Scale::Log && b.scale == Scale::Log {
+                let ratio = rng.random_range(-(4.0f64.ln())..4.0f64.ln()).exp().sqrt();
+                let mean = (base[w[0]] * base[w[1]]).sqrt();
+                drawn[w[0]] = (mean * ratio).clamp(a.lo, a.hi);
+                drawn[w[1]] = (mean / ratio).clamp(b.lo, b.hi);
+                paired.extend([w[0], w[1]]);
+            }
+        }
+        for &j in fresh.iter().filter(|j| !paired.contains(j)) {
             let d = &decls[j];
             drawn[j] = match d.lobe {
                 LobePart::Width if narrow => {
