@@ -157,7 +157,18 @@ fn check_reciprocity(spec: &str) {
 /// at their neutral values, where the lobe vanishes) about wi, where it peaks; returns
 /// (total, retro part).
 fn albedo_parts(model: &Model, flat: &[f64], wi: DVec3) -> (f64, f64) {
-    albedo_parts_with(COARSE, model, flat, wi)
+    // An anisotropic lobe can be 20× narrower across than along (α_u = 0.002, α_v =
+    // 0.04): near the lobe's axis the azimuthal cells must resolve the narrow side.
+    let anisotropic = model.params.iter().any(|p| p.decl.needs_planes);
+    let grid = if anisotropic {
+        Grid {
+            nphi: 1440,
+            ..COARSE
+        }
+    } else {
+        COARSE
+    };
+    albedo_parts_with(grid, model, flat, wi)
 }
 
 /// `flat` with the root node's own parameters at their neutral values: for a retro lobe

@@ -242,13 +242,18 @@ fn write_rgl(a: &ExportArgs, file: FitFile, fit_path: &str) -> Result<()> {
     );
     let bytes = crate::workflows::rgl::rgl_file(&fit, channels, &description)?;
     write_atomic(&a.out, &bytes)?;
+    let layout = crate::workflows::rgl::layout(&fit);
+    let azimuths = match layout.phis.len() {
+        1 => String::new(),
+        n => format!("{n} incidence azimuths × "),
+    };
     eprintln!(
-        "wrote {} (RGL .bsdf of {}, {} incidence angles × {} × {} half-vector cells, {})",
+        "wrote {} (RGL .bsdf of {}, {azimuths}{} incidence angles × {} × {} half-vector cells, {})",
         a.out.display(),
         fit.model.spec,
-        crate::workflows::rgl::theta_i_nodes().len(),
-        crate::workflows::rgl::PHI_M_NODES,
-        crate::workflows::rgl::THETA_M_NODES,
+        layout.thetas.len(),
+        layout.nodes,
+        layout.nodes,
         if a.spectral {
             format!("spectral at {:?} nm", fit.channels)
         } else {

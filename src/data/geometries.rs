@@ -16,6 +16,7 @@ pub const GEOMETRIES: &[Geometry] = &[
     Geometry { name: "inplane5", kind: Kind::Brdf, doc: "in-plane, θi 0…70° in 10° steps, θo −85…85° in 5° steps" },
     Geometry { name: "specular", kind: Kind::Brdf, doc: "inplane10 plus near-specular θo = −θi ± 1, 2, 3, 5°" },
     Geometry { name: "hemi", kind: Kind::Brdf, doc: "out-of-plane: θi 0, 20, 40, 60°; θo 10…80° by 10°; φo every 30°" },
+    Geometry { name: "azimuths", kind: Kind::Brdf, doc: "anisotropic materials: θi 20, 40, 60° at φi 0…150° by 30°; θo 10…80° by 10°, φo every 30° (both azimuths vary)" },
     Geometry { name: "offplane", kind: Kind::Brdf, doc: "sparse out-of-plane set: θi 20, 40, 60°; θo 20…80° by 20°; φo 45, 90, 135° (combine: specular+offplane)" },
     Geometry { name: "retro", kind: Kind::Brdf, doc: "inplane10 plus near-retro θo = θi ± 1, 2, 3° (retroreflective materials)" },
     Geometry { name: "ptb5", kind: Kind::Btdf, doc: "normal incidence, θt −20…20° in 5° steps, φt = 0 (PTB set 1)" },
@@ -49,6 +50,22 @@ pub fn geometry(name: &str) -> Result<(Kind, Vec<[f64; 4]>), String> {
         "inplane5" => inplane(&steps(-85.0, 85.0, 5.0)),
         "specular" | "retro" => near_mirror_or_source(g.name == "specular"),
         "hemi" => hemi(),
+        "azimuths" => {
+            let mut rows = Vec::new();
+            for pi in steps(0.0, 150.0, 30.0) {
+                for ti in [20.0, 40.0, 60.0] {
+                    for to in steps(10.0, 80.0, 10.0) {
+                        for po in steps(0.0, 330.0, 30.0) {
+                            // Not the source direction (the detector hides it).
+                            if !(po == pi && (to - ti).abs() < 0.5) {
+                                rows.push([ti, pi, to, po]);
+                            }
+                        }
+                    }
+                }
+            }
+            rows
+        }
         "offplane" => {
             let mut rows = Vec::new();
             for ti in [20.0, 40.0, 60.0] {

@@ -238,6 +238,36 @@ pub fn covariance(
     Ok(expand(out, free, model.dim))
 }
 
+/// The covariance of every parameter of `model` at the fitted point `flat` (none fixed),
+/// from `data` and the fit's loss (`metric` and `weights` as results tables name them),
+/// on the CPU reference: what a fit's saved parameters alone let a later stage (a plot)
+/// recover.
+pub fn at_fitted_point(
+    model: &Model,
+    data: &Dataset,
+    metric: &str,
+    weights: &str,
+    flat: &[f64],
+) -> anyhow::Result<Covariance> {
+    use crate::engine::Backend;
+    let loss = Loss::new(
+        metric.parse::<Metric>().map_err(anyhow::Error::msg)?,
+        weights
+            .parse::<crate::engine::loss::Weights>()
+            .map_err(anyhow::Error::msg)?,
+    );
+    let cpu = crate::engine::cpu::CpuBackend::new();
+    let mut eval = cpu.prepare(crate::engine::Problem { model, data, loss })?;
+    covariance(
+        model,
+        data,
+        loss,
+        eval.as_mut(),
+        flat,
+        &Constraints::none(model),
+    )
+}
+
 /// The batch of the central differences at `flat`: the point itself, then (+, −) per
 /// free parameter, each DU from the point in the unit box (less at its edges); and each
 /// free parameter's physical step between its two neighbours.

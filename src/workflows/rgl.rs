@@ -10,7 +10,7 @@
 //!
 //! | field | shape | meaning |
 //! |---|---|---|
-//! | `theta_i`, `phi_i` | [Nθ], [Nφ] | incidence nodes (radians; Nφ ≤ 2 means isotropic) |
+//! | `theta_i`, `phi_i` | [Nθ], [Nφ] | incidence nodes (radians; Nφ ≤ 2 means isotropic; an anisotropic file's φi nodes span 2π/R for a symmetry of order R) |
 //! | `rgb` (or `spectra` + `wavelengths`) | [Nφ, Nθ, C, H, W] | the value tables |
 //! | `vndf`, `luminance` | [Nφ, Nθ, H, W] | sample warps (VNDF, then luminance) |
 //! | `ndf` | [h, w] | the NDF over u_m, `sigma` [h, w] its projected area over u_i |
@@ -18,7 +18,8 @@
 //! | `description` | [n] u8 | text |
 //!
 //! A reader maps a direction pair to the half vector m in "u space",
-//! u_m = (√(2θm/π), (φm − φi + π)/2π), inverts the VNDF warp to a point of the value
+//! u_m = (√(2θm/π), (φm − φi + π)/2π) (φm alone, for an anisotropic file, after turning
+//! both directions into the span of the φi nodes), inverts the VNDF warp to a point of the value
 //! table's square, and interpolates the table there (bilinearly, and linearly between
 //! incidence nodes). What bsdfit writes: a uniform VNDF, so the warp is the identity and
 //! the value table is simply f·cos θo on a grid of u_m (dense near the half vector's
@@ -144,19 +145,73 @@ pub enum Channels {
     Spectral,
 }
 
+/// An anisotropic material (`+aniso`): incidence azimuths φi from −180° to 0° by this
+/// many degrees. Every anisotropic form of the catalogue is unchanged when both directions
+/// turn by 180° about the normal (its D and Λ depend on the squares of the tangent-frame
+/// components), so half the azimuths hold the material: the readers fold ωi into
+/// y ≤ 0 (the format's reduction by 2, from the nodes' range of 180°).
+pub const ANISO_PHI_I_STEP_DEG: f64 = 15.0;
+/// An anisotropic material's value tables: 64 × 64 nodes, and incidence angles every 3°
+/// (the file holds 13 azimuths × 31 angles of them: ~20 MB in RGB).
+pub const ANISO_TABLE_NODES: usize = 64;
+pub fn aniso_theta_i_nodes() -> Vec<f64> {
+    let mut v: Vec<f64> = (0..=29).map(|k| 3.0 * k as f64).collect();
+    v.push(89.5);
+    v
+}
+
+/// The incidence nodes and table size of a fit's file.
+pub struct Layout {
+    /// Incidence azimuths (degrees): φi = 0 alone for an isotropic fit, −180° … 0° for an
+    /// anisotropic one (`+aniso`).
+    pub phis: Vec<f64>,
+    /// Incidence angles (degrees).
+    pub thetas: Vec<f64>,
+    /// Nodes along each side of the value tables.
+    pub nodes: usize,
+}
+
+pub fn layout(fit: &SavedFit) -> Layout {
+    if fit.model.params.iter().any(|p| p.decl.needs_planes) {
+        let steps = (180.0 / ANISO_PHI_I_STEP_DEG).round() as usize;
+        Layout {
+            phis: (0..=steps)
+                .map(|k| -180.0 + k as f64 * ANISO_PHI_I_STEP_DEG)
+                .collect(),
+            thetas: aniso_theta_i_nodes(),
+            nodes: ANISO_TABLE_NODES,
+        }
+    } else {
+        Layout {
+            phis: vec![0.0],
+            thetas: theta_i_nodes(),
+            nodes: THETA_M_NODES,
+        }
+    }
+}
+
 /// A `.bsdf` file of the fitted BRDF (see the module's documentation).
 pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result<Vec<u8>> {
     check_representable(fit)?;
     let m = &fit.model;
     let (groups, wavelengths) = channel_groups(fit, channels);
     let views: Vec<Vec<f64>> = groups.iter().map(|&g| m.scalars(&fit.flat, g)).collect();
-    let thetas = theta_i_nodes();
-    // One incidence node per task: its value slice (C × H × W) and luminance (H × W).
-    let slices: Vec<(Vec<f32>, Vec<f32>)> = thetas
-        .par_iter()
-        .map(|&deg| incidence_slice(fit, &views, deg))
+    let Layout {
+        phis,
+        thetas,
+        nodes: n,
+    } = layout(fit);
+    // One incidence node per task (azimuth-major): its value slice (C × H × W) and
+    // luminance (H × W).
+    let nodes: Vec<(f64, f64)> = phis
+        .iter()
+        .flat_map(|&p| thetas.iter().map(move |&t| (p, t)))
         .collect();
-    let (w, h, nc) = (THETA_M_NODES, PHI_M_NODES, groups.len());
+    let slices: Vec<(Vec<f32>, Vec<f32>)> = nodes
+        .par_iter()
+        .map(|&(phi, deg)| incidence_slice(fit, &views, phi, deg, n))
+        .collect();
+    let (w, h, nc) = (n, n, groups.len());
     let mut values = Vec::with_capacity(slices.len() * nc * h * w);
     let mut luminance = Vec::with_capacity(slices.len() * h * w);
     for (v, l) in &slices {
@@ -169,7 +224,9 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         m.spec
     );
     let tables = Tables {
+        phis: &phis,
         thetas: &thetas,
+        nodes: n,
         channels: nc,
         values,
         luminance,
@@ -192,13 +249,21 @@ fn channel_groups(fit: &SavedFit, channels: Channels) -> (Vec<usize>, Option<Vec
     }
 }
 
-/// The value table (C × H × W, f·cos θo per channel of `views`) and the luminance map
-/// (H × W) of the incidence node at `deg` degrees.
-fn incidence_slice(fit: &SavedFit, views: &[Vec<f64>], deg: f64) -> (Vec<f32>, Vec<f32>) {
+/// The value table (C × H × W, f·cos θo per channel of `views`, on `n` × `n` nodes) and
+/// the luminance map (H × W) of the incidence node at azimuth `phi` and polar angle `deg`
+/// (degrees). The half vector's azimuth in u space is absolute (an anisotropic file) or
+/// relative to φi (an isotropic one, whose only node has φi = 0: the same).
+fn incidence_slice(
+    fit: &SavedFit,
+    views: &[Vec<f64>],
+    phi: f64,
+    deg: f64,
+    n: usize,
+) -> (Vec<f32>, Vec<f32>) {
     let m = &fit.model;
-    let (w, h, nc) = (THETA_M_NODES, PHI_M_NODES, views.len());
-    let ti = deg.to_radians();
-    let wi = DVec3::new(ti.sin(), 0.0, ti.cos());
+    let (w, h, nc) = (n, n, views.len());
+    let (ti, pi) = (deg.to_radians(), phi.to_radians());
+    let wi = DVec3::new(ti.sin() * pi.cos(), ti.sin() * pi.sin(), ti.cos());
     let mut values = vec![0f32; nc * h * w];
     let mut lum = vec![0f32; h * w];
     for y in 0..h {
@@ -226,10 +291,15 @@ fn incidence_slice(fit: &SavedFit, views: &[Vec<f64>], deg: f64) -> (Vec<f32>, V
     (values, lum)
 }
 
-/// The tables of a material file, every incidence node's one after the other.
+/// The tables of a material file, every incidence node's one after the other
+/// (azimuth-major).
 struct Tables<'a> {
+    /// Incidence azimuths (degrees): one (φi = 0) for an isotropic material.
+    phis: &'a [f64],
     /// Incidence nodes (degrees).
     thetas: &'a [f64],
+    /// Nodes along each side of the value tables.
+    nodes: usize,
     /// C, the value table's channels.
     channels: usize,
     values: Vec<f32>,
@@ -241,7 +311,8 @@ struct Tables<'a> {
 /// The fields of an isotropic material file (see the module's documentation).
 fn material_fields(description: &str, t: Tables) -> Vec<Field> {
     let n = t.thetas.len() as u64;
-    let (hw, wu) = (PHI_M_NODES as u64, THETA_M_NODES as u64);
+    let np = t.phis.len() as u64;
+    let (hw, wu) = (t.nodes as u64, t.nodes as u64);
     let mut fields = vec![
         Field {
             name: "description",
@@ -260,8 +331,8 @@ fn material_fields(description: &str, t: Tables) -> Vec<Field> {
         },
         Field {
             name: "phi_i",
-            shape: vec![1],
-            data: FieldData::F32(vec![0.0]),
+            shape: vec![np],
+            data: FieldData::F32(t.phis.iter().map(|d| d.to_radians() as f32).collect()),
         },
         // Not used by the evaluation when `jacobian` is 0.
         Field {
@@ -278,16 +349,16 @@ fn material_fields(description: &str, t: Tables) -> Vec<Field> {
         // 2 × 2 table is enough; readers do not require the value table's size).
         Field {
             name: "vndf",
-            shape: vec![1, n, 2, 2],
-            data: FieldData::F32(vec![1.0; t.thetas.len() * 4]),
+            shape: vec![np, n, 2, 2],
+            data: FieldData::F32(vec![1.0; t.phis.len() * t.thetas.len() * 4]),
         },
         Field {
             name: "luminance",
-            shape: vec![1, n, hw, wu],
+            shape: vec![np, n, hw, wu],
             data: FieldData::F32(t.luminance),
         },
     ];
-    let table_shape = vec![1, n, t.channels as u64, hw, wu];
+    let table_shape = vec![np, n, t.channels as u64, hw, wu];
     match t.wavelengths {
         None => fields.push(Field {
             name: "rgb",

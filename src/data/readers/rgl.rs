@@ -6,7 +6,9 @@
 //! the inverse of the file's VNDF warp, the value table interpolated there (and between
 //! incidence angles and wavelengths), divided by D/(4σ) when the file says so. The files
 //! carry no uncertainties: `--assume-uncertainty` is required, as for MERL tables.
-//! Isotropic materials only (an anisotropic file is refused with a message).
+//! Anisotropic materials (three or more incidence azimuths) are interpolated between
+//! their azimuths too, and sampled by default on [`DEFAULT_ANISOTROPIC_GEOMETRY`], whose
+//! incidence azimuths vary.
 
 use super::tensor::TensorFile;
 use super::{mark_assumed, require_assumption};
@@ -20,6 +22,9 @@ use std::path::Path;
 /// Where a `.bsdf` file is sampled without `--sample-geometry`: θi, θo = 0…80° and
 /// φo = 0…180° by 10° (the isotropic grid of `bsdfit models`).
 pub const DEFAULT_GEOMETRY: &str = "grid:10";
+/// Where an anisotropic `.bsdf` file is sampled without `--sample-geometry`: incidence
+/// azimuths as well as outgoing ones vary.
+pub const DEFAULT_ANISOTROPIC_GEOMETRY: &str = "azimuths";
 /// RGB files: the wavelengths R, G and B stand for (as for MERL tables).
 pub const NOMINAL_NM: [f64; 3] = [650.0, 550.0, 450.0];
 
@@ -208,6 +213,9 @@ pub fn u_to_phi(u: f64) -> f64 {
 /// A measured material, ready to evaluate.
 struct Material {
     theta_i: Vec<f64>,
+    /// An anisotropic material: the order R of its symmetry (its φi nodes span 2π/R);
+    /// None for an isotropic one.
+    reduction: Option<u32>,
     ndf: Table,
     sigma: Table,
     vndf: Table,
@@ -241,15 +249,24 @@ impl Material {
         }
         let theta_i = increasing(values("theta_i")?, "theta_i", file)?;
         let phi_i = increasing(values("phi_i")?, "phi_i", file)?;
-        if phi_i.len() > 2 {
-            return Err(bad(
-                file,
-                format!(
-                    "an anisotropic RGL material ({} incidence azimuths): bsdfit reads isotropic ones only",
-                    phi_i.len()
-                ),
-            ));
-        }
+        // Three or more incidence azimuths: an anisotropic material, whose nodes span
+        // 2π/R for a symmetry of order R (the readers fold ωi into that span).
+        let reduction = if phi_i.len() > 2 {
+            let span = phi_i[phi_i.len() - 1] - phi_i[0];
+            let r = (2.0 * PI / span).round();
+            if !(r >= 1.0 && (r * span - 2.0 * PI).abs() < 1e-3 * 2.0 * PI) {
+                return Err(bad(
+                    file,
+                    format!(
+                        "field phi_i: an anisotropic material's incidence azimuths must span 2π/R for a whole R (360°, 180°, 90°…); these span {:.2}°",
+                        span.to_degrees()
+                    ),
+                ));
+            }
+            Some(r as u32)
+        } else {
+            None
+        };
         let spectral = tf.field("spectra").is_some() && tf.field("wavelengths").is_some();
         let (table_name, wavelengths) = if spectral {
             (
@@ -299,15 +316,18 @@ impl Material {
         let table = values(table_name)?;
         let vndf = values("vndf")?;
         // An isotropic file has one incidence azimuth, or two holding the same tables;
-        // the first is read. Two that differ describe an anisotropic material.
+        // the first is read. Two that differ describe an anisotropic material too coarsely
+        // to interpolate (three or more are needed).
         if np == 2 {
             same_azimuth_slices(&phi_i, &[(table_name, &table), ("vndf", &vndf)], file)?;
         }
-        let first = |v: Vec<f64>| v[..v.len() / np].to_vec();
+        // An isotropic file keeps its first azimuth's tables, an anisotropic one all.
+        let kept = if reduction.is_some() { np } else { 1 };
+        let first = |v: Vec<f64>| v[..v.len() / np * kept].to_vec();
+        let phi_i = phi_i[..kept].to_vec();
         let jacobian = tf
             .values("jacobian")
             .is_some_and(|j| j.first().is_some_and(|&v| v != 0.0));
-        let phi_i = vec![phi_i[0]];
         Ok(Material {
             ndf: Table::new(values("ndf")?, ndf.shape[1], ndf.shape[0], vec![], false),
             sigma: Table::new(
@@ -332,6 +352,7 @@ impl Material {
                 false,
             ),
             theta_i,
+            reduction,
             wavelengths,
             jacobian,
             description: tf
@@ -350,10 +371,17 @@ impl Material {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return 0.0;
         }
+        let (wi, wo) = match self.reduction {
+            Some(r) if r >= 2 => fold(wi, wo, r),
+            _ => (wi, wo),
+        };
         let m = (wi + wo).normalize();
         let (theta_i, phi_i) = (wi.z.clamp(-1.0, 1.0).acos(), wi.y.atan2(wi.x));
         let (theta_m, phi_m) = (m.z.clamp(-1.0, 1.0).acos(), m.y.atan2(m.x));
-        let mut um = (theta_to_u(theta_m), phi_to_u(phi_m - phi_i));
+        // An isotropic table is over the half vector's azimuth relative to ωi's, an
+        // anisotropic one over its azimuth in the surface's frame.
+        let relative = if self.reduction.is_some() { 0.0 } else { phi_i };
+        let mut um = (theta_to_u(theta_m), phi_to_u(phi_m - relative));
         um.1 -= um.1.floor();
         let params = [phi_i, theta_i];
         let (sx, sy) = self.vndf.invert(um.0, um.1, &params);
@@ -369,6 +397,18 @@ impl Material {
         // The table holds f·cos θo.
         v / wo.z
     }
+}
+
+/// Both directions turned by the material's symmetry (order 2: a half turn, order 4: a
+/// quarter turn as well) so that ωi lies in the span of the φi nodes: y ≤ 0 (order 2),
+/// x ≤ 0 and y ≤ 0 (order 4), as the renderers fold them.
+fn fold(wi: DVec3, wo: DVec3, r: u32) -> (DVec3, DVec3) {
+    // −sign(s) with sign(0) = +1.
+    let flip = |s: f64| if s >= 0.0 { -1.0 } else { 1.0 };
+    let sy = flip(wi.y);
+    let sx = if r == 4 { flip(wi.x) } else { sy };
+    let turn = |w: DVec3| DVec3::new(w.x * sx, w.y * sy, w.z);
+    (turn(wi), turn(wo))
 }
 
 /// The nodes of a parameter (`theta_i`, `phi_i`, `wavelengths`): finite and strictly
@@ -420,16 +460,21 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
     let tf = TensorFile::parse(bytes).map_err(|e| bad(file, format!("RGL .bsdf file: {e}")))?;
     let material = Material::from_file(&tf, file)?;
     let spectral = material.wavelengths.len() != 3 || material.wavelengths != [0.0, 1.0, 2.0];
-    let (expr, rows) = sample_geometry(file, opts)?;
+    let (expr, rows) = sample_geometry(file, opts, material.reduction.is_some())?;
     let channels = channels(&material, spectral, file, opts)?;
     let mut b = Builder::new(Kind::Brdf, file, opts);
     b.notices.push(Notice::from(format!(
-        "{file}: RGL measured material{} ({} incidence angles), sampled on geometry {expr} ({} directions){}",
+        "{file}: RGL measured material{} ({} incidence angles{}), sampled on geometry {expr} ({} directions){}",
         material
             .description
             .as_ref()
             .map_or(String::new(), |d| format!(" '{d}'")),
         material.theta_i.len(),
+        material.reduction.map_or(String::new(), |r| format!(
+            "; anisotropic: {} incidence azimuths, symmetric under turns of {}°",
+            material.values.params[0].len(),
+            360 / r
+        )),
         rows.len(),
         if spectral {
             format!(
@@ -484,11 +529,20 @@ pub fn parse(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Dataset, Da
 
 /// The sample geometry (`--sample-geometry`, else [`DEFAULT_GEOMETRY`]): its expression
 /// and its (θi, φi, θo, φo) rows in degrees. It must be a BRDF geometry.
-fn sample_geometry(file: &str, opts: &ReadOptions) -> Result<(String, Vec<[f64; 4]>), DataError> {
+fn sample_geometry(
+    file: &str,
+    opts: &ReadOptions,
+    anisotropic: bool,
+) -> Result<(String, Vec<[f64; 4]>), DataError> {
+    let default = if anisotropic {
+        DEFAULT_ANISOTROPIC_GEOMETRY
+    } else {
+        DEFAULT_GEOMETRY
+    };
     let expr = opts
         .sample_geometry
         .clone()
-        .unwrap_or_else(|| DEFAULT_GEOMETRY.to_string());
+        .unwrap_or_else(|| default.to_string());
     let (kind, rows) = crate::data::geometries::geometry_expr(&expr)
         .map_err(|e| bad(file, format!("--sample-geometry: {e}")))?;
     if kind != Kind::Brdf {

@@ -30,35 +30,13 @@ fn fitted<'c>(r: &Row, c: &'c Compiled) -> Fitted<'c> {
 /// the plot can draw the uncertainty of its prediction between the planes. None for other
 /// fits, and for fits made under constraints (their free parameters are not in the row).
 fn with_covariance(r: &Row, c: &Compiled, ds: &Dataset) -> Option<SavedFit> {
-    use crate::engine::loss::{Loss, Metric, Weights};
-    use crate::engine::{Backend, Problem};
-    use crate::inference::constraints::Constraints;
     let anisotropic = c.model.params.iter().any(|p| p.decl.needs_planes);
     if !anisotropic || ds.kind != Kind::Btdf || ds.axes.len() < 2 || !r.constraints.is_empty() {
         return None;
     }
-    let loss = Loss::new(
-        r.loss.parse::<Metric>().ok()?,
-        r.weights.parse::<Weights>().ok()?,
-    );
-    let cpu = crate::engine::cpu::CpuBackend::new();
-    let mut eval = cpu
-        .prepare(Problem {
-            model: &c.model,
-            data: ds,
-            loss,
-        })
-        .ok()?;
-    let space = Constraints::none(&c.model);
-    let cov = crate::inference::covariance::covariance(
-        &c.model,
-        ds,
-        loss,
-        eval.as_mut(),
-        &c.flat,
-        &space,
-    )
-    .ok()?;
+    let cov =
+        crate::inference::covariance::at_fitted_point(&c.model, ds, &r.loss, &r.weights, &c.flat)
+            .ok()?;
     Some(SavedFit {
         model: c.model.clone(),
         flat: c.flat.clone(),
