@@ -219,6 +219,19 @@ def _columns(**cols: Any) -> List[np.ndarray]:
     return [np.ascontiguousarray(a, dtype=np.float64).ravel() for a in shaped]
 
 
+def _broadcast(names: Sequence[str], values: Sequence[Any]) -> Tuple[Tuple[int, ...], List[np.ndarray]]:
+    """Geometry arguments (numbers or arrays of any shape, checked as ``_numbers`` checks
+    them) broadcast together: their common shape, and each as a flat float64 array."""
+    arrays = [_numbers(k, v, max_ndim=None, allow_empty=True) for k, v in zip(names, values)]
+    try:
+        shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    except ValueError:
+        raise ValueError("the geometry arrays do not broadcast to one shape") from None
+    cols = [np.ascontiguousarray(np.broadcast_to(a, shape), dtype=np.float64).ravel()
+            for a in arrays]
+    return shape, cols
+
+
 def _int(name: str, n: Any, lo: int, hi: int = _U64_MAX) -> int:
     """An integer in [lo, hi] (an int or a numpy integer; not a bool, not a float)."""
     if isinstance(n, (bool, np.bool_)):
@@ -699,15 +712,8 @@ class Fit:
                     "say which with wavelength_nm"
                 )
             wavelength_nm = self.channels[0]
-        arrays = [_numbers(k, v, max_ndim=None, allow_empty=True) for k, v in
-                  zip(("theta_i", "phi_i", "theta_o", "phi_o", "wavelength_nm"),
-                      (theta_i, phi_i, theta_o, phi_o, wavelength_nm))]
-        try:
-            shape = np.broadcast_shapes(*(a.shape for a in arrays))
-        except ValueError:
-            raise ValueError("the geometry arrays do not broadcast to one shape") from None
-        cols = [np.ascontiguousarray(np.broadcast_to(a, shape), dtype=np.float64).ravel()
-                for a in arrays]
+        shape, cols = _broadcast(("theta_i", "phi_i", "theta_o", "phi_o", "wavelength_nm"),
+                                 (theta_i, phi_i, theta_o, phi_o, wavelength_nm))
         if cols[0].size == 0:
             return np.zeros(shape), np.zeros(shape)
         values, uncertainties, warnings = self._native.eval(*cols)
@@ -1074,13 +1080,9 @@ def evaluate(
         text = ",".join(parts)
     else:
         raise TypeError(f"params: expected a mapping of names to values or a string, got {_short(params)}")
-    arrays = [_numbers(k, v, max_ndim=None, allow_empty=True) for k, v in
-              zip(("theta_i", "phi_i", "theta_o", "phi_o"), (theta_i, phi_i, theta_o, phi_o))]
-    try:
-        shape = np.broadcast_shapes(*(a.shape for a in arrays))
-    except ValueError:
-        raise ValueError("the geometry arrays do not broadcast to one shape") from None
-    cols = [np.ascontiguousarray(np.broadcast_to(a, shape), dtype=np.float64).ravel()
-            for a in arrays]
-    values = _bsdfit.evaluate(_text("model", model), text, *cols, _text("backend", backend))
+    shape, cols = _broadcast(("theta_i", "phi_i", "theta_o", "phi_o"),
+                             (theta_i, phi_i, theta_o, phi_o))
+    theta_i_, phi_i_, theta_o_, phi_o_ = cols
+    values = _bsdfit.evaluate(_text("model", model), text, theta_i_, phi_i_, theta_o_, phi_o_,
+                              _text("backend", backend))
     return np.asarray(values).reshape(shape)

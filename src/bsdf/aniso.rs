@@ -31,13 +31,13 @@
 use super::btdf::{walter_transmission, Ndf};
 use super::effect::{Adds, Effect};
 use super::ggx::{ETA, KS};
-use super::microfacet::{gg_lambda_table, Distribution, Masking, C2_MIN, MICROFACET_WGSL};
+use super::microfacet::{gg_lambda_table, Distribution, Gg, Masking, C2_MIN, MICROFACET_WGSL};
 use super::{
     each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, Role,
     WgslFn,
 };
 use crate::data::Kind;
-use crate::math::{fresnel_dielectric, fresnel_transmittance, ln_gamma};
+use crate::math::{fresnel_dielectric, fresnel_transmittance};
 use glam::DVec3;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -200,39 +200,31 @@ impl Distribution for AnisoBeckmann {
     }
 }
 
-/// Anisotropic generalized Gaussian in the tangent frame.
+/// Anisotropic generalized Gaussian in the tangent frame: the isotropic form's shape
+/// constants (they depend on p alone) with its own normalisation and widths.
 #[derive(Clone, Copy, Debug)]
 pub struct AnisoGg {
     pub bu: f64,
     pub bv: f64,
-    pub p: f64,
-    /// r_c and J0 as in [`super::microfacet::Gg`] (they depend on p alone).
-    rc: f64,
-    j0: f64,
+    shape: Gg,
     /// ln(p / (π β_u β_v Γ(1/p))).
     ln_norm: f64,
 }
 
 impl AnisoGg {
     pub fn new(bu: f64, bv: f64, p: f64) -> AnisoGg {
-        let lg = ln_gamma(1.0 / p);
+        let shape = Gg::new(1.0, p);
         AnisoGg {
             bu,
             bv,
-            p,
-            rc: (-p.ln() / (2.0 * p)).exp(),
-            j0: (ln_gamma(1.5 / p) - lg).exp() / PI,
-            ln_norm: p.ln() - lg - (PI * bu * bv).ln(),
+            ln_norm: shape.ln_norm - (bu * bv).ln(),
+            shape,
         }
     }
     /// (μ, μΛ) as the isotropic form, with β sinθ → √(β_u² ω_x² + β_v² ω_y²).
     fn mu_lambda(&self, w: DVec3) -> (f64, f64) {
-        let mu = w.z.abs();
         let bs = projected2(self.bu, self.bv, w).sqrt();
-        let b = bs * self.rc;
-        let x = b / (mu + b);
-        let t = gg_lambda_table().interpolate(self.p, x);
-        (mu, t * self.j0 * (bs + mu / self.rc))
+        self.shape.mu_lambda_at(w.z.abs(), bs)
     }
 }
 
@@ -242,13 +234,8 @@ impl Distribution for AnisoGg {
         if m.z <= 0.0 || c2 < C2_MIN {
             return 0.0;
         }
-        let z = stretched2(self.bu, self.bv, m) / c2;
-        let e = if z > 0.0 {
-            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
-        } else {
-            0.0
-        };
-        (self.ln_norm - e - 2.0 * c2.ln()).exp()
+        self.shape
+            .d_at(self.ln_norm, stretched2(self.bu, self.bv, m) / c2, c2)
     }
 }
 

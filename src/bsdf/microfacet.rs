@@ -233,12 +233,28 @@ impl Gg {
     /// (μ, μ Λ) with μ Λ = T̂ · J0 · (β sinθ + μ / r_c), T̂ from the table at x = b/(1+b),
     /// b = r_c β tanθ; finite at μ = 0.
     fn mu_lambda(&self, w: DVec3) -> (f64, f64) {
-        let mu = w.z.abs();
         let bs = self.beta * (w.x * w.x + w.y * w.y).sqrt();
+        self.mu_lambda_at(w.z.abs(), bs)
+    }
+
+    /// (μ, μ Λ) at μ = |cos θ| and the width `bs` the direction sees (β sinθ; the
+    /// anisotropic form's projected width, [`super::aniso`]).
+    pub(super) fn mu_lambda_at(&self, mu: f64, bs: f64) -> (f64, f64) {
         let b = bs * self.rc;
         let x = b / (mu + b);
         let t = gg_lambda_table().interpolate(self.p, x);
         (mu, t * self.j0 * (bs + mu / self.rc))
+    }
+
+    /// D from z = tan²θm/β² (the anisotropic form's stretched slope) and c2 = cos²θm,
+    /// with the normalisation `ln_norm` (its own for the anisotropic form).
+    pub(super) fn d_at(&self, ln_norm: f64, z: f64, c2: f64) -> f64 {
+        let e = if z > 0.0 {
+            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
+        } else {
+            0.0
+        };
+        (ln_norm - e - 2.0 * c2.ln()).exp()
     }
 }
 
@@ -249,13 +265,7 @@ impl Distribution for Gg {
         if m.z <= 0.0 || c2 < C2_MIN {
             return 0.0;
         }
-        let z = s2 / c2 / (self.beta * self.beta);
-        let e = if z > 0.0 {
-            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
-        } else {
-            0.0
-        };
-        (self.ln_norm - e - 2.0 * c2.ln()).exp()
+        self.d_at(self.ln_norm, s2 / c2 / (self.beta * self.beta), c2)
     }
 }
 
