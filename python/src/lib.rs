@@ -16,6 +16,7 @@
 use bsdfit::choice::{Choice, ChoiceError};
 use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
 use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::engine::loss::{Metric, Weights};
 use bsdfit::engine::{self, BackendChoice};
 use bsdfit::inference::constraints::ConstraintSpec;
 use bsdfit::inference::fit::{FitReport, Optimizer};
@@ -414,6 +415,17 @@ fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
     parse_choice("backend", s)
 }
 
+/// The loss and weighting words of a call as values; an error names the keyword.
+fn loss_words(loss: &str, weighting: &str) -> anyhow::Result<(Metric, Weights)> {
+    let metric = loss
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("loss: {e}"))?;
+    let weights = weighting
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("weighting: {e}"))?;
+    Ok((metric, weights))
+}
+
 /// Fit one model: the report as the JSON text `bsdfit fit --json` writes, the Monte Carlo
 /// error if its replicas failed, the warnings the command line prints on stderr, the
 /// normalised residuals of the best fit (one per sample) and the text summary the command
@@ -448,13 +460,15 @@ fn fit_json<'py>(
     let data = dataset.data.clone();
     let mut reporter = Reporter::new(progress);
     let (text, mc_error, notes, residuals, summary, reporter) = compute(py, move || {
+        let optimizer = optimizer
+            .map(|s| parse_choice::<Optimizer>("optimizer", &s))
+            .transpose()?;
+        let (loss, weights) = loss_words(&loss, &weights)?;
         let request = fit::FitRequest {
             model,
             loss,
             weights,
-            optimizer: optimizer
-                .map(|s| parse_choice::<Optimizer>("optimizer", &s))
-                .transpose()?,
+            optimizer,
             restarts,
             seed,
             constraints: constraint_spec(fix, bounds, prior, false),
@@ -623,13 +637,14 @@ fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 }
 
 /// A diagnosis as `bsdfit.diagnose` asks for it: its keyword arguments, read once. The
-/// words (loss, weighting, optimizer, backend) are checked where the command line checks
-/// them, so that errors come in the same order.
+/// loss and weighting are values from here on; the other words (optimizer, backend) are
+/// checked where the command line checks them, so that errors come in the same order.
 struct DiagnoseRequest {
-    /// Every option but the loss and the optimizer, which are set from the words below.
+    /// Every option but the loss and the optimizer, which are set from the fields below.
     options: diagnose::DiagnoseOptions,
-    loss: String,
-    weights: String,
+    /// The loss and weighting, checked against the data's kind with the start model.
+    loss: Metric,
+    weights: Weights,
     optimizer: String,
     backend: String,
 }
@@ -673,6 +688,7 @@ impl DiagnoseRequest {
         }
         o.bootstrap.seed = o.seed;
         o.constraints = constraint_spec(fix, bounds, prior, true);
+        let (loss, weights) = loss_words(&loss, &weights).map_err(to_py)?;
         Ok(DiagnoseRequest {
             options: o,
             loss,
@@ -710,8 +726,8 @@ fn diagnose_json(
         let (loss, start) = diagnose::check_start(
             &data,
             &model,
-            &loss,
-            &weights,
+            loss,
+            weights,
             options.alpha,
             &options.constraints,
         )?;

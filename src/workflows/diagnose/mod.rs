@@ -191,12 +191,12 @@ impl Diagnosis {
 pub fn check_start(
     data: &crate::data::Dataset,
     model: &str,
-    loss: &str,
-    weights: &str,
+    metric: Metric,
+    weights: Weights,
     alpha: f64,
     constraints: &crate::inference::constraints::ConstraintSpec,
 ) -> anyhow::Result<(Loss, crate::bsdf::Model)> {
-    let loss = crate::workflows::fit::parse_loss(loss, weights, data.kind)?;
+    let loss = crate::workflows::fit::loss_for(metric, weights, data.kind)?;
     anyhow::ensure!(
         alpha > 0.0 && alpha < 1.0,
         "--alpha must be in (0, 1), got {alpha}"
