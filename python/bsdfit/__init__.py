@@ -725,19 +725,22 @@ _CONSTRAINTS: Dict[str, Tuple[str, Optional[Tuple[str, str]], str]] = {
 }
 
 
-def _constraint_list(name: str, given: Any) -> List[str]:
-    """``fix``/``bounds``/``prior`` as the command line's NAME=… strings.
+# One item of a constraint argument as the native module takes it: a parameter's name and
+# its numbers, or the command line's NAME=… text.
+_ConstraintItem = Union[str, Tuple[str, List[float]]]
 
-    Accepts a mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``,
-    ``{"rho": [0.4, 0.5, 0.6]}``) or the strings themselves.
-    """
+
+def _constraint_list(name: str, given: Any) -> List[_ConstraintItem]:
+    """``fix``/``bounds``/``prior`` as values for the library: (name, numbers) from a
+    mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``, ``{"rho": [0.4, 0.5, 0.6]}``),
+    the command line's NAME=… strings as they are (a mapping's string value too)."""
     form, pair, example = _CONSTRAINTS[name]
     if given is None:
         return []
     if isinstance(given, str):
         return [given]
     if isinstance(given, Mapping):
-        out = []
+        out: List[_ConstraintItem] = []
         for k, v in given.items():
             if not isinstance(k, str):
                 raise TypeError(f"{name}: parameter names are strings, got {_short(k)}")
@@ -749,10 +752,10 @@ def _constraint_list(name: str, given: Any) -> List[str]:
                 raise ValueError(
                     f"{name}[{k!r}]: expected ({pair[0]}, {pair[1]}), got {_short(v)}"
                 )
-            out.append(f"{k}=" + ":".join(repr(float(x)) for x in values))
+            out.append((k, [float(x) for x in values]))
         return out
     if isinstance(given, (list, tuple)) and all(isinstance(item, str) for item in given):
-        return list(given)
+        return [str(item) for item in given]
     raise TypeError(
         f"{name}: expected a mapping such as {example} or {form} strings, got {_short(given)}"
     )

@@ -7,12 +7,15 @@ its subclass for the cause (a file), ``ValueError`` (bad input, with the command
 message) or ``RuntimeError`` (a bug).
 """
 
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+
+# One item of fix, bounds or prior: (parameter name, its numbers), or a NAME=… text.
+ConstraintItem = Union[str, Tuple[str, List[float]]]
 
 # A progress callable: (stage, done, total or None, message).
 ProgressCallback = Callable[[str, int, Optional[int], str], None]
@@ -80,9 +83,9 @@ def fit_json(
     restarts: int,
     seed: int,
     backend: str,
-    fix: List[str],
-    bounds: List[str],
-    prior: List[str],
+    fix: List[ConstraintItem],
+    bounds: List[ConstraintItem],
+    prior: List[ConstraintItem],
     mc: int,
     mc_scale: float,
     mc_restarts: int,

@@ -18,7 +18,7 @@ use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
 use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
 use bsdfit::engine::loss::{Metric, Weights};
 use bsdfit::engine::{self, BackendChoice};
-use bsdfit::inference::constraints::ConstraintSpec;
+use bsdfit::inference::constraints::{Constraint, ConstraintKind, ConstraintSpec};
 use bsdfit::inference::fit::{FitReport, Optimizer};
 use bsdfit::inference::saved::FitFile;
 use bsdfit::workflows::{checks, diagnose, export, fit};
@@ -397,18 +397,37 @@ fn dataset_from_arrays(
     })
 }
 
+/// One item of a `fix`, `bounds` or `prior` argument: a parameter's name and its numbers
+/// (what a mapping gives), or the command line's `NAME=…` text.
+#[derive(FromPyObject)]
+enum ConstraintArg {
+    Values(String, Vec<f64>),
+    Text(String),
+}
+
+/// The constraints of `fix`, `bounds` and `prior` as values; an error names the argument.
 fn constraint_spec(
-    fix: Vec<String>,
-    bounds: Vec<String>,
-    prior: Vec<String>,
+    fix: Vec<ConstraintArg>,
+    bounds: Vec<ConstraintArg>,
+    prior: Vec<ConstraintArg>,
     lenient: bool,
-) -> ConstraintSpec {
-    ConstraintSpec {
-        fix,
-        bounds,
-        priors: prior,
-        lenient,
+) -> anyhow::Result<ConstraintSpec> {
+    let mut items = Vec::new();
+    // Bounds first, then fixed values, then priors: the order the library applies them in
+    // (and the command line checks them in).
+    for (kind, args) in [
+        (ConstraintKind::Bounds, bounds),
+        (ConstraintKind::Fix, fix),
+        (ConstraintKind::Prior, prior),
+    ] {
+        for arg in args {
+            items.push(match arg {
+                ConstraintArg::Values(name, values) => Constraint::new(kind, &name, &values)?,
+                ConstraintArg::Text(text) => Constraint::parse(kind, &text)?,
+            });
+        }
     }
+    Ok(ConstraintSpec { items, lenient })
 }
 
 fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
@@ -443,9 +462,9 @@ fn fit_json<'py>(
     restarts: usize,
     seed: u64,
     backend: String,
-    fix: Vec<String>,
-    bounds: Vec<String>,
-    prior: Vec<String>,
+    fix: Vec<ConstraintArg>,
+    bounds: Vec<ConstraintArg>,
+    prior: Vec<ConstraintArg>,
     mc: usize,
     mc_scale: f64,
     mc_restarts: usize,
@@ -471,7 +490,7 @@ fn fit_json<'py>(
             optimizer,
             restarts,
             seed,
-            constraints: constraint_spec(fix, bounds, prior, false),
+            constraints: constraint_spec(fix, bounds, prior, false)?,
             mc,
             mc_scale,
             mc_restarts,
@@ -687,7 +706,7 @@ impl DiagnoseRequest {
             }
         }
         o.bootstrap.seed = o.seed;
-        o.constraints = constraint_spec(fix, bounds, prior, true);
+        o.constraints = constraint_spec(fix, bounds, prior, true).map_err(to_py)?;
         let (loss, weights) = loss_words(&loss, &weights).map_err(to_py)?;
         Ok(DiagnoseRequest {
             options: o,

@@ -131,7 +131,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         crate::output::check_writable_dir(dir, "--report")?;
     }
     let data = a.data_args.read(&a.data)?;
-    let constraints = a.constraints.spec(true);
+    let constraints = a.constraints.spec(true)?;
     let (metric, weights) = (parse_metric(&a.loss)?, parse_weights(&a.weights)?);
     let (loss, start) = check_start(&data, &a.model, metric, weights, a.alpha, &constraints)?;
     // Extensions add a few parameters to the start model: estimate with three more.

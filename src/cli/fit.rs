@@ -83,7 +83,7 @@ impl FitArgs {
             optimizer: self.optimizer,
             restarts: self.restarts,
             seed: self.seed,
-            constraints: self.constraints.spec(false),
+            constraints: self.constraints.spec(false)?,
             mc: self.mc,
             mc_scale: self.mc_scale,
             mc_restarts: self.mc_restarts,

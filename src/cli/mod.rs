@@ -206,14 +206,14 @@ pub struct ConstraintArgs {
 
 impl ConstraintArgs {
     /// The options as a spec; `lenient` for runs over several models (a model that lacks
-    /// a parameter ignores its options).
-    pub fn spec(&self, lenient: bool) -> crate::inference::constraints::ConstraintSpec {
-        crate::inference::constraints::ConstraintSpec {
-            fix: self.fix.clone(),
-            bounds: self.bounds.clone(),
-            priors: self.prior.clone(),
+    /// a parameter ignores its options). A text that is not of its option's form fails.
+    pub fn spec(&self, lenient: bool) -> Result<crate::inference::constraints::ConstraintSpec> {
+        crate::inference::constraints::ConstraintSpec::parse(
+            &self.fix,
+            &self.bounds,
+            &self.prior,
             lenient,
-        }
+        )
     }
 }
 

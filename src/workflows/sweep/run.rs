@@ -181,10 +181,15 @@ pub fn read_cells(cfg: &SweepConfig) -> Result<(Vec<DataFile>, Vec<Task>)> {
 
 /// The run's constraint options as one canonical text (the `constraints` column).
 pub fn constraints_text(c: &ConstraintSpec) -> String {
+    use crate::inference::constraints::ConstraintKind;
     let mut items: Vec<String> = Vec::new();
-    items.extend(c.fix.iter().map(|s| format!("fix {}", s.trim())));
-    items.extend(c.bounds.iter().map(|s| format!("bounds {}", s.trim())));
-    items.extend(c.priors.iter().map(|s| format!("prior {}", s.trim())));
+    for (kind, word) in [
+        (ConstraintKind::Fix, "fix"),
+        (ConstraintKind::Bounds, "bounds"),
+        (ConstraintKind::Prior, "prior"),
+    ] {
+        items.extend(c.of(kind).map(|s| format!("{word} {}", s.text().trim())));
+    }
     items.join("; ")
 }
 
