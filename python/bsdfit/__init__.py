@@ -761,22 +761,26 @@ def _constraint_list(name: str, given: Any) -> List[_ConstraintItem]:
     )
 
 
+# The library's defaults of fit (FitRequest::default()), shown in its signature.
+_FIT_DEFAULTS: Dict[str, Any] = _bsdfit.fit_defaults()
+
+
 def fit(
     dataset: Dataset,
     model: str,
     *,
-    loss: str = "chi2",
-    weighting: str = "uniform",
-    restarts: int = 16,
-    seed: int = 1,
+    loss: str = _FIT_DEFAULTS["loss"],
+    weighting: str = _FIT_DEFAULTS["weighting"],
+    restarts: int = _FIT_DEFAULTS["restarts"],
+    seed: int = _FIT_DEFAULTS["seed"],
     backend: str = "auto",
-    optimizer: Optional[str] = None,
+    optimizer: Optional[str] = _FIT_DEFAULTS["optimizer"],
     fix: Any = None,
     bounds: Any = None,
     prior: Any = None,
-    mc: int = 0,
-    mc_scale: float = 0.0,
-    mc_restarts: int = 3,
+    mc: int = _FIT_DEFAULTS["mc"],
+    mc_scale: float = _FIT_DEFAULTS["mc_scale"],
+    mc_restarts: int = _FIT_DEFAULTS["mc_restarts"],
     progress: ProgressArg = None,
 ) -> Fit:
     """Fit ``model`` (a spec such as ``"on"``, ``"fa(eon)"``, ``"btdf(gg)+scale"``) to the data.
@@ -934,6 +938,10 @@ def diagnose(
     return Diagnosis(json.loads(text), notes)
 
 
+# The library's defaults of sweep (SweepConfig::default()), shown in its signature.
+_SWEEP_DEFAULTS: Dict[str, Any] = _bsdfit.sweep_defaults()
+
+
 def sweep(
     paths: Union[PathLike, Sequence[PathLike]],
     out: PathLike,
@@ -941,10 +949,10 @@ def sweep(
     models: Optional[Sequence[str]] = None,
     losses: Optional[Sequence[str]] = None,
     weighting: Optional[Union[str, Sequence[str]]] = None,
-    restarts: int = 16,
-    seed: int = 1,
-    backend: str = "auto",
-    pictures: bool = True,
+    restarts: int = _SWEEP_DEFAULTS["restarts"],
+    seed: int = _SWEEP_DEFAULTS["seed"],
+    backend: str = _SWEEP_DEFAULTS["backend"],
+    pictures: bool = _SWEEP_DEFAULTS["pictures"],
     shard: Optional[str] = None,
     assume_uncertainty: Optional[Union[str, Tuple[float, float]]] = None,
     progress: ProgressArg = True,

@@ -113,6 +113,12 @@ class NativeFit:
         """The fit's values and propagated standard uncertainties at these geometries, in
         order, with the warnings ``bsdfit eval`` prints."""
 
+def fit_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.fit`` that have a library default, and those defaults."""
+
+def sweep_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.sweep`` that have a library default, and those defaults."""
+
 def diagnose_defaults() -> Dict[str, Any]:
     """The keywords of ``bsdfit.diagnose`` and the library's defaults of them."""
 

@@ -632,6 +632,37 @@ impl NativeFit {
     }
 }
 
+/// The keywords of `bsdfit.fit` that have a library default, and those defaults
+/// (`FitRequest::default()`): the Python signature shows these, so that no default is
+/// written twice.
+#[pyfunction]
+fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = fit::FitRequest::default();
+    let dict = PyDict::new(py);
+    dict.set_item("loss", d.loss.to_string())?;
+    dict.set_item("weighting", d.weights.to_string())?;
+    dict.set_item("optimizer", d.optimizer.map(|o| o.to_string()))?;
+    dict.set_item("restarts", d.restarts)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("mc", d.mc)?;
+    dict.set_item("mc_scale", d.mc_scale)?;
+    dict.set_item("mc_restarts", d.mc_restarts)?;
+    Ok(dict)
+}
+
+/// The keywords of `bsdfit.sweep` that have a library default, and those defaults
+/// (`SweepConfig::default()`), for its signature as [`fit_defaults`] for `fit`.
+#[pyfunction]
+fn sweep_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = bsdfit::workflows::sweep::SweepConfig::default();
+    let dict = PyDict::new(py);
+    dict.set_item("restarts", d.restarts)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("backend", d.backend.to_string())?;
+    dict.set_item("pictures", d.pictures)?;
+    Ok(dict)
+}
+
 /// The keywords of `bsdfit.diagnose` and their defaults, the library's
 /// (`DiagnoseOptions::default()`): the Python signature shows these, so that no default is
 /// written twice.
@@ -873,6 +904,8 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
     m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;

@@ -303,6 +303,8 @@ BAD_ARGUMENTS = [
     ("fit", dict(backend=None), TypeError, "backend: expected a string, got NoneType None"),
     ("fit", dict(optimizer="newton"), ValueError, "optimizer: 'newton' is not one of 'compass', 'lm'"),
     ("fit", dict(loss=2), TypeError, "loss: expected a string"),
+    ("fit", dict(loss="l3"), ValueError, "loss: unknown loss 'l3'"),
+    ("fit", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
     ("fit", dict(mc=-1), ValueError, "mc must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_restarts=-1), ValueError, "mc_restarts must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_scale="0.1"), TypeError, "mc_scale: expected a number, got str"),
@@ -322,6 +324,7 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(bootstrap=-1), ValueError, "bootstrap must be ≥ 0"),
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),
+    ("diagnose", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
     ("diagnose", dict(backend="cuda"), ValueError, "backend: 'cuda' is not one of"),
     ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),
     ("read", dict(max_samples=-1), ValueError, "max_samples must be ≥ 0, got -1"),
@@ -769,6 +772,30 @@ def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="emit_slurm writes an array whose tasks use shard='auto'; leave shard out"):
         bsdfit.sweep([data], tmp_path / "bad", shard="1/2", emit_slurm=2, slurm_binary=binary,
                      progress=False)
+
+
+@pytest.mark.parametrize("command", ["fit", "sweep"])
+def test_fit_and_sweep_defaults_are_the_library_and_cli_defaults(command):
+    """bsdfit.fit's and bsdfit.sweep's keyword defaults are the library's
+    (FitRequest::default(), SweepConfig::default()), and `bsdfit fit --help` and
+    `bsdfit sweep --help` show the same ones."""
+    import inspect
+    import re
+
+    native = getattr(bsdfit._bsdfit, f"{command}_defaults")()
+    assert native, command
+    signature = inspect.signature(getattr(bsdfit, command)).parameters
+    for name, value in native.items():
+        assert signature[name].default == value, name
+    help_text = run_cli(command, "--help").stdout
+    flags = {"weighting": "weights"}
+    for name, value in native.items():
+        if value is None or isinstance(value, bool):
+            continue  # no default shown: chosen by the loss (optimizer), or a flag (--no-pictures)
+        flag = "--" + flags.get(name, name).replace("_", "-")
+        m = re.search(r"(?<![\w-])" + re.escape(flag) + r" <[^>]+>\n.*?\[default: ([^\]]+)\]", help_text, re.S)
+        assert m, flag
+        assert type(value)(m.group(1)) == value, flag
 
 
 def test_diagnose_defaults_are_the_library_and_cli_defaults():
