@@ -163,6 +163,39 @@ fn unknown_model_spec() {
     assert_clear_error(&out, &["unknown model 'nope'"]);
 }
 
+/// A bad `--params` assignment is refused naming the option as the command line spells
+/// it (the library's message names only the assignment), for synth and render alike.
+#[test]
+fn bad_params_name_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "lambert",
+        "--params",
+        "albedo=0.5",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    let err = assert_clear_error(
+        &out,
+        &["error: --params: model lambert has no parameter 'albedo' (it has: rho)"],
+    );
+    assert!(!dir.path().join("x.csv").exists(), "{err}");
+    let data = synth_on(dir.path());
+    let out = bsdfit(&[
+        "render",
+        p(&data),
+        "--model",
+        "on",
+        "--params",
+        "sigma",
+        "--out",
+        p(&dir.path().join("r")),
+    ]);
+    assert_clear_error(&out, &["error: --params: 'sigma' is not name=value"]);
+}
+
 #[test]
 fn unknown_loss_and_weights() {
     let dir = tempfile::tempdir().unwrap();

@@ -74,7 +74,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             }
             (None, Some(spec), Some(p)) => {
                 let m = Model::for_data(spec, &data)?;
-                let flat = m.params_from_assignments(p)?;
+                let flat = m.params_from_assignments(p).context("--params")?;
                 let mut map = serde_json::Map::new();
                 for fp in &m.params {
                     let w = fp.width(m.channels);

@@ -64,7 +64,9 @@ pub fn run(a: SynthArgs) -> Result<()> {
         model.spec,
         model.kind
     );
-    let flat = model.params_from_assignments(&a.params)?;
+    let flat = model
+        .params_from_assignments(&a.params)
+        .context("--params")?;
     let (rel, abs) = a
         .noise
         .split_once(',')
