@@ -259,7 +259,11 @@ def _wavelengths(given: Optional[Any]) -> Optional[List[float]]:
     return [float(w) for w in _numbers("wavelengths", given, max_ndim=1, allow_empty=True).ravel()]
 
 
-def _assume(assume_uncertainty: Optional[Union[str, Tuple[float, float]]]) -> Optional[str]:
+def _assume(
+    assume_uncertainty: Optional[Union[str, Tuple[float, float]]],
+) -> Optional[Union[str, Tuple[float, float]]]:
+    """``assume_uncertainty`` for the library: ``(rel, abs)`` as numbers, or the command
+    line's ``"REL,ABS"`` text as it is."""
     if assume_uncertainty is None or isinstance(assume_uncertainty, str):
         return assume_uncertainty
     pair = _numbers("assume_uncertainty", assume_uncertainty, max_ndim=1, allow_empty=True)
@@ -268,7 +272,7 @@ def _assume(assume_uncertainty: Optional[Union[str, Tuple[float, float]]]) -> Op
             f"assume_uncertainty: expected (rel, abs) or 'REL,ABS', got {_short(assume_uncertainty)}"
         )
     rel, abs_ = (float(v) for v in pair)
-    return f"{rel!r},{abs_!r}"
+    return (rel, abs_)
 
 
 class Dataset:

@@ -14,8 +14,8 @@
 #![allow(clippy::too_many_arguments)]
 
 use bsdfit::choice::{Choice, ChoiceError};
-use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
-use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::data::readers::{self, alta::AltaValues};
+use bsdfit::data::{AssumeArg, Dataset, Kind, RawRow, ReadOptions, ReadRequest};
 use bsdfit::engine::loss::{Metric, Weights};
 use bsdfit::engine::{self, BackendChoice};
 use bsdfit::inference::constraints::{Constraint, ConstraintKind, ConstraintSpec};
@@ -234,26 +234,33 @@ impl NativeDataset {
     }
 }
 
-/// Reader options from the keyword arguments shared by `read_dataset` and `from_arrays`.
+/// An `assume_uncertainty` argument: `(rel, abs)` or the command line's `"REL,ABS"`.
+#[derive(FromPyObject)]
+enum AssumeUncertainty {
+    Values(f64, f64),
+    Text(String),
+}
+
+/// Reader options from the keyword arguments shared by `read_dataset`, `from_arrays` and
+/// `sweep`, checked by the library as the command line's are.
 fn read_options(
     wavelengths: Option<Vec<f64>>,
     band: Option<f64>,
     max_samples: Option<usize>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
     sample_geometry: Option<String>,
 ) -> anyhow::Result<ReadOptions> {
-    Ok(ReadOptions {
+    ReadOptions::from_request(ReadRequest {
         allow_zero_uncertainty,
         wavelengths,
         band_nm: band,
-        assume_uncertainty: assume_uncertainty
-            .as_deref()
-            .map(parse_assume_arg)
-            .transpose()
-            .map_err(|e| anyhow::anyhow!("assume_uncertainty: {e}"))?,
-        max_samples: Some(max_samples.unwrap_or(readers::merl::DEFAULT_MAX_SAMPLES)),
+        assume_uncertainty: assume_uncertainty.map(|a| match a {
+            AssumeUncertainty::Values(rel, abs) => AssumeArg::Values(rel, abs),
+            AssumeUncertainty::Text(text) => AssumeArg::Text(text),
+        }),
+        max_samples,
         alta_values: alta_values
             .map(|s| parse_choice::<AltaValues>("alta_values", &s))
             .transpose()?,
@@ -269,7 +276,7 @@ fn read_dataset(
     wavelengths: Option<Vec<f64>>,
     band: Option<f64>,
     max_samples: Option<usize>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
     sample_geometry: Option<String>,
@@ -826,7 +833,7 @@ fn sweep(
     backend: String,
     pictures: bool,
     shard: Option<String>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     progress: Option<Py<PyAny>>,
     emit_slurm: Option<usize>,
     slurm_cpus: usize,
