@@ -39,6 +39,8 @@ __all__ = [
     "fit",
     "diagnose",
     "sweep",
+    "Battery",
+    "battery",
     "models",
     "gpu_available",
     "__version__",
@@ -56,8 +58,9 @@ class ProgressEvent:
 
     ``stage``: ``"fit"`` (restarts converged of ``total``), ``"mc"`` (Monte Carlo replica
     restarts), ``"diagnose"`` (``message`` is the line the command line prints; ``total``
-    is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last) or
-    ``"note"`` (a line the command line prints: a warning, a skipped file).
+    is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last),
+    ``"battery"`` (cases ended of ``total``; ``message`` names the last) or ``"note"`` (a
+    line the command line prints: a warning, a skipped file).
     """
 
     stage: str
@@ -1028,6 +1031,78 @@ def sweep(
             binary,
         )
     return out_path
+
+
+class Battery:
+    """What ``bsdfit battery`` measured: ``outcomes``, every case and its diagnosis as
+    ``battery --json`` writes them (one dict each: ``case``, ``named``, ``final_model``,
+    ``snr``, ``detected``, ``false_effect``, ``error``, …), and ``table``, the rates the
+    command line prints (markdown)."""
+
+    def __init__(self, outcomes: List[Dict[str, Any]], table: str) -> None:
+        self.outcomes = outcomes
+        self.table = table
+
+    def __len__(self) -> int:
+        return len(self.outcomes)
+
+    def __repr__(self) -> str:
+        detected = sum(1 for o in self.outcomes if o.get("detected"))
+        false = sum(1 for o in self.outcomes if o.get("false_effect"))
+        return (f"<bsdfit.Battery {len(self.outcomes)} cases: {detected} detected, "
+                f"{false} false effects>")
+
+
+# The library's defaults of the battery (BatteryOptions::default()), shown in its signature.
+_BATTERY_DEFAULTS: Dict[str, Any] = _bsdfit.battery_defaults()
+
+
+def _range(name: str, given: Any, integer: bool) -> Tuple[Any, Any]:
+    """A ``(lo, hi)`` pair of numbers (integers with ``integer``), naming ``name``."""
+    if not isinstance(given, (list, tuple)) or len(given) != 2:
+        raise TypeError(f"{name}: expected (lo, hi), got {_short(given)}")
+    if integer:
+        return (_int(f"{name}[0]", given[0], 0), _int(f"{name}[1]", given[1], 0))
+    return (_real(f"{name}[0]", given[0]), _real(f"{name}[1]", given[1]))
+
+
+def battery(
+    *,
+    cases: int = _BATTERY_DEFAULTS["cases"],
+    nulls: int = _BATTERY_DEFAULTS["nulls"],
+    seed: int = _BATTERY_DEFAULTS["seed"],
+    effects: Optional[Sequence[str]] = None,
+    signal: Tuple[float, float] = _BATTERY_DEFAULTS["signal"],
+    samples: Tuple[int, int] = _BATTERY_DEFAULTS["samples"],
+    restarts: int = _BATTERY_DEFAULTS["restarts"],
+    backend: str = "auto",
+    case: Optional[int] = None,
+    progress: ProgressArg = True,
+) -> Battery:
+    """Run the diagnosis's randomized battery (``bsdfit battery``): ``cases`` cases per
+    hidden effect (``effects``: names as ``diagnose`` gives them; default every effect)
+    and ``nulls`` cases with nothing hidden, the effect's pre-fit ``signal`` and the
+    sample counts drawn log-uniformly from their ``(lo, hi)`` ranges, each diagnosed with
+    ``restarts`` restarts per fit. The same ``seed`` draws the same battery; ``case=ID``
+    runs that case only. ``progress``: True (the default) for a bar on stderr, False or
+    None for silence, or a callable given a :class:`ProgressEvent` as each case ends."""
+    listed = None
+    if effects is not None:
+        listed = [effects] if isinstance(effects, str) else [_text("effects", e) for e in effects]
+    with _Progress(progress) as reports:
+        text, table = _bsdfit.battery(
+            _int("cases", cases, 0),
+            _int("nulls", nulls, 0),
+            _int("seed", seed, 0),
+            listed,
+            _range("signal", signal, integer=False),
+            _range("samples", samples, integer=True),
+            _int("restarts", restarts, 1),
+            _text("backend", backend),
+            None if case is None else _int("case", case, 0),
+            reports.native,
+        )
+    return Battery(json.loads(text), table)
 
 
 @dataclass(frozen=True)

@@ -151,6 +151,24 @@ def sweep(
     """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added.
     With ``emit_slurm``, write its Slurm job scripts instead (0 fits)."""
 
+def battery_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.battery`` and the library's defaults of them."""
+
+def battery(
+    cases: int,
+    nulls: int,
+    seed: int,
+    effects: Optional[List[str]],
+    signal: Tuple[float, float],
+    samples: Tuple[int, int],
+    restarts: int,
+    backend: str,
+    case: Optional[int],
+    progress: Optional[ProgressCallback],
+) -> Tuple[str, str]:
+    """Run the diagnosis's randomized battery (``bsdfit battery``): every case and its
+    outcome as the JSON text ``battery --json`` writes, and the rates table (markdown)."""
+
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""
 

@@ -877,6 +877,87 @@ fn sweep(
     observer.reporter.finish(added)
 }
 
+/// The keywords of `bsdfit.battery` and their defaults, the library's
+/// (`BatteryOptions::default()`), for its signature.
+#[pyfunction]
+fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = bsdfit::workflows::diagnose::battery::BatteryOptions::default();
+    let dict = PyDict::new(py);
+    dict.set_item("cases", d.cases)?;
+    dict.set_item("nulls", d.nulls)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("signal", d.signal)?;
+    dict.set_item("samples", d.samples)?;
+    dict.set_item("restarts", d.diagnose.restarts)?;
+    Ok(dict)
+}
+
+/// Run the diagnosis's randomized battery (what `bsdfit battery` does): every case and
+/// its outcome as the JSON text `battery --json` writes, and the rates table (markdown)
+/// the command line prints. `progress` (a callable or None) hears of each case as it
+/// ends (stage `battery`).
+#[pyfunction]
+#[pyo3(signature = (cases, nulls, seed, effects, signal, samples, restarts, backend, case, progress))]
+fn battery(
+    py: Python<'_>,
+    cases: usize,
+    nulls: usize,
+    seed: u64,
+    effects: Option<Vec<String>>,
+    signal: (f64, f64),
+    samples: (usize, usize),
+    restarts: usize,
+    backend: String,
+    case: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(String, String)> {
+    use bsdfit::workflows::diagnose::battery::{
+        effects_named, rates_table, run_battery, BatteryOptions,
+    };
+    let mut reporter = Reporter::new(progress);
+    let (text, table, reporter) = compute(py, move || {
+        let defaults = BatteryOptions::default();
+        let opts = BatteryOptions {
+            cases,
+            nulls,
+            seed,
+            effects: match effects {
+                None => defaults.effects.clone(),
+                Some(names) => effects_named(&names)?,
+            },
+            signal,
+            samples,
+            diagnose: diagnose::DiagnoseOptions {
+                restarts,
+                seed,
+                ..defaults.diagnose.clone()
+            },
+            only: case,
+        };
+        opts.check()?;
+        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
+        let total = opts.total() as u64;
+        let mut done = 0;
+        reporter.send("battery", 0, Some(total), "");
+        let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
+            done += 1;
+            let what = format!(
+                "case {} {} → {}",
+                o.case.id,
+                o.case.hidden.as_deref().unwrap_or("none"),
+                o.final_model
+            );
+            reporter.send("battery", done, Some(total), &what);
+        });
+        Ok((
+            serde_json::to_string(&outcomes)?,
+            rates_table(&outcomes),
+            reporter,
+        ))
+    })?;
+    reporter.finish((text, table))
+}
+
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
@@ -916,6 +997,8 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(battery_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(battery, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -777,11 +777,11 @@ def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
                      progress=False)
 
 
-@pytest.mark.parametrize("command", ["fit", "sweep"])
-def test_fit_and_sweep_defaults_are_the_library_and_cli_defaults(command):
-    """bsdfit.fit's and bsdfit.sweep's keyword defaults are the library's
-    (FitRequest::default(), SweepConfig::default()), and `bsdfit fit --help` and
-    `bsdfit sweep --help` show the same ones."""
+@pytest.mark.parametrize("command", ["fit", "sweep", "battery"])
+def test_fit_sweep_and_battery_defaults_are_the_library_and_cli_defaults(command):
+    """bsdfit.fit's, bsdfit.sweep's and bsdfit.battery's keyword defaults are the
+    library's (FitRequest::default(), SweepConfig::default(), BatteryOptions::default()),
+    and the command's --help shows the same ones (a range as LO,HI)."""
     import inspect
     import re
 
@@ -798,7 +798,40 @@ def test_fit_and_sweep_defaults_are_the_library_and_cli_defaults(command):
         flag = "--" + flags.get(name, name).replace("_", "-")
         m = re.search(r"(?<![\w-])" + re.escape(flag) + r" <[^>]+>\n.*?\[default: ([^\]]+)\]", help_text, re.S)
         assert m, flag
-        assert type(value)(m.group(1)) == value, flag
+        if isinstance(value, tuple):
+            shown = tuple(type(v)(x) for v, x in zip(value, m.group(1).split(",")))
+        else:
+            shown = type(value)(m.group(1))
+        assert shown == value, flag
+
+
+def test_battery_is_the_command_lines_battery(tmp_path):
+    """bsdfit.battery draws and diagnoses the cases `bsdfit battery` does with the same
+    options: the same outcomes (but the seconds each took) and the same rates table,
+    with a progress event per case; bad options are refused naming the keyword."""
+    options = dict(cases=1, nulls=1, effects=["scale"], samples=(20, 60), restarts=2, seed=3)
+    events = []
+    result = bsdfit.battery(backend="cpu", progress=events.append, **options)
+    assert len(result) == 2 and "2 cases" in repr(result)
+    out = tmp_path / "battery.json"
+    cli = run_cli("battery", "--cases", "1", "--nulls", "1", "--effects", "scale",
+                  "--samples", "20,60", "--restarts", "2", "--seed", "3", "--backend", "cpu",
+                  "--json", str(out))
+    expected = json.loads(out.read_text())
+    for outcomes in (expected, result.outcomes):
+        for o in outcomes:
+            o.pop("seconds")
+    assert result.outcomes == expected
+    assert [o["case"]["hidden"] for o in expected] == ["scale", None]
+    assert result.table.strip() in cli.stdout
+    assert [(e.stage, e.done, e.total) for e in events] == [
+        ("battery", 0, 2), ("battery", 1, 2), ("battery", 2, 2)]
+    with pytest.raises(ValueError, match="effects: unknown effect 'glare' \\(known: backscatter"):
+        bsdfit.battery(effects=["glare"], backend="cpu", progress=False)
+    with pytest.raises(ValueError, match="signal='0,30': 0 < LO ≤ HI"):
+        bsdfit.battery(signal=(0, 30), backend="cpu", progress=False)
+    with pytest.raises(TypeError, match="samples: expected \\(lo, hi\\)"):
+        bsdfit.battery(samples=200, backend="cpu", progress=False)
 
 
 def test_diagnose_defaults_are_the_library_and_cli_defaults():
