@@ -196,6 +196,65 @@ fn bad_params_name_the_flag() {
     assert_clear_error(&out, &["error: --params: 'sigma' is not name=value"]);
 }
 
+/// Refusals that have an obvious next step name it: a geometry of the other kind, a MERL
+/// table of the wrong data, a JSON that holds no fit to render.
+#[test]
+fn refusals_name_the_next_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--geometry",
+        "oblique",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["is a btdf geometry but on is a brdf model: give a brdf geometry (`bsdfit models`"],
+    );
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--wavelengths",
+        "550",
+        "--out",
+        p(&dir.path().join("x.binary")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["this is brdf data in 1 channel: give three wavelengths, e.g. --wavelengths 450,550,650"],
+    );
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "btdf(tr)",
+        "--out",
+        p(&dir.path().join("t.binary")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["this is btdf data in 1 channel: write it as a bsdfit CSV"],
+    );
+    let data = synth_on(dir.path());
+    let json = dir.path().join("other.json");
+    std::fs::write(&json, r#"{"per_axis": []}"#).unwrap();
+    let out = bsdfit(&[
+        "render",
+        p(&data),
+        "--fit",
+        p(&json),
+        "--out",
+        p(&dir.path().join("r")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["the JSON has no model and best.params: give a fit report of `bsdfit fit --json`"],
+    );
+}
+
 #[test]
 fn unknown_loss_and_weights() {
     let dir = tempfile::tempdir().unwrap();

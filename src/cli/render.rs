@@ -214,6 +214,8 @@ fn pick_fit(
                 n => anyhow::bail!("{n} rows match for data '{stem}' ({}); narrow with --model/--loss/--weights/--optimizer", data.label()),
             }
         }
-        o => get(o).context("the JSON has no model and best.params"),
+        o => get(o).context(
+            "the JSON has no model and best.params: give a fit report of `bsdfit fit --json` (one fit, not --per-axis) or a sweep's results.json",
+        ),
     }
 }
