@@ -255,6 +255,42 @@ fn refusals_name_the_next_step() {
     );
 }
 
+/// The library names its options as fields; the command line prints them as its flags
+/// (diagnose's significance level and start model, sweep's optimizers).
+#[test]
+fn library_fields_print_as_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let diagnose = |extra: &[&str]| {
+        let mut args = vec!["diagnose", p(&data), "--backend", "cpu"];
+        args.extend_from_slice(extra);
+        bsdfit(&args)
+    };
+    let out = diagnose(&["--model", "on", "--alpha", "2"]);
+    assert_clear_error(&out, &["error: --alpha must be in (0, 1), got 2"]);
+    let out = diagnose(&["--model", "lambret"]);
+    assert_clear_error(
+        &out,
+        &["error: --model: model spec 'lambret': unknown model 'lambret'"],
+    );
+    let out = bsdfit(&[
+        "sweep",
+        p(&data),
+        "--models",
+        "lambert",
+        "--optimizer",
+        "newton",
+        "--backend",
+        "cpu",
+        "--out",
+        p(&dir.path().join("run")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["error: --optimizer: unknown 'newton' (auto, lm, compass)"],
+    );
+}
+
 #[test]
 fn unknown_loss_and_weights() {
     let dir = tempfile::tempdir().unwrap();

@@ -324,6 +324,7 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(bootstrap=-1), ValueError, "bootstrap must be ≥ 0"),
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),
+    ("diagnose", dict(alpha=2.0), ValueError, r"^alpha must be in \(0, 1\), got 2$"),
     ("diagnose", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
     ("diagnose", dict(backend="cuda"), ValueError, "backend: 'cuda' is not one of"),
     ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),

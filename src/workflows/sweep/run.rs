@@ -245,7 +245,9 @@ impl Place {
 /// pictures and report).
 pub fn run(cfg: &SweepConfig, obs: &mut dyn SweepObserver) -> Result<SweepStats> {
     let t0 = Instant::now();
-    anyhow::ensure!(cfg.restarts >= 1, "--restarts: at least 1");
+    if cfg.restarts < 1 {
+        return Err(crate::choice::field_error("{restarts}: at least 1"));
+    }
     let place = Place::of(cfg)?;
     let out = &place.out;
     let (files, all) = read_cells(cfg)?;
