@@ -190,8 +190,8 @@ impl FitRequest {
         self.mc * (self.mc_restarts.max(1) + 1)
     }
 
-    /// The model, loss and fit options for `data`; a misspelt model, loss or parameter
-    /// name fails here, before any work.
+    /// The model, loss and fit options for `data`; a misspelt model or parameter name, or
+    /// a loss not defined for the data's kind, fails here, before any work.
     pub fn prepare(&self, data: &Dataset) -> Result<(Model, Loss, FitOptions)> {
         self.check()?;
         let loss = loss_for(self.loss, self.weights, data.kind)?;
