@@ -163,6 +163,134 @@ fn unknown_model_spec() {
     assert_clear_error(&out, &["unknown model 'nope'"]);
 }
 
+/// A bad `--params` assignment is refused naming the option as the command line spells
+/// it (the library's message names only the assignment), for synth and render alike.
+#[test]
+fn bad_params_name_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "lambert",
+        "--params",
+        "albedo=0.5",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    let err = assert_clear_error(
+        &out,
+        &["error: --params: model lambert has no parameter 'albedo' (it has: rho)"],
+    );
+    assert!(!dir.path().join("x.csv").exists(), "{err}");
+    let data = synth_on(dir.path());
+    let out = bsdfit(&[
+        "render",
+        p(&data),
+        "--model",
+        "on",
+        "--params",
+        "sigma",
+        "--out",
+        p(&dir.path().join("r")),
+    ]);
+    assert_clear_error(&out, &["error: --params: 'sigma' is not name=value"]);
+}
+
+/// Refusals that have an obvious next step name it: a geometry of the other kind, a MERL
+/// table of the wrong data, a JSON that holds no fit to render.
+#[test]
+fn refusals_name_the_next_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--geometry",
+        "oblique",
+        "--out",
+        p(&dir.path().join("x.csv")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["is a btdf geometry but on is a brdf model: give a brdf geometry (`bsdfit models`"],
+    );
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "on",
+        "--wavelengths",
+        "550",
+        "--out",
+        p(&dir.path().join("x.binary")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["this is brdf data in 1 channel: give three wavelengths, e.g. --wavelengths 450,550,650"],
+    );
+    let out = bsdfit(&[
+        "synth",
+        "--model",
+        "btdf(tr)",
+        "--out",
+        p(&dir.path().join("t.binary")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["this is btdf data in 1 channel: write it as a bsdfit CSV"],
+    );
+    let data = synth_on(dir.path());
+    let json = dir.path().join("other.json");
+    std::fs::write(&json, r#"{"per_axis": []}"#).unwrap();
+    let out = bsdfit(&[
+        "render",
+        p(&data),
+        "--fit",
+        p(&json),
+        "--out",
+        p(&dir.path().join("r")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["the JSON has no model and best.params: give a fit report of `bsdfit fit --json`"],
+    );
+}
+
+/// The library names its options as fields; the command line prints them as its flags
+/// (diagnose's significance level and start model, sweep's optimizers).
+#[test]
+fn library_fields_print_as_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_on(dir.path());
+    let diagnose = |extra: &[&str]| {
+        let mut args = vec!["diagnose", p(&data), "--backend", "cpu"];
+        args.extend_from_slice(extra);
+        bsdfit(&args)
+    };
+    let out = diagnose(&["--model", "on", "--alpha", "2"]);
+    assert_clear_error(&out, &["error: --alpha must be in (0, 1), got 2"]);
+    let out = diagnose(&["--model", "lambret"]);
+    assert_clear_error(
+        &out,
+        &["error: --model: model spec 'lambret': unknown model 'lambret'"],
+    );
+    let out = bsdfit(&[
+        "sweep",
+        p(&data),
+        "--models",
+        "lambert",
+        "--optimizer",
+        "newton",
+        "--backend",
+        "cpu",
+        "--out",
+        p(&dir.path().join("run")),
+    ]);
+    assert_clear_error(
+        &out,
+        &["error: --optimizer: unknown 'newton' (auto, lm, compass)"],
+    );
+}
+
 #[test]
 fn unknown_loss_and_weights() {
     let dir = tempfile::tempdir().unwrap();

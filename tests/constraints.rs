@@ -30,13 +30,7 @@ fn run(model: &Model, data: &Dataset, c: ConstraintSpec) -> FitReport {
 }
 
 fn spec(fix: &[&str], bounds: &[&str], priors: &[&str]) -> ConstraintSpec {
-    let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect();
-    ConstraintSpec {
-        fix: v(fix),
-        bounds: v(bounds),
-        priors: v(priors),
-        lenient: false,
-    }
+    ConstraintSpec::parse(fix, bounds, priors, false).unwrap()
 }
 
 fn value(r: &FitReport, name: &str) -> (f64, Option<f64>) {

@@ -1022,3 +1022,58 @@ fn csv_dialects_of_other_tools_read_to_the_same_samples() {
         .to_string();
     assert!(e.contains("wide.csv:1") && e.contains("UTF-8"), "{e}");
 }
+
+/// Reader options from a front end's arguments: the uncertainty to assume (text or
+/// numbers) and a band are checked once, before any file, naming the option in words,
+/// which the command line prints as its flag (once).
+#[test]
+fn read_requests_are_checked_once_naming_the_option() {
+    use bsdfit::data::{AssumeArg, ReadRequest};
+    let request = |assume: Option<AssumeArg>, band: Option<f64>, wavelengths: bool| ReadRequest {
+        assume_uncertainty: assume,
+        band_nm: band,
+        wavelengths: wavelengths.then(|| vec![550.0]),
+        ..Default::default()
+    };
+    let o = ReadOptions::from_request(request(Some(AssumeArg::Values(0.05, 0.001)), None, false))
+        .unwrap();
+    assert_eq!(o.assume_uncertainty, Some((0.05, 0.001)));
+    assert_eq!(
+        o.max_samples,
+        Some(bsdfit::data::readers::merl::DEFAULT_MAX_SAMPLES)
+    );
+    let text = ReadOptions::from_request(request(
+        Some(AssumeArg::Text("0.05, 0.001".into())),
+        Some(2.0),
+        true,
+    ))
+    .unwrap();
+    assert_eq!(text.assume_uncertainty, o.assume_uncertainty);
+    assert_eq!(text.band_nm, Some(2.0));
+    for (r, words, flags) in [
+        (
+            request(Some(AssumeArg::Text("x".into())), None, false),
+            "assume_uncertainty: expected REL,ABS such as 0.05,0.001",
+            "--assume-uncertainty: expected REL,ABS such as 0.05,0.001",
+        ),
+        (
+            request(Some(AssumeArg::Values(-0.1, 0.01)), None, false),
+            "assume_uncertainty: (-0.1, 0.01): REL and ABS must be finite",
+            "--assume-uncertainty: (-0.1, 0.01): REL and ABS must be finite",
+        ),
+        (
+            request(None, Some(5.0), false),
+            "band needs wavelengths: the centres",
+            "--band needs --wavelengths: the centres",
+        ),
+        (
+            request(None, Some(-1.0), true),
+            "band=-1: expected a width ≥ 0 nm",
+            "--band -1: expected a width ≥ 0 nm",
+        ),
+    ] {
+        let e = ReadOptions::from_request(r).unwrap_err();
+        assert!(e.to_string().starts_with(words), "{e}");
+        assert!(bsdfit::cli::error_text(&e).starts_with(flags), "{e}");
+    }
+}

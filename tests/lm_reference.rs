@@ -201,10 +201,9 @@ fn sums_of_squares_come_from_the_loss_sum() {
         (0.02, 1e-4),
         2,
     );
-    let spec = bsdfit::inference::constraints::ConstraintSpec {
-        priors: vec!["sigma=0.5:0.1".into()],
-        ..Default::default()
-    };
+    let spec =
+        bsdfit::inference::constraints::ConstraintSpec::parse(&[], &[], &["sigma=0.5:0.1"], false)
+            .unwrap();
     let on_prior =
         bsdfit::inference::constraints::Constraints::resolve(&model, &spec, false).unwrap();
     let gpu = bsdfit::engine::gpu::GpuBackend::new().expect("a Vulkan adapter (lavapipe in CI)");

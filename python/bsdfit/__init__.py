@@ -39,6 +39,8 @@ __all__ = [
     "fit",
     "diagnose",
     "sweep",
+    "Battery",
+    "battery",
     "models",
     "gpu_available",
     "evaluate",
@@ -57,8 +59,9 @@ class ProgressEvent:
 
     ``stage``: ``"fit"`` (restarts converged of ``total``), ``"mc"`` (Monte Carlo replica
     restarts), ``"diagnose"`` (``message`` is the line the command line prints; ``total``
-    is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last) or
-    ``"note"`` (a line the command line prints: a warning, a skipped file).
+    is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last),
+    ``"battery"`` (cases ended of ``total``; ``message`` names the last) or ``"note"`` (a
+    line the command line prints: a warning, a skipped file).
     """
 
     stage: str
@@ -273,7 +276,11 @@ def _wavelengths(given: Optional[Any]) -> Optional[List[float]]:
     return [float(w) for w in _numbers("wavelengths", given, max_ndim=1, allow_empty=True).ravel()]
 
 
-def _assume(assume_uncertainty: Optional[Union[str, Tuple[float, float]]]) -> Optional[str]:
+def _assume(
+    assume_uncertainty: Optional[Union[str, Tuple[float, float]]],
+) -> Optional[Union[str, Tuple[float, float]]]:
+    """``assume_uncertainty`` for the library: ``(rel, abs)`` as numbers, or the command
+    line's ``"REL,ABS"`` text as it is."""
     if assume_uncertainty is None or isinstance(assume_uncertainty, str):
         return assume_uncertainty
     pair = _numbers("assume_uncertainty", assume_uncertainty, max_ndim=1, allow_empty=True)
@@ -282,7 +289,7 @@ def _assume(assume_uncertainty: Optional[Union[str, Tuple[float, float]]]) -> Op
             f"assume_uncertainty: expected (rel, abs) or 'REL,ABS', got {_short(assume_uncertainty)}"
         )
     rel, abs_ = (float(v) for v in pair)
-    return f"{rel!r},{abs_!r}"
+    return (rel, abs_)
 
 
 class Dataset:
@@ -732,19 +739,22 @@ _CONSTRAINTS: Dict[str, Tuple[str, Optional[Tuple[str, str]], str]] = {
 }
 
 
-def _constraint_list(name: str, given: Any) -> List[str]:
-    """``fix``/``bounds``/``prior`` as the command line's NAME=… strings.
+# One item of a constraint argument as the native module takes it: a parameter's name and
+# its numbers, or the command line's NAME=… text.
+_ConstraintItem = Union[str, Tuple[str, List[float]]]
 
-    Accepts a mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``,
-    ``{"rho": [0.4, 0.5, 0.6]}``) or the strings themselves.
-    """
+
+def _constraint_list(name: str, given: Any) -> List[_ConstraintItem]:
+    """``fix``/``bounds``/``prior`` as values for the library: (name, numbers) from a
+    mapping (``{"sigma": 0.3}``, ``{"alpha": (0.01, 0.5)}``, ``{"rho": [0.4, 0.5, 0.6]}``),
+    the command line's NAME=… strings as they are (a mapping's string value too)."""
     form, pair, example = _CONSTRAINTS[name]
     if given is None:
         return []
     if isinstance(given, str):
         return [given]
     if isinstance(given, Mapping):
-        out = []
+        out: List[_ConstraintItem] = []
         for k, v in given.items():
             if not isinstance(k, str):
                 raise TypeError(f"{name}: parameter names are strings, got {_short(k)}")
@@ -756,31 +766,35 @@ def _constraint_list(name: str, given: Any) -> List[str]:
                 raise ValueError(
                     f"{name}[{k!r}]: expected ({pair[0]}, {pair[1]}), got {_short(v)}"
                 )
-            out.append(f"{k}=" + ":".join(repr(float(x)) for x in values))
+            out.append((k, [float(x) for x in values]))
         return out
     if isinstance(given, (list, tuple)) and all(isinstance(item, str) for item in given):
-        return list(given)
+        return [str(item) for item in given]
     raise TypeError(
         f"{name}: expected a mapping such as {example} or {form} strings, got {_short(given)}"
     )
+
+
+# The library's defaults of fit (FitRequest::default()), shown in its signature.
+_FIT_DEFAULTS: Dict[str, Any] = _bsdfit.fit_defaults()
 
 
 def fit(
     dataset: Dataset,
     model: str,
     *,
-    loss: str = "chi2",
-    weighting: str = "uniform",
-    restarts: int = 16,
-    seed: int = 1,
+    loss: str = _FIT_DEFAULTS["loss"],
+    weighting: str = _FIT_DEFAULTS["weighting"],
+    restarts: int = _FIT_DEFAULTS["restarts"],
+    seed: int = _FIT_DEFAULTS["seed"],
     backend: str = "auto",
-    optimizer: Optional[str] = None,
+    optimizer: Optional[str] = _FIT_DEFAULTS["optimizer"],
     fix: Any = None,
     bounds: Any = None,
     prior: Any = None,
-    mc: int = 0,
-    mc_scale: float = 0.0,
-    mc_restarts: int = 3,
+    mc: int = _FIT_DEFAULTS["mc"],
+    mc_scale: float = _FIT_DEFAULTS["mc_scale"],
+    mc_restarts: int = _FIT_DEFAULTS["mc_restarts"],
     progress: ProgressArg = None,
 ) -> Fit:
     """Fit ``model`` (a spec such as ``"on"``, ``"fa(eon)"``, ``"btdf(gg)+scale"``) to the data.
@@ -938,6 +952,10 @@ def diagnose(
     return Diagnosis(json.loads(text), notes)
 
 
+# The library's defaults of sweep (SweepConfig::default()), shown in its signature.
+_SWEEP_DEFAULTS: Dict[str, Any] = _bsdfit.sweep_defaults()
+
+
 def sweep(
     paths: Union[PathLike, Sequence[PathLike]],
     out: PathLike,
@@ -945,10 +963,10 @@ def sweep(
     models: Optional[Sequence[str]] = None,
     losses: Optional[Sequence[str]] = None,
     weighting: Optional[Union[str, Sequence[str]]] = None,
-    restarts: int = 16,
-    seed: int = 1,
-    backend: str = "auto",
-    pictures: bool = True,
+    restarts: int = _SWEEP_DEFAULTS["restarts"],
+    seed: int = _SWEEP_DEFAULTS["seed"],
+    backend: str = _SWEEP_DEFAULTS["backend"],
+    pictures: bool = _SWEEP_DEFAULTS["pictures"],
     shard: Optional[str] = None,
     assume_uncertainty: Optional[Union[str, Tuple[float, float]]] = None,
     progress: ProgressArg = True,
@@ -1020,6 +1038,78 @@ def sweep(
             binary,
         )
     return out_path
+
+
+class Battery:
+    """What ``bsdfit battery`` measured: ``outcomes``, every case and its diagnosis as
+    ``battery --json`` writes them (one dict each: ``case``, ``named``, ``final_model``,
+    ``snr``, ``detected``, ``false_effect``, ``error``, …), and ``table``, the rates the
+    command line prints (markdown)."""
+
+    def __init__(self, outcomes: List[Dict[str, Any]], table: str) -> None:
+        self.outcomes = outcomes
+        self.table = table
+
+    def __len__(self) -> int:
+        return len(self.outcomes)
+
+    def __repr__(self) -> str:
+        detected = sum(1 for o in self.outcomes if o.get("detected"))
+        false = sum(1 for o in self.outcomes if o.get("false_effect"))
+        return (f"<bsdfit.Battery {len(self.outcomes)} cases: {detected} detected, "
+                f"{false} false effects>")
+
+
+# The library's defaults of the battery (BatteryOptions::default()), shown in its signature.
+_BATTERY_DEFAULTS: Dict[str, Any] = _bsdfit.battery_defaults()
+
+
+def _range(name: str, given: Any, integer: bool) -> Tuple[Any, Any]:
+    """A ``(lo, hi)`` pair of numbers (integers with ``integer``), naming ``name``."""
+    if not isinstance(given, (list, tuple)) or len(given) != 2:
+        raise TypeError(f"{name}: expected (lo, hi), got {_short(given)}")
+    if integer:
+        return (_int(f"{name}[0]", given[0], 0), _int(f"{name}[1]", given[1], 0))
+    return (_real(f"{name}[0]", given[0]), _real(f"{name}[1]", given[1]))
+
+
+def battery(
+    *,
+    cases: int = _BATTERY_DEFAULTS["cases"],
+    nulls: int = _BATTERY_DEFAULTS["nulls"],
+    seed: int = _BATTERY_DEFAULTS["seed"],
+    effects: Optional[Sequence[str]] = None,
+    signal: Tuple[float, float] = _BATTERY_DEFAULTS["signal"],
+    samples: Tuple[int, int] = _BATTERY_DEFAULTS["samples"],
+    restarts: int = _BATTERY_DEFAULTS["restarts"],
+    backend: str = "auto",
+    case: Optional[int] = None,
+    progress: ProgressArg = True,
+) -> Battery:
+    """Run the diagnosis's randomized battery (``bsdfit battery``): ``cases`` cases per
+    hidden effect (``effects``: names as ``diagnose`` gives them; default every effect)
+    and ``nulls`` cases with nothing hidden, the effect's pre-fit ``signal`` and the
+    sample counts drawn log-uniformly from their ``(lo, hi)`` ranges, each diagnosed with
+    ``restarts`` restarts per fit. The same ``seed`` draws the same battery; ``case=ID``
+    runs that case only. ``progress``: True (the default) for a bar on stderr, False or
+    None for silence, or a callable given a :class:`ProgressEvent` as each case ends."""
+    listed = None
+    if effects is not None:
+        listed = [effects] if isinstance(effects, str) else [_text("effects", e) for e in effects]
+    with _Progress(progress) as reports:
+        text, table = _bsdfit.battery(
+            _int("cases", cases, 0),
+            _int("nulls", nulls, 0),
+            _int("seed", seed, 0),
+            listed,
+            _range("signal", signal, integer=False),
+            _range("samples", samples, integer=True),
+            _int("restarts", restarts, 1),
+            _text("backend", backend),
+            None if case is None else _int("case", case, 0),
+            reports.native,
+        )
+    return Battery(json.loads(text), table)
 
 
 @dataclass(frozen=True)

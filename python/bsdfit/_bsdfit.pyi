@@ -7,12 +7,15 @@ its subclass for the cause (a file), ``ValueError`` (bad input, with the command
 message) or ``RuntimeError`` (a bug).
 """
 
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+
+# One item of fix, bounds or prior: (parameter name, its numbers), or a NAME=… text.
+ConstraintItem = Union[str, Tuple[str, List[float]]]
 
 # A progress callable: (stage, done, total or None, message).
 ProgressCallback = Callable[[str, int, Optional[int], str], None]
@@ -48,7 +51,7 @@ def read_dataset(
     wavelengths: Optional[List[float]],
     band: Optional[float],
     max_samples: Optional[int],
-    assume_uncertainty: Optional[str],
+    assume_uncertainty: Optional[Union[str, Tuple[float, float]]],
     allow_zero_uncertainty: bool,
     alta_values: Optional[str],
     sample_geometry: Optional[str],
@@ -80,9 +83,9 @@ def fit_json(
     restarts: int,
     seed: int,
     backend: str,
-    fix: List[str],
-    bounds: List[str],
-    prior: List[str],
+    fix: List[ConstraintItem],
+    bounds: List[ConstraintItem],
+    prior: List[ConstraintItem],
     mc: int,
     mc_scale: float,
     mc_restarts: int,
@@ -110,6 +113,12 @@ class NativeFit:
         """The fit's values and propagated standard uncertainties at these geometries, in
         order, with the warnings ``bsdfit eval`` prints."""
 
+def fit_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.fit`` that have a library default, and those defaults."""
+
+def sweep_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.sweep`` that have a library default, and those defaults."""
+
 def diagnose_defaults() -> Dict[str, Any]:
     """The keywords of ``bsdfit.diagnose`` and the library's defaults of them."""
 
@@ -133,7 +142,7 @@ def sweep(
     backend: str,
     pictures: bool,
     shard: Optional[str],
-    assume_uncertainty: Optional[str],
+    assume_uncertainty: Optional[Union[str, Tuple[float, float]]],
     progress: Optional[ProgressCallback],
     emit_slurm: Optional[int],
     slurm_cpus: int,
@@ -141,6 +150,24 @@ def sweep(
 ) -> int:
     """Run a sweep into ``out`` (the command line's ``bsdfit sweep``); the fits it added.
     With ``emit_slurm``, write its Slurm job scripts instead (0 fits)."""
+
+def battery_defaults() -> Dict[str, Any]:
+    """The keywords of ``bsdfit.battery`` and the library's defaults of them."""
+
+def battery(
+    cases: int,
+    nulls: int,
+    seed: int,
+    effects: Optional[List[str]],
+    signal: Tuple[float, float],
+    samples: Tuple[int, int],
+    restarts: int,
+    backend: str,
+    case: Optional[int],
+    progress: Optional[ProgressCallback],
+) -> Tuple[str, str]:
+    """Run the diagnosis's randomized battery (``bsdfit battery``): every case and its
+    outcome as the JSON text ``battery --json`` writes, and the rates table (markdown)."""
 
 def catalogue() -> List[Tuple[str, str, List[Tuple[str, bool, float, float]]]]:
     """``[(spec, kind, [(parameter, per_channel, lo, hi), …]), …]``."""

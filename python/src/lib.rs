@@ -14,10 +14,11 @@
 #![allow(clippy::too_many_arguments)]
 
 use bsdfit::choice::{Choice, ChoiceError};
-use bsdfit::data::readers::{self, alta::AltaValues, parse_assume_arg};
-use bsdfit::data::{Dataset, Kind, RawRow, ReadOptions};
+use bsdfit::data::readers::{self, alta::AltaValues};
+use bsdfit::data::{AssumeArg, Dataset, Kind, RawRow, ReadOptions, ReadRequest};
+use bsdfit::engine::loss::{Metric, Weights};
 use bsdfit::engine::{self, BackendChoice};
-use bsdfit::inference::constraints::ConstraintSpec;
+use bsdfit::inference::constraints::{Constraint, ConstraintKind, ConstraintSpec};
 use bsdfit::inference::fit::{FitReport, Optimizer};
 use bsdfit::inference::saved::FitFile;
 use bsdfit::workflows::{checks, diagnose, export, fit};
@@ -233,26 +234,33 @@ impl NativeDataset {
     }
 }
 
-/// Reader options from the keyword arguments shared by `read_dataset` and `from_arrays`.
+/// An `assume_uncertainty` argument: `(rel, abs)` or the command line's `"REL,ABS"`.
+#[derive(FromPyObject)]
+enum AssumeUncertainty {
+    Values(f64, f64),
+    Text(String),
+}
+
+/// Reader options from the keyword arguments shared by `read_dataset`, `from_arrays` and
+/// `sweep`, checked by the library as the command line's are.
 fn read_options(
     wavelengths: Option<Vec<f64>>,
     band: Option<f64>,
     max_samples: Option<usize>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
     sample_geometry: Option<String>,
 ) -> anyhow::Result<ReadOptions> {
-    Ok(ReadOptions {
+    ReadOptions::from_request(ReadRequest {
         allow_zero_uncertainty,
         wavelengths,
         band_nm: band,
-        assume_uncertainty: assume_uncertainty
-            .as_deref()
-            .map(parse_assume_arg)
-            .transpose()
-            .map_err(|e| anyhow::anyhow!("assume_uncertainty: {e}"))?,
-        max_samples: Some(max_samples.unwrap_or(readers::merl::DEFAULT_MAX_SAMPLES)),
+        assume_uncertainty: assume_uncertainty.map(|a| match a {
+            AssumeUncertainty::Values(rel, abs) => AssumeArg::Values(rel, abs),
+            AssumeUncertainty::Text(text) => AssumeArg::Text(text),
+        }),
+        max_samples,
         alta_values: alta_values
             .map(|s| parse_choice::<AltaValues>("alta_values", &s))
             .transpose()?,
@@ -268,7 +276,7 @@ fn read_dataset(
     wavelengths: Option<Vec<f64>>,
     band: Option<f64>,
     max_samples: Option<usize>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     allow_zero_uncertainty: bool,
     alta_values: Option<String>,
     sample_geometry: Option<String>,
@@ -396,22 +404,52 @@ fn dataset_from_arrays(
     })
 }
 
+/// One item of a `fix`, `bounds` or `prior` argument: a parameter's name and its numbers
+/// (what a mapping gives), or the command line's `NAME=…` text.
+#[derive(FromPyObject)]
+enum ConstraintArg {
+    Values(String, Vec<f64>),
+    Text(String),
+}
+
+/// The constraints of `fix`, `bounds` and `prior` as values; an error names the argument.
 fn constraint_spec(
-    fix: Vec<String>,
-    bounds: Vec<String>,
-    prior: Vec<String>,
+    fix: Vec<ConstraintArg>,
+    bounds: Vec<ConstraintArg>,
+    prior: Vec<ConstraintArg>,
     lenient: bool,
-) -> ConstraintSpec {
-    ConstraintSpec {
-        fix,
-        bounds,
-        priors: prior,
-        lenient,
+) -> anyhow::Result<ConstraintSpec> {
+    let mut items = Vec::new();
+    // Bounds first, then fixed values, then priors: the order the library applies them in
+    // (and the command line checks them in).
+    for (kind, args) in [
+        (ConstraintKind::Bounds, bounds),
+        (ConstraintKind::Fix, fix),
+        (ConstraintKind::Prior, prior),
+    ] {
+        for arg in args {
+            items.push(match arg {
+                ConstraintArg::Values(name, values) => Constraint::new(kind, &name, &values)?,
+                ConstraintArg::Text(text) => Constraint::parse(kind, &text)?,
+            });
+        }
     }
+    Ok(ConstraintSpec { items, lenient })
 }
 
 fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
     parse_choice("backend", s)
+}
+
+/// The loss and weighting words of a call as values; an error names the keyword.
+fn loss_words(loss: &str, weighting: &str) -> anyhow::Result<(Metric, Weights)> {
+    let metric = loss
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("loss: {e}"))?;
+    let weights = weighting
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("weighting: {e}"))?;
+    Ok((metric, weights))
 }
 
 /// Fit one model: the report as the JSON text `bsdfit fit --json` writes, the Monte Carlo
@@ -431,9 +469,9 @@ fn fit_json<'py>(
     restarts: usize,
     seed: u64,
     backend: String,
-    fix: Vec<String>,
-    bounds: Vec<String>,
-    prior: Vec<String>,
+    fix: Vec<ConstraintArg>,
+    bounds: Vec<ConstraintArg>,
+    prior: Vec<ConstraintArg>,
     mc: usize,
     mc_scale: f64,
     mc_restarts: usize,
@@ -448,16 +486,18 @@ fn fit_json<'py>(
     let data = dataset.data.clone();
     let mut reporter = Reporter::new(progress);
     let (text, mc_error, notes, residuals, summary, reporter) = compute(py, move || {
+        let optimizer = optimizer
+            .map(|s| parse_choice::<Optimizer>("optimizer", &s))
+            .transpose()?;
+        let (loss, weights) = loss_words(&loss, &weights)?;
         let request = fit::FitRequest {
             model,
             loss,
             weights,
-            optimizer: optimizer
-                .map(|s| parse_choice::<Optimizer>("optimizer", &s))
-                .transpose()?,
+            optimizer,
             restarts,
             seed,
-            constraints: constraint_spec(fix, bounds, prior, false),
+            constraints: constraint_spec(fix, bounds, prior, false)?,
             mc,
             mc_scale,
             mc_restarts,
@@ -636,6 +676,37 @@ impl NativeFit {
     }
 }
 
+/// The keywords of `bsdfit.fit` that have a library default, and those defaults
+/// (`FitRequest::default()`): the Python signature shows these, so that no default is
+/// written twice.
+#[pyfunction]
+fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = fit::FitRequest::default();
+    let dict = PyDict::new(py);
+    dict.set_item("loss", d.loss.to_string())?;
+    dict.set_item("weighting", d.weights.to_string())?;
+    dict.set_item("optimizer", d.optimizer.map(|o| o.to_string()))?;
+    dict.set_item("restarts", d.restarts)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("mc", d.mc)?;
+    dict.set_item("mc_scale", d.mc_scale)?;
+    dict.set_item("mc_restarts", d.mc_restarts)?;
+    Ok(dict)
+}
+
+/// The keywords of `bsdfit.sweep` that have a library default, and those defaults
+/// (`SweepConfig::default()`), for its signature as [`fit_defaults`] for `fit`.
+#[pyfunction]
+fn sweep_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = bsdfit::workflows::sweep::SweepConfig::default();
+    let dict = PyDict::new(py);
+    dict.set_item("restarts", d.restarts)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("backend", d.backend.to_string())?;
+    dict.set_item("pictures", d.pictures)?;
+    Ok(dict)
+}
+
 /// The keywords of `bsdfit.diagnose` and their defaults, the library's
 /// (`DiagnoseOptions::default()`): the Python signature shows these, so that no default is
 /// written twice.
@@ -660,13 +731,14 @@ fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 }
 
 /// A diagnosis as `bsdfit.diagnose` asks for it: its keyword arguments, read once. The
-/// words (loss, weighting, optimizer, backend) are checked where the command line checks
-/// them, so that errors come in the same order.
+/// loss and weighting are values from here on; the other words (optimizer, backend) are
+/// checked where the command line checks them, so that errors come in the same order.
 struct DiagnoseRequest {
-    /// Every option but the loss and the optimizer, which are set from the words below.
+    /// Every option but the loss and the optimizer, which are set from the fields below.
     options: diagnose::DiagnoseOptions,
-    loss: String,
-    weights: String,
+    /// The loss and weighting, checked against the data's kind with the start model.
+    loss: Metric,
+    weights: Weights,
     optimizer: String,
     backend: String,
 }
@@ -709,7 +781,8 @@ impl DiagnoseRequest {
             }
         }
         o.bootstrap.seed = o.seed;
-        o.constraints = constraint_spec(fix, bounds, prior, true);
+        o.constraints = constraint_spec(fix, bounds, prior, true).map_err(to_py)?;
+        let (loss, weights) = loss_words(&loss, &weights).map_err(to_py)?;
         Ok(DiagnoseRequest {
             options: o,
             loss,
@@ -747,8 +820,8 @@ fn diagnose_json(
         let (loss, start) = diagnose::check_start(
             &data,
             &model,
-            &loss,
-            &weights,
+            loss,
+            weights,
             options.alpha,
             &options.constraints,
         )?;
@@ -797,7 +870,7 @@ fn sweep(
     backend: String,
     pictures: bool,
     shard: Option<String>,
-    assume_uncertainty: Option<String>,
+    assume_uncertainty: Option<AssumeUncertainty>,
     progress: Option<Py<PyAny>>,
     emit_slurm: Option<usize>,
     slurm_cpus: usize,
@@ -841,6 +914,87 @@ fn sweep(
     observer.reporter.finish(added)
 }
 
+/// The keywords of `bsdfit.battery` and their defaults, the library's
+/// (`BatteryOptions::default()`), for its signature.
+#[pyfunction]
+fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = bsdfit::workflows::diagnose::battery::BatteryOptions::default();
+    let dict = PyDict::new(py);
+    dict.set_item("cases", d.cases)?;
+    dict.set_item("nulls", d.nulls)?;
+    dict.set_item("seed", d.seed)?;
+    dict.set_item("signal", d.signal)?;
+    dict.set_item("samples", d.samples)?;
+    dict.set_item("restarts", d.diagnose.restarts)?;
+    Ok(dict)
+}
+
+/// Run the diagnosis's randomized battery (what `bsdfit battery` does): every case and
+/// its outcome as the JSON text `battery --json` writes, and the rates table (markdown)
+/// the command line prints. `progress` (a callable or None) hears of each case as it
+/// ends (stage `battery`).
+#[pyfunction]
+#[pyo3(signature = (cases, nulls, seed, effects, signal, samples, restarts, backend, case, progress))]
+fn battery(
+    py: Python<'_>,
+    cases: usize,
+    nulls: usize,
+    seed: u64,
+    effects: Option<Vec<String>>,
+    signal: (f64, f64),
+    samples: (usize, usize),
+    restarts: usize,
+    backend: String,
+    case: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(String, String)> {
+    use bsdfit::workflows::diagnose::battery::{
+        effects_named, rates_table, run_battery, BatteryOptions,
+    };
+    let mut reporter = Reporter::new(progress);
+    let (text, table, reporter) = compute(py, move || {
+        let defaults = BatteryOptions::default();
+        let opts = BatteryOptions {
+            cases,
+            nulls,
+            seed,
+            effects: match effects {
+                None => defaults.effects.clone(),
+                Some(names) => effects_named(&names)?,
+            },
+            signal,
+            samples,
+            diagnose: diagnose::DiagnoseOptions {
+                restarts,
+                seed,
+                ..defaults.diagnose.clone()
+            },
+            only: case,
+        };
+        opts.check()?;
+        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
+        let total = opts.total() as u64;
+        let mut done = 0;
+        reporter.send("battery", 0, Some(total), "");
+        let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
+            done += 1;
+            let what = format!(
+                "case {} {} → {}",
+                o.case.id,
+                o.case.hidden.as_deref().unwrap_or("none"),
+                o.final_model
+            );
+            reporter.send("battery", done, Some(total), &what);
+        });
+        Ok((
+            serde_json::to_string(&outcomes)?,
+            rates_table(&outcomes),
+            reporter,
+        ))
+    })?;
+    reporter.finish((text, table))
+}
+
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
@@ -875,9 +1029,13 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dataset_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit_json, m)?)?;
     m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(battery_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(battery, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

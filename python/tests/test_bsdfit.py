@@ -303,6 +303,8 @@ BAD_ARGUMENTS = [
     ("fit", dict(backend=None), TypeError, "backend: expected a string, got NoneType None"),
     ("fit", dict(optimizer="newton"), ValueError, "optimizer: 'newton' is not one of 'compass', 'lm'"),
     ("fit", dict(loss=2), TypeError, "loss: expected a string"),
+    ("fit", dict(loss="l3"), ValueError, "loss: unknown loss 'l3'"),
+    ("fit", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
     ("fit", dict(mc=-1), ValueError, "mc must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_restarts=-1), ValueError, "mc_restarts must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_scale="0.1"), TypeError, "mc_scale: expected a number, got str"),
@@ -322,6 +324,8 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(bootstrap=-1), ValueError, "bootstrap must be ≥ 0"),
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),
+    ("diagnose", dict(alpha=2.0), ValueError, r"^alpha must be in \(0, 1\), got 2$"),
+    ("diagnose", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
     ("diagnose", dict(backend="cuda"), ValueError, "backend: 'cuda' is not one of"),
     ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),
     ("read", dict(max_samples=-1), ValueError, "max_samples must be ≥ 0, got -1"),
@@ -330,6 +334,9 @@ BAD_ARGUMENTS = [
     ("read", dict(wavelengths=[[550.0]]), ValueError, "wavelengths: .* got a 2-D array"),
     ("read", dict(assume_uncertainty=(0.01, 0.001, 0.1)), ValueError, r"assume_uncertainty: expected \(rel, abs\)"),
     ("read", dict(alta_values=1), TypeError, "alta_values: expected a string"),
+    ("read", dict(assume_uncertainty=(-0.1, 0.01)), ValueError,
+     r"assume_uncertainty: \(-0.1, 0.01\): REL and ABS must be finite, ≥ 0 and not both zero"),
+    ("read", dict(assume_uncertainty="x"), ValueError, "assume_uncertainty: expected REL,ABS such as 0.05,0.001"),
     ("sweep", dict(seed=-1), ValueError, "seed must be ≥ 0, got -1"),
     ("sweep", dict(backend="gpuu"), ValueError, "backend: 'gpuu' is not one of"),
     ("sweep", dict(models="lambert", restarts=1.0), TypeError, "restarts: expected an integer"),
@@ -769,6 +776,63 @@ def test_sweep_emit_slurm_writes_the_cli_job_scripts(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="emit_slurm writes an array whose tasks use shard='auto'; leave shard out"):
         bsdfit.sweep([data], tmp_path / "bad", shard="1/2", emit_slurm=2, slurm_binary=binary,
                      progress=False)
+
+
+@pytest.mark.parametrize("command", ["fit", "sweep", "battery"])
+def test_fit_sweep_and_battery_defaults_are_the_library_and_cli_defaults(command):
+    """bsdfit.fit's, bsdfit.sweep's and bsdfit.battery's keyword defaults are the
+    library's (FitRequest::default(), SweepConfig::default(), BatteryOptions::default()),
+    and the command's --help shows the same ones (a range as LO,HI)."""
+    import inspect
+    import re
+
+    native = getattr(bsdfit._bsdfit, f"{command}_defaults")()
+    assert native, command
+    signature = inspect.signature(getattr(bsdfit, command)).parameters
+    for name, value in native.items():
+        assert signature[name].default == value, name
+    help_text = run_cli(command, "--help").stdout
+    flags = {"weighting": "weights"}
+    for name, value in native.items():
+        if value is None or isinstance(value, bool):
+            continue  # no default shown: chosen by the loss (optimizer), or a flag (--no-pictures)
+        flag = "--" + flags.get(name, name).replace("_", "-")
+        m = re.search(r"(?<![\w-])" + re.escape(flag) + r" <[^>]+>\n.*?\[default: ([^\]]+)\]", help_text, re.S)
+        assert m, flag
+        if isinstance(value, tuple):
+            shown = tuple(type(v)(x) for v, x in zip(value, m.group(1).split(",")))
+        else:
+            shown = type(value)(m.group(1))
+        assert shown == value, flag
+
+
+def test_battery_is_the_command_lines_battery(tmp_path):
+    """bsdfit.battery draws and diagnoses the cases `bsdfit battery` does with the same
+    options: the same outcomes (but the seconds each took) and the same rates table,
+    with a progress event per case; bad options are refused naming the keyword."""
+    options = dict(cases=1, nulls=1, effects=["scale"], samples=(20, 60), restarts=2, seed=3)
+    events = []
+    result = bsdfit.battery(backend="cpu", progress=events.append, **options)
+    assert len(result) == 2 and "2 cases" in repr(result)
+    out = tmp_path / "battery.json"
+    cli = run_cli("battery", "--cases", "1", "--nulls", "1", "--effects", "scale",
+                  "--samples", "20,60", "--restarts", "2", "--seed", "3", "--backend", "cpu",
+                  "--json", str(out))
+    expected = json.loads(out.read_text())
+    for outcomes in (expected, result.outcomes):
+        for o in outcomes:
+            o.pop("seconds")
+    assert result.outcomes == expected
+    assert [o["case"]["hidden"] for o in expected] == ["scale", None]
+    assert result.table.strip() in cli.stdout
+    assert [(e.stage, e.done, e.total) for e in events] == [
+        ("battery", 0, 2), ("battery", 1, 2), ("battery", 2, 2)]
+    with pytest.raises(ValueError, match="effects: unknown effect 'glare' \\(known: backscatter"):
+        bsdfit.battery(effects=["glare"], backend="cpu", progress=False)
+    with pytest.raises(ValueError, match="signal='0,30': 0 < LO ≤ HI"):
+        bsdfit.battery(signal=(0, 30), backend="cpu", progress=False)
+    with pytest.raises(TypeError, match="samples: expected \\(lo, hi\\)"):
+        bsdfit.battery(samples=200, backend="cpu", progress=False)
 
 
 def test_diagnose_defaults_are_the_library_and_cli_defaults():

@@ -676,20 +676,22 @@ impl Model {
     }
 
     /// Parse `name=value` assignments (`rho=0.5` sets every channel, `rho=0.4:0.5:0.6`
-    /// one value per channel); unnamed parameters keep their defaults.
+    /// one value per channel); unnamed parameters keep their defaults. A message names
+    /// the assignment or parameter at fault, not an option: the caller adds which of its
+    /// options the text came from.
     pub fn params_from_assignments(&self, text: &str) -> Result<Vec<f64>, SpecError> {
         let mut flat = self.defaults();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             let (name, value) = item
                 .split_once('=')
-                .ok_or_else(|| SpecError::Other(format!("--params: '{item}' is not name=value")))?;
+                .ok_or_else(|| SpecError::Other(format!("'{item}' is not name=value")))?;
             let p = self
                 .params
                 .iter()
                 .find(|p| p.name == name.trim())
                 .ok_or_else(|| {
                     SpecError::Other(format!(
-                        "--params: model {} has no parameter '{}' (it has: {})",
+                        "model {} has no parameter '{}' (it has: {})",
                         self.spec,
                         name.trim(),
                         self.params
@@ -707,10 +709,7 @@ impl Model {
                         .ok()
                         .filter(|x| x.is_finite())
                         .ok_or_else(|| {
-                            SpecError::Other(format!(
-                                "--params: '{v}' for {} is not a number",
-                                p.name
-                            ))
+                            SpecError::Other(format!("'{v}' for {} is not a number", p.name))
                         })
                 })
                 .collect::<Result<_, _>>()?;
@@ -720,7 +719,7 @@ impl Model {
                 n if n == width => values,
                 n => {
                     return Err(SpecError::Other(format!(
-                        "--params: {} takes 1 or {width} values, got {n}",
+                        "{} takes 1 or {width} values, got {n}",
                         p.name
                     )))
                 }
@@ -728,7 +727,7 @@ impl Model {
             for (k, v) in values.into_iter().enumerate() {
                 if v < p.decl.lo || v > p.decl.hi {
                     return Err(SpecError::Other(format!(
-                        "--params: {} = {v} is outside its bounds [{}, {}]",
+                        "{} = {v} is outside its bounds [{}, {}]",
                         p.name, p.decl.lo, p.decl.hi
                     )));
                 }

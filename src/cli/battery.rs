@@ -3,7 +3,9 @@
 use super::progress::Progress;
 use super::BackendArgs;
 use crate::engine;
-use crate::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions};
+use crate::workflows::diagnose::battery::{
+    effects_named, rates_table, run_battery, BatteryOptions,
+};
 use crate::workflows::diagnose::{DiagnoseOptions, Effect};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -12,13 +14,13 @@ use std::path::PathBuf;
 #[derive(Args)]
 pub struct BatteryArgs {
     /// Cases per hidden effect.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = BatteryOptions::default().cases)]
     pub cases: usize,
     /// Cases with no hidden effect (the truth is the start model).
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = BatteryOptions::default().nulls)]
     pub nulls: usize,
     /// Seed of the cases (a non-negative integer): the same seed draws the same battery.
-    #[arg(long, default_value_t = 1, value_parser = super::parse_seed, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = BatteryOptions::default().seed, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
     /// The effects to hide, comma-separated (default: every effect of the table; `bsdfit
     /// diagnose --help` and docs/diagnose.md list them).
@@ -26,13 +28,13 @@ pub struct BatteryArgs {
     pub effects: Option<Vec<String>>,
     /// The range the hidden effect's size is drawn from, log-uniform: the RMS of
     /// (truth − start)/u over the samples before any fit.
-    #[arg(long, value_name = "LO,HI", default_value = "1,30")]
+    #[arg(long, value_name = "LO,HI", default_value_t = pair_text(BatteryOptions::default().signal))]
     pub signal: String,
     /// The range of sample counts, log-uniform.
-    #[arg(long, value_name = "LO,HI", default_value = "200,20000")]
+    #[arg(long, value_name = "LO,HI", default_value_t = pair_text(BatteryOptions::default().samples))]
     pub samples: String,
     /// Random restarts per fit of each diagnosis.
-    #[arg(long, default_value_t = super::DEFAULT_RESTARTS, value_parser = super::parse_restarts, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = BatteryOptions::default().diagnose.restarts, value_parser = super::parse_restarts, allow_hyphen_values = true)]
     pub restarts: usize,
     #[command(flatten)]
     pub backend: BackendArgs,
@@ -46,6 +48,11 @@ pub struct BatteryArgs {
     /// its truth and its diagnosis's log.
     #[arg(long, value_name = "ID")]
     pub case: Option<usize>,
+}
+
+/// `LO,HI` as the option writes it.
+fn pair_text<T: std::fmt::Display>((lo, hi): (T, T)) -> String {
+    format!("{lo},{hi}")
 }
 
 fn pair<T: std::str::FromStr>(text: &str, option: &str) -> Result<(T, T)> {
@@ -64,42 +71,17 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
     for p in [&a.json, &a.markdown].into_iter().flatten() {
         crate::output::check_writable_file(p, "--json/--markdown")?;
     }
-    let signal: (f64, f64) = pair(&a.signal, "--signal")?;
-    anyhow::ensure!(
-        signal.0 > 0.0 && signal.1 >= signal.0,
-        "--signal {}: 0 < LO ≤ HI",
-        a.signal
-    );
-    let samples: (usize, usize) = pair(&a.samples, "--samples")?;
-    anyhow::ensure!(
-        samples.0 >= 20 && samples.1 >= samples.0,
-        "--samples {}: 20 ≤ LO ≤ HI",
-        a.samples
-    );
     let effects: Vec<Effect> = match &a.effects {
         None => Effect::all().collect(),
-        Some(names) => names
-            .iter()
-            .map(|n| {
-                Effect::from_name(n.trim()).ok_or_else(|| {
-                    anyhow::anyhow!(
-                        "--effects: unknown effect '{n}' (known: {})",
-                        Effect::all()
-                            .map(|e| e.name())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )
-                })
-            })
-            .collect::<Result<_>>()?,
+        Some(names) => effects_named(names)?,
     };
     let opts = BatteryOptions {
         cases: a.cases,
         nulls: a.nulls,
         seed: a.seed,
         effects,
-        signal,
-        samples,
+        signal: pair(&a.signal, "--signal")?,
+        samples: pair(&a.samples, "--samples")?,
         diagnose: DiagnoseOptions {
             restarts: a.restarts,
             seed: a.seed,
@@ -107,12 +89,9 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
         },
         only: a.case,
     };
+    opts.check()?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
-    let total = if opts.only.is_some() {
-        1
-    } else {
-        opts.effects.len() * opts.cases + opts.nulls
-    };
+    let total = opts.total();
     let progress = Progress::new("battery", total as u64, "cases");
     let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
         if opts.only.is_some() {

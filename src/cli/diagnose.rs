@@ -10,6 +10,7 @@ use crate::inference::constraints::ConstraintSpec;
 use crate::inference::fit::Optimizer;
 use crate::text::plural;
 use crate::workflows::diagnose::{check_start, diagnose, write_report, DiagnoseOptions};
+use crate::workflows::fit::{parse_metric, parse_weights};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -130,8 +131,9 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         crate::output::check_writable_dir(dir, "--report")?;
     }
     let data = a.data_args.read(&a.data)?;
-    let constraints = a.constraints.spec(true);
-    let (loss, start) = check_start(&data, &a.model, &a.loss, &a.weights, a.alpha, &constraints)?;
+    let constraints = a.constraints.spec(true)?;
+    let (metric, weights) = (parse_metric(&a.loss)?, parse_weights(&a.weights)?);
+    let (loss, start) = check_start(&data, &a.model, metric, weights, a.alpha, &constraints)?;
     // Extensions add a few parameters to the start model: estimate with three more.
     check_batch_memory(
         a.restarts + 1,

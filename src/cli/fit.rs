@@ -7,7 +7,7 @@ use crate::data::Dataset;
 use crate::engine;
 use crate::inference::fit::{FitReport, Optimizer};
 use crate::output::files::write_result;
-use crate::workflows::fit::{FitRequest, FitResponse, Stage};
+use crate::workflows::fit::{parse_metric, parse_weights, FitRequest, FitResponse, Stage};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -23,11 +23,11 @@ pub struct FitArgs {
     /// data file carries a standard uncertainty per value, so χ² weighs each sample by
     /// what it is worth. The paper's losses remain: smape rmse ngan low (BRDF), f cosf
     /// logf logcosf (BTDF).
-    #[arg(long, default_value_t = FitRequest::default().loss)]
+    #[arg(long, default_value_t = FitRequest::default().loss.to_string())]
     pub loss: String,
     /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2). chi2
     /// already weighs by 1/u².
-    #[arg(long, default_value_t = FitRequest::default().weights)]
+    #[arg(long, default_value_t = FitRequest::default().weights.to_string())]
     pub weights: String,
     /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
     /// every loss but smape — and compass search for smape.
@@ -74,20 +74,20 @@ pub struct FitArgs {
 }
 
 impl FitArgs {
-    /// The fit these arguments ask for.
-    fn request(&self) -> FitRequest {
-        FitRequest {
+    /// The fit these arguments ask for; a loss or weighting that names none fails here.
+    fn request(&self) -> Result<FitRequest> {
+        Ok(FitRequest {
             model: self.model.clone(),
-            loss: self.loss.clone(),
-            weights: self.weights.clone(),
+            loss: parse_metric(&self.loss)?,
+            weights: parse_weights(&self.weights)?,
             optimizer: self.optimizer,
             restarts: self.restarts,
             seed: self.seed,
-            constraints: self.constraints.spec(false),
+            constraints: self.constraints.spec(false)?,
             mc: self.mc,
             mc_scale: self.mc_scale,
             mc_restarts: self.mc_restarts,
-        }
+        })
     }
 }
 
@@ -95,7 +95,7 @@ pub fn run(a: FitArgs) -> Result<()> {
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
-    let request = a.request();
+    let request = a.request()?;
     request.check()?;
     anyhow::ensure!(
         !(a.mc > 0 && a.per_axis),
@@ -209,6 +209,9 @@ mod tests {
             model: "on".into(),
             ..FitRequest::default()
         };
-        assert_eq!(format!("{:?}", a.request()), format!("{library:?}"));
+        assert_eq!(
+            format!("{:?}", a.request().expect("the defaults parse")),
+            format!("{library:?}")
+        );
     }
 }

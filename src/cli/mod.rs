@@ -5,8 +5,8 @@
 
 use crate::choice::{Choice, FieldError};
 use crate::data::readers::alta::AltaValues;
-use crate::data::readers::{self, merl, parse_assume_arg};
-use crate::data::{Dataset, ReadOptions};
+use crate::data::readers::{self, merl};
+use crate::data::{AssumeArg, Dataset, ReadOptions, ReadRequest};
 use crate::engine::BackendChoice;
 use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
@@ -159,16 +159,11 @@ pub struct DataArgs {
 impl DataArgs {
     /// The reader options these flags ask for.
     pub fn read_options(&self) -> Result<ReadOptions> {
-        Ok(ReadOptions {
+        ReadOptions::from_request(ReadRequest {
             allow_zero_uncertainty: self.allow_zero_uncertainty,
             wavelengths: self.wavelengths.clone(),
-            assume_uncertainty: self
-                .assume_uncertainty
-                .as_deref()
-                .map(parse_assume_arg)
-                .transpose()
-                .map_err(|e| anyhow::anyhow!("--assume-uncertainty: {e}"))?,
             band_nm: self.band,
+            assume_uncertainty: self.assume_uncertainty.clone().map(AssumeArg::Text),
             max_samples: Some(self.max_samples),
             alta_values: self.alta_values,
             sample_geometry: self.sample_geometry.clone(),
@@ -206,14 +201,14 @@ pub struct ConstraintArgs {
 
 impl ConstraintArgs {
     /// The options as a spec; `lenient` for runs over several models (a model that lacks
-    /// a parameter ignores its options).
-    pub fn spec(&self, lenient: bool) -> crate::inference::constraints::ConstraintSpec {
-        crate::inference::constraints::ConstraintSpec {
-            fix: self.fix.clone(),
-            bounds: self.bounds.clone(),
-            priors: self.prior.clone(),
+    /// a parameter ignores its options). A text that is not of its option's form fails.
+    pub fn spec(&self, lenient: bool) -> Result<crate::inference::constraints::ConstraintSpec> {
+        crate::inference::constraints::ConstraintSpec::parse(
+            &self.fix,
+            &self.bounds,
+            &self.prior,
             lenient,
-        }
+        )
     }
 }
 

@@ -74,7 +74,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             }
             (None, Some(spec), Some(p)) => {
                 let m = Model::for_data(spec, &data)?;
-                let flat = m.params_from_assignments(p)?;
+                let flat = m.params_from_assignments(p).context("--params")?;
                 let mut map = serde_json::Map::new();
                 for fp in &m.params {
                     let w = fp.width(m.channels);
@@ -214,6 +214,8 @@ fn pick_fit(
                 n => anyhow::bail!("{n} rows match for data '{stem}' ({}); narrow with --model/--loss/--weights/--optimizer", data.label()),
             }
         }
-        o => get(o).context("the JSON has no model and best.params"),
+        o => get(o).context(
+            "the JSON has no model and best.params: give a fit report of `bsdfit fit --json` (one fit, not --per-axis) or a sweep's results.json",
+        ),
     }
 }

@@ -153,7 +153,7 @@ impl SweepArgs {
             restarts: self.restarts,
             seed: self.seed,
             backend: self.backend.backend,
-            constraints: self.constraints.spec(true),
+            constraints: self.constraints.spec(true)?,
             out: self.out.clone(),
             shard,
             pictures: !self.no_pictures,

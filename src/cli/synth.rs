@@ -60,11 +60,14 @@ pub fn run(a: SynthArgs) -> Result<()> {
     let model = Model::parse_for(&a.model, wavelengths.len(), &planes).context("--model")?;
     anyhow::ensure!(
         gkind == model.kind,
-        "--geometry {geometry} is a {gkind} geometry but {} is a {} model",
+        "--geometry {geometry} is a {gkind} geometry but {} is a {} model: give a {} geometry (`bsdfit models` lists each geometry with its kind)",
         model.spec,
+        model.kind,
         model.kind
     );
-    let flat = model.params_from_assignments(&a.params)?;
+    let flat = model
+        .params_from_assignments(&a.params)
+        .context("--params")?;
     let (rel, abs) = a
         .noise
         .split_once(',')
@@ -108,9 +111,14 @@ pub fn run(a: SynthArgs) -> Result<()> {
 /// several fall in one cell), channels from the longest wavelength (R) to the shortest.
 fn write_merl(ds: &crate::data::Dataset, out: &std::path::Path, geometry: &str) -> Result<()> {
     use crate::data::readers::merl;
+    let next = if ds.kind != Kind::Brdf {
+        "write it as a bsdfit CSV (an --out that does not end in .binary)"
+    } else {
+        "give three wavelengths, e.g. --wavelengths 450,550,650"
+    };
     anyhow::ensure!(
         ds.kind == Kind::Brdf && ds.channel_count() == 3,
-        "--out {}: a MERL table holds three BRDF channels (R, G, B); this is {} data in {}",
+        "--out {}: a MERL table holds three BRDF channels (R, G, B); this is {} data in {}: {next}",
         out.display(),
         ds.kind,
         crate::text::plural(ds.channel_count(), "channel")

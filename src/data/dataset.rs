@@ -299,6 +299,75 @@ pub struct ReadOptions {
     pub sample_geometry: Option<String>,
 }
 
+/// An uncertainty to assume, as a caller gives it: the text `REL,ABS` (the command
+/// line's), or the two numbers.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AssumeArg {
+    Text(String),
+    Values(f64, f64),
+}
+
+/// The reader options a caller asks for, as its options give them: what
+/// [`ReadOptions::from_request`] checks and completes, for the command line and the
+/// Python module alike.
+#[derive(Clone, Debug, Default)]
+pub struct ReadRequest {
+    pub allow_zero_uncertainty: bool,
+    pub wavelengths: Option<Vec<f64>>,
+    pub band_nm: Option<f64>,
+    pub assume_uncertainty: Option<AssumeArg>,
+    /// None: [`crate::data::readers::merl::DEFAULT_MAX_SAMPLES`].
+    pub max_samples: Option<usize>,
+    pub alta_values: Option<crate::data::readers::alta::AltaValues>,
+    pub sample_geometry: Option<String>,
+}
+
+impl ReadOptions {
+    /// The options `request` asks for, with the checks that need no file made once,
+    /// here: the uncertainty to assume, and a band (a width ≥ 0 nm, around the
+    /// wavelengths chosen). Errors name the options as fields
+    /// ([`crate::choice::FieldError`]).
+    pub fn from_request(request: ReadRequest) -> anyhow::Result<ReadOptions> {
+        use crate::choice::field_error;
+        use crate::data::readers::{check_assumed, parse_assume_arg};
+        let assume_uncertainty = match &request.assume_uncertainty {
+            None => None,
+            Some(AssumeArg::Text(text)) => Some(parse_assume_arg(text)),
+            Some(AssumeArg::Values(rel, abs)) => {
+                Some(check_assumed(*rel, *abs).map_err(|e| format!("({rel:?}, {abs:?}): {e}")))
+            }
+        }
+        .transpose()
+        .map_err(|e| field_error(format!("{{assume_uncertainty}}: {e}")))?;
+        match request.band_nm {
+            Some(_) if request.wavelengths.is_none() => {
+                return Err(field_error(
+                    "{band} needs {wavelengths}: the centres of the bands to average",
+                ))
+            }
+            Some(b) if !(b.is_finite() && b >= 0.0) => {
+                return Err(field_error(format!(
+                    "{{band={b}}}: expected a width ≥ 0 nm"
+                )))
+            }
+            _ => {}
+        }
+        Ok(ReadOptions {
+            allow_zero_uncertainty: request.allow_zero_uncertainty,
+            wavelengths: request.wavelengths,
+            band_nm: request.band_nm,
+            assume_uncertainty,
+            max_samples: Some(
+                request
+                    .max_samples
+                    .unwrap_or(crate::data::readers::merl::DEFAULT_MAX_SAMPLES),
+            ),
+            alta_values: request.alta_values,
+            sample_geometry: request.sample_geometry,
+        })
+    }
+}
+
 pub const COLUMNS: [&str; 7] = [
     "theta_i",
     "phi_i",

@@ -15,48 +15,220 @@
 //! models (`rho` is `rho` in `lambert` and `base.rho` in `fa(lambert)`).
 
 use crate::bsdf::{Model, ParamDecl, Scale};
+use crate::choice::field_error;
 
-/// The constraint options as given (`NAME=…` strings), before they meet a model.
+/// What a constraint does with its numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConstraintKind {
+    /// Hold the parameter at one value, or one per entry (`NAME=VALUE[:VALUE…]`).
+    Fix,
+    /// Narrow its search range to [LO, HI] (`NAME=LO:HI`).
+    Bounds,
+    /// A Gaussian prior N(MEAN, SD²) (`NAME=MEAN:SD`).
+    Prior,
+}
+
+impl ConstraintKind {
+    /// The option as a field of a message (`{fix}`).
+    fn option(self) -> &'static str {
+        match self {
+            ConstraintKind::Fix => "{fix}",
+            ConstraintKind::Bounds => "{bounds}",
+            ConstraintKind::Prior => "{prior}",
+        }
+    }
+
+    /// The form of the option's text.
+    fn form(self) -> &'static str {
+        match self {
+            ConstraintKind::Fix => "NAME=VALUE",
+            ConstraintKind::Bounds => "NAME=LO:HI",
+            ConstraintKind::Prior => "NAME=MEAN:SD",
+        }
+    }
+
+    /// What each number is, in messages (a fix takes as many values as it is given).
+    fn number_names(self) -> [&'static str; 2] {
+        match self {
+            ConstraintKind::Fix => ["VALUE", "VALUE"],
+            ConstraintKind::Bounds => ["LO", "HI"],
+            ConstraintKind::Prior => ["MEAN", "SD"],
+        }
+    }
+}
+
+/// One constraint as a value: the parameter it names (full, flat or last component: see
+/// the module doc) and its numbers, with its text `NAME=…` (as given, or written from
+/// the numbers), which messages, saved sweeps and the sweep's `constraints` column show.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Constraint {
+    pub kind: ConstraintKind,
+    pub name: String,
+    /// Fix: one value, or one per entry of the parameter; bounds: LO, HI; prior: MEAN, SD.
+    pub values: Vec<f64>,
+    text: String,
+}
+
+impl Constraint {
+    /// A constraint from its text (`sigma=0.3`, `rho=0.4:0.5:0.6`, `alpha=0.01:0.5`,
+    /// `eta=1.5:0.1`); an error names the option as a field.
+    pub fn parse(kind: ConstraintKind, text: &str) -> anyhow::Result<Constraint> {
+        let (option, form) = (kind.option(), kind.form());
+        let (name, rest) = text
+            .split_once('=')
+            .map(|(n, r)| (n.trim(), r.trim()))
+            .filter(|(n, _)| !n.is_empty())
+            .ok_or_else(|| field_error(format!("{option} '{text}': expected {form}")))?;
+        let words: Vec<&str> = match kind {
+            ConstraintKind::Fix => rest.split(':').collect(),
+            ConstraintKind::Bounds | ConstraintKind::Prior => {
+                let (a, b) = rest
+                    .split_once(':')
+                    .ok_or_else(|| field_error(format!("{option} '{text}': expected {form}")))?;
+                vec![a, b]
+            }
+        };
+        let what = kind.number_names();
+        let values = words
+            .iter()
+            .enumerate()
+            .map(|(k, w)| number(w, what[k.min(1)], option, text))
+            .collect::<anyhow::Result<Vec<f64>>>()?;
+        Ok(Constraint {
+            kind,
+            name: name.to_string(),
+            values,
+            text: text.to_string(),
+        })
+    }
+
+    /// A constraint from its numbers (see [`Constraint::values`]), its text written from
+    /// them (`NAME=A:B`, each number as Rust's `{:?}` writes it); an error names the
+    /// option as a field, as [`Constraint::parse`] would.
+    pub fn new(kind: ConstraintKind, name: &str, values: &[f64]) -> anyhow::Result<Constraint> {
+        let numbers: Vec<String> = values.iter().map(|v| format!("{v:?}")).collect();
+        let text = format!("{}={}", name.trim(), numbers.join(":"));
+        let (option, form) = (kind.option(), kind.form());
+        let count_fits = match kind {
+            ConstraintKind::Fix => !values.is_empty(),
+            ConstraintKind::Bounds | ConstraintKind::Prior => values.len() == 2,
+        };
+        if name.trim().is_empty() || !count_fits {
+            return Err(field_error(format!("{option} '{text}': expected {form}")));
+        }
+        let what = kind.number_names();
+        for (k, v) in values.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(field_error(format!(
+                    "{option} {text}: {} '{v:?}' is not a number",
+                    what[k.min(1)]
+                )));
+            }
+        }
+        Ok(Constraint {
+            kind,
+            name: name.trim().to_string(),
+            values: values.to_vec(),
+            text,
+        })
+    }
+
+    /// Its text, `NAME=…`.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+}
+
+/// What a user imposes on a fit, before it meets a model: fixed values, bounds and
+/// priors, each kind in the order given. Saved (in a sweep's configuration) as the
+/// options' texts: `{"fix": ["sigma=0.3"], "bounds": [], "priors": [], "lenient": false}`.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(try_from = "SpecText", into = "SpecText")]
 pub struct ConstraintSpec {
-    pub fix: Vec<String>,
-    pub bounds: Vec<String>,
-    pub priors: Vec<String>,
+    pub items: Vec<Constraint>,
     /// Skip a name the model lacks instead of failing (runs over several models, which
     /// check the names once with [`ConstraintSpec::check_names_against`]).
     pub lenient: bool,
 }
 
+/// A [`ConstraintSpec`] as it is saved: the options' texts.
+#[derive(Clone, Default, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+struct SpecText {
+    fix: Vec<String>,
+    bounds: Vec<String>,
+    priors: Vec<String>,
+    lenient: bool,
+}
+
+impl TryFrom<SpecText> for ConstraintSpec {
+    type Error = String;
+    fn try_from(t: SpecText) -> Result<Self, String> {
+        ConstraintSpec::parse(&t.fix, &t.bounds, &t.priors, t.lenient).map_err(|e| format!("{e:#}"))
+    }
+}
+
+impl From<ConstraintSpec> for SpecText {
+    fn from(spec: ConstraintSpec) -> SpecText {
+        let texts = |kind| spec.of(kind).map(|c| c.text.clone()).collect();
+        SpecText {
+            fix: texts(ConstraintKind::Fix),
+            bounds: texts(ConstraintKind::Bounds),
+            priors: texts(ConstraintKind::Prior),
+            lenient: spec.lenient,
+        }
+    }
+}
+
 impl ConstraintSpec {
-    pub fn is_empty(&self) -> bool {
-        self.fix.is_empty() && self.bounds.is_empty() && self.priors.is_empty()
+    /// The constraints of the options' texts (`--fix`, `--bounds`, `--prior` as given);
+    /// the first that does not parse is the error (bounds checked first, then fixed
+    /// values, then priors, the order they are applied in).
+    pub fn parse<S: AsRef<str>>(
+        fix: &[S],
+        bounds: &[S],
+        priors: &[S],
+        lenient: bool,
+    ) -> anyhow::Result<ConstraintSpec> {
+        let parse = |kind, texts: &[S]| -> anyhow::Result<Vec<Constraint>> {
+            texts
+                .iter()
+                .map(|t| Constraint::parse(kind, t.as_ref()))
+                .collect()
+        };
+        let bounds = parse(ConstraintKind::Bounds, bounds)?;
+        let fix = parse(ConstraintKind::Fix, fix)?;
+        let priors = parse(ConstraintKind::Prior, priors)?;
+        Ok(ConstraintSpec {
+            items: fix.into_iter().chain(bounds).chain(priors).collect(),
+            lenient,
+        })
     }
 
-    /// Every (option, name) pair, for checks that each name means something.
-    fn names(&self) -> Vec<(&'static str, String)> {
-        fn name(s: &str) -> &str {
-            s.split_once('=').map_or(s, |(n, _)| n).trim()
-        }
-        let mut v = Vec::new();
-        v.extend(self.fix.iter().map(|s| ("{fix}", name(s).to_string())));
-        v.extend(
-            self.bounds
-                .iter()
-                .map(|s| ("{bounds}", name(s).to_string())),
-        );
-        v.extend(self.priors.iter().map(|s| ("{prior}", name(s).to_string())));
-        v
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    /// The constraints of one kind, in the order given.
+    pub fn of(&self, kind: ConstraintKind) -> impl Iterator<Item = &Constraint> + '_ {
+        self.items.iter().filter(move |c| c.kind == kind)
     }
 
     /// Check, before a run over several models (sweep, diagnose), that every name given
     /// is a parameter of at least one of them; a model that lacks a name ignores it.
     pub fn check_names_against(&self, models: &[&Model]) -> anyhow::Result<()> {
-        for (option, name) in self.names() {
-            if !models.iter().any(|m| resolve(m, &name).is_ok()) {
+        let kinds = [
+            ConstraintKind::Fix,
+            ConstraintKind::Bounds,
+            ConstraintKind::Prior,
+        ];
+        for c in kinds.into_iter().flat_map(|k| self.of(k)) {
+            let name = &c.name;
+            if !models.iter().any(|m| resolve(m, name).is_ok()) {
                 let specs: Vec<&str> = models.iter().map(|m| m.spec.as_str()).collect();
-                return Err(crate::choice::field_error(format!(
-                    "{option} {name}: no model of this run has a parameter '{name}' (models: {})",
+                return Err(field_error(format!(
+                    "{} {name}: no model of this run has a parameter '{name}' (models: {})",
+                    c.kind.option(),
                     specs.join(", ")
                 )));
             }
@@ -68,7 +240,7 @@ impl ConstraintSpec {
 /// An error of the checks of [`Constraints::resolve`], whose messages name the options
 /// as `{fix}`, `{bounds}`, `{prior}`, as a [`crate::choice::FieldError`].
 fn as_field_error(e: anyhow::Error) -> anyhow::Error {
-    crate::choice::field_error(format!("{e:#}"))
+    field_error(format!("{e:#}"))
 }
 
 /// A Gaussian prior on one flat parameter.
@@ -138,32 +310,12 @@ fn number(s: &str, what: &str, option: &str, item: &str) -> anyhow::Result<f64> 
         .parse::<f64>()
         .ok()
         .filter(|x| x.is_finite())
-        .ok_or_else(|| anyhow::anyhow!("{option} {item}: {what} '{}' is not a number", s.trim()))
-}
-
-/// `NAME=REST` → (name, rest).
-fn split_item<'a>(item: &'a str, option: &str, form: &str) -> anyhow::Result<(&'a str, &'a str)> {
-    item.split_once('=')
-        .map(|(n, r)| (n.trim(), r.trim()))
-        .filter(|(n, _)| !n.is_empty())
-        .ok_or_else(|| anyhow::anyhow!("{option} '{item}': expected {form}"))
-}
-
-/// `A:B` → (A, B).
-fn pair(
-    rest: &str,
-    option: &str,
-    item: &str,
-    form: &str,
-    names: [&str; 2],
-) -> anyhow::Result<(f64, f64)> {
-    let (a, b) = rest
-        .split_once(':')
-        .ok_or_else(|| anyhow::anyhow!("{option} '{item}': expected {form}"))?;
-    Ok((
-        number(a, names[0], option, item)?,
-        number(b, names[1], option, item)?,
-    ))
+        .ok_or_else(|| {
+            field_error(format!(
+                "{option} {item}: {what} '{}' is not a number",
+                s.trim()
+            ))
+        })
 }
 
 impl Constraints {
@@ -205,10 +357,10 @@ impl Constraints {
                 Err(msg) => anyhow::bail!("{option} {item}: {msg}"),
             }
         };
-        for item in &spec.bounds {
-            let (name, rest) = split_item(item, "{bounds}", "NAME=LO:HI")?;
-            let (lo, hi) = pair(rest, "{bounds}", item, "NAME=LO:HI", ["LO", "HI"])?;
-            let Some(ix) = lookup("{bounds}", item, name)? else {
+        for con in spec.of(ConstraintKind::Bounds) {
+            let item = con.text();
+            let (lo, hi) = (con.values[0], con.values[1]);
+            let Some(ix) = lookup("{bounds}", item, &con.name)? else {
                 continue;
             };
             for j in ix {
@@ -231,12 +383,8 @@ impl Constraints {
                 c.narrowed.push(j);
             }
         }
-        for item in &spec.fix {
-            let (name, rest) = split_item(item, "{fix}", "NAME=VALUE")?;
-            let values: Vec<f64> = rest
-                .split(':')
-                .map(|v| number(v, "VALUE", "{fix}", item))
-                .collect::<anyhow::Result<_>>()?;
+        for con in spec.of(ConstraintKind::Fix) {
+            let (item, name, values) = (con.text(), con.name.as_str(), &con.values);
             let Some(ix) = lookup("{fix}", item, name)? else {
                 continue;
             };
@@ -263,11 +411,11 @@ impl Constraints {
                 c.fixed[j] = Some(v);
             }
         }
-        for item in &spec.priors {
-            let (name, rest) = split_item(item, "{prior}", "NAME=MEAN:SD")?;
-            let (mean, sd) = pair(rest, "{prior}", item, "NAME=MEAN:SD", ["MEAN", "SD"])?;
+        for con in spec.of(ConstraintKind::Prior) {
+            let item = con.text();
+            let (mean, sd) = (con.values[0], con.values[1]);
             anyhow::ensure!(sd > 0.0, "{{prior}} {item}: SD must be positive");
-            let Some(ix) = lookup("{prior}", item, name)? else {
+            let Some(ix) = lookup("{prior}", item, &con.name)? else {
                 continue;
             };
             for j in ix {
@@ -389,13 +537,7 @@ mod tests {
     use super::*;
 
     fn spec(fix: &[&str], bounds: &[&str], priors: &[&str]) -> ConstraintSpec {
-        let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect();
-        ConstraintSpec {
-            fix: v(fix),
-            bounds: v(bounds),
-            priors: v(priors),
-            lenient: false,
-        }
+        ConstraintSpec::parse(fix, bounds, priors, false).unwrap()
     }
 
     #[test]
@@ -458,11 +600,18 @@ mod tests {
 
     #[test]
     fn malformed_options_are_errors_naming_the_option() {
+        for ((fix, priors), want) in [
+            ((&["rho"][..], &[][..]), "fix 'rho': expected NAME=VALUE"),
+            ((&["rho=x"], &[]), "VALUE 'x' is not a number"),
+            ((&[], &["rho=0.5"]), "expected NAME=MEAN:SD"),
+        ] {
+            let err = ConstraintSpec::parse(fix, &[], priors, false)
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want), "{fix:?} {priors:?}: {err}");
+        }
         let m = Model::parse("lambert", 1).unwrap();
         for (s, want) in [
-            (spec(&["rho"], &[], &[]), "fix 'rho': expected NAME=VALUE"),
-            (spec(&["rho=x"], &[], &[]), "VALUE 'x' is not a number"),
-            (spec(&[], &[], &["rho=0.5"]), "expected NAME=MEAN:SD"),
             (spec(&[], &[], &["rho=0.5:0"]), "SD must be positive"),
             (
                 spec(&["rho=0.5"], &[], &["rho=0.5:0.1"]),
@@ -477,5 +626,60 @@ mod tests {
         // Lenient resolution skips a name the model lacks, strict names it.
         assert!(Constraints::resolve(&m, &spec(&["alpha=0.2"], &[], &[]), true).is_ok());
         assert!(Constraints::resolve(&m, &spec(&["alpha=0.2"], &[], &[]), false).is_err());
+    }
+
+    /// A constraint given as numbers is the one its text gives, and is written as that
+    /// text; numbers a text could not hold are refused with the text's messages.
+    #[test]
+    fn constraints_from_numbers_are_those_of_their_text() {
+        use ConstraintKind::{Bounds, Fix, Prior};
+        for (kind, name, values, text) in [
+            (Fix, "sigma", &[0.3][..], "sigma=0.3"),
+            (Fix, "rho", &[0.4, 0.5, 0.6], "rho=0.4:0.5:0.6"),
+            (Bounds, "alpha", &[0.01, 0.5], "alpha=0.01:0.5"),
+            (Prior, "eta", &[1.5, 0.0], "eta=1.5:0.0"),
+        ] {
+            let given = Constraint::new(kind, name, values).unwrap();
+            assert_eq!(given.text(), text);
+            assert_eq!(given, Constraint::parse(kind, text).unwrap());
+        }
+        for (kind, values, want) in [
+            (Bounds, &[0.1][..], "bounds 'a=0.1': expected NAME=LO:HI"),
+            (
+                Prior,
+                &[0.1, 0.2, 0.3],
+                "prior 'a=0.1:0.2:0.3': expected NAME=MEAN:SD",
+            ),
+            (Fix, &[], "fix 'a=': expected NAME=VALUE"),
+            (
+                Bounds,
+                &[0.1, f64::NAN],
+                "bounds a=0.1:NaN: HI 'NaN' is not a number",
+            ),
+        ] {
+            let err = Constraint::new(kind, "a", values).unwrap_err().to_string();
+            assert_eq!(err, want);
+        }
+    }
+
+    /// A spec is saved as the options' texts, as given, and read back the same.
+    #[test]
+    fn specs_are_saved_as_their_texts() {
+        let s = ConstraintSpec::parse(&["sigma = 0.30"], &["alpha=0.1:0.2"], &[], true).unwrap();
+        let json = serde_json::to_string(&s).unwrap();
+        assert_eq!(
+            json,
+            r#"{"fix":["sigma = 0.30"],"bounds":["alpha=0.1:0.2"],"priors":[],"lenient":true}"#
+        );
+        assert_eq!(serde_json::from_str::<ConstraintSpec>(&json).unwrap(), s);
+        let err = serde_json::from_str::<ConstraintSpec>(r#"{"fix":["sigma"]}"#).unwrap_err();
+        assert!(
+            err.to_string().contains("fix 'sigma': expected NAME=VALUE"),
+            "{err}"
+        );
+        assert_eq!(
+            serde_json::from_str::<ConstraintSpec>("{}").unwrap(),
+            ConstraintSpec::default()
+        );
     }
 }

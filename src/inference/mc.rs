@@ -348,10 +348,13 @@ mod tests {
             optimizer: Optimizer::Lm,
             restarts: 1,
             screen: 1,
-            constraints: crate::inference::constraints::ConstraintSpec {
-                bounds: vec![format!("rho={}:{}", bounds[0], bounds[1])],
-                ..Default::default()
-            },
+            constraints: crate::inference::constraints::ConstraintSpec::parse(
+                &[],
+                &[format!("rho={}:{}", bounds[0], bounds[1])],
+                &[],
+                false,
+            )
+            .unwrap(),
             ..FitOptions::default()
         };
         let mc = McOptions {

@@ -22,10 +22,10 @@ pub const DEFAULT_RESTARTS: usize = 16;
 pub struct FitRequest {
     /// Model spec, e.g. `fa(eon)`.
     pub model: String,
-    /// Loss name (`chi2`, or one of the paper's losses for the data's kind).
-    pub loss: String,
-    /// Weighting name (`uniform`, `relunc`, `invunc`).
-    pub weights: String,
+    /// The loss: χ², or one of the paper's losses for the data's kind.
+    pub loss: Metric,
+    /// The weighting of the paper's losses (χ² weighs by 1/u² whatever it is).
+    pub weights: Weights,
     /// None: LM for sum-of-squares losses, compass search for smape.
     pub optimizer: Option<Optimizer>,
     pub restarts: usize,
@@ -42,8 +42,8 @@ impl Default for FitRequest {
     fn default() -> Self {
         FitRequest {
             model: String::new(),
-            loss: "chi2".into(),
-            weights: "uniform".into(),
+            loss: Metric::Chi2,
+            weights: Weights::Uniform,
             optimizer: None,
             restarts: DEFAULT_RESTARTS,
             seed: 1,
@@ -55,14 +55,21 @@ impl Default for FitRequest {
     }
 }
 
-/// The loss named by a loss and a weighting, checked against the kind of data.
-pub fn parse_loss(loss: &str, weights: &str, kind: Kind) -> Result<Loss> {
-    let metric: Metric = loss
-        .parse()
-        .map_err(|e: String| field_error(format!("{{loss}}: {e}")))?;
-    let weights: Weights = weights
-        .parse()
-        .map_err(|e: String| field_error(format!("{{weights}}: {e}")))?;
+/// The loss a word names (`chi2`, `rmse`, …), as an error of the `loss` option.
+pub fn parse_metric(word: &str) -> Result<Metric> {
+    word.parse()
+        .map_err(|e: String| field_error(format!("{{loss}}: {e}")))
+}
+
+/// The weighting a word names (`uniform`, `relunc`, `invunc`), as an error of the
+/// `weights` option.
+pub fn parse_weights(word: &str) -> Result<Weights> {
+    word.parse()
+        .map_err(|e: String| field_error(format!("{{weights}}: {e}")))
+}
+
+/// The loss of a metric and a weighting, checked against the kind of data.
+pub fn loss_for(metric: Metric, weights: Weights, kind: Kind) -> Result<Loss> {
     if !metric.applies_to(kind) {
         return Err(field_error(format!(
             "{{loss={metric}}} is not defined for {kind} data (use one of {:?} or chi2)",
@@ -183,11 +190,11 @@ impl FitRequest {
         self.mc * (self.mc_restarts.max(1) + 1)
     }
 
-    /// The model, loss and fit options for `data`; a misspelt model, loss or parameter
-    /// name fails here, before any work.
+    /// The model, loss and fit options for `data`; a misspelt model or parameter name, or
+    /// a loss not defined for the data's kind, fails here, before any work.
     pub fn prepare(&self, data: &Dataset) -> Result<(Model, Loss, FitOptions)> {
         self.check()?;
-        let loss = parse_loss(&self.loss, &self.weights, data.kind)?;
+        let loss = loss_for(self.loss, self.weights, data.kind)?;
         let model = Model::for_data(&self.model, data).map_err(|e| model_error(&e))?;
         Constraints::resolve(&model, &self.constraints, false)?;
         let opts = FitOptions {

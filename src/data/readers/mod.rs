@@ -307,19 +307,24 @@ pub fn parse_assumed_note(note: &str) -> Option<(f64, f64)> {
     Some((after("REL")?, after("ABS")?))
 }
 
-/// Parse `REL,ABS` for `--assume-uncertainty`: both finite, ≥ 0, not both zero.
+/// Parse `REL,ABS`, an uncertainty to assume: both finite, ≥ 0, not both zero. The
+/// message names what is wrong, not the option: the caller names it.
 pub fn parse_assume_arg(s: &str) -> Result<(f64, f64), String> {
     let bad = || {
-        format!("--assume-uncertainty: expected REL,ABS such as 0.05,0.001 (u = sqrt((REL·|value|)² + ABS²) sr⁻¹), got '{s}'")
+        format!(
+            "expected REL,ABS such as 0.05,0.001 (u = sqrt((REL·|value|)² + ABS²) sr⁻¹), got '{s}'"
+        )
     };
     let (r, a) = s.split_once(',').ok_or_else(bad)?;
     let rel: f64 = r.trim().parse().map_err(|_| bad())?;
     let abs: f64 = a.trim().parse().map_err(|_| bad())?;
+    check_assumed(rel, abs).map_err(|e| format!("{}: {e}", bad()))
+}
+
+/// An uncertainty to assume, (REL, ABS): both finite, ≥ 0, not both zero.
+pub fn check_assumed(rel: f64, abs: f64) -> Result<(f64, f64), String> {
     if !(rel.is_finite() && abs.is_finite() && rel >= 0.0 && abs >= 0.0) || rel + abs == 0.0 {
-        return Err(format!(
-            "{}: REL and ABS must be finite, ≥ 0 and not both zero",
-            bad()
-        ));
+        return Err("REL and ABS must be finite, ≥ 0 and not both zero".into());
     }
     Ok((rel, abs))
 }

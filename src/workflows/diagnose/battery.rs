@@ -67,6 +67,55 @@ impl Default for BatteryOptions {
     }
 }
 
+impl BatteryOptions {
+    /// The checks made before any case is drawn, for every caller: the ranges of the
+    /// signal and of the sample counts. Errors name the options as fields.
+    pub fn check(&self) -> Result<()> {
+        let (lo, hi) = self.signal;
+        if !(lo > 0.0 && hi >= lo) {
+            return Err(crate::choice::field_error(format!(
+                "{{signal={lo},{hi}}}: 0 < LO ≤ HI"
+            )));
+        }
+        let (lo, hi) = self.samples;
+        if !(lo >= 20 && hi >= lo) {
+            return Err(crate::choice::field_error(format!(
+                "{{samples={lo},{hi}}}: 20 ≤ LO ≤ HI"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The cases the battery runs: one, or every case of the plan.
+    pub fn total(&self) -> usize {
+        if self.only.is_some() {
+            1
+        } else {
+            self.effects.len() * self.cases + self.nulls
+        }
+    }
+}
+
+/// The effects named by `names` (as `diagnose` names them); an unknown name is an error
+/// of the `effects` option, listing the known ones.
+pub fn effects_named<S: AsRef<str>>(names: &[S]) -> Result<Vec<Effect>> {
+    names
+        .iter()
+        .map(|n| {
+            let n = n.as_ref();
+            Effect::from_name(n.trim()).ok_or_else(|| {
+                crate::choice::field_error(format!(
+                    "{{effects}}: unknown effect '{n}' (known: {})",
+                    Effect::all()
+                        .map(|e| e.name())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })
+        })
+        .collect()
+}
+
 /// One generated case.
 #[derive(Clone, Debug, Serialize)]
 pub struct Case {

@@ -191,18 +191,19 @@ impl Diagnosis {
 pub fn check_start(
     data: &crate::data::Dataset,
     model: &str,
-    loss: &str,
-    weights: &str,
+    metric: Metric,
+    weights: Weights,
     alpha: f64,
     constraints: &crate::inference::constraints::ConstraintSpec,
 ) -> anyhow::Result<(Loss, crate::bsdf::Model)> {
-    let loss = crate::workflows::fit::parse_loss(loss, weights, data.kind)?;
-    anyhow::ensure!(
-        alpha > 0.0 && alpha < 1.0,
-        "--alpha must be in (0, 1), got {alpha}"
-    );
-    let start =
-        crate::bsdf::Model::for_data(model, data).map_err(|e| anyhow::anyhow!("--model: {e}"))?;
+    let loss = crate::workflows::fit::loss_for(metric, weights, data.kind)?;
+    if !(alpha > 0.0 && alpha < 1.0) {
+        return Err(crate::choice::field_error(format!(
+            "{{alpha}} must be in (0, 1), got {alpha}"
+        )));
+    }
+    let start = crate::bsdf::Model::for_data(model, data)
+        .map_err(|e| crate::workflows::fit::model_error(&e))?;
     let strict = crate::inference::constraints::ConstraintSpec {
         lenient: false,
         ..constraints.clone()

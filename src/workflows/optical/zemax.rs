@@ -4,6 +4,7 @@
 //! ∫ f cos θ dω over the whole hemisphere ([`super::tis`]), not the table's sum.
 
 use super::{nearest_channel, provenance, tis::tis, Planes};
+use crate::choice::field_error;
 use crate::data::readers::zemax::{self, geometry, Header, Symmetry, NOMINAL_XYZ_NM, SYMMETRIES};
 use crate::data::Kind;
 use crate::inference::saved::FitFile;
@@ -60,7 +61,7 @@ impl ZemaxGrid {
         }
     }
 
-    /// `--geometry`: a Zemax file (its grid), or `key=list;…` with keys `rotation`,
+    /// The `geometry` option: a Zemax file (its grid), or `key=list;…` with keys `rotation`,
     /// `aoi`, `azimuth`, `radial`, `symmetry` (a list is numbers and `from:step:to`
     /// ranges joined by commas; a key left out keeps the usual grid's list).
     pub fn parse(spec: &str, default_symmetry: Symmetry) -> Result<ZemaxGrid> {
@@ -70,16 +71,17 @@ impl ZemaxGrid {
             let h = zemax::read_header(std::io::BufReader::new(f), spec)?;
             return Ok(ZemaxGrid::of(&h));
         }
-        anyhow::ensure!(
-            spec.contains('='),
-            "--geometry '{spec}': neither a Zemax file nor a grid such as 'aoi=0:10:80;azimuth=0:10:180;radial=0:5:90'"
-        );
+        if !spec.contains('=') {
+            return Err(field_error(format!(
+                "{{geometry}} '{spec}': neither a Zemax file nor a grid such as 'aoi=0:10:80;azimuth=0:10:180;radial=0:5:90'"
+            )));
+        }
         let mut symmetry = default_symmetry;
         let mut lists: [Option<Vec<f64>>; 4] = [None, None, None, None];
         for item in spec.split(';').map(str::trim).filter(|s| !s.is_empty()) {
             let (k, v) = item
                 .split_once('=')
-                .ok_or_else(|| anyhow::anyhow!("--geometry: '{item}' is not key=list"))?;
+                .ok_or_else(|| field_error(format!("{{geometry}}: '{item}' is not key=list")))?;
             let k = k.trim().to_ascii_lowercase();
             if k == "symmetry" {
                 let word = v.trim();
@@ -88,10 +90,10 @@ impl ZemaxGrid {
                     .find(|(w, _)| w.eq_ignore_ascii_case(word))
                     .map(|(_, s)| *s)
                     .ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "--geometry: symmetry '{}' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D",
+                        field_error(format!(
+                            "{{geometry}}: symmetry '{}' is not PlaneSymmetrical, Asymmetrical or Asymmetrical4D",
                             word.to_ascii_lowercase()
-                        )
+                        ))
                     })?;
                 continue;
             }
@@ -100,11 +102,14 @@ impl ZemaxGrid {
                 "aoi" | "incidence" | "angleofincidence" => 1,
                 "azimuth" | "scatterazimuth" => 2,
                 "radial" | "scatterradial" => 3,
-                _ => anyhow::bail!(
-                    "--geometry: unknown key '{k}' (rotation, aoi, azimuth, radial, symmetry)"
-                ),
+                _ => {
+                    return Err(field_error(format!(
+                        "{{geometry}}: unknown key '{k}' (rotation, aoi, azimuth, radial, symmetry)"
+                    )))
+                }
             };
-            lists[slot] = Some(parse_list(v).map_err(|e| anyhow::anyhow!("--geometry {k}: {e}"))?);
+            lists[slot] =
+                Some(parse_list(v).map_err(|e| field_error(format!("{{geometry}} {k}: {e}")))?);
         }
         let usual = ZemaxGrid::usual(symmetry);
         let [r, i, a, d] = lists;
@@ -143,34 +148,43 @@ impl ZemaxGrid {
 
     /// The ranges and combinations the reader accepts.
     fn check(&self) -> Result<()> {
-        anyhow::ensure!(
+        let require = |ok: bool, template: String| {
+            if ok {
+                Ok(())
+            } else {
+                Err(field_error(template))
+            }
+        };
+        require(
             self.incidences.iter().all(|a| (0.0..=90.0).contains(a)),
-            "--geometry: incidences must be in [0, 90]°"
-        );
-        anyhow::ensure!(
+            "{geometry}: incidences must be in [0, 90]°".into(),
+        )?;
+        require(
             self.radials.iter().all(|r| (0.0..=180.0).contains(r)),
-            "--geometry: radial angles must be in [0, 180]°"
-        );
-        anyhow::ensure!(
+            "{geometry}: radial angles must be in [0, 180]°".into(),
+        )?;
+        require(
             self.rotations.len() == 1 || self.symmetry == Symmetry::Asymmetrical4D,
-            "--geometry: several sample rotations need symmetry=Asymmetrical4D"
-        );
-        anyhow::ensure!(
+            "{geometry}: several sample rotations need symmetry=Asymmetrical4D".into(),
+        )?;
+        require(
             self.symmetry != Symmetry::PlaneSymmetrical
                 || self.azimuths.iter().all(|a| (0.0..=180.0).contains(a)),
-            "--geometry: a PlaneSymmetrical table has azimuths in [0, 180]°"
-        );
+            "{geometry}: a PlaneSymmetrical table has azimuths in [0, 180]°".into(),
+        )?;
         for (name, v) in [
             ("rotation", &self.rotations),
             ("aoi", &self.incidences),
             ("azimuth", &self.azimuths),
             ("radial", &self.radials),
         ] {
-            anyhow::ensure!(
+            require(
                 !v.is_empty() && v.len() <= zemax::MAX_ANGLES,
-                "--geometry: {name} needs 1 to {} angles",
-                zemax::MAX_ANGLES
-            );
+                format!(
+                    "{{geometry}}: {name} needs 1 to {} angles",
+                    zemax::MAX_ANGLES
+                ),
+            )?;
         }
         Ok(())
     }

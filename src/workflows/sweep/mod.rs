@@ -27,7 +27,7 @@ use crate::data::Kind;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;
 use crate::output::results::{write_if_changed, DataFile, FitKey, Row, Skipped, SKIPPED_JSON};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -181,7 +181,12 @@ pub fn tasks(files: &[DataFile], args: &Selection) -> Result<Vec<Task>> {
                             }
                             "lm" => Optimizer::Lm,
                             "compass" => Optimizer::Compass,
-                            other => bail!("--optimizer: unknown '{other}' (auto, lm, compass)"),
+                            other => {
+                                return Err(field_error(format!(
+                                    "{{optimizer}}: unknown '{}' (auto, lm, compass)",
+                                    other.replace(['{', '}'], "")
+                                )))
+                            }
                         };
                         if o == Optimizer::Lm && !Loss::new(loss, w).is_sum_of_squares() {
                             continue; // LM needs a sum of squares

@@ -181,10 +181,15 @@ pub fn read_cells(cfg: &SweepConfig) -> Result<(Vec<DataFile>, Vec<Task>)> {
 
 /// The run's constraint options as one canonical text (the `constraints` column).
 pub fn constraints_text(c: &ConstraintSpec) -> String {
+    use crate::inference::constraints::ConstraintKind;
     let mut items: Vec<String> = Vec::new();
-    items.extend(c.fix.iter().map(|s| format!("fix {}", s.trim())));
-    items.extend(c.bounds.iter().map(|s| format!("bounds {}", s.trim())));
-    items.extend(c.priors.iter().map(|s| format!("prior {}", s.trim())));
+    for (kind, word) in [
+        (ConstraintKind::Fix, "fix"),
+        (ConstraintKind::Bounds, "bounds"),
+        (ConstraintKind::Prior, "prior"),
+    ] {
+        items.extend(c.of(kind).map(|s| format!("{word} {}", s.text().trim())));
+    }
     items.join("; ")
 }
 
@@ -240,7 +245,9 @@ impl Place {
 /// pictures and report).
 pub fn run(cfg: &SweepConfig, obs: &mut dyn SweepObserver) -> Result<SweepStats> {
     let t0 = Instant::now();
-    anyhow::ensure!(cfg.restarts >= 1, "--restarts: at least 1");
+    if cfg.restarts < 1 {
+        return Err(crate::choice::field_error("{restarts}: at least 1"));
+    }
     let place = Place::of(cfg)?;
     let out = &place.out;
     let (files, all) = read_cells(cfg)?;
