@@ -457,10 +457,7 @@ fn the_bundled_elliptical_diffuser_is_one_anisotropic_surface() {
         let opts = FitOptions {
             restarts: 16,
             seed: 1,
-            constraints: ConstraintSpec {
-                fix: fix.iter().map(|s| s.to_string()).collect(),
-                ..Default::default()
-            },
+            constraints: ConstraintSpec::parse(fix, &[], &[], false).unwrap(),
             ..Default::default()
         };
         let loss = Loss::new(Metric::Chi2, Weights::Uniform);
