@@ -26,7 +26,7 @@
 //!
 //! The parametrisation has a symmetry: (α_u, α_v, φ0) and (α_v, α_u, φ0 ± 90°) are the
 //! same surface, so φ0 ranges over [−90°, 90°] and every surface is found with
-//! |φ0| ≤ 45°, away from the bounds.
+//! |φ0| ≤ 45°, away from the bounds; fits report that form ([`Bsdf::frame_params`]).
 
 use super::btdf::{walter_transmission, Ndf};
 use super::effect::{Adds, Effect};
@@ -306,6 +306,9 @@ impl Bsdf for GgxAniso {
     fn entry(&self) -> &'static Entry {
         &GGX_ENTRY
     }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([1, 2, 3])
+    }
     fn params(&self) -> Vec<ParamDecl> {
         vec![KS, ALPHA_U, ALPHA_V, PHI0, ETA]
     }
@@ -341,6 +344,9 @@ const FA_ENTRY: Entry = Entry::layer(
 impl Bsdf for FaAniso {
     fn entry(&self) -> &'static Entry {
         &FA_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([0, 1, 2])
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
@@ -397,6 +403,9 @@ impl Bsdf for CoatAniso {
     fn entry(&self) -> &'static Entry {
         &COAT_ENTRY
     }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([1, 2, 3])
+    }
     fn params(&self) -> Vec<ParamDecl> {
         vec![
             super::coat::KC,
@@ -449,6 +458,9 @@ impl BtdfAniso {
 impl Bsdf for BtdfAniso {
     fn entry(&self) -> &'static Entry {
         &BTDF_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([0, 1, 2])
     }
     fn params(&self) -> Vec<ParamDecl> {
         match self.ndf {

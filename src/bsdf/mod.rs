@@ -264,6 +264,13 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     fn anisotropic(&self) -> Option<Arc<dyn Bsdf>> {
         None
     }
+    /// An anisotropic lobe's (α_u, α_v, φ0): the positions of the two roughnesses and of
+    /// the frame's azimuth (degrees) among the node's parameters. (α_u, α_v, φ0) and
+    /// (α_v, α_u, φ0 ∓ 90°) are the same surface; [`Model::canonical_form`] picks the one
+    /// with |φ0| ≤ 45°.
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        None
+    }
     /// Whether f(i, o) = f(o, i) holds (tests check it where claimed).
     fn reciprocal(&self) -> bool {
         true
@@ -735,6 +742,26 @@ impl Model {
             }
         }
         Ok(flat)
+    }
+
+    /// `flat` with every anisotropic lobe in the form with |φ0| ≤ 45° (swapping α_u and
+    /// α_v, φ0 ∓ 90°): the same model values, so a fit reports one form of each surface.
+    /// A lobe is left as it is unless `free` holds for its three flat indices (a user's
+    /// bounds, fixed values or priors are not carried over a swap).
+    pub fn canonical_form(&self, flat: &mut [f64], free: impl Fn(usize) -> bool) {
+        for node in self.nodes() {
+            let Some(local) = node.bsdf.frame_params() else {
+                continue;
+            };
+            let [u, v, phi] = local.map(|k| self.params[node.offset + k].index);
+            if self.params[node.offset + local[0]].axes > 1 || ![u, v, phi].into_iter().all(&free) {
+                continue;
+            }
+            if flat[phi].abs() > 45.0 {
+                flat.swap(u, v);
+                flat[phi] -= 90.0f64.copysign(flat[phi]);
+            }
+        }
     }
 
     /// Every node in pre-order (the order of offsets).

@@ -55,7 +55,14 @@ pub(super) fn conclude(
     let t0 = Instant::now();
     let cpu = crate::engine::cpu::CpuBackend::new();
     let mut eval = cpu.prepare(Problem { model, data, loss })?;
-    let flat = best.flat;
+    let mut flat = best.flat;
+    // One form of each anisotropic surface (|φ0| ≤ 45°) where its parameters are free
+    // within their declared bounds: the values, and so the loss, are the same.
+    let declared = model.flat_decls();
+    let prior_on = |j: usize| space.priors.iter().any(|p| p.index == j);
+    model.canonical_form(&mut flat, |j| {
+        space.fixed[j].is_none() && space.decls[j] == declared[j] && !prior_on(j)
+    });
     let searched = best.evaluations;
     let values = eval.values(&flat)?;
     let chi2 = chi2(data, &values);
