@@ -33,7 +33,7 @@ use super::effect::{Adds, Effect};
 use super::ggx::{ETA, KS};
 use super::microfacet::{gg_lambda_table, Distribution, Gg, Masking, C2_MIN, MICROFACET_WGSL};
 use super::{
-    each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, Role,
+    each_direction, pass_through, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, Role,
     WgslFn,
 };
 use crate::data::Kind;
@@ -261,29 +261,25 @@ pub fn ggx_aniso_reflect(
     wi: DVec3,
     wo: DVec3,
 ) -> f64 {
-    ks * AnisoLobe::at(au, av, frame, eta, wi, wo)
+    ks * lobe_kernel(au, av, frame, eta, wi, wo)
 }
 
-/// What the channels of one direction share: F · kernel (0 below the surface).
-#[derive(Clone, Copy, Debug)]
-struct AnisoLobe;
-
-impl AnisoLobe {
-    #[inline]
-    fn at(au: f64, av: f64, frame: Frame, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return 0.0;
-        }
-        let (li, lo) = (frame.local(wi), frame.local(wo));
-        let sum = li + lo;
-        let len = sum.length();
-        let (m, cos_h) = if len < 1e-12 {
-            (DVec3::Z, li.z)
-        } else {
-            (sum, 0.5 * len)
-        };
-        fresnel_dielectric(cos_h, eta) * AnisoGgx { au, av }.reflection(li, lo, m)
+/// What the channels of one direction share: F(ωi·h; η) · D G1 G1 / (4 μi μo), 0 below
+/// the surface (k_s is the lobe's only rgb parameter).
+#[inline]
+fn lobe_kernel(au: f64, av: f64, frame: Frame, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return 0.0;
     }
+    let (li, lo) = (frame.local(wi), frame.local(wo));
+    let sum = li + lo;
+    let len = sum.length();
+    let (m, cos_h) = if len < 1e-12 {
+        (DVec3::Z, li.z)
+    } else {
+        (sum, 0.5 * len)
+    };
+    fresnel_dielectric(cos_h, eta) * AnisoGgx { au, av }.reflection(li, lo, m)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -318,7 +314,7 @@ impl Bsdf for GgxAniso {
     fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
         let (au, av, frame, eta) = (p.get(0, 1), p.get(0, 2), Frame::new(p.get(0, 3)), p.get(0, 4));
         each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            let lobe = AnisoLobe::at(au, av, frame, eta, wi, wo);
+            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
             for (i, o) in out.iter_mut().enumerate() {
                 *o = p.get(i, 0) * lobe;
             }
@@ -376,7 +372,7 @@ impl Bsdf for FaAniso {
                 return;
             }
             let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
-            let lobe = AnisoLobe::at(au, av, frame, eta, wi, wo);
+            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 *o = p.get(i, 4) * lobe + transmit * b;
             }
@@ -529,9 +525,7 @@ impl Bsdf for Aniso {
         children[0]
     }
     fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        each_direction(dirs, p.len(), out, |d, _, _, out| {
-            out.copy_from_slice(children.at(0, d))
-        });
+        pass_through(p, dirs, children, out)
     }
     fn reciprocal(&self) -> bool {
         // ggx and fa stay reciprocal (the frame turns both directions); btdf never was.

@@ -190,6 +190,15 @@ pub fn each_direction(
     }
 }
 
+/// [`Bsdf::eval_channels`] of a node that passes its one child's values through (the
+/// suffixes `+peraxis` and `+aniso`, whose work is in the layout or in the nodes below).
+#[inline]
+pub fn pass_through(p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+    each_direction(dirs, p.len(), out, |d, _, _, out| {
+        out.copy_from_slice(children.at(0, d))
+    });
+}
+
 /// A one-entry cache of a function of one f64, keyed on its bits: in a block of
 /// directions consecutive ones often share θi (a goniometer scans θo at a fixed θi) or
 /// θo (several φo at one θo), so a factor of μi or μo alone (a Fresnel transmittance) is

@@ -5,7 +5,7 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/bsdf/peraxis.wgsl`.
 
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{pass_through, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use glam::DVec3;
 
@@ -43,9 +43,7 @@ impl Bsdf for PerAxis {
         children[0]
     }
     fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        each_direction(dirs, p.len(), out, |d, _, _, out| {
-            out.copy_from_slice(children.at(0, d))
-        });
+        pass_through(p, dirs, children, out)
     }
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters

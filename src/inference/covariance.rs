@@ -217,7 +217,8 @@ pub fn covariance(
     // frame: the normal matrix may still be regular (the plane's width, height and
     // masking weigh them differently), but their values would be one of many sets.
     let mut undetermined = singular.clone();
-    if data.direction_planes() < 2 {
+    // (The planes are counted only for such a model: it scans every sample.)
+    if free_decls.iter().any(|d| d.needs_planes) && data.direction_planes() < 2 {
         let names_in_plane: Vec<&str> = (0..p)
             .filter(|&c| free_decls[c].needs_planes)
             .inspect(|&c| undetermined[c] = true)
