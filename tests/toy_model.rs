@@ -15,6 +15,7 @@ use bsdfit::data::{Dataset, Kind, ReadOptions};
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::simd::SimdBackend;
 use bsdfit::engine::{Backend, Problem};
 use bsdfit::inference::fit::{fit, FitOptions, FitReport};
 use bsdfit::inference::saved::FitFile;
@@ -80,7 +81,7 @@ fn assert_recovered(r: &FitReport, truth: &[f64], backend: &str) {
 }
 
 #[test]
-fn the_toy_model_is_in_the_catalogue_and_fits_on_both_backends() {
+fn the_toy_model_is_in_the_catalogue_and_fits_on_every_backend() {
     register();
     // Declared a diffuse base: the catalogue puts it alone and under every layer.
     let brdf = bsdf::catalogue(Kind::Brdf);
@@ -96,25 +97,34 @@ fn the_toy_model_is_in_the_catalogue_and_fits_on_both_backends() {
     let cpu = fit_on(&model, &data, &CpuBackend::new());
     assert_recovered(&cpu, &truth, "cpu");
     let gpu = GpuBackend::new().expect("a Vulkan adapter (CI installs lavapipe)");
-    let on_gpu = fit_on(&model, &data, &gpu);
-    assert_recovered(&on_gpu, &truth, "gpu");
-    // The two backends find the same optimum: f32 kernels, then an f64 polish.
-    for (i, name) in cpu.flat_names.iter().enumerate() {
-        let sd = cpu.flat_std[i].unwrap();
-        let d = (on_gpu.flat_params[i] - cpu.flat_params[i]).abs();
-        assert!(
-            d < 0.01 * sd,
-            "{name}: gpu {} vs cpu {}",
-            on_gpu.flat_params[i],
-            cpu.flat_params[i]
-        );
+    // The SIMD engine runs the toy without a fourth touch: it has no kernel, so its
+    // lanes go through its f64 `eval`.
+    let simd = SimdBackend::new();
+    for (id, backend) in [("gpu", &gpu as &dyn Backend), ("simd", &simd)] {
+        let other = fit_on(&model, &data, backend);
+        assert_recovered(&other, &truth, id);
+        // The backends find the same optimum: f32 evaluations, then an f64 polish.
+        for (i, name) in cpu.flat_names.iter().enumerate() {
+            let sd = cpu.flat_std[i].unwrap();
+            let d = (other.flat_params[i] - cpu.flat_params[i]).abs();
+            assert!(
+                d < 0.01 * sd,
+                "{name}: {id} {} vs cpu {}",
+                other.flat_params[i],
+                cpu.flat_params[i]
+            );
+        }
     }
 
-    // A nested model: the toy under the Fresnel aggregate's lobe.
+    // A nested model: the toy under the Fresnel aggregate's lobe (a kernel above a node
+    // without one, on the SIMD engine).
     let params = "base.rho=0.2:0.4:0.6,base.k=1.3,lobe.alpha=0.15,lobe.eta=1.5,lobe.ks=0.7";
     let (model, truth, data) = synth("fa(minnaert)", params, "specular+offplane", 6);
+    assert_eq!(model.nodes_without_kernel(), ["minnaert"]);
     let r = fit_on(&model, &data, &CpuBackend::new());
     assert_recovered(&r, &truth, "cpu, fa(minnaert)");
+    let r = fit_on(&model, &data, &simd);
+    assert_recovered(&r, &truth, "simd, fa(minnaert)");
 }
 
 /// The toy's twins agree: GPU (f32, its WGSL) against CPU (f64, its Rust) model values at

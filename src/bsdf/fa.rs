@@ -4,19 +4,46 @@
 //! `lambert on eon vmf`. The lobe's parameters are named `lobe.*`, the base's `base.*`.
 //! Twin: `shaders/bsdf/fa.wgsl`.
 
-use super::ggx::{ggx_reflect, GgxLobe, ALPHA, ETA, KS};
+use super::ggx::{GgxLobe, ALPHA, ETA, KS};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir, LaneMemo};
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Memo, Node, ParamDecl, Role, WgslFn};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
-use crate::math::fresnel_transmittance;
-use glam::DVec3;
+use crate::math::fresnel_transmittance_in;
+use crate::math::lanes::Real;
 
 #[derive(Debug, Clone, Copy)]
 pub struct FresnelAggregate;
 
-/// Directions whose shared factors are computed in one pass (a few kB on the stack).
-const CHUNK: usize = 16;
+impl Kernel for FresnelAggregate {
+    /// The lobe's F and kernel and the two Fresnel transmittances once per direction
+    /// (the transmittances once per run of directions with the same μi, μo: a memo);
+    /// per channel only k_s and the base's value differ.
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
+        let (alpha, eta, n) = (p.get(0, 0), p.get(0, 1), p.len());
+        let zero = R::zero();
+        let (mut ti, mut to) = (LaneMemo::default(), LaneMemo::default());
+        for (d, (wi, wo), out) in lanes(dirs, n, out) {
+            let below = wi.z.le(zero) | wo.z.le(zero);
+            let lobe = GgxLobe::at_in(alpha, eta, wi, wo);
+            let t_i = match ti.get(wi.z) {
+                Some(t) => t,
+                None => ti.put(wi.z, fresnel_transmittance_in(wi.z, R::splat(eta))),
+            };
+            let t_o = match to.get(wo.z) {
+                Some(t) => t,
+                None => to.put(wo.z, fresnel_transmittance_in(wo.z, R::splat(eta))),
+            };
+            let transmit = t_i * t_o;
+            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+                let v = lobe.scaled(R::splat(p.get(i, 2))) + transmit * b;
+                *o = R::select(below, zero, v);
+            }
+        }
+    }
+}
 
 impl Bsdf for FresnelAggregate {
     fn entry(&self) -> &'static Entry {
@@ -32,49 +59,7 @@ impl Bsdf for FresnelAggregate {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return 0.0;
-        }
-        let (alpha, eta, ks) = (p[0], p[1], p[2]);
-        let transmit =
-            fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
-        ggx_reflect(ks, alpha, eta, wi, wo) + transmit * children[0]
-    }
-    /// The lobe's F and kernel and the two Fresnel transmittances once per direction
-    /// (the transmittances once per run of directions with the same μi, μo: [`Memo`]);
-    /// per channel only k_s and the base's value differ.
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
-        let (alpha, eta, n) = (p.get(0, 0), p.get(0, 1), p.len());
-        let (mut ti, mut to) = (Memo::default(), Memo::default());
-        let ft = |mu| fresnel_transmittance(mu, eta);
-        // Two passes per chunk of directions: first the shared factors of every direction
-        // (independent of one another, so the processor overlaps their chains of square
-        // roots and divisions), then the per-channel products.
-        let mut shared = [(GgxLobe::ZERO, 0.0); CHUNK];
-        for (c, dirs) in dirs.chunks(CHUNK).enumerate() {
-            for (s, &(wi, wo)) in shared.iter_mut().zip(dirs) {
-                *s = if wi.z <= 0.0 || wo.z <= 0.0 {
-                    (GgxLobe::ZERO, 0.0)
-                } else {
-                    let transmit = ti.get(wi.z, ft) * to.get(wo.z, ft);
-                    (GgxLobe::at(alpha, eta, wi, wo), transmit)
-                };
-            }
-            let first = c * CHUNK;
-            let out = &mut out[first * n..(first + dirs.len()) * n];
-            each_direction(dirs, n, out, |d, wi, wo, out| {
-                if wi.z <= 0.0 || wo.z <= 0.0 {
-                    out.fill(0.0);
-                    return;
-                }
-                let (lobe, transmit) = shared[d];
-                for (i, (o, &b)) in out.iter_mut().zip(base.at(0, first + d)).enumerate() {
-                    *o = lobe.scaled(p.get(i, 2)) + transmit * b;
-                }
-            });
-        }
-    }
+    crate::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::fa())
     }

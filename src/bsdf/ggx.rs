@@ -5,12 +5,11 @@
 //! Twin: `shaders/bsdf/ggx.wgsl`.
 
 use super::microfacet;
-use super::{
-    each_direction, Bsdf, Channels, Children, Dir, Entry, MitsubaBsdf, MitsubaField, Node,
-    ParamDecl, Role, WgslFn,
-};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, MitsubaBsdf, MitsubaField, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::fresnel_dielectric;
+use crate::math::fresnel_dielectric_in;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 
 /// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
@@ -21,11 +20,11 @@ pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
 /// The parts of [`ggx_reflect`] that do not depend on k_s: evaluated once per direction
 /// for every channel (k_s is the lobe's only rgb parameter).
 #[derive(Clone, Copy, Debug)]
-pub struct GgxLobe {
+pub struct GgxLobe<R: Real = f64> {
     /// F(ωi·h; η), and the microfacet kernel D G1 G1 / (4 μi μo); both 0 below the surface.
-    fresnel: f64,
-    kernel: f64,
-    above: bool,
+    fresnel: R,
+    kernel: R,
+    above: R::Mask,
 }
 
 impl GgxLobe {
@@ -36,37 +35,46 @@ impl GgxLobe {
         above: false,
     };
 
+    /// [`Self::at_in`] at f64 directions.
+    #[inline]
+    pub fn at(alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> GgxLobe {
+        GgxLobe::at_in(alpha, eta, wi.into(), wo.into())
+    }
+}
+
+impl<R: Real> GgxLobe<R> {
     /// The lobe at (ωi, ωo) without normalising the half vector: for unit ωi and ωo,
     /// ωi·h = |ωi + ωo| / 2 (since |ωi + ωo|² = 2 + 2 ωi·ωo), and the kernel takes
     /// ωi + ωo itself ([`microfacet::Ggx::reflection`]), so F needs no division and the
     /// kernel one. (ωi = −ωo cannot occur above the surface; there h is the normal, as
     /// [`crate::math::half_vector`] takes it.)
-    #[inline]
-    pub fn at(alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> GgxLobe {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return GgxLobe::ZERO;
+    #[inline(always)]
+    pub fn at_in(alpha: f64, eta: f64, wi: V3<R>, wo: V3<R>) -> GgxLobe<R> {
+        let zero = R::zero();
+        let above = zero.lt(wi.z) & zero.lt(wo.z);
+        if !R::any(above) {
+            return GgxLobe {
+                fresnel: zero,
+                kernel: zero,
+                above,
+            };
         }
         let sum = wi + wo;
         let len = sum.length();
-        let (m, cos_h) = if len < 1e-12 {
-            (DVec3::Z, wi.z)
-        } else {
-            (sum, 0.5 * len)
-        };
+        let at_normal = len.lt(R::splat(1e-12));
+        let z = V3::new(zero, zero, R::splat(1.0));
+        let m = V3::select(at_normal, z, sum);
+        let cos_h = R::select(at_normal, wi.z, R::splat(0.5) * len);
         GgxLobe {
-            fresnel: fresnel_dielectric(cos_h, eta),
-            kernel: microfacet::Ggx { alpha }.reflection(wi, wo, m),
-            above: true,
+            fresnel: fresnel_dielectric_in(cos_h, R::splat(eta)),
+            kernel: microfacet::ggx_reflection(R::splat(alpha), wi, wo, m),
+            above,
         }
     }
     /// k_s · F · kernel, in that order (what a per-channel evaluation computes).
-    #[inline]
-    pub fn scaled(&self, ks: f64) -> f64 {
-        if self.above {
-            ks * self.fresnel * self.kernel
-        } else {
-            0.0
-        }
+    #[inline(always)]
+    pub fn scaled(&self, ks: R) -> R {
+        R::select(self.above, ks * self.fresnel * self.kernel, R::zero())
     }
 }
 
@@ -84,6 +92,19 @@ pub const ETA: ParamDecl = ParamDecl::shared("eta", 1.0, 5.0, 1.5, "refractive i
 #[derive(Debug, Clone, Copy)]
 pub struct Ggx;
 
+impl Kernel for Ggx {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let (alpha, eta) = (p.get(0, 1), p.get(0, 2));
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let lobe = GgxLobe::at_in(alpha, eta, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = lobe.scaled(R::splat(p.get(i, 0)));
+            }
+        }
+    }
+}
+
 impl Bsdf for Ggx {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -91,18 +112,7 @@ impl Bsdf for Ggx {
     fn params(&self) -> Vec<ParamDecl> {
         vec![KS, ALPHA, ETA]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        ggx_reflect(p[0], p[1], p[2], wi, wo)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let (alpha, eta) = (p.get(0, 1), p.get(0, 2));
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            let lobe = GgxLobe::at(alpha, eta, wi, wo);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = lobe.scaled(p.get(i, 0));
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::ggx())
     }

@@ -1,15 +1,26 @@
 //! Lambertian reflection: f = ρ/π. Twin: `shaders/bsdf/lambert.wgsl`.
 
-use super::{
-    each_direction, Bsdf, Channels, Children, Dir, Entry, MitsubaBsdf, MitsubaField, Node,
-    ParamDecl, Role, WgslFn,
-};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, MitsubaBsdf, MitsubaField, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
+use crate::math::lanes::Real;
 use std::f64::consts::FRAC_1_PI;
 
 #[derive(Debug, Clone, Copy)]
 pub struct Lambert;
+
+impl Kernel for Lambert {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let zero = R::zero();
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let below = wi.z.le(zero) | wo.z.le(zero);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = R::select(below, zero, R::splat(p.get(i, 0)) * R::splat(FRAC_1_PI));
+            }
+        }
+    }
+}
 
 impl Bsdf for Lambert {
     fn entry(&self) -> &'static Entry {
@@ -18,23 +29,7 @@ impl Bsdf for Lambert {
     fn params(&self) -> Vec<ParamDecl> {
         vec![ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0)]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return 0.0;
-        }
-        p[0] * FRAC_1_PI
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                out.fill(0.0);
-                return;
-            }
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = p.get(i, 0) * FRAC_1_PI;
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("lambert", include_str!("../../shaders/bsdf/lambert.wgsl"))
     }

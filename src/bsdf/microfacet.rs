@@ -14,6 +14,7 @@
 //! the side of ω (the sign of ω.z).
 
 use super::WgslFn;
+use crate::math::lanes::{Real, V3};
 use crate::math::ln_gamma;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -103,19 +104,28 @@ impl Ggx {
     /// direction). ωi and ωo must be above the surface.
     #[inline]
     pub fn reflection(&self, wi: DVec3, wo: DVec3, m: DVec3) -> f64 {
-        // D = 0 below; χ⁺ of G1: a facet facing away from ωi or ωo masks it.
-        if m.z <= 0.0 || wi.dot(m) * wi.z <= 0.0 || wo.dot(m) * wo.z <= 0.0 {
-            return 0.0;
-        }
-        let a2 = self.alpha * self.alpha;
-        let (c2, s2) = cos2_sin2(m);
-        let (t, m2) = (a2 * c2 + s2, c2 + s2);
-        let r = |w: DVec3| {
-            let mu = w.z.abs();
-            mu + (mu * mu + a2 * (w.x * w.x + w.y * w.y)).sqrt()
-        };
-        a2 * (m2 * m2) / (PI * t * t * r(wi) * r(wo))
+        ggx_reflection(self.alpha, wi.into(), wo.into(), m.into())
     }
+}
+
+/// [`Ggx::reflection`] over any [`Real`] (lanes of directions; `f64` is the reference).
+#[inline(always)]
+pub fn ggx_reflection<R: Real>(alpha: R, wi: V3<R>, wo: V3<R>, m: V3<R>) -> R {
+    // D = 0 below; χ⁺ of G1: a facet facing away from ωi or ωo masks it.
+    let zero = R::zero();
+    let masked = m.z.le(zero) | (wi.dot(m) * wi.z).le(zero) | (wo.dot(m) * wo.z).le(zero);
+    let a2 = alpha * alpha;
+    let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
+    let (t, m2) = (a2 * c2 + s2, c2 + s2);
+    let value = a2 * (m2 * m2) / (R::splat(PI) * t * t * ggx_r(a2, wi) * ggx_r(a2, wo));
+    R::select(masked, zero, value)
+}
+
+/// μ + √(μ² + α² sin²θ), μ = |cos θ|: 2μ / G1(ω) of GGX.
+#[inline(always)]
+fn ggx_r<R: Real>(a2: R, w: V3<R>) -> R {
+    let mu = w.z.abs();
+    mu + (mu * mu + a2 * (w.x * w.x + w.y * w.y)).sqrt()
 }
 
 impl Masking for Ggx {

@@ -9,6 +9,7 @@
 //! that the node functions read — the same layout on the CPU and the GPU.
 
 use crate::data::Kind;
+use crate::math::lanes::{F32x8, F64x4};
 pub use decl::{
     Builder, Entry, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role, Scale,
 };
@@ -22,6 +23,7 @@ use std::sync::Arc;
 
 pub mod decl;
 pub mod effect;
+pub mod kernel;
 pub mod microfacet;
 pub mod micrograin;
 pub mod registry;
@@ -109,6 +111,23 @@ impl<'a> Channels<'a> {
             groups,
             offset: 0,
             nparams: stride,
+        }
+    }
+    /// One channel whose view is `p` (what [`Bsdf::eval`] takes).
+    pub fn one(p: &'a [f64]) -> Channels<'a> {
+        Channels {
+            scalars: p,
+            stride: p.len(),
+            groups: &[0],
+            offset: 0,
+            nparams: p.len(),
+        }
+    }
+    /// Channel 0 alone (a subtree with no rgb parameter has one value for all).
+    fn first(&self) -> Channels<'a> {
+        Channels {
+            groups: &self.groups[..1],
+            ..*self
         }
     }
     /// Number of channels evaluated.
@@ -268,6 +287,33 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
             }
         });
     }
+    /// [`Self::eval_channels`] at lane-directions of eight f32 lanes (the SIMD engine).
+    /// [`kernel_methods`](crate::kernel_methods) derives it from a [`kernel::Kernel`];
+    /// the default evaluates each lane with `eval_channels`.
+    fn eval_f32x8(
+        &self,
+        p: Channels,
+        dirs: &[kernel::LaneDir<F32x8>],
+        children: kernel::LaneChildren<F32x8>,
+        out: &mut [F32x8],
+    ) {
+        kernel::by_reference(self, p, dirs, children, out)
+    }
+    /// The same in four f64 lanes.
+    fn eval_f64x4(
+        &self,
+        p: Channels,
+        dirs: &[kernel::LaneDir<F64x4>],
+        children: kernel::LaneChildren<F64x4>,
+        out: &mut [F64x4],
+    ) {
+        kernel::by_reference(self, p, dirs, children, out)
+    }
+    /// The lanes the node's kernel runs in; `None` for a node without one (the SIMD
+    /// engine then evaluates it lane by lane through the f64 reference).
+    fn lanes(&self) -> Option<kernel::LaneKind> {
+        None
+    }
     /// The node's anisotropic form (two roughnesses and a tangent azimuth in place of
     /// its roughness), which `+aniso` puts in its place; `None` where it has none.
     fn anisotropic(&self) -> Option<Arc<dyn Bsdf>> {
@@ -375,6 +421,44 @@ impl Node {
         let children = Children::new(mine, m, n);
         self.bsdf
             .eval_channels(p.node(self.offset, self.nparams), dirs, children, out);
+    }
+    /// [`Self::eval_channels`] in lanes: `dirs` holds lane-directions, `out[d · n + i]`
+    /// lane-direction d, channel i; `scratch` at least [`Model::scratch_len`] of
+    /// `out.len()`.
+    pub fn eval_lanes<R: kernel::LaneReal>(
+        &self,
+        p: Channels,
+        dirs: &[kernel::LaneDir<R>],
+        out: &mut [R],
+        scratch: &mut [R],
+    ) {
+        let (n, m) = (p.len(), dirs.len());
+        debug_assert_eq!(out.len(), n * m);
+        if n == 0 || m == 0 {
+            return;
+        }
+        if self.uniform && n > 1 {
+            // Only shared parameters below: channel 0's values are every channel's.
+            let (first, rest) = scratch.split_at_mut(m);
+            self.eval_lanes(p.first(), dirs, first, rest);
+            for (o, &v) in out.chunks_exact_mut(n).zip(first.iter()) {
+                o.fill(v);
+            }
+            return;
+        }
+        let block = n * m;
+        let (mine, rest) = scratch.split_at_mut(self.children.len() * block);
+        for (k, c) in self.children.iter().enumerate() {
+            c.eval_lanes(p, dirs, &mut mine[k * block..(k + 1) * block], rest);
+        }
+        let children = kernel::LaneChildren::new(mine, m, n);
+        R::eval_node(
+            self.bsdf.as_ref(),
+            p.node(self.offset, self.nparams),
+            dirs,
+            children,
+            out,
+        );
     }
     pub fn visit<'a>(&'a self, f: &mut impl FnMut(&'a Node)) {
         f(self);
@@ -771,6 +855,29 @@ impl Model {
                 flat[phi] -= 90.0f64.copysign(flat[phi]);
             }
         }
+    }
+
+    /// The lanes the SIMD engine evaluates the model in: f64 where a node needs it.
+    pub fn lane_kind(&self) -> kernel::LaneKind {
+        if self
+            .nodes()
+            .iter()
+            .any(|n| n.bsdf.lanes() == Some(kernel::LaneKind::F64x4))
+        {
+            kernel::LaneKind::F64x4
+        } else {
+            kernel::LaneKind::F32x8
+        }
+    }
+
+    /// The nodes without a [`kernel::Kernel`] (evaluated lane by lane through the f64
+    /// reference on the SIMD engine), by name.
+    pub fn nodes_without_kernel(&self) -> Vec<&'static str> {
+        self.nodes()
+            .iter()
+            .filter(|n| n.bsdf.lanes().is_none())
+            .map(|n| n.bsdf.name())
+            .collect()
     }
 
     /// Every node in pre-order (the order of offsets).

@@ -148,7 +148,7 @@ fn print_table(rows: &[crate::workflows::bench::BenchRow], file: Option<&crate::
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
-    use crate::workflows::bench::{bench_dataset, measure, median_speedup};
+    use crate::workflows::bench::{bench_dataset, measure, median_ratio, median_speedup};
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
@@ -225,6 +225,13 @@ pub fn run(a: BenchArgs) -> Result<()> {
     if let Some(s) = median {
         println!("median GPU/CPU speed-up over models: {s:.2}x");
     }
+    let median_simd = median_ratio(&rows, "simd", "cpu");
+    if let Some(s) = median_simd {
+        println!("median SIMD/CPU speed-up over models: {s:.2}x");
+    }
+    if let Some(s) = median_ratio(&rows, "simd", "gpu") {
+        println!("median SIMD/GPU speed ratio over models: {s:.2}x");
+    }
     let sweep = if a.sweep {
         Some(sweep_bench(&a, &backends)?)
     } else {
@@ -236,6 +243,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             Some(s) => serde_json::json!({
                 "rows": rows,
                 "median_speedup": median,
+                "median_simd_speedup": median_simd,
                 "sweep": s,
             }),
         };
@@ -496,18 +504,21 @@ fn scale_bench(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The backends `--backend` asks to measure: the CPU reference, the GPU engine, or both
-/// (auto: the GPU where an adapter exists).
+/// The backends `--backend` asks to measure: one of them, or (auto) the CPU reference,
+/// the SIMD engine and the GPU engine where an adapter exists, in one run.
 fn backends_for(choice: BackendChoice) -> Result<Vec<Box<dyn engine::Backend>>> {
     let mut backends: Vec<Box<dyn engine::Backend>> = Vec::new();
-    if choice != BackendChoice::Gpu {
+    if matches!(choice, BackendChoice::Auto | BackendChoice::Cpu) {
         backends.push(Box::new(engine::cpu::CpuBackend::new()));
     }
-    if choice != BackendChoice::Cpu {
+    if matches!(choice, BackendChoice::Auto | BackendChoice::Simd) {
+        backends.push(Box::new(engine::simd::SimdBackend::new()));
+    }
+    if matches!(choice, BackendChoice::Auto | BackendChoice::Gpu) {
         match engine::gpu::GpuBackend::new() {
             Ok(g) => backends.push(Box::new(g)),
             Err(e) if choice == BackendChoice::Auto => {
-                eprintln!("no GPU ({e}); measuring the CPU only")
+                eprintln!("no GPU ({e}); measuring the CPU engines only")
             }
             Err(e) => return Err(e.context("--backend gpu")),
         }

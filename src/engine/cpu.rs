@@ -42,8 +42,10 @@
 
 use super::reduce::{GramSums, RowTerms, ValueWindow, Values, WindowPart};
 use super::{Backend, Evaluator, Problem};
+use crate::bsdf::kernel::{LaneDir, LaneKind, LaneReal};
 use crate::bsdf::{Channels, Dir, Model};
-use crate::engine::loss::{LossTerms, Term, EPS};
+use crate::engine::loss::{LossTerms, Term, EPS, NO_SAMPLE};
+use crate::math::lanes::{vectorized, F32x8, F64x4, Real, V3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::ops::Range;
@@ -69,18 +71,7 @@ impl Backend for CpuBackend {
         &'a self,
         problems: &[Problem<'a>],
     ) -> anyhow::Result<Box<dyn Evaluator + 'a>> {
-        super::check_shared(problems)?;
-        let (parts, rows): (Vec<Part>, Vec<RowTerms>) =
-            problems.iter().map(|&p| Part::new(p)).unzip();
-        let model = problems[0].model;
-        let widest = parts.iter().map(|p| p.widest).max().unwrap_or(0);
-        Ok(Box::new(CpuEvaluator {
-            slots: model.slot_table(),
-            widest,
-            scratch_len: model.scratch_len(widest),
-            parts,
-            rows,
-        }))
+        Ok(Box::new(CpuEvaluator::new(problems, Arith::Reference)?))
     }
 }
 
@@ -124,14 +115,111 @@ struct Part<'a> {
     samples: usize,
     /// The most rows of one block.
     widest: usize,
+    /// The directions of every block in lanes, when the SIMD engine evaluates it.
+    lanes: Option<LaneDirs>,
+    /// The loss constants in the lane order of `lanes`.
+    lane_terms: Option<LossTerms>,
     evaluations: AtomicU64,
+}
+
+/// How an evaluator computes model values: the f64 reference, or SIMD lanes
+/// ([`super::simd::SimdBackend`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Arith {
+    Reference,
+    Lanes(LaneKind),
+}
+
+/// Every block's directions as lane-directions (the last lane-direction of a block
+/// padded with its last direction), block after block, and the lane order of the
+/// block's values.
+struct LaneDirs {
+    dirs: LaneVec,
+    /// Block b's first lane-direction.
+    at: Vec<usize>,
+    /// Block b's first value in lane order: its m lane-directions × n channels × L
+    /// lanes, value (d · n + i) · L + j at lane j of lane-direction d, channel i.
+    values_at: Vec<usize>,
+    /// The row of each value in lane order, or [`NO_SAMPLE`] for a padding lane.
+    rows: Vec<u32>,
+}
+
+enum LaneVec {
+    F32x8(Vec<LaneDir<F32x8>>),
+    F64x4(Vec<LaneDir<F64x4>>),
+}
+
+impl LaneDirs {
+    fn new(kind: LaneKind, dirs: &[Dir], blocks: &[Block]) -> LaneDirs {
+        fn pack<R: Real>(dirs: &[Dir], blocks: &[Block]) -> Vec<LaneDir<R>> {
+            let mut v = Vec::new();
+            for b in blocks {
+                let d = &dirs[b.dirs.clone()];
+                for first in (0..d.len()).step_by(R::LANES) {
+                    let lane = |j: usize| d[(first + j).min(d.len() - 1)];
+                    let c = |f: fn(&Dir) -> f64| R::from_fn(|j| f(&lane(j)));
+                    v.push(LaneDir {
+                        wi: V3::new(c(|w| w.0.x), c(|w| w.0.y), c(|w| w.0.z)),
+                        wo: V3::new(c(|w| w.1.x), c(|w| w.1.y), c(|w| w.1.z)),
+                    });
+                }
+            }
+            v
+        }
+        let (dirs, l) = match kind {
+            LaneKind::F32x8 => (LaneVec::F32x8(pack(dirs, blocks)), F32x8::LANES),
+            LaneKind::F64x4 => (LaneVec::F64x4(pack(dirs, blocks)), F64x4::LANES),
+        };
+        let (mut at, mut values_at, mut rows) = (Vec::new(), Vec::new(), Vec::new());
+        let mut next = 0;
+        for b in blocks {
+            at.push(next);
+            values_at.push(rows.len());
+            let (n, len) = (b.n, b.dirs.len());
+            let m = len.div_ceil(l);
+            next += m;
+            for d in 0..m {
+                for i in 0..n {
+                    for j in 0..l {
+                        let direction = d * l + j;
+                        rows.push(if direction < len {
+                            (b.start + direction * n + i) as u32
+                        } else {
+                            NO_SAMPLE
+                        });
+                    }
+                }
+            }
+        }
+        LaneDirs {
+            dirs,
+            at,
+            values_at,
+            rows,
+        }
+    }
+}
+
+/// The lane buffers of a worker's [`Scratch`] for one lane type.
+trait LaneScratch: LaneReal {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>);
+}
+impl LaneScratch for F32x8 {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
+        (&mut s.out32, &mut s.children32)
+    }
+}
+impl LaneScratch for F64x4 {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
+        (&mut s.out64, &mut s.children64)
+    }
 }
 
 impl<'a> Part<'a> {
     /// Group the samples by direction (ωi, ωo bit for bit) and plane, directions in the
     /// order their first samples come in [`walk_order`](super::walk_order), rows of a
     /// direction in sample order. Returns the part and its loss constants in row order.
-    fn new(problem: Problem<'a>) -> (Part<'a>, RowTerms) {
+    fn new(problem: Problem<'a>, arith: Arith) -> (Part<'a>, RowTerms) {
         let model = problem.model;
         let samples = &problem.data.samples;
         let mut index: HashMap<([u64; 6], usize), usize> = HashMap::new();
@@ -204,9 +292,19 @@ impl<'a> Part<'a> {
             }
         }
         let terms = problem.loss.terms(problem.data);
+        let lanes = match arith {
+            Arith::Reference => None,
+            Arith::Lanes(kind) => Some(LaneDirs::new(kind, &first, &blocks)),
+        };
+        let rows = RowTerms::new(&terms, order);
+        let lane_terms = lanes
+            .as_ref()
+            .map(|l| rows.terms.in_rows(l.rows.iter().copied()));
         let part = Part {
             problem,
             widest: blocks.iter().map(|b| b.n * b.dirs.len()).max().unwrap_or(0),
+            lanes,
+            lane_terms,
             dirs: first,
             blocks,
             windows,
@@ -214,13 +312,26 @@ impl<'a> Part<'a> {
             samples: samples.len(),
             evaluations: AtomicU64::new(0),
         };
-        (part, RowTerms::new(&terms, order))
+        (part, rows)
     }
 
     /// Calls `f(first row, values)` with the model values of the blocks `blocks` for one
     /// candidate (`scratch.views` already holds its scalar views).
     #[inline]
     fn for_each_block(
+        &self,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        f: impl FnMut(usize, &[f64]),
+    ) {
+        match &self.lanes {
+            None => self.blocks_in_reference(blocks, scratch, f),
+            Some(lanes) => self.blocks_in_lanes(lanes, false, blocks, scratch, f),
+        }
+    }
+
+    #[inline]
+    fn blocks_in_reference(
         &self,
         blocks: Range<usize>,
         scratch: &mut Scratch,
@@ -244,6 +355,89 @@ impl<'a> Part<'a> {
         }
     }
 
+    /// [`Self::blocks_in_reference`] in lanes: each block's lane-directions through
+    /// [`Node::eval_lanes`](crate::bsdf::Node::eval_lanes), its values widened to f64
+    /// in row order (`f(first row, values)`), or, with `lane_order`, in the lane order
+    /// of [`LaneDirs`] (`f(first value in lane order, values)`, padding lanes included).
+    #[inline(always)]
+    fn blocks_in_lanes(
+        &self,
+        lanes: &LaneDirs,
+        lane_order: bool,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        f: impl FnMut(usize, &[f64]),
+    ) {
+        match &lanes.dirs {
+            LaneVec::F32x8(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
+            LaneVec::F64x4(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
+        }
+    }
+
+    #[inline(always)]
+    fn blocks_in<R: LaneScratch>(
+        &self,
+        lane_dirs: &[LaneDir<R>],
+        lanes: &LaneDirs,
+        lane_order: bool,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        mut f: impl FnMut(usize, &[f64]),
+    ) {
+        let model = self.problem.model;
+        let stride = model.scalar_count();
+        let l = R::LANES;
+        let views = std::mem::take(&mut scratch.views);
+        let mut out = std::mem::take(&mut scratch.out);
+        for (k, b) in blocks.clone().zip(&self.blocks[blocks]) {
+            let (n, len) = (b.n, b.dirs.len());
+            let m = len.div_ceil(l);
+            let first = lanes.at[k];
+            let (values, children) = R::buffers(scratch);
+            values.resize(n * m, R::zero());
+            let need = model.scratch_len(n * m);
+            if children.len() < need {
+                children.resize(need, R::zero());
+            }
+            if out.len() < n * m * l {
+                out.resize(n * m * l, 0.0);
+            }
+            let p = Channels::new(&views, stride, &self.group[b.start..b.start + b.n]);
+            model.root.eval_lanes(
+                p,
+                &lane_dirs[first..first + m],
+                &mut values[..n * m],
+                children,
+            );
+            // The values to f64 and the caller's reduction, compiled for the vector
+            // extensions too (a loss's row terms are independent).
+            vectorized(
+                #[inline(always)]
+                || {
+                    if lane_order {
+                        let out = &mut out[..n * m * l];
+                        for (o, v) in out.chunks_exact_mut(l).zip(values.iter()) {
+                            v.store_f64(o, 1, l);
+                        }
+                        f(lanes.values_at[k], out);
+                    } else {
+                        let out = &mut out[..n * len];
+                        // Row (d·L + j)·n + i is lane j of values[d·n + i].
+                        for (d, o) in out.chunks_mut(n * l).enumerate() {
+                            let count = o.len() / n;
+                            for i in 0..n {
+                                values[d * n + i].store_f64(&mut o[i..], n, count);
+                            }
+                        }
+                        f(b.start, out);
+                    }
+                },
+            );
+        }
+        scratch.views = views;
+        scratch.out = out;
+    }
+
     /// The model values of one candidate at a window's rows, into `out` (its rows' length).
     fn window_values(&self, w: &Window, scratch: &mut Scratch, out: &mut [f64]) {
         let first = w.rows.start;
@@ -255,6 +449,9 @@ impl<'a> Part<'a> {
     /// The sum of one candidate's loss terms (`t`, in row order) over a window's rows,
     /// in row order.
     fn cost_sum(&self, t: &LossTerms, w: &Window, scratch: &mut Scratch) -> f64 {
+        if let Some(lanes) = &self.lanes {
+            return self.cost_sum_split(lanes, w, scratch);
+        }
         let mut sum = 0.0;
         // One loop per term shape, so that the row loop has no branch on it.
         match t.term {
@@ -291,6 +488,113 @@ impl<'a> Part<'a> {
         }
         sum
     }
+
+    /// [`Self::cost_sum`] of the SIMD engine: the terms in lane order (constants laid
+    /// out so at prepare time, padding lanes 0), so that values leave the lanes in
+    /// contiguous runs, summed in [`SPLIT`]
+    /// interleaved partial sums, so that the additions do not wait on one another (one
+    /// running sum costs an addition's latency per row, more than the model's lanes
+    /// take). The reference keeps one sum in row order.
+    fn cost_sum_split(&self, lanes: &LaneDirs, w: &Window, scratch: &mut Scratch) -> f64 {
+        let t = self.lane_terms.as_ref().expect("lane terms of a SIMD part");
+        let mut acc = [0.0f64; SPLIT];
+        match t.term {
+            Term::Square => self.blocks_in_lanes(
+                lanes,
+                true,
+                w.blocks.clone(),
+                scratch,
+                #[inline(always)]
+                |start, values| {
+                    let r = start..start + values.len();
+                    split_sum(
+                        &mut acc,
+                        values,
+                        &t.a[r.clone()],
+                        &t.gy[r.clone()],
+                        &t.w[r],
+                        #[inline(always)]
+                        |v, a, gy, w| {
+                            let d = a * v - gy;
+                            w * d * d
+                        },
+                    )
+                },
+            ),
+            Term::LogSquare => self.blocks_in_lanes(
+                lanes,
+                true,
+                w.blocks.clone(),
+                scratch,
+                #[inline(always)]
+                |start, values| {
+                    let r = start..start + values.len();
+                    split_sum(
+                        &mut acc,
+                        values,
+                        &t.a[r.clone()],
+                        &t.gy[r.clone()],
+                        &t.w[r],
+                        #[inline(always)]
+                        |v, a, gy, w| {
+                            let d = (a * v).ln_1p() - gy;
+                            w * d * d
+                        },
+                    )
+                },
+            ),
+            Term::AbsRatio => self.blocks_in_lanes(
+                lanes,
+                true,
+                w.blocks.clone(),
+                scratch,
+                #[inline(always)]
+                |start, values| {
+                    let r = start..start + values.len();
+                    split_sum(
+                        &mut acc,
+                        values,
+                        &t.y[r.clone()],
+                        &t.y[r.clone()],
+                        &t.w[r],
+                        #[inline(always)]
+                        |v, _, y, w| w * (v - y).abs() / (v.abs() + y.abs() + EPS),
+                    )
+                },
+            ),
+        }
+        acc.iter().sum()
+    }
+}
+
+/// Partial sums of the SIMD engine's loss ([`Part::cost_sum_split`]).
+const SPLIT: usize = 4;
+
+/// Adds `term(value, a, b, w)` of each row (its value and its constants in `a`, `b`,
+/// `w`) into the partial sums `acc`, row k of the block into `acc[k mod SPLIT]`.
+#[inline(always)]
+fn split_sum(
+    acc: &mut [f64; SPLIT],
+    values: &[f64],
+    a: &[f64],
+    b: &[f64],
+    w: &[f64],
+    term: impl Fn(f64, f64, f64, f64) -> f64,
+) {
+    let chunks = values
+        .chunks_exact(SPLIT)
+        .zip(a.chunks_exact(SPLIT))
+        .zip(b.chunks_exact(SPLIT))
+        .zip(w.chunks_exact(SPLIT));
+    for (((v, a), b), w) in chunks {
+        for k in 0..SPLIT {
+            acc[k] += term(v[k], a[k], b[k], w[k]);
+        }
+    }
+    let done = values.len() / SPLIT * SPLIT;
+    for k in done..values.len() {
+        acc[k - done] += term(values[k], a[k], b[k], w[k]);
+    }
 }
 
 thread_local! {
@@ -307,6 +611,11 @@ struct Scratch {
     children: Vec<f64>,
     /// A group's values at a window (normal equations).
     group_values: Vec<f64>,
+    /// A block's values and its nodes' children's values in lanes (SIMD engine).
+    out32: Vec<F32x8>,
+    children32: Vec<F32x8>,
+    out64: Vec<F64x4>,
+    children64: Vec<F64x4>,
 }
 
 impl Scratch {
@@ -333,7 +642,23 @@ pub struct CpuEvaluator<'a> {
     scratch_len: usize,
 }
 
-impl CpuEvaluator<'_> {
+impl<'a> CpuEvaluator<'a> {
+    /// An evaluator of `problems` that computes model values as `arith` says.
+    pub(crate) fn new(problems: &[Problem<'a>], arith: Arith) -> anyhow::Result<Self> {
+        super::check_shared(problems)?;
+        let (parts, rows): (Vec<Part>, Vec<RowTerms>) =
+            problems.iter().map(|&p| Part::new(p, arith)).unzip();
+        let model = problems[0].model;
+        let widest = parts.iter().map(|p| p.widest).max().unwrap_or(0);
+        Ok(CpuEvaluator {
+            slots: model.slot_table(),
+            widest,
+            scratch_len: model.scratch_len(widest),
+            parts,
+            rows,
+        })
+    }
+
     fn check(&self, owners: &[usize], params: &[f64]) -> anyhow::Result<()> {
         let p = self.dim();
         anyhow::ensure!(

@@ -1,7 +1,8 @@
 //! Backends evaluate a batch of candidate parameter vectors against a dataset and a loss.
 //!
-//! One trait, two implementations: [`cpu::CpuBackend`] (plain Rust, f64, rayon — the
-//! reference) and [`gpu::GpuBackend`] (wgpu compute, f32). Optimizers never see a backend:
+//! One trait, three implementations: [`cpu::CpuBackend`] (plain Rust, f64, rayon — the
+//! reference), [`simd::SimdBackend`] (the same models in SIMD lanes, f32 or f64) and
+//! [`gpu::GpuBackend`] (wgpu compute, f32). Optimizers never see a backend:
 //! they see an [`Evaluator`] prepared for one problem or for a batch of independent
 //! problems that share a model (many fits per dispatch).
 
@@ -13,6 +14,7 @@ pub mod cpu;
 pub mod gpu;
 pub mod loss;
 pub mod reduce;
+pub mod simd;
 pub mod wgsl;
 
 pub use gpu::fault::{device_fault, DeviceFault};
@@ -267,11 +269,13 @@ pub trait Evaluator {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BackendChoice {
-    /// The GPU when a Vulkan adapter exists, else the CPU (with a notice).
+    /// A hardware GPU when one exists, else the SIMD CPU engine (with a notice).
     Auto,
-    /// The GPU engine; an error when no adapter exists.
+    /// The GPU engine on any Vulkan adapter (a software one too); an error when none exists.
     Gpu,
-    /// The CPU reference.
+    /// The SIMD CPU engine (f32 or f64 lanes).
+    Simd,
+    /// The CPU reference (f64, one direction at a time): the checker.
     Cpu,
 }
 
@@ -281,26 +285,35 @@ impl crate::choice::Choice for BackendChoice {
         (
             BackendChoice::Auto,
             "auto",
-            "The GPU when a Vulkan adapter exists, else the CPU (with a notice)",
+            "A hardware GPU when one exists, else the SIMD CPU engine (with a notice)",
         ),
         (
             BackendChoice::Gpu,
             "gpu",
-            "The GPU engine; an error when no adapter exists",
+            "The GPU engine on any Vulkan adapter, a software one (lavapipe) too; an error when none exists",
         ),
-        (BackendChoice::Cpu, "cpu", "The CPU reference"),
+        (
+            BackendChoice::Simd,
+            "simd",
+            "The SIMD CPU engine: the models in f32 (or f64) vector lanes of the processor",
+        ),
+        (
+            BackendChoice::Cpu,
+            "cpu",
+            "The CPU reference (f64, one direction at a time): the checker",
+        ),
     ];
 }
 crate::choice::named_choice!(BackendChoice);
 
 impl BackendChoice {
     /// The word that names it, which is also the id of the backend it selects
-    /// ([`Backend::id`]) for `gpu` and `cpu`.
+    /// ([`Backend::id`]) for `gpu`, `simd` and `cpu`.
     pub fn name(self) -> &'static str {
         crate::choice::Choice::name(self)
     }
 
-    /// The choice named `name` (`auto`, `gpu`, `cpu`).
+    /// The choice named `name` (`auto`, `gpu`, `simd`, `cpu`).
     pub fn from_name(name: &str) -> Option<BackendChoice> {
         name.parse().ok()
     }
@@ -319,6 +332,11 @@ pub fn select(
 ) -> anyhow::Result<Box<dyn Backend>> {
     match choice {
         BackendChoice::Cpu => Ok(Box::new(cpu::CpuBackend::new())),
+        BackendChoice::Simd => {
+            let s = simd::SimdBackend::new();
+            notice(format!("using {}", s.name()));
+            Ok(Box::new(s))
+        }
         BackendChoice::Gpu => {
             let g = gpu::GpuBackend::new().map_err(|e| {
                 crate::choice::field_error(format!(
@@ -329,22 +347,28 @@ pub fn select(
             notice(format!("using {}", g.name()));
             Ok(Box::new(g))
         }
-        BackendChoice::Auto => match gpu::GpuBackend::new() {
-            Ok(g) => {
-                notice(format!("using {}", g.name()));
-                Ok(Box::new(g))
-            }
-            Err(e) => {
-                notice(format!("no GPU ({e}); using the CPU reference"));
-                Ok(Box::new(cpu::CpuBackend::new()))
-            }
-        },
+        BackendChoice::Auto => {
+            let why = match gpu::GpuBackend::new() {
+                Ok(g) if !g.is_software() => {
+                    notice(format!("using {}", g.name()));
+                    return Ok(Box::new(g));
+                }
+                Ok(g) => format!(
+                    "the only Vulkan device is a software one, {} (--backend gpu runs the kernels there)",
+                    g.adapter_name()
+                ),
+                Err(e) => format!("no GPU ({e})"),
+            };
+            let s = simd::SimdBackend::new();
+            notice(format!("{why}; using {}", s.name()));
+            Ok(Box::new(s))
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{cpu, Backend, BackendChoice, Spread, SubmissionStats};
+    use super::{cpu, simd, Backend, BackendChoice, Spread, SubmissionStats};
 
     #[test]
     fn spreads_take_the_nearest_rank_and_the_mean() {
@@ -362,10 +386,16 @@ mod tests {
     /// Names round-trip, and `gpu` and `cpu` name the backends they select.
     #[test]
     fn backend_choice_names_are_the_option_values() {
-        for c in [BackendChoice::Auto, BackendChoice::Gpu, BackendChoice::Cpu] {
+        for c in [
+            BackendChoice::Auto,
+            BackendChoice::Gpu,
+            BackendChoice::Simd,
+            BackendChoice::Cpu,
+        ] {
             assert_eq!(BackendChoice::from_name(c.name()), Some(c));
         }
         assert_eq!(BackendChoice::from_name("tpu"), None);
         assert_eq!(cpu::CpuBackend::new().id(), BackendChoice::Cpu.name());
+        assert_eq!(simd::SimdBackend::new().id(), BackendChoice::Simd.name());
     }
 }

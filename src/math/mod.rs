@@ -5,11 +5,13 @@
 //! from the surface, μ = cos θ = z. Special functions (ln Γ, incomplete gamma and beta,
 //! χ² and F tails, Gauss–Legendre quadrature) live in [`special`].
 
+pub mod lanes;
 pub mod special;
 
 pub use special::{beta_i, chi2_sf, f_sf, gamma_q, gauss_legendre, ln_gamma};
 
 use glam::DVec3;
+use lanes::Real;
 
 /// Σ aᵢbᵢ in eight interleaved partial sums (vectorisable; an in-order sum is not).
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -40,19 +42,25 @@ pub fn direction(theta: f64, phi: f64) -> DVec3 {
 /// the side of index 1 onto index `eta` (Walter et al. 2007, Eq. 22). `cos_i` is the
 /// cosine between the direction and the (micro)normal; its sign is ignored.
 pub fn fresnel_dielectric(cos_i: f64, eta: f64) -> f64 {
+    fresnel_dielectric_in(cos_i, eta)
+}
+
+/// [`fresnel_dielectric`] over any [`Real`] (lanes of directions; `f64` is the reference).
+#[inline(always)]
+pub fn fresnel_dielectric_in<R: Real>(cos_i: R, eta: R) -> R {
     let c = cos_i.abs();
-    let g2 = eta * eta - 1.0 + c * c;
-    if g2 <= 0.0 {
-        return 1.0; // total internal reflection (only possible for eta < 1)
-    }
+    let g2 = eta * eta - R::splat(1.0) + c * c;
+    // g² ≤ 0: total internal reflection (only possible for eta < 1).
+    let tir = g2.le(R::zero());
     let g = g2.sqrt();
     // ½ a² (1 + b²) with a = (g − c)/(g + c), b = n/d, n = c(g + c) − 1, d = c(g − c) + 1,
     // over one common denominator: one division instead of two (the CPU backend evaluates
     // this once per sample direction; d ≥ 1 − c² > 0 and g + c > 0 past the test above).
     let (gm, gp) = (g - c, g + c);
-    let n = c * gp - 1.0;
-    let d = c * gm + 1.0;
-    (0.5 * gm * gm * (d * d + n * n) / (gp * gp * (d * d))).clamp(0.0, 1.0)
+    let n = c * gp - R::splat(1.0);
+    let d = c * gm + R::splat(1.0);
+    let f = (R::splat(0.5) * gm * gm * (d * d + n * n) / (gp * gp * (d * d))).clamp(0.0, 1.0);
+    R::select(tir, R::splat(1.0), f)
 }
 
 /// 1 − [`fresnel_dielectric`], the unpolarised transmittance, without the cancellation of
@@ -62,18 +70,24 @@ pub fn fresnel_dielectric(cos_i: f64, eta: f64) -> f64 {
 /// and T_p = 1 − R_p = 4η²cg/(η²c + g)² (Born & Wolf, Principles of Optics, §1.5.3), and
 /// T = (T_s + T_p)/2, a sum of positive terms.
 pub fn fresnel_transmittance(cos_i: f64, eta: f64) -> f64 {
+    fresnel_transmittance_in(cos_i, eta)
+}
+
+/// [`fresnel_transmittance`] over any [`Real`].
+#[inline(always)]
+pub fn fresnel_transmittance_in<R: Real>(cos_i: R, eta: R) -> R {
     let c = cos_i.abs();
-    let g2 = eta * eta - 1.0 + c * c;
-    if g2 <= 0.0 {
-        return 0.0; // total internal reflection (only possible for eta < 1)
-    }
+    let g2 = eta * eta - R::splat(1.0) + c * c;
+    // g² ≤ 0: total internal reflection (only possible for eta < 1).
+    let tir = g2.le(R::zero());
     let g = g2.sqrt();
     let e2 = eta * eta;
     // 2cg (1/s² + η²/p²), s = c + g, p = η²c + g, over one common denominator (one
     // division instead of two; still a sum of positive terms).
     let s2 = (c + g) * (c + g);
     let p2 = (e2 * c + g) * (e2 * c + g);
-    (2.0 * c * g * (p2 + e2 * s2) / (s2 * p2)).clamp(0.0, 1.0)
+    let t = (R::splat(2.0) * c * g * (p2 + e2 * s2) / (s2 * p2)).clamp(0.0, 1.0);
+    R::select(tir, R::zero(), t)
 }
 
 /// Reflection half vector of two directions (unnormalised input allowed).

@@ -124,6 +124,11 @@ impl GpuBackend {
         })
     }
 
+    /// Whether the adapter is a software rasterizer on the host's processor (lavapipe).
+    pub fn is_software(&self) -> bool {
+        self.device.is_cpu()
+    }
+
     /// Lower the largest binding the engine allocates (tests of the paths that split a
     /// batch into several windows and submissions).
     pub fn with_max_binding(mut self, bytes: u64) -> Self {

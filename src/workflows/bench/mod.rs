@@ -122,7 +122,8 @@ pub fn measure(
     }
     let secs = t0.elapsed().as_secs_f64();
     let evals = reps as f64 * candidates as f64 * data.len() as f64;
-    let is_cpu = backend.id() == "cpu";
+    // Host backends: their rate per thread and per CPU-second mean something.
+    let is_cpu = backend.submissions().is_none();
     let cpu_secs = match (cpu0, process_cpu_seconds()) {
         // At least 10 ticks, so that the tick's rounding stays below 10 %.
         (Some(a), Some(b)) if is_cpu && b - a >= 0.1 => Some(b - a),
@@ -142,12 +143,17 @@ pub fn measure(
 
 /// Median over models of GPU evals/s ÷ CPU evals/s, from rows of both backends.
 pub fn median_speedup(rows: &[BenchRow]) -> Option<f64> {
+    median_ratio(rows, "gpu", "cpu")
+}
+
+/// Median over models of evals/s on backend `over` ÷ evals/s on backend `under`.
+pub fn median_ratio(rows: &[BenchRow], over: &str, under: &str) -> Option<f64> {
     let mut ratios: Vec<f64> = rows
         .iter()
-        .filter(|r| r.backend == "gpu")
+        .filter(|r| r.backend == over)
         .filter_map(|g| {
             rows.iter()
-                .find(|c| c.backend == "cpu" && c.model == g.model)
+                .find(|c| c.backend == under && c.model == g.model)
                 .map(|c| g.evals_per_s / c.evals_per_s)
         })
         .collect();

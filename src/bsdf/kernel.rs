@@ -1,0 +1,386 @@
+//! One model source for two CPU engines: a node written once over a [`Real`] as a
+//! [`Kernel`] is the f64 reference (`Kernel::block::<f64>`, one direction at a time) and
+//! the SIMD engine (`Kernel::block::<F32x8>` or `::<F64x4>`, eight or four directions
+//! in the lanes of one value), as Mitsuba's Dr.Jit types or pbrt-v4's `PBRT_CPU_GPU`
+//! functions serve several back ends from one text.
+//!
+//! A node opts in with `impl Kernel for X` and `kernel_methods!()` in its `impl Bsdf`,
+//! which derives `eval`, `eval_channels` and the lane entry points from the kernel. A
+//! node that does not (a model added with `eval` alone, as `tests/toy_model.rs` shows)
+//! still runs on the SIMD engine: the default lane entry points unpack the lanes and
+//! call its f64 `eval_channels` ([`by_reference`]).
+
+use super::{Bsdf, Channels, Children, Dir};
+use crate::math::lanes::{level, F32x8, F64x4, Level, Real, V3};
+use glam::DVec3;
+
+/// A direction pair (ωi, ωo) in lanes.
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+pub struct LaneDir<R> {
+    pub wi: V3<R>,
+    pub wo: V3<R>,
+}
+
+/// The children's values for a block of m lane-directions × n channels: child k at
+/// lane-direction d, channel i is `values[(k · m + d) · n + i]` (the layout of
+/// [`Children`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LaneChildren<'a, R> {
+    values: &'a [R],
+    m: usize,
+    n: usize,
+}
+
+impl<'a, R: Real> LaneChildren<'a, R> {
+    pub fn new(values: &'a [R], m: usize, n: usize) -> Self {
+        LaneChildren { values, m, n }
+    }
+    /// Child k's values at lane-direction d, one per channel.
+    #[inline(always)]
+    pub fn at(&self, k: usize, d: usize) -> &'a [R] {
+        let at = (k * self.m + d) * self.n;
+        &self.values[at..at + self.n]
+    }
+}
+
+/// A node's evaluation written once over the number type.
+pub trait Kernel: Bsdf {
+    /// Whether the node needs f64 lanes (its f32 form loses what data can see); a model
+    /// with one such node runs in [`F64x4`] on the SIMD engine.
+    const F64_LANES: bool = false;
+    /// The n = `p.len()` channels at every lane-direction of `dirs`: `out[d · n + i]`
+    /// receives lane-direction d, channel i; `children` holds the children's values the
+    /// same way. Per lane, the value [`Bsdf::eval`] gives (for R = f64 it *is* `eval`).
+    fn block<R: Real>(
+        &self,
+        p: Channels,
+        dirs: &[LaneDir<R>],
+        children: LaneChildren<R>,
+        out: &mut [R],
+    );
+}
+
+/// Which lanes a model runs in on the SIMD engine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum LaneKind {
+    /// Eight f32 lanes (the GPU engine's precision).
+    F32x8,
+    /// Four f64 lanes.
+    F64x4,
+}
+
+/// [`Bsdf::eval`] of a kernel: one direction, one channel.
+#[inline]
+pub fn eval_one<K: Kernel>(k: &K, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
+    let mut out = [0.0];
+    let dirs = [LaneDir {
+        wi: wi.into(),
+        wo: wo.into(),
+    }];
+    k.block::<f64>(
+        Channels::one(p),
+        &dirs,
+        LaneChildren::new(children, 1, 1),
+        &mut out,
+    );
+    out[0]
+}
+
+/// [`Bsdf::eval_channels`] of a kernel: the f64 reference, a direction at a time.
+#[inline]
+pub fn eval_f64<K: Kernel>(k: &K, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
+    // The directions as V3<f64>, a stack chunk at a time.
+    const CHUNK: usize = 32;
+    let n = p.len();
+    let m = dirs.len();
+    if n == 0 || m == 0 {
+        return;
+    }
+    if m <= CHUNK {
+        let zero = V3::from(DVec3::ZERO);
+        let mut lane = [LaneDir { wi: zero, wo: zero }; CHUNK];
+        for (l, &(wi, wo)) in lane.iter_mut().zip(dirs) {
+            *l = LaneDir {
+                wi: wi.into(),
+                wo: wo.into(),
+            };
+        }
+        k.block::<f64>(p, &lane[..m], LaneChildren::new(children.values, m, n), out);
+    } else {
+        let lane: Vec<LaneDir<f64>> = dirs
+            .iter()
+            .map(|&(wi, wo)| LaneDir {
+                wi: wi.into(),
+                wo: wo.into(),
+            })
+            .collect();
+        k.block::<f64>(p, &lane, LaneChildren::new(children.values, m, n), out);
+    }
+}
+
+/// The lane entry points of a node without a kernel: each lane through its f64
+/// `eval_channels`, rounded to the lanes' precision.
+pub fn by_reference<R: Real>(
+    b: &(impl Bsdf + ?Sized),
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    children: LaneChildren<R>,
+    out: &mut [R],
+) {
+    let (n, m, l) = (p.len(), dirs.len(), R::LANES);
+    let flat: Vec<Dir> = dirs
+        .iter()
+        .flat_map(|LaneDir { wi, wo }| {
+            (0..l).map(|j| {
+                (
+                    DVec3::new(wi.x.lane(j), wi.y.lane(j), wi.z.lane(j)),
+                    DVec3::new(wo.x.lane(j), wo.y.lane(j), wo.z.lane(j)),
+                )
+            })
+        })
+        .collect();
+    let nc = children.values.len() / (m * n).max(1);
+    // Child k at direction D = d·L + j, channel i: (k · mL + D) · n + i.
+    let mut child = vec![0.0; nc * m * l * n];
+    for k in 0..nc {
+        for d in 0..m {
+            for i in 0..n {
+                let v = children.at(k, d)[i];
+                for j in 0..l {
+                    child[(k * m * l + d * l + j) * n + i] = v.lane(j);
+                }
+            }
+        }
+    }
+    let mut values = vec![0.0; m * l * n];
+    b.eval_channels(p, &flat, Children::new(&child, m * l, n), &mut values);
+    for d in 0..m {
+        for i in 0..n {
+            out[d * n + i] = R::from_fn(|j| values[(d * l + j) * n + i]);
+        }
+    }
+}
+
+/// The `eval`, `eval_channels` and lane entry points of a [`Bsdf`] that implements
+/// [`Kernel`]: put `kernel_methods!();` in its `impl Bsdf` block.
+#[macro_export]
+macro_rules! kernel_methods {
+    () => {
+        fn eval(&self, p: &[f64], wi: glam::DVec3, wo: glam::DVec3, children: &[f64]) -> f64 {
+            $crate::bsdf::kernel::eval_one(self, p, wi, wo, children)
+        }
+        fn eval_channels(
+            &self,
+            p: $crate::bsdf::Channels,
+            dirs: &[$crate::bsdf::Dir],
+            children: $crate::bsdf::Children,
+            out: &mut [f64],
+        ) {
+            $crate::bsdf::kernel::eval_f64(self, p, dirs, children, out)
+        }
+        fn eval_f32x8(
+            &self,
+            p: $crate::bsdf::Channels,
+            dirs: &[$crate::bsdf::kernel::LaneDir<$crate::math::lanes::F32x8>],
+            children: $crate::bsdf::kernel::LaneChildren<$crate::math::lanes::F32x8>,
+            out: &mut [$crate::math::lanes::F32x8],
+        ) {
+            $crate::bsdf::kernel::run_lanes(self, p, dirs, children, out)
+        }
+        fn eval_f64x4(
+            &self,
+            p: $crate::bsdf::Channels,
+            dirs: &[$crate::bsdf::kernel::LaneDir<$crate::math::lanes::F64x4>],
+            children: $crate::bsdf::kernel::LaneChildren<$crate::math::lanes::F64x4>,
+            out: &mut [$crate::math::lanes::F64x4],
+        ) {
+            $crate::bsdf::kernel::run_lanes(self, p, dirs, children, out)
+        }
+        fn lanes(&self) -> Option<$crate::bsdf::kernel::LaneKind> {
+            Some(if <Self as $crate::bsdf::kernel::Kernel>::F64_LANES {
+                $crate::bsdf::kernel::LaneKind::F64x4
+            } else {
+                $crate::bsdf::kernel::LaneKind::F32x8
+            })
+        }
+    };
+}
+
+/// A kernel in lanes, compiled for this processor's vector extensions: one instance of
+/// `block` per instruction set, each with the kernel inlined whole, picked at run time.
+/// With AVX the lanes are cast to the AVX types of the same layout
+/// ([`crate::math::lanes::avx`]), whose every operation is one instruction.
+#[inline]
+pub fn run_lanes<K: Kernel, R: LaneReal>(
+    k: &K,
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    children: LaneChildren<R>,
+    out: &mut [R],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[allow(clippy::let_unit_value)]
+        let () = R::SAME_LAYOUT;
+        // SAFETY: R and R::Reg have one size and alignment (SAME_LAYOUT), LaneDir and
+        // V3 are repr(C), so the slices hold the same lanes as AVX registers.
+        let (dirs, values, out) = unsafe {
+            (
+                std::slice::from_raw_parts(dirs.as_ptr() as *const LaneDir<R::Reg>, dirs.len()),
+                std::slice::from_raw_parts(
+                    children.values.as_ptr() as *const R::Reg,
+                    children.values.len(),
+                ),
+                std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut R::Reg, out.len()),
+            )
+        };
+        let children = LaneChildren::new(values, children.m, children.n);
+        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+        fn avx512<K: Kernel, R: Real>(
+            k: &K,
+            p: Channels,
+            dirs: &[LaneDir<R>],
+            children: LaneChildren<R>,
+            out: &mut [R],
+        ) {
+            k.block::<R>(p, dirs, children, out)
+        }
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2<K: Kernel, R: Real>(
+            k: &K,
+            p: Channels,
+            dirs: &[LaneDir<R>],
+            children: LaneChildren<R>,
+            out: &mut [R],
+        ) {
+            k.block::<R>(p, dirs, children, out)
+        }
+        match level() {
+            // SAFETY: `level` found these features on this processor.
+            Level::Avx512 => unsafe { avx512::<K, R::Reg>(k, p, dirs, children, out) },
+            Level::Avx2 => unsafe { avx2::<K, R::Reg>(k, p, dirs, children, out) },
+            Level::Baseline => {
+                // Back to the array types (the same memory) for the portable form.
+                let (dirs, values, out) = unsafe {
+                    (
+                        std::slice::from_raw_parts(dirs.as_ptr() as *const LaneDir<R>, dirs.len()),
+                        std::slice::from_raw_parts(
+                            children.values.as_ptr() as *const R,
+                            children.values.len(),
+                        ),
+                        std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut R, out.len()),
+                    )
+                };
+                k.block::<R>(
+                    p,
+                    dirs,
+                    LaneChildren::new(values, children.m, children.n),
+                    out,
+                )
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    k.block::<R>(p, dirs, children, out)
+}
+
+/// A lane type a model tree can be evaluated in: calls the node's entry point for it.
+#[cfg(target_arch = "x86_64")]
+pub trait LaneReal: crate::math::lanes::avx::Avx {
+    const KIND: LaneKind;
+    fn eval_node(
+        b: &dyn Bsdf,
+        p: Channels,
+        dirs: &[LaneDir<Self>],
+        children: LaneChildren<Self>,
+        out: &mut [Self],
+    );
+}
+/// A lane type a model tree can be evaluated in: calls the node's entry point for it.
+#[cfg(not(target_arch = "x86_64"))]
+pub trait LaneReal: Real {
+    const KIND: LaneKind;
+    fn eval_node(
+        b: &dyn Bsdf,
+        p: Channels,
+        dirs: &[LaneDir<Self>],
+        children: LaneChildren<Self>,
+        out: &mut [Self],
+    );
+}
+
+impl LaneReal for F32x8 {
+    const KIND: LaneKind = LaneKind::F32x8;
+    #[inline]
+    fn eval_node(
+        b: &dyn Bsdf,
+        p: Channels,
+        dirs: &[LaneDir<Self>],
+        children: LaneChildren<Self>,
+        out: &mut [Self],
+    ) {
+        b.eval_f32x8(p, dirs, children, out)
+    }
+}
+
+impl LaneReal for F64x4 {
+    const KIND: LaneKind = LaneKind::F64x4;
+    #[inline]
+    fn eval_node(
+        b: &dyn Bsdf,
+        p: Channels,
+        dirs: &[LaneDir<Self>],
+        children: LaneChildren<Self>,
+        out: &mut [Self],
+    ) {
+        b.eval_f64x4(p, dirs, children, out)
+    }
+}
+
+/// Lane-direction d of a block with its n outputs: the loop of a [`Kernel::block`]
+/// whose directions are independent (`for (d, (wi, wo), out) in lanes(dirs, n, out)`).
+/// An iterator rather than a closure: kernels are compiled once per instruction set,
+/// and a closure with a call site in each would be left out of line, without the
+/// vector extensions.
+#[inline(always)]
+pub fn lanes<'a, R: Real>(
+    dirs: &'a [LaneDir<R>],
+    n: usize,
+    out: &'a mut [R],
+) -> impl Iterator<Item = (usize, (V3<R>, V3<R>), &'a mut [R])> + 'a {
+    dirs.iter()
+        .zip(out.chunks_exact_mut(n.max(1)))
+        .enumerate()
+        .map(|(d, (dir, o))| (d, (dir.wi, dir.wo), o))
+}
+
+/// A one-entry cache of a function of one value ([`super::Memo`] over a [`Real`]): in
+/// lanes it hits when every lane repeats.
+#[derive(Clone, Copy, Debug)]
+pub struct LaneMemo<R> {
+    last: Option<(R, R)>,
+}
+
+impl<R: Real> Default for LaneMemo<R> {
+    fn default() -> Self {
+        LaneMemo { last: None }
+    }
+}
+
+impl<R: Real> LaneMemo<R> {
+    /// The value cached for `x`, if `x` is the previous argument.
+    #[inline(always)]
+    pub fn get(&self, x: R) -> Option<R> {
+        match self.last {
+            Some((key, value)) if key.same_bits(x) => Some(value),
+            _ => None,
+        }
+    }
+    /// Caches `value` for `x` and returns it.
+    #[inline(always)]
+    pub fn put(&mut self, x: R, value: R) -> R {
+        self.last = Some((x, value));
+        value
+    }
+}

@@ -1,0 +1,73 @@
+//! The SIMD CPU engine (f32 or f64 lanes, the models' one source instantiated for the
+//! processor's vector extensions) against the CPU reference (the same source in f64, one
+//! direction at a time) on random valid inputs, for every model the registry derives
+//! and every loss: the GPU engine's parity suite (`tests/common/parity_suite.rs`) with
+//! the SIMD engine in its place, and the GPU engine's accuracy contract.
+//!
+//! Tolerance: the models run in f32 lanes (unit roundoff 6e-8) unless one of their nodes
+//! needs f64, through some hundred operations, so model values are compared per sample
+//! with |simd − cpu| ≤ REL · |cpu| + FLOOR, REL = 2e-3, FLOOR = 1e-30 sr⁻¹ (f32's range),
+//! and costs with REL_COST = 1e-3, as the GPU engine's (tests/gpu_parity.rs says why).
+//! NaN never passes. Every instruction set the processor has is checked: the run-time
+//! dispatch picks the widest, and `BSDFIT_SIMD=avx2` or `=baseline` (CI runs this file
+//! once more with the baseline) caps it. Also: a model without a kernel (evaluated lane
+//! by lane through the reference) and a data set whose blocks end in partial lanes.
+
+use bsdfit::engine::simd::SimdBackend;
+
+const ENGINE: &str = "simd";
+
+include!("common/parity_suite.rs");
+
+fn tested() -> &'static dyn Backend {
+    static S: SimdBackend = SimdBackend;
+    &S
+}
+
+/// The lanes a model runs in: f32 unless a node asks for f64; every kernel of the
+/// catalogue is named (a node without one is evaluated through the reference).
+#[test]
+fn lane_kinds_and_kernels_are_reported() {
+    let m = Model::parse("fa(lambert)", 3).unwrap();
+    assert_eq!(m.lane_kind(), bsdfit::bsdf::kernel::LaneKind::F32x8);
+    assert!(
+        m.nodes_without_kernel().is_empty(),
+        "{:?}",
+        m.nodes_without_kernel()
+    );
+    eprintln!(
+        "instruction set: {}",
+        bsdfit::math::lanes::instruction_set()
+    );
+}
+
+/// Costs of the SIMD engine (summed in lane order, in partial sums) against the
+/// reference's on data whose directions do not fill whole lanes (7 and 13 directions per
+/// channel set) and hold repeated channels: padding lanes add nothing.
+#[test]
+fn partial_lanes_add_nothing() {
+    let model = Model::parse("ggx", 3).unwrap();
+    for n in [1usize, 7, 13] {
+        let data = random_dataset(Kind::Brdf, 3, n, 40 + n as u64);
+        let params = random_params(&model, 6, 41);
+        for metric in [Metric::Chi2, Metric::Smape, Metric::Low] {
+            let problem = Problem {
+                model: &model,
+                data: &data,
+                loss: Loss::new(metric, Weights::Relunc),
+            };
+            let c = CpuBackend::new()
+                .prepare(problem)
+                .unwrap()
+                .costs(&params)
+                .unwrap();
+            let s = tested().prepare(problem).unwrap().costs(&params).unwrap();
+            for (cv, sv) in c.iter().zip(&s) {
+                assert!(
+                    cv.is_finite() && (sv - cv).abs() <= REL_COST * cv.abs() + 1e-12,
+                    "{n} directions, {metric}: simd {sv} cpu {cv}"
+                );
+            }
+        }
+    }
+}
