@@ -24,13 +24,16 @@
 //! components of m (no 1 − cos² cancellation at sharp peaks); G1/|μ| is evaluated in forms
 //! without a division by μ, so grazing θt gives no 0·∞.
 
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
 use super::microfacet::{
-    gg_lambda_table, Beckmann, Distribution, Gg, Ggx, Gtr, Masking, MICROFACET_WGSL,
+    gg_lambda_table, ggx_d, ggx_g1_over_mu, Beckmann, Distribution, Gg, Gtr, Masking,
+    MICROFACET_WGSL,
 };
 use super::effect::{Adds, Effect};
-use super::{Ast, Bsdf, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
+use super::{Ast, Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::fresnel_transmittance;
+use crate::math::fresnel_transmittance_in;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -127,22 +130,8 @@ impl Ndf {
 
     /// f_t for this NDF with parameters `p` (in [`Ndf::params`] order).
     pub fn eval(self, p: &[f64], wi: DVec3, wo: DVec3) -> f64 {
-        let tr = Ggx { alpha: p[0] };
-        match self {
-            Ndf::Tr => walter_transmission(wi, wo, p[1], &tr, &tr),
-            Ndf::Beckmann => walter_transmission(wi, wo, p[1], &Beckmann { alpha: p[0] }, &tr),
-            Ndf::Gtr => {
-                let gtr = Gtr {
-                    alpha: p[0],
-                    gamma: p[1],
-                };
-                walter_transmission(wi, wo, p[2], &gtr, &tr)
-            }
-            Ndf::Gg => {
-                let gg = Gg::new(p[0], p[1]);
-                walter_transmission(wi, wo, p[2], &gg, &gg)
-            }
-        }
+        let p3 = [p[0], p[1], p.get(2).copied().unwrap_or(0.0)];
+        self.eval_in(p3, V3::from(wi), V3::from(wo))
     }
 }
 
@@ -151,39 +140,42 @@ impl Ndf {
 
 /// The refraction microfacet of a valid transmission configuration.
 #[derive(Clone, Copy, Debug)]
-pub struct Refraction {
+pub struct Refraction<R: Real = f64> {
     /// Microfacet normal, upper hemisphere (m.z > 0), unit.
-    pub m: DVec3,
+    pub m: V3<R>,
     /// i·m > 0.
-    pub im: f64,
+    pub im: R,
     /// o·m < 0.
-    pub om: f64,
+    pub om: R,
     /// (η_i (i·m) + η_t (o·m))² = ‖i + η_t o‖².
-    pub l2: f64,
+    pub l2: R,
 }
 
 /// Walter's refraction half vector and validity conditions; `None` when f_t = 0
 /// (ωi not above, ωo not below, η ≤ 1, degenerate or back-facing microfacet).
 pub fn refraction(wi: DVec3, wo: DVec3, eta: f64) -> Option<Refraction> {
-    if !(wi.z > 0.0 && wo.z < 0.0 && eta > 1.0) {
-        return None;
-    }
+    let (r, valid) = refraction_in(V3::from(wi), V3::from(wo), eta);
+    valid.then_some(r)
+}
+
+/// [`refraction`] over any [`Real`]: the microfacet, and where it is valid.
+#[inline(always)]
+pub fn refraction_in<R: Real>(wi: V3<R>, wo: V3<R>, eta: f64) -> (Refraction<R>, R::Mask) {
+    let zero = R::zero();
+    let valid = zero.lt(wi.z) & wo.z.lt(zero) & R::splat(1.0).lt(R::splat(eta));
     // v = i + η o, written so that it keeps its relative accuracy when it is small.
-    let v = (wi + wo) + (eta - 1.0) * wo;
+    let v = (wi + wo) + wo.scale(R::splat(eta - 1.0));
     let l2 = v.dot(v);
-    if l2.is_nan() || l2 <= L2_MIN {
-        return None;
-    }
-    let mut m = -v / l2.sqrt();
-    if m.z < 0.0 {
-        m = -m; // D lives on the upper hemisphere; the χ⁺ tests below reject this side for η > 1
-    }
+    // Not NaN and above L2_MIN.
+    let valid = valid & R::splat(L2_MIN).lt(l2);
+    let len = l2.sqrt();
+    let m = V3::new(-v.x / len, -v.y / len, -v.z / len);
+    // D lives on the upper hemisphere; the χ⁺ tests below reject this side for η > 1.
+    let m = V3::select(m.z.lt(zero), V3::new(-m.x, -m.y, -m.z), m);
     let im = wi.dot(m);
     let om = wo.dot(m);
-    if !(m.z > 0.0 && im > 0.0 && om < 0.0) {
-        return None;
-    }
-    Some(Refraction { m, im, om, l2 })
+    let valid = valid & zero.lt(m.z) & zero.lt(im) & om.lt(zero);
+    (Refraction { m, im, om, l2 }, valid)
 }
 
 /// Eq. 1 with the distribution `ndf` and the Smith masking `masking`.
@@ -200,15 +192,52 @@ pub fn walter_transmission(
     transmit(
         &r,
         eta,
-        ndf.d(r.m),
+        ndf.d(r.m.into()),
         masking.g1_over_mu(wi),
         masking.g1_over_mu(wo),
     )
 }
 
 /// |i·m| |o·m| (1 − F(i·m)) D · (G1(i)/|μi|) (G1(o)/|μo|) / ‖i + η o‖².
-pub fn transmit(r: &Refraction, eta: f64, d: f64, g1i_over_mu: f64, g1o_over_mu: f64) -> f64 {
-    r.im * (-r.om) * fresnel_transmittance(r.im, eta) * d * g1i_over_mu * g1o_over_mu / r.l2
+#[inline(always)]
+pub fn transmit<R: Real>(r: &Refraction<R>, eta: f64, d: R, g1i_over_mu: R, g1o_over_mu: R) -> R {
+    r.im * (-r.om) * fresnel_transmittance_in(r.im, R::splat(eta)) * d * g1i_over_mu * g1o_over_mu
+        / r.l2
+}
+
+impl Ndf {
+    /// f_t for this NDF with parameters `p` (in [`Ndf::params`] order) over any [`Real`]:
+    /// the kernel of `btdf(…)`.
+    #[inline(always)]
+    pub fn eval_in<R: Real>(self, p: [f64; 3], wi: V3<R>, wo: V3<R>) -> R {
+        let eta = match self {
+            Ndf::Tr | Ndf::Beckmann => p[1],
+            Ndf::Gtr | Ndf::Gg => p[2],
+        };
+        let (r, valid) = refraction_in(wi, wo, eta);
+        if !R::any(valid) {
+            return R::zero();
+        }
+        let (d, g1i, g1o) = match self {
+            Ndf::Tr | Ndf::Beckmann | Ndf::Gtr => {
+                let d = match self {
+                    Ndf::Tr => ggx_d(p[0], r.m),
+                    Ndf::Beckmann => Beckmann { alpha: p[0] }.d_in(r.m),
+                    _ => Gtr {
+                        alpha: p[0],
+                        gamma: p[1],
+                    }
+                    .d_in(r.m),
+                };
+                (d, ggx_g1_over_mu(p[0], wi), ggx_g1_over_mu(p[0], wo))
+            }
+            Ndf::Gg => {
+                let gg = Gg::new(p[0], p[1]);
+                (gg.d_in(r.m), gg.g1_over_mu_in(wi), gg.g1_over_mu_in(wo))
+            }
+        };
+        R::select(valid, transmit(&r, eta, d, g1i, g1o), R::zero())
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -220,6 +249,17 @@ pub struct Btdf {
     pub ndf: Ndf,
 }
 
+impl Kernel for Btdf {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let k = self.ndf.params().len();
+        let p3 = [p.get(0, 0), p.get(0, 1), if k > 2 { p.get(0, 2) } else { 0.0 }];
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            out.fill(self.ndf.eval_in(p3, wi, wo));
+        }
+    }
+}
+
 impl Bsdf for Btdf {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -227,9 +267,7 @@ impl Bsdf for Btdf {
     fn params(&self) -> Vec<ParamDecl> {
         self.ndf.params()
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        self.ndf.eval(p, wi, wo)
-    }
+    crate::kernel_methods!();
     /// f(i, o) needs ωi above and ωo below, so f(o, i) = 0: not reciprocal by swapping.
     fn reciprocal(&self) -> bool {
         false
@@ -275,15 +313,30 @@ impl Suffix {
         self.entry().name
     }
     pub fn apply(self, k: f64, wi: DVec3, wo: DVec3, inner: f64) -> f64 {
+        self.apply_in(k, V3::from(wi), V3::from(wo), inner)
+    }
+
+    /// [`Self::apply`] over any [`Real`].
+    #[inline(always)]
+    pub fn apply_in<R: Real>(self, k: f64, wi: V3<R>, wo: V3<R>, inner: R) -> R {
         match self {
-            Suffix::Scale => inner * k,
-            Suffix::Absorb => inner * (-k / wo.z.abs().max(1e-20)).exp(),
+            Suffix::Scale => inner * R::splat(k),
+            Suffix::Absorb => inner * (R::splat(-k) / wo.z.abs().max(R::splat(1e-20))).exp(),
             Suffix::Diffuse => {
-                if wi.z > 0.0 && wo.z < 0.0 {
-                    inner + k / PI
-                } else {
-                    inner
-                }
+                let zero = R::zero();
+                let through = zero.lt(wi.z) & wo.z.lt(zero);
+                R::select(through, inner + R::splat(k / PI), inner)
+            }
+        }
+    }
+}
+
+impl Kernel for Suffix {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            for (i, (o, &f)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
+                *o = self.apply_in(p.get(i, 0), wi, wo, f);
             }
         }
     }
@@ -307,9 +360,7 @@ impl Bsdf for Suffix {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        self.apply(p[0], wi, wo, children[0])
-    }
+    crate::kernel_methods!();
     fn reciprocal(&self) -> bool {
         false
     }

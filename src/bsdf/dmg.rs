@@ -13,10 +13,14 @@
 //! B ∈ `lambert on eon vmf ggx`. Twins: `shaders/bsdf/micrograin.wgsl` +
 //! `shaders/bsdf/dmg.wgsl` (with `microfacet.wgsl`).
 
-use super::micrograin::{layer, layer_wgsl, weight, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::micrograin::{
+    layer, layer_wgsl, weight, weight_in, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0,
+};
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
+use crate::math::lanes::Real;
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
 
@@ -35,6 +39,23 @@ pub fn dmg_layer(tau0: f64, beta: f64, rho_g: f64, wi: DVec3, wo: DVec3, f_base:
     layer(weight(tau0, beta, wi.z, wo.z), rho_g * FRAC_1_PI, f_base)
 }
 
+impl Kernel for DiffuseMicrograin {
+    /// The visibility weight once per direction (τ0 and β are shared).
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
+        let (tau0, beta) = (p.get(0, 0), p.get(0, 1));
+        let zero = R::zero();
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let below = wi.z.le(zero) | wo.z.le(zero);
+            let w = weight_in(tau0, beta, wi.z, wo.z);
+            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+                let v = layer(w, R::splat(p.get(i, 2)) * R::splat(FRAC_1_PI), b);
+                *o = R::select(below, zero, v);
+            }
+        }
+    }
+}
+
 impl Bsdf for DiffuseMicrograin {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -45,23 +66,7 @@ impl Bsdf for DiffuseMicrograin {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        dmg_layer(p[0], p[1], p[2], wi, wo, children[0])
-    }
-    /// The visibility weight once per direction (τ0 and β are shared).
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
-        let (tau0, beta) = (p.get(0, 0), p.get(0, 1));
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                out.fill(0.0);
-                return;
-            }
-            let w = weight(tau0, beta, wi.z, wo.z);
-            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
-                *o = layer(w, p.get(i, 2) * FRAC_1_PI, b);
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("dmg", include_str!("../../shaders/bsdf/dmg.wgsl"))
     }

@@ -11,8 +11,10 @@
 //! Twin: `shaders/bsdf/eon.wgsl`.
 
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
 
@@ -25,12 +27,20 @@ const EPS: f64 = 1e-7;
 
 /// Exact directional albedo of the FON single-scattering lobe with ρ = 1 (EON Eq. 9).
 pub fn e_fon_exact(mu: f64, r: f64) -> f64 {
+    e_fon_exact_in(mu, r)
+}
+
+/// [`e_fon_exact`] over any [`Real`].
+#[inline(always)]
+pub fn e_fon_exact_in<R: Real>(mu: R, r: R) -> R {
+    let one = R::splat(1.0);
     let mu = mu.clamp(1e-7, 1.0);
-    let af = 1.0 / (1.0 + C1_FON * r);
+    let af = one / (one + R::splat(C1_FON) * r);
     let bf = r * af;
-    let si = (1.0 - mu * mu).max(0.0).sqrt();
-    let g = si * (mu.acos() - si * mu) + (2.0 / 3.0) * ((si / mu) * (1.0 - si * si * si) - si);
-    af + bf * FRAC_1_PI * g
+    let si = (one - mu * mu).max(R::zero()).sqrt();
+    let g = si * (mu.acos() - si * mu)
+        + R::splat(2.0 / 3.0) * ((si / mu) * (one - si * si * si) - si);
+    af + bf * R::splat(FRAC_1_PI) * g
 }
 
 /// Single-scattering FON lobe (without the multiple-scattering term).
@@ -48,44 +58,63 @@ pub struct Eon;
 /// What EON depends on besides ρ, at one direction pair: A_F and 1 + r s/t of the
 /// single-scattering FON lobe, Ē_F and the three (1 − E) factors of f_ms (the directional
 /// albedos are the costly part, so channels share them).
-struct EonAt {
-    af: f64,
-    fon: f64,
-    e_avg: f64,
-    one_minus_eo: f64,
-    one_minus_ei: f64,
-    one_minus_eavg: f64,
+struct EonAt<R: Real> {
+    af: R,
+    fon: R,
+    e_avg: R,
+    one_minus_eo: R,
+    one_minus_ei: R,
+    one_minus_eavg: R,
+    /// Below the surface (f = 0).
+    below: R::Mask,
 }
 
-impl EonAt {
-    /// None below the surface (f = 0).
-    fn new(r: f64, wi: DVec3, wo: DVec3) -> Option<EonAt> {
+impl<R: Real> EonAt<R> {
+    #[inline(always)]
+    fn new(r: f64, wi: V3<R>, wo: V3<R>) -> EonAt<R> {
         let (mu_i, mu_o) = (wi.z, wo.z);
-        if mu_i <= 0.0 || mu_o <= 0.0 {
-            return None;
-        }
+        let (zero, one) = (R::zero(), R::splat(1.0));
+        let below = mu_i.le(zero) | mu_o.le(zero);
         let s = wi.dot(wo) - mu_i * mu_o;
-        let s_over_t = if s > 0.0 { s / mu_i.max(mu_o) } else { s };
-        let af = 1.0 / (1.0 + C1_FON * r);
-        let e_avg = af * (1.0 + C2_FON * r);
-        Some(EonAt {
+        let s_over_t = R::select(zero.lt(s), s / mu_i.max(mu_o), s);
+        let r = R::splat(r);
+        let af = one / (one + R::splat(C1_FON) * r);
+        let e_avg = af * (one + R::splat(C2_FON) * r);
+        let eps = R::splat(EPS);
+        EonAt {
             af,
-            fon: 1.0 + r * s_over_t,
+            fon: one + r * s_over_t,
             e_avg,
-            one_minus_eo: (1.0 - e_fon_exact(mu_o, r)).max(EPS),
-            one_minus_ei: (1.0 - e_fon_exact(mu_i, r)).max(EPS),
-            one_minus_eavg: (1.0 - e_avg).max(EPS),
-        })
+            one_minus_eo: (one - e_fon_exact_in(mu_o, r)).max(eps),
+            one_minus_ei: (one - e_fon_exact_in(mu_i, r)).max(eps),
+            one_minus_eavg: (one - e_avg).max(eps),
+            below,
+        }
     }
 
     /// f_ss + f_ms for albedo ρ: the operations of [`f_fon`] and of paper Eq. 11–13, in
     /// their order.
-    fn value(&self, rho: f64) -> f64 {
-        let f_ss = rho * FRAC_1_PI * self.af * self.fon;
-        let rho_ms = rho * rho * self.e_avg / (1.0 - rho * (1.0 - self.e_avg));
-        let f_ms =
-            rho_ms * FRAC_1_PI * self.one_minus_eo * self.one_minus_ei / self.one_minus_eavg;
-        f_ss + f_ms
+    #[inline(always)]
+    fn value(&self, rho: R) -> R {
+        let one = R::splat(1.0);
+        let f_ss = rho * R::splat(FRAC_1_PI) * self.af * self.fon;
+        let rho_ms = rho * rho * self.e_avg / (one - rho * (one - self.e_avg));
+        let f_ms = rho_ms * R::splat(FRAC_1_PI) * self.one_minus_eo * self.one_minus_ei
+            / self.one_minus_eavg;
+        R::select(self.below, R::zero(), f_ss + f_ms)
+    }
+}
+
+impl Kernel for Eon {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let r = p.get(0, 1);
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let at = EonAt::new(r, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = at.value(R::splat(p.get(i, 0)));
+            }
+        }
     }
 }
 
@@ -99,23 +128,7 @@ impl Bsdf for Eon {
             ParamDecl::shared("r", 0.0, 1.0, 0.5, "roughness").neutral_at(0.0),
         ]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        match EonAt::new(p[1], wi, wo) {
-            Some(at) => at.value(p[0]),
-            None => 0.0,
-        }
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let r = p.get(0, 1);
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| match EonAt::new(r, wi, wo) {
-            Some(at) => {
-                for (i, o) in out.iter_mut().enumerate() {
-                    *o = at.value(p.get(i, 0));
-                }
-            }
-            None => out.fill(0.0),
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("eon", include_str!("../../shaders/bsdf/eon.wgsl"))
     }

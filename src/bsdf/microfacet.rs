@@ -83,14 +83,17 @@ pub struct Ggx {
 impl Distribution for Ggx {
     /// α² / (π (α² cos²θm + sin²θm)²).
     fn d(&self, m: DVec3) -> f64 {
-        if m.z <= 0.0 {
-            return 0.0;
-        }
-        let a2 = self.alpha * self.alpha;
-        let (c2, s2) = cos2_sin2(m);
-        let t = a2 * c2 + s2;
-        a2 / (PI * t * t)
+        ggx_d(self.alpha, m.into())
     }
+}
+
+/// [`Ggx`]'s D over any [`Real`].
+#[inline(always)]
+pub fn ggx_d<R: Real>(alpha: f64, m: V3<R>) -> R {
+    let a2 = R::splat(alpha * alpha);
+    let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
+    let t = a2 * c2 + s2;
+    R::select(m.z.le(R::zero()), R::zero(), a2 / (R::splat(PI) * t * t))
 }
 
 impl Ggx {
@@ -138,10 +141,16 @@ impl Masking for Ggx {
 
     /// 2 / (μ + √(μ² + α² sin²θ)).
     fn g1_over_mu(&self, w: DVec3) -> f64 {
-        let mu = w.z.abs();
-        let s2 = w.x * w.x + w.y * w.y;
-        2.0 / (mu + (mu * mu + self.alpha * self.alpha * s2).sqrt())
+        ggx_g1_over_mu(self.alpha, w.into())
     }
+}
+
+/// [`Ggx`]'s G1(ω)/|ω.z| over any [`Real`].
+#[inline(always)]
+pub fn ggx_g1_over_mu<R: Real>(alpha: f64, w: V3<R>) -> R {
+    let mu = w.z.abs();
+    let s2 = w.x * w.x + w.y * w.y;
+    R::splat(2.0) / (mu + (mu * mu + R::splat(alpha * alpha) * s2).sqrt())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -160,12 +169,19 @@ pub struct Beckmann {
 impl Distribution for Beckmann {
     /// exp(−tan²θm/α²) / (π α² cos⁴θm).
     fn d(&self, m: DVec3) -> f64 {
-        let (c2, s2) = cos2_sin2(m);
-        if m.z <= 0.0 || c2 < C2_MIN {
-            return 0.0;
-        }
+        self.d_in(m.into())
+    }
+}
+
+impl Beckmann {
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
+        let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
+        let zero = R::zero();
         let a2 = self.alpha * self.alpha;
-        (-(s2 / c2) / a2 - 2.0 * c2.ln()).exp() / (PI * a2)
+        let d = (-(s2 / c2) / R::splat(a2) - R::splat(2.0) * c2.ln()).exp() / R::splat(PI * a2);
+        R::select(m.z.le(zero) | c2.lt(R::splat(C2_MIN)), zero, d)
     }
 }
 
@@ -180,12 +196,19 @@ pub struct Gtr {
 impl Distribution for Gtr {
     /// c(α, γ) / (α² cos²θm + sin²θm)^γ, normalised by [`gtr_norm`].
     fn d(&self, m: DVec3) -> f64 {
-        if m.z <= 0.0 {
-            return 0.0;
-        }
+        self.d_in(m.into())
+    }
+}
+
+impl Gtr {
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
         let a2 = (self.alpha * self.alpha).max(1e-12);
-        let (c2, s2) = cos2_sin2(m);
-        gtr_norm(a2, self.gamma) * (-self.gamma * (a2 * c2 + s2).ln()).exp()
+        let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
+        let d = R::splat(gtr_norm(a2, self.gamma))
+            * (R::splat(-self.gamma) * (R::splat(a2) * c2 + s2).ln()).exp();
+        R::select(m.z.le(R::zero()), R::zero(), d)
     }
 }
 
@@ -242,52 +265,69 @@ impl Gg {
 
     /// (μ, μ Λ) with μ Λ = T̂ · J0 · (β sinθ + μ / r_c), T̂ from the table at x = b/(1+b),
     /// b = r_c β tanθ; finite at μ = 0.
-    fn mu_lambda(&self, w: DVec3) -> (f64, f64) {
-        let bs = self.beta * (w.x * w.x + w.y * w.y).sqrt();
+    #[inline(always)]
+    fn mu_lambda<R: Real>(&self, w: V3<R>) -> (R, R) {
+        let bs = R::splat(self.beta) * (w.x * w.x + w.y * w.y).sqrt();
         self.mu_lambda_at(w.z.abs(), bs)
     }
 
     /// (μ, μ Λ) at μ = |cos θ| and the width `bs` the direction sees (β sinθ; the
-    /// anisotropic form's projected width, [`super::aniso`]).
-    pub(super) fn mu_lambda_at(&self, mu: f64, bs: f64) -> (f64, f64) {
-        let b = bs * self.rc;
+    /// anisotropic form's projected width, [`super::aniso`]). In lanes the table is read
+    /// lane by lane.
+    #[inline(always)]
+    pub(super) fn mu_lambda_at<R: Real>(&self, mu: R, bs: R) -> (R, R) {
+        let b = bs * R::splat(self.rc);
         let x = b / (mu + b);
-        let t = gg_lambda_table().interpolate(self.p, x);
-        (mu, t * self.j0 * (bs + mu / self.rc))
+        let table = gg_lambda_table();
+        let t = R::from_fn(|j| table.interpolate(self.p, x.lane(j)));
+        (mu, t * R::splat(self.j0) * (bs + mu / R::splat(self.rc)))
     }
 
     /// D from z = tan²θm/β² (the anisotropic form's stretched slope) and c2 = cos²θm,
     /// with the normalisation `ln_norm` (its own for the anisotropic form).
-    pub(super) fn d_at(&self, ln_norm: f64, z: f64, c2: f64) -> f64 {
-        let e = if z > 0.0 {
-            (self.p * z.ln()).clamp(-80.0, 80.0).exp()
-        } else {
-            0.0
-        };
-        (ln_norm - e - 2.0 * c2.ln()).exp()
+    #[inline(always)]
+    pub(super) fn d_at<R: Real>(&self, ln_norm: f64, z: R, c2: R) -> R {
+        let zero = R::zero();
+        let e = R::select(
+            zero.lt(z),
+            (R::splat(self.p) * z.ln()).clamp(-80.0, 80.0).exp(),
+            zero,
+        );
+        (R::splat(ln_norm) - e - R::splat(2.0) * c2.ln()).exp()
+    }
+
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
+        let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
+        let zero = R::zero();
+        let d = self.d_at(self.ln_norm, s2 / c2 / R::splat(self.beta * self.beta), c2);
+        R::select(m.z.le(zero) | c2.lt(R::splat(C2_MIN)), zero, d)
+    }
+
+    /// [`Masking::g1_over_mu`] over any [`Real`].
+    #[inline(always)]
+    pub fn g1_over_mu_in<R: Real>(&self, w: V3<R>) -> R {
+        let (mu, mu_lambda) = self.mu_lambda(w);
+        R::splat(1.0) / (mu + mu_lambda)
     }
 }
 
 impl Distribution for Gg {
     /// p / (π β² Γ(1/p)) · exp(−(tan²θm/β²)^p) / cos⁴θm.
     fn d(&self, m: DVec3) -> f64 {
-        let (c2, s2) = cos2_sin2(m);
-        if m.z <= 0.0 || c2 < C2_MIN {
-            return 0.0;
-        }
-        self.d_at(self.ln_norm, s2 / c2 / (self.beta * self.beta), c2)
+        self.d_in(m.into())
     }
 }
 
 impl Masking for Gg {
     fn lambda(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(w);
+        let (mu, mu_lambda) = self.mu_lambda(V3::from(w));
         mu_lambda / mu
     }
 
     fn g1_over_mu(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(w);
-        1.0 / (mu + mu_lambda)
+        self.g1_over_mu_in(w.into())
     }
 }
 

@@ -38,9 +38,11 @@
 //! inside w; G1/μ is computed as 1/(γβ (σ + Λσ)), finite at μ → 0, so nothing divides by
 //! zero at grazing.
 
-use super::microfacet::{cos2_sin2, Distribution, Ggx, MICROFACET_WGSL};
-use super::{Memo, ParamDecl, Role, WgslFn};
-use crate::math::{fresnel_dielectric, fresnel_transmittance};
+use super::kernel::LaneMemo;
+use super::microfacet::{ggx_d, MICROFACET_WGSL};
+use super::{ParamDecl, Role, WgslFn};
+use crate::math::lanes::{Real, V3};
+use crate::math::{fresnel_dielectric_in, fresnel_transmittance_in};
 use glam::DVec3;
 use std::f64::consts::FRAC_1_PI;
 
@@ -110,57 +112,81 @@ pub fn lambda0(tau0: f64) -> f64 {
 
 /// γβ(θ) = √(β² sin²θ + cos²θ): projected area of a (1, 1, β) ellipsoid seen from θ, over π.
 pub fn gamma_beta(beta: f64, mu: f64) -> f64 {
-    let s2 = (1.0 - mu * mu).max(0.0);
-    (beta * beta * s2 + mu * mu).sqrt()
+    gamma_beta_in(beta, mu)
+}
+
+/// [`gamma_beta`] over any [`Real`].
+#[inline(always)]
+fn gamma_beta_in<R: Real>(beta: f64, mu: R) -> R {
+    let s2 = (R::splat(1.0) - mu * mu).max(R::zero());
+    (R::splat(beta * beta) * s2 + mu * mu).sqrt()
 }
 
 /// Visibility weight w of the grains (Eqs. 21–23): 1 − (1 − τ0)^{½(γβ(θi)/μi + γβ(θo)/μo)}.
 pub fn weight(tau0: f64, beta: f64, mu_i: f64, mu_o: f64) -> f64 {
+    weight_in(tau0, beta, mu_i, mu_o)
+}
+
+/// [`weight`] over any [`Real`].
+#[inline(always)]
+pub fn weight_in<R: Real>(tau0: f64, beta: f64, mu_i: R, mu_o: R) -> R {
     let (tau0, beta) = (clamp_tau(tau0), clamp_beta(beta));
     let mi = mu_i.abs().clamp(MU_MIN, 1.0);
     let mo = mu_o.abs().clamp(MU_MIN, 1.0);
-    let e = 0.5 * (gamma_beta(beta, mi) / mi + gamma_beta(beta, mo) / mo);
-    (-(-lambda0(tau0) * e).exp_m1()).clamp(0.0, 1.0)
+    let e = R::splat(0.5) * (gamma_beta_in(beta, mi) / mi + gamma_beta_in(beta, mo) / mo);
+    (-(R::splat(-lambda0(tau0)) * e).exp_m1()).clamp(0.0, 1.0)
 }
 
 /// Micrograin NDF (Eq. 17) at the unit micro-normal `h` (local frame).
 pub fn ndf(tau0: f64, beta: f64, h: DVec3) -> f64 {
-    if h.z <= 0.0 {
-        return 0.0;
-    }
+    ndf_in(tau0, beta, h.into())
+}
+
+/// [`ndf`] over any [`Real`].
+#[inline(always)]
+fn ndf_in<R: Real>(tau0: f64, beta: f64, h: V3<R>) -> R {
     let (tau0, beta) = (clamp_tau(tau0), clamp_beta(beta));
     let l0 = lambda0(tau0);
-    let (c2, s2) = cos2_sin2(h);
-    let u = s2 / (beta * beta * c2 + s2);
-    (l0 / tau0) * (-l0 * u).exp() * Ggx { alpha: beta }.d(h)
+    let (c2, s2) = (h.z * h.z, h.x * h.x + h.y * h.y);
+    let u = s2 / (R::splat(beta * beta) * c2 + s2);
+    let d = R::splat(l0 / tau0) * (R::splat(-l0) * u).exp() * ggx_d(beta, h);
+    R::select(h.z.le(R::zero()), R::zero(), d)
 }
 
 /// (σ, S) with σ = μ/γβ and S = Λ·σ, from the first `terms` terms of the Λ series.
-/// Expects clamped τ0, β.
-fn lambda_parts_n(tau0: f64, beta: f64, mu: f64, terms: usize) -> (f64, f64) {
+/// Expects clamped τ0, β. In lanes, a lane whose series has converged adds no more
+/// terms while the others go on.
+#[inline(always)]
+fn lambda_parts_n<R: Real>(tau0: f64, beta: f64, mu: R, terms: usize) -> (R, R) {
+    let one = R::splat(1.0);
     let mu = mu.clamp(0.0, 1.0);
-    let s2 = (1.0 - mu * mu).max(0.0);
-    let g = (beta * beta * s2 + mu * mu).sqrt();
+    let s2 = (one - mu * mu).max(R::zero());
+    let g = (R::splat(beta * beta) * s2 + mu * mu).sqrt();
     let sn = mu / g;
-    let c2 = beta * beta * s2 / (g * g);
+    let c2 = R::splat(beta * beta) * s2 / (g * g);
     let l0 = lambda0(tau0);
     let mut wk = l0 * (1.0 - tau0) / tau0; // w_0 = Λ0/(e^{Λ0} − 1)
-    let mut c2k = 1.0; // c^{2k}
-    let mut j = c2 / (1.0 + sn); // J_0 = 1 − σ, without cancellation
-    let mut sum = wk * SERIES[0].k * (c2 - sn * j);
+    let mut c2k = one; // c^{2k}
+    let mut j = c2 / (one + sn); // J_0 = 1 − σ, without cancellation
+    let mut sum = R::splat(wk * SERIES[0].k) * (c2 - sn * j);
+    let mut done = R::zero().lt(R::zero());
     for (k, t) in SERIES.iter().enumerate().take(terms).skip(1) {
         let kf = k as f64;
         wk *= l0 * t.inv_k;
-        c2k *= c2;
-        j = (2.0 * kf * j - c2k * sn) * t.inv_odd;
-        sum += wk * t.k * (c2k * c2 * t.inv_odd - sn * j);
+        c2k = c2k * c2;
+        j = (R::splat(2.0 * kf) * j - c2k * sn) * R::splat(t.inv_odd);
+        let term = R::splat(wk * t.k) * (c2k * c2 * R::splat(t.inv_odd) - sn * j);
+        sum = R::select(done, sum, sum + term);
         // Every term is ≥ 0 and ≤ w_k c^{2k+2}/2; once k + 1 ≥ 2Λ0 the w_k at least halve,
         // so the whole tail is ≤ w_k c^{2k+2}/2: stop when that is negligible.
-        if kf + 1.0 >= 2.0 * l0 && wk * c2k * c2 <= LAMBDA_TAIL_EPS * sum {
-            break;
+        if kf + 1.0 >= 2.0 * l0 {
+            done = done | (R::splat(wk) * c2k * c2).le(R::splat(LAMBDA_TAIL_EPS) * sum);
+            if !R::any(!done) {
+                break;
+            }
         }
     }
-    (sn, sum.max(0.0))
+    (sn, sum.max(R::zero()))
 }
 
 /// The Λ series' constant factors for term k: K_k, 1/k and 1/(2k + 1).
@@ -213,8 +239,14 @@ pub fn g1(tau0: f64, beta: f64, mu: f64) -> f64 {
 
 /// G1(μ)/μ = 1/(γβ (σ + S)), finite as μ → 0.
 pub fn g1_over_mu(tau0: f64, beta: f64, mu: f64) -> f64 {
-    let (sn, s) = lambda_parts(tau0, beta, mu);
-    1.0 / (gamma_beta(clamp_beta(beta), mu.clamp(0.0, 1.0)) * (sn + s))
+    g1_over_mu_in(tau0, beta, mu)
+}
+
+/// [`g1_over_mu`] over any [`Real`].
+#[inline(always)]
+fn g1_over_mu_in<R: Real>(tau0: f64, beta: f64, mu: R) -> R {
+    let (sn, s) = lambda_parts_n(clamp_tau(tau0), clamp_beta(beta), mu, LAMBDA_TERMS);
+    R::splat(1.0) / (gamma_beta_in(clamp_beta(beta), mu.clamp(0.0, 1.0)) * (sn + s))
 }
 
 /// Rough dielectric grain (rmg): F(ωi·h) D(h) G1(μi) G1(μo)/(4 μi μo) plus
@@ -229,84 +261,135 @@ pub fn rough_grain(tau0: f64, beta: f64, eta_g: f64, rho_g: f64, wi: DVec3, wo: 
 /// of the two Fresnel transmittances, shared by every channel (ρ_g is the only rgb
 /// parameter of the grain).
 #[derive(Clone, Copy, Debug)]
-pub struct RoughGrain {
+pub struct RoughGrain<R: Real = f64> {
     /// The product of the Fresnel transmittances at μi and μo; 0 below the surface.
-    transmit: f64,
-    /// The specular term; None where it is not added (below the surface, or ωi = −ωo).
-    spec: Option<f64>,
+    transmit: R,
+    /// The specular term, added where `has_spec` holds (not below the surface, nor
+    /// where ωi = −ωo).
+    spec: R,
+    has_spec: R::Mask,
 }
 
 /// One-entry caches of [`RoughGrain`]'s factors of μi or μo alone (the Fresnel
 /// transmittances and G1/μ, whose Λ series is most of the grain's cost), for a run of
 /// directions of one parameter vector: consecutive directions often share θi or θo.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct RoughGrainMemo {
-    t_i: Memo,
-    t_o: Memo,
-    g_i: Memo,
-    g_o: Memo,
+#[derive(Clone, Copy, Debug)]
+pub struct RoughGrainMemo<R: Real = f64> {
+    t_i: LaneMemo<R>,
+    t_o: LaneMemo<R>,
+    g_i: LaneMemo<R>,
+    g_o: LaneMemo<R>,
+}
+
+impl<R: Real> Default for RoughGrainMemo<R> {
+    fn default() -> Self {
+        RoughGrainMemo {
+            t_i: LaneMemo::default(),
+            t_o: LaneMemo::default(),
+            g_i: LaneMemo::default(),
+            g_o: LaneMemo::default(),
+        }
+    }
+}
+
+/// `f(x)` from `memo` where x is its key, else computed and kept. (Closures passed to
+/// kernels' helpers are marked `#[inline(always)]`: out of line, one would be compiled
+/// without the vector extensions of the kernel that calls it.)
+#[inline(always)]
+fn memo_get<R: Real>(memo: &mut LaneMemo<R>, x: R, f: impl FnOnce(R) -> R) -> R {
+    match memo.get(x) {
+        Some(v) => v,
+        None => memo.put(x, f(x)),
+    }
 }
 
 impl RoughGrain {
     pub fn at(tau0: f64, beta: f64, eta_g: f64, wi: DVec3, wo: DVec3) -> RoughGrain {
-        Self::at_memo(&mut RoughGrainMemo::default(), tau0, beta, eta_g, wi, wo)
+        Self::at_memo(
+            &mut RoughGrainMemo::default(),
+            tau0,
+            beta,
+            eta_g,
+            wi.into(),
+            wo.into(),
+        )
     }
+}
 
+impl<R: Real> RoughGrain<R> {
     /// [`Self::at`] with the factors of μi or μo alone taken from `memo` where it holds
     /// them (the same parameters must be passed for every direction of a memo's run).
+    #[inline(always)]
     pub fn at_memo(
-        memo: &mut RoughGrainMemo,
+        memo: &mut RoughGrainMemo<R>,
         tau0: f64,
         beta: f64,
         eta_g: f64,
-        wi: DVec3,
-        wo: DVec3,
-    ) -> RoughGrain {
+        wi: V3<R>,
+        wo: V3<R>,
+    ) -> RoughGrain<R> {
         let (mu_i, mu_o) = (wi.z, wo.z);
-        if mu_i <= 0.0 || mu_o <= 0.0 {
+        let zero = R::zero();
+        let above = zero.lt(mu_i) & zero.lt(mu_o);
+        if !R::any(above) {
             return RoughGrain {
-                transmit: 0.0,
-                spec: None,
+                transmit: zero,
+                spec: zero,
+                has_spec: above,
             };
         }
-        let eta = eta_g.max(1.0);
-        let transmit = memo.t_i.get(mu_i, |mu| fresnel_transmittance(mu, eta))
-            * memo.t_o.get(mu_o, |mu| fresnel_transmittance(mu, eta));
+        let eta = R::splat(eta_g.max(1.0));
+        let transmit = memo_get(
+            &mut memo.t_i,
+            mu_i,
+            #[inline(always)]
+            |mu| fresnel_transmittance_in(mu, eta),
+        ) * memo_get(
+            &mut memo.t_o,
+            mu_o,
+            #[inline(always)]
+            |mu| fresnel_transmittance_in(mu, eta),
+        );
         let hs = wi + wo;
-        let hl2 = hs.length_squared();
-        if hl2 < 1e-30 {
-            return RoughGrain {
-                transmit,
-                spec: None,
-            };
-        }
-        let h = hs / hl2.sqrt();
+        let hl2 = hs.dot(hs);
+        let has_spec = above & !hl2.lt(R::splat(1e-30));
+        let hl = hl2.sqrt();
+        let h = V3::new(hs.x / hl, hs.y / hl, hs.z / hl);
         let cd = wi.dot(h).clamp(0.0, 1.0);
-        let spec = fresnel_dielectric(cd, eta)
-            * ndf(tau0, beta, h)
-            * memo.g_i.get(mu_i, |mu| g1_over_mu(tau0, beta, mu))
-            * memo.g_o.get(mu_o, |mu| g1_over_mu(tau0, beta, mu))
-            * 0.25;
+        let spec = fresnel_dielectric_in(cd, eta)
+            * ndf_in(tau0, beta, h)
+            * memo_get(
+                &mut memo.g_i,
+                mu_i,
+                #[inline(always)]
+                |mu| g1_over_mu_in(tau0, beta, mu),
+            )
+            * memo_get(
+                &mut memo.g_o,
+                mu_o,
+                #[inline(always)]
+                |mu| g1_over_mu_in(tau0, beta, mu),
+            )
+            * R::splat(0.25);
         RoughGrain {
-            transmit,
-            spec: Some(spec),
+            transmit: R::select(above, transmit, zero),
+            spec,
+            has_spec,
         }
     }
 
     /// The grain's value for albedo ρ_g: spec + transmittances · ρ_g/π.
-    #[inline]
-    pub fn value(&self, rho_g: f64) -> f64 {
-        let diffuse = self.transmit * rho_g * FRAC_1_PI;
-        match self.spec {
-            Some(spec) => spec + diffuse,
-            None => diffuse,
-        }
+    #[inline(always)]
+    pub fn value(&self, rho_g: R) -> R {
+        let diffuse = self.transmit * rho_g * R::splat(FRAC_1_PI);
+        R::select(self.has_spec, self.spec + diffuse, diffuse)
     }
 }
 
 /// The layer: f = w·f_grain + (1 − w)·f_B.
-pub fn layer(w: f64, f_grain: f64, f_base: f64) -> f64 {
-    w * f_grain + (1.0 - w) * f_base
+#[inline(always)]
+pub fn layer<R: Real>(w: R, f_grain: R, f_base: R) -> R {
+    w * f_grain + (R::splat(1.0) - w) * f_base
 }
 
 /// Helpers shared by the tests of `micrograin`, `dmg` and `rmg`.

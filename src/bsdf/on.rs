@@ -8,9 +8,10 @@
 //! Twin: `shaders/bsdf/on.wgsl`.
 
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
+use crate::math::lanes::{Real, V3};
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2};
 
 #[derive(Debug, Clone, Copy)]
@@ -18,13 +19,30 @@ pub struct OrenNayar;
 
 /// A + B · max(0, cos Δφ) sin α tan β, the factor of ρ/π that depends on σ and the
 /// directions only (ωi and ωo above the surface).
-fn shape(sigma: f64, wi: DVec3, wo: DVec3) -> f64 {
+#[inline(always)]
+fn shape<R: Real>(sigma: f64, wi: V3<R>, wo: V3<R>) -> R {
     let (mu_i, mu_o) = (wi.z, wo.z);
     let s2 = sigma * sigma;
     let a = 1.0 - 0.5 * s2 / (s2 + 0.33);
     let b = 0.45 * s2 / (s2 + 0.09);
     let s = wi.dot(wo) - mu_i * mu_o;
-    a + b * s.max(0.0) / mu_i.max(mu_o)
+    R::splat(a) + R::splat(b) * s.max(R::zero()) / mu_i.max(mu_o)
+}
+
+impl Kernel for OrenNayar {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let sigma = p.get(0, 1);
+        let zero = R::zero();
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let below = wi.z.le(zero) | wo.z.le(zero);
+            let shape = shape(sigma, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                let v = R::splat(p.get(i, 0)) * R::splat(FRAC_1_PI) * shape;
+                *o = R::select(below, zero, v);
+            }
+        }
+    }
 }
 
 impl Bsdf for OrenNayar {
@@ -44,26 +62,7 @@ impl Bsdf for OrenNayar {
             .neutral_at(0.0),
         ]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        let (mu_i, mu_o) = (wi.z, wo.z);
-        if mu_i <= 0.0 || mu_o <= 0.0 {
-            return 0.0;
-        }
-        p[0] * FRAC_1_PI * shape(p[1], wi, wo)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let sigma = p.get(0, 1);
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                out.fill(0.0);
-                return;
-            }
-            let t = shape(sigma, wi, wo);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = p.get(i, 0) * FRAC_1_PI * t;
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("on", include_str!("../../shaders/bsdf/on.wgsl"))
     }

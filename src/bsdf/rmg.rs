@@ -19,13 +19,15 @@
 //! η_g [1, 5]; then B's as `base.*`. B ∈ `lambert on eon vmf ggx`.
 //! Twins: `shaders/bsdf/micrograin.wgsl` + `shaders/bsdf/rmg.wgsl` (with `microfacet.wgsl`).
 
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
 use super::micrograin::{
-    layer, layer_wgsl, rough_grain, weight, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G, MICROGRAIN_BASES,
-    RHO_G, TAU0,
+    layer, layer_wgsl, rough_grain, weight, weight_in, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G,
+    MICROGRAIN_BASES, RHO_G, TAU0,
 };
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
+use crate::math::lanes::Real;
 use glam::DVec3;
 
 /// β of rmg: log scale (see the module doc).
@@ -56,6 +58,28 @@ pub fn rmg_layer(
     )
 }
 
+impl Kernel for RoughMicrograin {
+    /// The weight and the grain's specular term and transmittances once per direction.
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
+        let (tau0, beta, eta_g) = (p.get(0, 0), p.get(0, 1), p.get(0, 3));
+        let mut memo = RoughGrainMemo::default();
+        let zero = R::zero();
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            if !R::any(above) {
+                out.fill(zero);
+                continue;
+            }
+            let w = weight_in(tau0, beta, wi.z, wo.z);
+            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, wi, wo);
+            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+                *o = R::select(above, layer(w, grain.value(R::splat(p.get(i, 2))), b), zero);
+            }
+        }
+    }
+}
+
 impl Bsdf for RoughMicrograin {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -66,25 +90,7 @@ impl Bsdf for RoughMicrograin {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        rmg_layer(p[0], p[1], p[2], p[3], wi, wo, children[0])
-    }
-    /// The weight and the grain's specular term and transmittances once per direction.
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
-        let (tau0, beta, eta_g) = (p.get(0, 0), p.get(0, 1), p.get(0, 3));
-        let mut memo = RoughGrainMemo::default();
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                out.fill(0.0);
-                return;
-            }
-            let w = weight(tau0, beta, wi.z, wo.z);
-            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, wi, wo);
-            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
-                *o = layer(w, grain.value(p.get(i, 2)), b);
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("rmg", include_str!("../../shaders/bsdf/rmg.wgsl"))
     }

@@ -56,6 +56,8 @@ pub trait Real:
     fn clamp(self, lo: f64, hi: f64) -> Self;
     fn exp(self) -> Self;
     fn ln(self) -> Self;
+    fn acos(self) -> Self;
+    fn exp_m1(self) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
     /// Per lane: `a` where `m` holds, else `b`.
@@ -128,6 +130,14 @@ impl Real for f64 {
     #[inline(always)]
     fn ln(self) -> f64 {
         f64::ln(self)
+    }
+    #[inline(always)]
+    fn acos(self) -> f64 {
+        f64::acos(self)
+    }
+    #[inline(always)]
+    fn exp_m1(self) -> f64 {
+        f64::exp_m1(self)
     }
     #[inline(always)]
     fn lt(self, o: f64) -> bool {
@@ -284,6 +294,14 @@ macro_rules! lane_type {
                 self.map(<$t>::ln)
             }
             #[inline(always)]
+            fn acos(self) -> Self {
+                self.map(<$t>::acos)
+            }
+            #[inline(always)]
+            fn exp_m1(self) -> Self {
+                self.map(<$t>::exp_m1)
+            }
+            #[inline(always)]
             fn lt(self, o: Self) -> Lanes<$n> {
                 self.test(o, |a, b| a < b)
             }
@@ -369,6 +387,13 @@ impl<R: Real> Add for V3<R> {
     #[inline(always)]
     fn add(self, o: Self) -> Self {
         V3::new(self.x + o.x, self.y + o.y, self.z + o.z)
+    }
+}
+
+impl From<V3<f64>> for glam::DVec3 {
+    #[inline(always)]
+    fn from(v: V3<f64>) -> Self {
+        glam::DVec3::new(v.x, v.y, v.z)
     }
 }
 
@@ -633,6 +658,14 @@ pub mod avx {
                 #[inline(always)]
                 fn ln(self) -> Self {
                     Self::from_array(self.array().ln())
+                }
+                #[inline(always)]
+                fn acos(self) -> Self {
+                    Self::from_array(self.array().acos())
+                }
+                #[inline(always)]
+                fn exp_m1(self) -> Self {
+                    Self::from_array(self.array().exp_m1())
                 }
                 #[inline(always)]
                 fn lt(self, o: Self) -> $mask {
