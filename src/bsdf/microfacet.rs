@@ -278,8 +278,7 @@ impl Gg {
     pub(super) fn mu_lambda_at<R: Real>(&self, mu: R, bs: R) -> (R, R) {
         let b = bs * R::splat(self.rc);
         let x = b / (mu + b);
-        let table = gg_lambda_table();
-        let t = R::from_fn(|j| table.interpolate(self.p, x.lane(j)));
+        let t = gg_lambda_table().interpolate_in(self.p, x);
         (mu, t * R::splat(self.j0) * (bs + mu / R::splat(self.rc)))
     }
 
@@ -345,13 +344,20 @@ pub const GG_P_HI: f64 = 5.0;
 /// the central differences there. Local, interpolating, O(h³) accurate; the same
 /// polynomial forms are written in `gg_cr_weights` of `shaders/bsdf/microfacet.wgsl`.
 pub fn catmull_rom_weights(t: f64) -> [f64; 4] {
+    catmull_rom_weights_in(t)
+}
+
+/// [`catmull_rom_weights`] over any [`Real`].
+#[inline(always)]
+fn catmull_rom_weights_in<R: Real>(t: R) -> [R; 4] {
+    let c = R::splat;
     let t2 = t * t;
     let t3 = t2 * t;
     [
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
+        c(0.5) * (-t3 + c(2.0) * t2 - t),
+        c(0.5) * (c(3.0) * t3 - c(5.0) * t2 + c(2.0)),
+        c(0.5) * (c(-3.0) * t3 + c(4.0) * t2 + t),
+        c(0.5) * (t3 - t2),
     ]
 }
 
@@ -418,23 +424,36 @@ impl LambdaTable {
 
     /// Bicubic (Catmull–Rom) T̂ at (p, x), clamped to the table's range.
     pub fn interpolate(&self, p: f64, x: f64) -> f64 {
+        self.interpolate_in(p, x)
+    }
+
+    /// [`Self::interpolate`] over any [`Real`]: the weights in p once, those in x and
+    /// the table's values per lane.
+    #[inline(always)]
+    pub fn interpolate_in<R: Real>(&self, p: f64, x: R) -> R {
         let stride = self.na + 2;
         let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
             * (self.np - 1) as f64;
         let ip = (fp as usize).min(self.np - 2);
         let wp = catmull_rom_weights(fp - ip as f64);
-        let fa = x.clamp(0.0, 1.0) * (self.na - 1) as f64;
-        let ia = (fa as usize).min(self.na - 2);
-        let wa = catmull_rom_weights(fa - ia as f64);
+        let fa = x.clamp(0.0, 1.0) * R::splat((self.na - 1) as f64);
+        let mut ia = [0usize; 16];
+        for (j, ia) in ia.iter_mut().enumerate().take(R::LANES) {
+            *ia = (fa.lane(j) as usize).min(self.na - 2);
+        }
+        let wa = catmull_rom_weights_in(fa - R::from_fn(|j| ia[j] as f64));
         // Grid node (ip − 1, ia − 1) is stored at (ip, ia).
-        let mut t = 0.0;
-        for (i, wpi) in wp.iter().enumerate() {
-            let row = &self.data[(ip + i) * stride + ia..(ip + i) * stride + ia + 4];
-            let r = wa[0] * row[0] + wa[1] * row[1] + wa[2] * row[2] + wa[3] * row[3];
-            t += wpi * r;
+        let mut t = R::zero();
+        for (i, &wpi) in wp.iter().enumerate() {
+            let row = &self.data[(ip + i) * stride..];
+            let r = wa[0] * gather(row, &ia, 0)
+                + wa[1] * gather(row, &ia, 1)
+                + wa[2] * gather(row, &ia, 2)
+                + wa[3] * gather(row, &ia, 3);
+            t = t + R::splat(wpi) * r;
         }
         // Cubic overshoot where T̂ leaves 0 must not make Λ negative (G1 > 1).
-        t.max(0.0)
+        t.max(R::zero())
     }
 
     /// Λ at shape p and a = β tanθ, from the table.
@@ -451,6 +470,12 @@ impl LambdaTable {
     pub fn to_f32(&self) -> Vec<f32> {
         self.data.iter().map(|&v| v as f32).collect()
     }
+}
+
+/// Lane j of the result is `row[ia[j] + k]`.
+#[inline(always)]
+fn gather<R: Real>(row: &[f64], ia: &[usize; 16], k: usize) -> R {
+    R::from_fn(|j| row[ia[j] + k])
 }
 
 /// The GG Λ table, computed on first use (~8.7k one-dimensional integrals).

@@ -53,8 +53,10 @@
 //! Twin: `shaders/bsdf/vmf.wgsl`.
 
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, Node, ParamDecl, Role, WgslFn};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::f64::consts::{FRAC_1_PI, PI};
 
@@ -87,22 +89,27 @@ const CL: [f64; L_MAX + 1] = [
 ];
 
 /// erfc(x) for x ≥ 0: Taylor series of erf below 2 (abs. error < 1e-15), continued fraction above
-/// (rel. error < 2e-15).
-fn erfc(x: f64) -> f64 {
-    if x < 2.0 {
-        let (x2, mut term, mut s) = (x * x, x, 0.0);
+/// (rel. error < 2e-15). In lanes, each form is computed where some lane needs it.
+#[inline(always)]
+fn erfc<R: Real>(x: R) -> R {
+    let series = x.lt(R::splat(2.0));
+    let mut out = R::zero();
+    if R::any(series) {
+        let (x2, mut term, mut s) = (x * x, x, R::zero());
         for n in 0..30 {
-            s += term / (2 * n + 1) as f64;
-            term *= -x2 / (n + 1) as f64;
+            s = s + term / R::splat((2 * n + 1) as f64);
+            term = term * (-x2 / R::splat((n + 1) as f64));
         }
-        1.0 - 2.0 / PI.sqrt() * s
-    } else {
+        out = R::splat(1.0) - R::splat(2.0 / PI.sqrt()) * s;
+    }
+    if R::any(!series) {
         let mut k = x; // Laplace continued fraction, evaluated backwards
         for n in (1..=60).rev() {
-            k = x + 0.5 * n as f64 / k;
+            k = x + R::splat(0.5 * n as f64) / k;
         }
-        (-x * x).exp() / (PI.sqrt() * k)
+        out = R::select(series, out, (-x * x).exp() / (R::splat(PI.sqrt()) * k));
     }
+    out
 }
 
 /// Beckmann-like slope m = −ln(1 − √r), without cancellation near r = 0 and r = 1 (∞ at r = 1).
@@ -143,46 +150,59 @@ fn moments(kappa: f64) -> [f64; L_MAX + 1] {
 
 /// Cross section σ(u) = E_vMF[max(0, n·ω)] for a direction of cosine u ∈ [−1, 1].
 /// `a` holds the moments A_l (used when m ≥ 1/4).
-fn sigma(u: f64, m: f64, a: &[f64; L_MAX + 1]) -> f64 {
+#[inline(always)]
+fn sigma<R: Real>(u: R, m: f64, a: &[f64; L_MAX + 1]) -> R {
     if m < M_SWITCH {
         // Beckmann cross-section u (1 + Λ(u)) minus the first-order normalisation m²/2 max(u, 0).
-        let pos = u.max(0.0);
-        let ms = m * (1.0 - u * u).max(0.0).sqrt();
-        let beckmann = if u.abs() >= 9.0 * ms {
-            pos // |a| ≥ 9: the exp and erfc terms are below 1e-35
-        } else {
+        let zero = R::zero();
+        let pos = u.max(zero);
+        let ms = R::splat(m) * (R::splat(1.0) - u * u).max(zero).sqrt();
+        // |a| ≥ 9: the exp and erfc terms are below 1e-35.
+        let far = (R::splat(9.0) * ms).le(u.abs());
+        let beckmann = if R::any(!far) {
             let x = u / ms;
-            let one_plus_erf = if x >= 0.0 { 2.0 - erfc(x) } else { erfc(-x) };
-            0.5 * (ms * (-x * x).exp() / PI.sqrt() + u * one_plus_erf)
+            let e = erfc(x.abs());
+            let one_plus_erf = R::select(zero.le(x), R::splat(2.0) - e, e);
+            let near = R::splat(0.5)
+                * (ms * (-x * x).exp() / R::splat(PI.sqrt()) + u * one_plus_erf);
+            R::select(far, pos, near)
+        } else {
+            pos
         };
-        beckmann - 0.5 * m * m * pos
+        beckmann - R::splat(0.5 * m * m) * pos
     } else {
-        // Funk–Hecke: Σ c_l A_l P_l(u), Legendre polynomials by their upward recurrence.
-        let (mut p_prev, mut p) = (1.0, u);
-        let mut s = CL[0] + CL[1] * a[1] * u;
-        for l in 1..L_MAX {
-            let p_next = ((2 * l + 1) as f64 * u * p - l as f64 * p_prev) / (l + 1) as f64;
-            p_prev = p;
-            p = p_next;
-            s += CL[l + 1] * a[l + 1] * p;
-        }
-        s
+        funk_hecke(u, a)
     }
 }
 
+/// Funk–Hecke: Σ c_l A_l P_l(u), Legendre polynomials by their upward recurrence.
+#[inline(always)]
+fn funk_hecke<R: Real>(u: R, a: &[f64; L_MAX + 1]) -> R {
+    let (mut p_prev, mut p) = (R::splat(1.0), u);
+    let mut s = R::splat(CL[0]) + R::splat(CL[1] * a[1]) * u;
+    for l in 1..L_MAX {
+        let p_next = (R::splat((2 * l + 1) as f64) * u * p - R::splat(l as f64) * p_prev)
+            / R::splat((l + 1) as f64);
+        p_prev = p;
+        p = p_next;
+        s = s + R::splat(CL[l + 1] * a[l + 1]) * p;
+    }
+    s
+}
+
 /// The geometric quantities the fits use.
-struct Geometry {
-    ui: f64,
-    uo: f64,
+struct Geometry<R> {
+    ui: R,
+    uo: R,
     /// μi μo
-    prod: f64,
+    prod: R,
     /// μi + μo
-    sum: f64,
+    sum: R,
     /// sin²θi sin²θo
-    sin2: f64,
+    sin2: R,
     /// cos φ, cos 2φ
-    cphi: f64,
-    c2phi: f64,
+    cphi: R,
+    c2phi: R,
 }
 
 /// The C_1ij of order 1 (rational fits in r): C100..C103, C110..C112, C120, C121.
@@ -203,20 +223,26 @@ fn order1_coefficients(r: f64) -> [f64; 9] {
 
 /// Order 1 (single scattering): max(0, f10 + 2 f11 cos φ + 2 f12 cos 2φ), `c` from
 /// [`order1_coefficients`]. `s_io` = σ(μi) σ(μo), `den` = μo σ(μi) + μi σ(−μo).
-fn order1(c: &[f64; 9], g: &Geometry, s_io: f64, den: f64) -> f64 {
-    let [c100, c101, c102, c103, c110, c111, c112, c120, c121] = *c;
+#[inline(always)]
+fn order1<R: Real>(c: &[f64; 9], g: &Geometry<R>, s_io: R, den: R) -> R {
+    let [c100, c101, c102, c103, c110, c111, _, c120, c121] = c.map(R::splat);
+    let c112 = c[6];
     let f10 = (c100 + c101 * g.prod + c102 * g.prod * g.prod + c103 * (g.ui * g.ui + g.uo * g.uo))
         * s_io
         / den;
-    let f11 = g.sin2.sqrt() * (c110 + c111 * g.prod) * s_io.max(1e-300).powf(c112) / den;
+    let f11 =
+        g.sin2.sqrt() * (c110 + c111 * g.prod) * s_io.max(R::splat(1e-300)).powf(c112) / den;
     let f12 = g.sin2 * (c120 + c121 * g.uo) * (c120 + c121 * g.ui) / g.sum;
-    (f10 + 2.0 * f11 * g.cphi + 2.0 * f12 * g.c2phi).max(0.0)
+    let two = R::splat(2.0);
+    (f10 + two * f11 * g.cphi + two * f12 * g.c2phi).max(R::zero())
 }
 
 /// Orders 2 and 3 share one form: max(0, f_k0 + 2 f_k1 cos φ) with
 /// f_k0 = (C_k00 + C_k01 μiμo + C_k02 (μi + μo) + C_k03 μi²μo² + C_k04 (μi² + μo²)) / (μi + μo),
 /// f_k1 = sinθi sinθo (C_k10 + C_k11 μiμo + C_k12 (μi + μo)) / (μi + μo).
-fn order_k((c0, c1): &OrderK, g: &Geometry) -> f64 {
+#[inline(always)]
+fn order_k<R: Real>((c0, c1): &OrderK, g: &Geometry<R>) -> R {
+    let (c0, c1) = (c0.map(R::splat), c1.map(R::splat));
     let fk0 = (c0[0]
         + c0[1] * g.prod
         + c0[2] * g.sum
@@ -224,7 +250,7 @@ fn order_k((c0, c1): &OrderK, g: &Geometry) -> f64 {
         + c0[4] * (g.ui * g.ui + g.uo * g.uo))
         / g.sum;
     let fk1 = g.sin2.sqrt() * (c1[0] + c1[1] * g.prod + c1[2] * g.sum) / g.sum;
-    (fk0 + 2.0 * fk1 * g.cphi).max(0.0)
+    (fk0 + R::splat(2.0) * fk1 * g.cphi).max(R::zero())
 }
 
 /// C_k00..C_k04 and C_k10..C_k12 of order k = 2 or 3.
@@ -328,61 +354,70 @@ impl VmfLobe {
 
     /// The three scattering orders' shapes and the residual's t at one direction pair.
     fn at(&self, wi: DVec3, wo: DVec3) -> VmfAt {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return VmfAt::Below;
-        }
+        self.at_in(V3::from(wi), V3::from(wo))
+    }
+
+    /// [`Self::at`] over any [`Real`].
+    #[inline(always)]
+    fn at_in<R: Real>(&self, wi: V3<R>, wo: V3<R>) -> VmfAt<R> {
+        let zero = R::zero();
+        let one = R::splat(1.0);
+        let below = wi.z.le(zero) | wo.z.le(zero);
         let (ui, uo) = (wi.z.clamp(MU_MIN, 1.0), wo.z.clamp(MU_MIN, 1.0));
-        let (m, a) = (self.m, &self.a);
-        let (s_i, s_o, s_mo) = (sigma(ui, m, a), sigma(uo, m, a), sigma(-uo, m, a));
-        let den = (uo * s_i + ui * s_mo).max(1e-300);
+        let (s_i, s_o, s_mo) = (self.sigma(ui), self.sigma(uo), self.sigma(-uo));
+        let den = (uo * s_i + ui * s_mo).max(R::splat(1e-300));
 
         // cos φ, φ the azimuth between wi and wo; either direction on the normal: its terms vanish.
         let nn = (wi.x * wi.x + wi.y * wi.y) * (wo.x * wo.x + wo.y * wo.y);
-        let cphi = if nn > 1e-300 {
-            ((wi.x * wo.x + wi.y * wo.y) / nn.sqrt()).clamp(-1.0, 1.0)
-        } else {
-            1.0
-        };
+        let cphi = R::select(
+            R::splat(1e-300).lt(nn),
+            ((wi.x * wo.x + wi.y * wo.y) / nn.sqrt()).clamp(-1.0, 1.0),
+            one,
+        );
         let g = Geometry {
             ui,
             uo,
             prod: ui * uo,
             sum: ui + uo,
-            sin2: (1.0 - ui * ui).max(0.0) * (1.0 - uo * uo).max(0.0),
+            sin2: (one - ui * ui).max(zero) * (one - uo * uo).max(zero),
             cphi,
-            c2phi: 2.0 * cphi * cphi - 1.0,
+            c2phi: R::splat(2.0) * cphi * cphi - one,
         };
-        VmfAt::Rough {
+        VmfAt {
             orders: [
                 order1(&self.c1, &g, s_i * s_o, den),
                 order_k(&self.c2, &g),
                 order_k(&self.c3, &g),
             ],
-            t: -0.0578978 / (0.287663 + g.prod) + self.t_r,
+            t: R::splat(-0.0578978) / (R::splat(0.287663) + g.prod) + R::splat(self.t_r),
+            below,
         }
+    }
+
+    /// σ(u) of this lobe.
+    #[inline(always)]
+    fn sigma<R: Real>(&self, u: R) -> R {
+        sigma(u, self.m, &self.a)
     }
 }
 
-/// VMF at one direction pair, besides ρ.
+/// VMF at one direction pair, besides ρ: the three scattering orders' shapes and the
+/// residual's geometric factor t (0 below the surface).
 #[derive(Clone, Copy, Debug)]
-enum VmfAt {
-    /// Below the surface: 0.
-    Below,
-    /// The three scattering orders' shapes and the residual's geometric factor t.
-    Rough { orders: [f64; 3], t: f64 },
+struct VmfAt<R: Real = f64> {
+    orders: [R; 3],
+    t: R,
+    below: R::Mask,
 }
 
-impl VmfAt {
+impl<R: Real> VmfAt<R> {
     /// f for facet albedo ρ, `k` the lobe's [`VmfLobe::residual_factor`] of ρ.
-    fn value(&self, rho: f64, k: f64) -> f64 {
-        match self {
-            VmfAt::Below => 0.0,
-            VmfAt::Rough { orders, t } => {
-                let orders =
-                    rho * orders[0] + rho * rho * orders[1] + rho * rho * rho * orders[2];
-                FRAC_1_PI * orders + (k * t).max(0.0)
-            }
-        }
+    #[inline(always)]
+    fn value(&self, rho: R, k: R) -> R {
+        let o = &self.orders;
+        let orders = rho * o[0] + rho * rho * o[1] + rho * rho * rho * o[2];
+        let f = R::splat(FRAC_1_PI) * orders + (k * self.t).max(R::zero());
+        R::select(self.below, R::zero(), f)
     }
 }
 
@@ -406,6 +441,32 @@ pub fn f_vmf(rho: f64, r: f64, wi: DVec3, wo: DVec3) -> f64 {
 #[derive(Debug, Clone, Copy)]
 pub struct Vmf;
 
+impl Kernel for Vmf {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let zero = R::zero();
+        let Some(lobe) = VmfLobe::new(p.get(0, 1)) else {
+            for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+                let below = wi.z.le(zero) | wo.z.le(zero);
+                for (i, o) in out.iter_mut().enumerate() {
+                    let v = R::splat(p.get(i, 0)) * R::splat(FRAC_1_PI);
+                    *o = R::select(below, zero, v);
+                }
+            }
+            return;
+        };
+        let k: Vec<f64> = (0..p.len())
+            .map(|i| lobe.residual_factor(p.get(i, 0)))
+            .collect();
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let at = lobe.at_in(wi, wo);
+            for ((o, &k), i) in out.iter_mut().zip(&k).zip(0..) {
+                *o = at.value(R::splat(p.get(i, 0)), R::splat(k));
+            }
+        }
+    }
+}
+
 impl Bsdf for Vmf {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -420,28 +481,7 @@ impl Bsdf for Vmf {
                 .quadratic(),
         ]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        f_vmf(p[0], p[1], wi, wo)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let Some(lobe) = VmfLobe::new(p.get(0, 1)) else {
-            each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-                for (i, o) in out.iter_mut().enumerate() {
-                    *o = lambert(p.get(i, 0), wi, wo);
-                }
-            });
-            return;
-        };
-        let k: Vec<f64> = (0..p.len())
-            .map(|i| lobe.residual_factor(p.get(i, 0)))
-            .collect();
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            let at = lobe.at(wi, wo);
-            for ((o, &k), i) in out.iter_mut().zip(&k).zip(0..) {
-                *o = at.value(p.get(i, 0), k);
-            }
-        });
-    }
+    crate::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))
     }

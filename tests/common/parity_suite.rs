@@ -25,12 +25,23 @@ fn assert_no_failures(failures: &[String]) {
 
 /// Random geometries (θ up to 85°, any φ) with random positive values and uncertainties.
 fn random_dataset(kind: Kind, channels: usize, n: usize, seed: u64) -> Dataset {
+    random_dataset_in(kind, channels, n, seed, 0.0..85.0)
+}
+
+/// [`random_dataset`] with θi and θo in `theta` (degrees).
+fn random_dataset_in(
+    kind: Kind,
+    channels: usize,
+    n: usize,
+    seed: u64,
+    theta: std::ops::Range<f64>,
+) -> Dataset {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let wl = [450.0, 550.0, 650.0];
     let mut rows = Vec::new();
     for i in 0..n {
-        let ti: f64 = rng.random_range(0.0..85.0);
-        let to: f64 = rng.random_range(0.0..85.0);
+        let ti: f64 = rng.random_range(theta.clone());
+        let to: f64 = rng.random_range(theta.clone());
         let value: f64 = rng.random_range(0.01..2.0);
         rows.push((
             i + 1,
