@@ -507,6 +507,7 @@ mod tests {
         let vectorized = vectorized(|| (a / b + a * b - b).sqrt().min(a).clamp(0.0, 1.0));
         for i in 0..8 {
             // clamp in lanes is max(lo) then min(hi): a NaN lane becomes lo.
+            #[allow(clippy::manual_clamp)]
             let want = ((a.0[i] / b.0[i] + a.0[i] * b.0[i] - b.0[i]).sqrt())
                 .min(a.0[i])
                 .max(0.0)
