@@ -822,6 +822,22 @@ pub mod avx {
         unsafe { std::mem::transmute::<[f64; 4], __m256d>(a.map(f64::exp_m1)) }
     }
 
+    /// The AVX type of the same layout as an array lane type.
+    pub trait Avx: Real {
+        type Reg: Real;
+        /// Same size and alignment (checked where a slice is cast).
+        const SAME_LAYOUT: () = assert!(
+            std::mem::size_of::<Self>() == std::mem::size_of::<Self::Reg>()
+                && std::mem::align_of::<Self>() == std::mem::align_of::<Self::Reg>()
+        );
+    }
+    impl Avx for F32x8 {
+        type Reg = Avx8;
+    }
+    impl Avx for F64x4 {
+        type Reg = Avx4d;
+    }
+
     #[cfg(test)]
     mod tests {
         use super::*;
@@ -862,21 +878,5 @@ pub mod avx {
                 }
             }
         }
-    }
-
-    /// The AVX type of the same layout as an array lane type.
-    pub trait Avx: Real {
-        type Reg: Real;
-        /// Same size and alignment (checked where a slice is cast).
-        const SAME_LAYOUT: () = assert!(
-            std::mem::size_of::<Self>() == std::mem::size_of::<Self::Reg>()
-                && std::mem::align_of::<Self>() == std::mem::align_of::<Self::Reg>()
-        );
-    }
-    impl Avx for F32x8 {
-        type Reg = Avx8;
-    }
-    impl Avx for F64x4 {
-        type Reg = Avx4d;
     }
 }
