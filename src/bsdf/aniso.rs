@@ -508,6 +508,19 @@ pub struct Aniso {
     kind: Kind,
 }
 
+impl super::kernel::Kernel for Aniso {
+    #[inline(always)]
+    fn block<R: crate::math::lanes::Real>(
+        &self,
+        p: Channels,
+        dirs: &[super::kernel::LaneDir<R>],
+        children: super::kernel::LaneChildren<R>,
+        out: &mut [R],
+    ) {
+        pass_through(p, dirs, children, out)
+    }
+}
+
 impl Bsdf for Aniso {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -521,12 +534,7 @@ impl Bsdf for Aniso {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, children: &[f64]) -> f64 {
-        children[0]
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        pass_through(p, dirs, children, out)
-    }
+    crate::kernel_methods!();
     fn reciprocal(&self) -> bool {
         // ggx and fa stay reciprocal (the frame turns both directions); btdf never was.
         self.kind == Kind::Brdf

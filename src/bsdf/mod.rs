@@ -209,13 +209,18 @@ pub fn each_direction(
     }
 }
 
-/// [`Bsdf::eval_channels`] of a node that passes its one child's values through (the
+/// [`kernel::Kernel::block`] of a node that passes its one child's values through (the
 /// suffixes `+peraxis` and `+aniso`, whose work is in the layout or in the nodes below).
-#[inline]
-pub fn pass_through(p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-    each_direction(dirs, p.len(), out, |d, _, _, out| {
+#[inline(always)]
+pub fn pass_through<R: crate::math::lanes::Real>(
+    p: Channels,
+    dirs: &[kernel::LaneDir<R>],
+    children: kernel::LaneChildren<R>,
+    out: &mut [R],
+) {
+    for (d, _, out) in kernel::lanes(dirs, p.len(), out) {
         out.copy_from_slice(children.at(0, d))
-    });
+    }
 }
 
 /// A one-entry cache of a function of one f64, keyed on its bits: in a block of

@@ -5,9 +5,8 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/bsdf/peraxis.wgsl`.
 
-use super::{pass_through, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{pass_through, Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
 
 /// Registry entry: a suffix of either kind; in the catalogue, appended to the scaled
 /// models for data measured on several planes.
@@ -26,6 +25,19 @@ pub struct PerAxis {
     kind: Kind,
 }
 
+impl super::kernel::Kernel for PerAxis {
+    #[inline(always)]
+    fn block<R: crate::math::lanes::Real>(
+        &self,
+        p: Channels,
+        dirs: &[super::kernel::LaneDir<R>],
+        children: super::kernel::LaneChildren<R>,
+        out: &mut [R],
+    ) {
+        pass_through(p, dirs, children, out)
+    }
+}
+
 impl Bsdf for PerAxis {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -39,12 +51,7 @@ impl Bsdf for PerAxis {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, children: &[f64]) -> f64 {
-        children[0]
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        pass_through(p, dirs, children, out)
-    }
+    crate::kernel_methods!();
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters
     }
