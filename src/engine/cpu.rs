@@ -80,6 +80,11 @@ impl Backend for CpuBackend {
 /// (directions × channels × nodes) stay in the L1 cache.
 const BLOCK: usize = 32;
 
+/// [`BLOCK`] of the SIMD engine: its lanes take a block's 32 directions in four steps,
+/// and the costs of a call (dispatch, the lanes' buffers, the instruction-set switch)
+/// then weigh as much as the model; its values (f32 or f64 lanes) stay in L2.
+const LANE_BLOCK: usize = 256;
+
 /// Most rows of one window (whole blocks; a block larger than this is a window of its
 /// own): a unit of parallel work and of the memory a value window takes per candidate
 /// (64 KiB of f64). The bundled data sets, and most measured ones, are one window.
@@ -258,12 +263,16 @@ impl<'a> Part<'a> {
         drop(direction_of);
         let group: Vec<u32> = order.iter().map(|&k| group[k as usize]).collect();
         // Blocks: runs of consecutive directions whose rows name the same groups.
+        let block = match arith {
+            Arith::Reference => BLOCK,
+            Arith::Lanes(_) => LANE_BLOCK,
+        };
         let rows_of = |d: usize| count[d]..count[d + 1];
         let mut blocks: Vec<Block> = Vec::new();
         for d in 0..first.len() {
             let rows = rows_of(d);
             let extend = blocks.last().is_some_and(|b| {
-                b.dirs.len() < BLOCK
+                b.dirs.len() < block
                     && b.n == rows.len()
                     && group[b.start..b.start + b.n] == group[rows.clone()]
             });
@@ -297,9 +306,18 @@ impl<'a> Part<'a> {
             Arith::Lanes(kind) => Some(LaneDirs::new(kind, &first, &blocks)),
         };
         let rows = RowTerms::new(&terms, order);
-        let lane_terms = lanes
-            .as_ref()
-            .map(|l| rows.terms.in_rows(l.rows.iter().copied()));
+        // In lane order, a squared term's √w taken into a and g(y): w (a y′ − g(y))² =
+        // (√w a y′ − √w g(y))², one product less per row.
+        let lane_terms = lanes.as_ref().map(|l| {
+            let mut t = rows.terms.in_rows(l.rows.iter().copied());
+            if t.term == Term::Square {
+                for ((a, gy), s) in t.a.iter_mut().zip(&mut t.gy).zip(&t.sqrt_w) {
+                    *a *= s;
+                    *gy *= s;
+                }
+            }
+            t
+        });
         let part = Part {
             problem,
             widest: blocks.iter().map(|b| b.n * b.dirs.len()).max().unwrap_or(0),
@@ -417,7 +435,7 @@ impl<'a> Part<'a> {
                     if lane_order {
                         let out = &mut out[..n * m * l];
                         for (o, v) in out.chunks_exact_mut(l).zip(values.iter()) {
-                            v.store_f64(o, 1, l);
+                            v.store_all_f64(o);
                         }
                         f(lanes.values_at[k], out);
                     } else {
@@ -498,25 +516,26 @@ impl<'a> Part<'a> {
     fn cost_sum_split(&self, lanes: &LaneDirs, w: &Window, scratch: &mut Scratch) -> f64 {
         let t = self.lane_terms.as_ref().expect("lane terms of a SIMD part");
         let mut acc = [0.0f64; SPLIT];
+        let blocks = w.blocks.clone();
         match t.term {
+            // a and gy hold √w·a and √w·g(y) here (LaneDirs' terms, see Part::new).
             Term::Square => self.blocks_in_lanes(
                 lanes,
                 true,
-                w.blocks.clone(),
+                blocks,
                 scratch,
                 #[inline(always)]
                 |start, values| {
                     let r = start..start + values.len();
+                    let cols = [&t.a[r.clone()], &t.gy[r]];
                     split_sum(
                         &mut acc,
                         values,
-                        &t.a[r.clone()],
-                        &t.gy[r.clone()],
-                        &t.w[r],
+                        cols,
                         #[inline(always)]
-                        |v, a, gy, w| {
+                        |v, [a, gy]| {
                             let d = a * v - gy;
-                            w * d * d
+                            d * d
                         },
                     )
                 },
@@ -524,19 +543,18 @@ impl<'a> Part<'a> {
             Term::LogSquare => self.blocks_in_lanes(
                 lanes,
                 true,
-                w.blocks.clone(),
+                blocks,
                 scratch,
                 #[inline(always)]
                 |start, values| {
                     let r = start..start + values.len();
+                    let cols = [&t.a[r.clone()], &t.gy[r.clone()], &t.w[r]];
                     split_sum(
                         &mut acc,
                         values,
-                        &t.a[r.clone()],
-                        &t.gy[r.clone()],
-                        &t.w[r],
+                        cols,
                         #[inline(always)]
-                        |v, a, gy, w| {
+                        |v, [a, gy, w]| {
                             let d = (a * v).ln_1p() - gy;
                             w * d * d
                         },
@@ -546,19 +564,18 @@ impl<'a> Part<'a> {
             Term::AbsRatio => self.blocks_in_lanes(
                 lanes,
                 true,
-                w.blocks.clone(),
+                blocks,
                 scratch,
                 #[inline(always)]
                 |start, values| {
                     let r = start..start + values.len();
+                    let cols = [&t.y[r.clone()], &t.w[r]];
                     split_sum(
                         &mut acc,
                         values,
-                        &t.y[r.clone()],
-                        &t.y[r.clone()],
-                        &t.w[r],
+                        cols,
                         #[inline(always)]
-                        |v, _, y, w| w * (v - y).abs() / (v.abs() + y.abs() + EPS),
+                        |v, [y, w]| w * (v - y).abs() / (v.abs() + y.abs() + EPS),
                     )
                 },
             ),
@@ -568,33 +585,34 @@ impl<'a> Part<'a> {
 }
 
 /// Partial sums of the SIMD engine's loss ([`Part::cost_sum_split`]).
-const SPLIT: usize = 4;
+const SPLIT: usize = 8;
 
-/// Adds `term(value, a, b, w)` of each row (its value and its constants in `a`, `b`,
-/// `w`) into the partial sums `acc`, row k of the block into `acc[k mod SPLIT]`.
+/// Adds `term(value, constants)` of each row (its value, and its entry of each column
+/// of `cols`) into the partial sums `acc`, row k of the block into `acc[k mod SPLIT]`.
 #[inline(always)]
-fn split_sum(
+fn split_sum<const N: usize>(
     acc: &mut [f64; SPLIT],
     values: &[f64],
-    a: &[f64],
-    b: &[f64],
-    w: &[f64],
-    term: impl Fn(f64, f64, f64, f64) -> f64,
+    cols: [&[f64]; N],
+    term: impl Fn(f64, [f64; N]) -> f64,
 ) {
-    let chunks = values
-        .chunks_exact(SPLIT)
-        .zip(a.chunks_exact(SPLIT))
-        .zip(b.chunks_exact(SPLIT))
-        .zip(w.chunks_exact(SPLIT));
-    for (((v, a), b), w) in chunks {
+    let n = values.len();
+    let cols = cols.map(|c| &c[..n]);
+    // The sums in registers, four rows a step (the compiler makes one vector add of it).
+    let mut sums = *acc;
+    let mut chunks = values.chunks_exact(SPLIT);
+    for (i, v) in (&mut chunks).enumerate() {
+        let at = i * SPLIT;
+        let c: [&[f64; SPLIT]; N] = cols.map(|c| c[at..at + SPLIT].try_into().unwrap());
         for k in 0..SPLIT {
-            acc[k] += term(v[k], a[k], b[k], w[k]);
+            sums[k] += term(v[k], c.map(|c| c[k]));
         }
     }
-    let done = values.len() / SPLIT * SPLIT;
-    for k in done..values.len() {
-        acc[k - done] += term(values[k], a[k], b[k], w[k]);
+    let done = n - chunks.remainder().len();
+    for row in done..n {
+        sums[row - done] += term(values[row], cols.map(|c| c[row]));
     }
+    *acc = sums;
 }
 
 thread_local! {

@@ -68,6 +68,11 @@ pub trait Real:
     fn any(m: Self::Mask) -> bool;
     /// Lanes bit for bit equal to `o`'s (a memo's key).
     fn same_bits(self, o: Self) -> bool;
+    /// Every lane as f64 into `out[..LANES]`.
+    #[inline(always)]
+    fn store_all_f64(&self, out: &mut [f64]) {
+        self.store_f64(out, 1, Self::LANES);
+    }
     /// Lanes 0..count as f64 into `out[j · stride]`.
     #[inline(always)]
     fn store_f64(&self, out: &mut [f64], stride: usize, count: usize) {
@@ -335,6 +340,12 @@ macro_rules! lane_type {
             #[inline(always)]
             fn store_f64(&self, out: &mut [f64], stride: usize, count: usize) {
                 for (o, &x) in out.iter_mut().step_by(stride).zip(&self.0[..count]) {
+                    *o = x as f64;
+                }
+            }
+            #[inline(always)]
+            fn store_all_f64(&self, out: &mut [f64]) {
+                for (o, &x) in out[..$n].iter_mut().zip(&self.0) {
                     *o = x as f64;
                 }
             }
@@ -701,6 +712,14 @@ pub mod avx {
                 #[inline(always)]
                 fn any(m: $mask) -> bool {
                     unsafe { $movemask(m.0) != 0 }
+                }
+                #[inline(always)]
+                fn store_f64(&self, out: &mut [f64], stride: usize, count: usize) {
+                    self.array().store_f64(out, stride, count)
+                }
+                #[inline(always)]
+                fn store_all_f64(&self, out: &mut [f64]) {
+                    self.array().store_all_f64(out)
                 }
                 #[inline(always)]
                 fn same_bits(self, o: Self) -> bool {
