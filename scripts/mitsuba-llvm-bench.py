@@ -30,8 +30,9 @@ with libllvm15 Mitsuba's BSDF kernels abort: "LLVM ERROR: Cannot select: fmaximu
 The library is $DRJIT_LIBLLVM_PATH if set, else the newest found by globbing
 /usr/lib/x86_64-linux-gnu/libLLVM*.so* and /usr/lib/llvm-*/lib/libLLVM*.so*.
 
-Run (from the repository root, after `cargo build --release`):
-    /work/venv-main/bin/python scripts/mitsuba-llvm-bench.py --seconds 3 [--threads T]
+Run (from the repository root, after `cargo build --release`, with a Python that has
+`pip install mitsuba numpy`):
+    python3 scripts/mitsuba-llvm-bench.py --seconds 3 [--threads T]
         [--data FILE] [--bin PATH] [--n N] [--json out.json]
 """
 

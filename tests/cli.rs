@@ -614,7 +614,7 @@ fn bench_sweep_times_both_backends_and_compares_them() {
         .iter()
         .filter_map(|b| b["backend"].as_str())
         .collect();
-    assert_eq!(ids, ["cpu", "gpu"], "{s}");
+    assert_eq!(ids, ["cpu", "simd", "gpu"], "{s}");
     for b in backends {
         // 2 files × (rmse/uniform, rmse/relunc, chi2) = 6 fits per backend
         assert_eq!(b["fits"], 6, "{b}");
@@ -635,12 +635,14 @@ fn bench_sweep_times_both_backends_and_compares_them() {
     // The GPU's device submissions: some, and no more evaluations in all than the sweep
     // counted (its polish and the fits' conclusions run on the CPU); the CPU reference
     // submits nothing.
+    // The host engines submit nothing.
     assert!(backends[0].get("submissions").is_none(), "{s}");
-    let sub = &backends[1]["submissions"];
+    assert!(backends[1].get("submissions").is_none(), "{s}");
+    let sub = &backends[2]["submissions"];
     let n = sub["submissions"].as_f64().expect("gpu submissions");
     assert!(n > 0.0, "{sub}");
     let on_device = sub["evaluations"]["mean"].as_f64().unwrap() * n;
-    let counted = backends[1]["evaluations"].as_f64().unwrap();
+    let counted = backends[2]["evaluations"].as_f64().unwrap();
     assert!(
         on_device > 0.0 && on_device <= counted * (1.0 + 1e-9),
         "{sub} vs {counted}"
@@ -649,7 +651,22 @@ fn bench_sweep_times_both_backends_and_compares_them() {
     assert!(cand["median"].as_f64().unwrap() >= 1.0, "{sub}");
     assert!(cand["max"].as_f64() >= cand["p90"].as_f64(), "{sub}");
     assert!(sub["seconds"]["median"].as_f64().unwrap() > 0.0, "{sub}");
-    let c = &s["comparison"];
+    assert!(
+        s["simd_cpu_time_ratio"].as_f64().is_some_and(|r| r > 0.0),
+        "{s}"
+    );
+    // The GPU's sweep and the SIMD engine's, each against the CPU reference's.
+    for c in [&s["comparison"], &s["simd_comparison"]] {
+        sweep_comparison_is_within_tolerance(c);
+    }
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("GPU/CPU sweep time ratio"), "{stdout}");
+    assert!(stdout.contains("SIMD/CPU sweep time ratio"), "{stdout}");
+}
+
+/// A comparison of `bench --sweep` (an f32 engine's sweep against the CPU reference's)
+/// on the Lambertian fits of its test.
+fn sweep_comparison_is_within_tolerance(c: &serde_json::Value) {
     assert_eq!(c["fits_compared"], 6, "{c}");
     assert_eq!(c["rankings_identical"], true, "{c}");
     assert_eq!(c["groups_reordered"], 0, "{c}");
@@ -675,8 +692,6 @@ fn bench_sweep_times_both_backends_and_compares_them() {
         .unwrap();
     assert!(over <= 1.0, "{c}");
     assert_eq!(c["within_tolerance"], true, "{c}");
-    let stdout = text(&out.stdout);
-    assert!(stdout.contains("GPU/CPU sweep time ratio"), "{stdout}");
 }
 
 /// With `--backend cpu` only the CPU sweep is timed, and nothing is compared.

@@ -534,7 +534,7 @@ impl Bsdf for Aniso {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn reciprocal(&self) -> bool {
         // ggx and fa stay reciprocal (the frame turns both directions); btdf never was.
         self.kind == Kind::Brdf

@@ -267,7 +267,7 @@ impl Bsdf for Btdf {
     fn params(&self) -> Vec<ParamDecl> {
         self.ndf.params()
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     /// f(i, o) needs ωi above and ωo below, so f(o, i) = 0: not reciprocal by swapping.
     fn reciprocal(&self) -> bool {
         false
@@ -360,7 +360,7 @@ impl Bsdf for Suffix {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn reciprocal(&self) -> bool {
         false
     }

@@ -66,7 +66,7 @@ impl Bsdf for DiffuseMicrograin {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("dmg", include_str!("../../shaders/bsdf/dmg.wgsl"))
     }

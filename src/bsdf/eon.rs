@@ -128,7 +128,7 @@ impl Bsdf for Eon {
             ParamDecl::shared("r", 0.0, 1.0, 0.5, "roughness").neutral_at(0.0),
         ]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("eon", include_str!("../../shaders/bsdf/eon.wgsl"))
     }

@@ -59,7 +59,7 @@ impl Bsdf for FresnelAggregate {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::fa())
     }

@@ -112,7 +112,7 @@ impl Bsdf for Ggx {
     fn params(&self) -> Vec<ParamDecl> {
         vec![KS, ALPHA, ETA]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::ggx())
     }

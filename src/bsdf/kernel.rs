@@ -163,8 +163,9 @@ pub fn by_reference<R: Real>(
 }
 
 /// The `eval`, `eval_channels` and lane entry points of a [`Bsdf`] that implements
-/// [`Kernel`]: put `kernel_methods!();` in its `impl Bsdf` block.
-#[macro_export]
+/// [`Kernel`]: put `super::kernel::kernel_methods!();` in its `impl Bsdf` block. (A
+/// model defined outside the crate, as `tests/toy_model.rs`'s, implements `eval` and
+/// gets the per-lane fallback.)
 macro_rules! kernel_methods {
     () => {
         fn eval(&self, p: &[f64], wi: glam::DVec3, wo: glam::DVec3, children: &[f64]) -> f64 {
@@ -206,6 +207,8 @@ macro_rules! kernel_methods {
         }
     };
 }
+
+pub(crate) use kernel_methods;
 
 /// A kernel in lanes, compiled for this processor's vector extensions: one instance of
 /// `block` per instruction set, each with the kernel inlined whole, picked at run time.

@@ -29,7 +29,7 @@ impl Bsdf for Lambert {
     fn params(&self) -> Vec<ParamDecl> {
         vec![ParamDecl::rgb("rho", 0.0, 1.0, 0.5, "albedo").neutral_at(0.0)]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("lambert", include_str!("../../shaders/bsdf/lambert.wgsl"))
     }

@@ -62,7 +62,7 @@ impl Bsdf for OrenNayar {
             .neutral_at(0.0),
         ]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("on", include_str!("../../shaders/bsdf/on.wgsl"))
     }

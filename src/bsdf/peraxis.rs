@@ -51,7 +51,7 @@ impl Bsdf for PerAxis {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn reciprocal(&self) -> bool {
         false // samples on different planes see different parameters
     }

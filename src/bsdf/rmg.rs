@@ -90,7 +90,7 @@ impl Bsdf for RoughMicrograin {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         layer_wgsl("rmg", include_str!("../../shaders/bsdf/rmg.wgsl"))
     }

@@ -481,7 +481,7 @@ impl Bsdf for Vmf {
                 .quadratic(),
         ]
     }
-    crate::kernel_methods!();
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("vmf", include_str!("../../shaders/bsdf/vmf.wgsl"))
     }

@@ -335,11 +335,22 @@ fn print_sweep_bench(bench: &crate::workflows::bench::SweepBench) {
     if let Some(r) = bench.gpu_cpu_time_ratio {
         println!("GPU/CPU sweep time ratio: {r:.3}");
     }
+    if let Some(r) = bench.simd_cpu_time_ratio {
+        println!("SIMD/CPU sweep time ratio: {r:.3}");
+    }
     if let Some(c) = &bench.comparison {
         print_comparison(
             c,
             timings.first().map_or(0, |t| t.fits),
             ["cpu", "gpu"],
+            "the f32 tolerance",
+        );
+    }
+    if let Some(c) = &bench.simd_comparison {
+        print_comparison(
+            c,
+            timings.first().map_or(0, |t| t.fits),
+            ["cpu", "simd"],
             "the f32 tolerance",
         );
     }

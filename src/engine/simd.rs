@@ -19,11 +19,20 @@ use crate::math::lanes::instruction_set;
 
 /// The SIMD CPU engine.
 #[derive(Debug, Default, Clone)]
-pub struct SimdBackend;
+pub struct SimdBackend {
+    /// Lanes for every model, whatever its nodes ask for (tests of the f64 lanes).
+    lanes: Option<LaneKind>,
+}
 
 impl SimdBackend {
     pub fn new() -> Self {
-        SimdBackend
+        SimdBackend { lanes: None }
+    }
+
+    /// The engine with every model in the lanes `kind` (f64 lanes give the reference's
+    /// values bit for bit: `tests/simd_parity.rs`).
+    pub fn with_lanes(kind: LaneKind) -> Self {
+        SimdBackend { lanes: Some(kind) }
     }
 }
 
@@ -50,7 +59,7 @@ impl Backend for SimdBackend {
             .first()
             .ok_or_else(|| anyhow::anyhow!("no problem to evaluate"))?
             .model;
-        let kind: LaneKind = model.lane_kind();
+        let kind: LaneKind = self.lanes.unwrap_or_else(|| model.lane_kind());
         Ok(Box::new(CpuEvaluator::new(problems, Arith::Lanes(kind))?))
     }
 }

@@ -175,13 +175,14 @@ pub fn table(rows: &[ScaleRow]) -> String {
         "cost evals/s",
         "setup s",
         "peak MiB",
-        "gpu/cpu LM"
+        "LM vs cpu"
     );
     for r in rows {
+        // Each engine's LM rate over the CPU reference's at the same model and size.
         let ratio = rows
             .iter()
             .find(|o| o.backend == "cpu" && o.model == r.model && o.samples == r.samples)
-            .filter(|_| r.backend == "gpu")
+            .filter(|_| r.backend != "cpu")
             .map_or("".to_string(), |c| {
                 format!("{:.2}×", r.normal_evals_per_s / c.normal_evals_per_s)
             });

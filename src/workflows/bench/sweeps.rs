@@ -445,6 +445,11 @@ pub struct SweepBench {
     pub gpu_cpu_time_ratio: Option<f64>,
     /// Null unless both backends ran.
     pub comparison: Option<SweepComparison>,
+    /// SIMD wall time ÷ CPU wall time (null unless both ran).
+    pub simd_cpu_time_ratio: Option<f64>,
+    /// The SIMD engine's sweep (the `gpu` side) against the CPU reference's; null unless
+    /// both ran.
+    pub simd_comparison: Option<SweepComparison>,
     /// `--sweep-reference-seed`: the CPU reference's sweep with another seed, compared
     /// with its first (absent without it).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -554,6 +559,14 @@ pub fn sweep_bench(
         (Some(c), Some(g)) => Some(compare_sweeps(c, g)),
         _ => None,
     };
+    let simd_cpu_time_ratio = match (find("cpu"), find("simd")) {
+        (Some(c), Some(s)) => Some(s.wall_seconds / c.wall_seconds.max(1e-9)),
+        _ => None,
+    };
+    let simd_comparison = match (rows_of("cpu"), rows_of("simd")) {
+        (Some(c), Some(s)) => Some(compare_sweeps(c, s)),
+        _ => None,
+    };
     let reference_seed = match (reference_seed, rows_of("cpu")) {
         (Some(seed), Some(first)) => {
             let (rows, wall, _) = timed_sweep(on(BackendChoice::Cpu, seed), obs)
@@ -576,6 +589,8 @@ pub fn sweep_bench(
         backends: timings,
         gpu_cpu_time_ratio: ratio,
         comparison,
+        simd_cpu_time_ratio,
+        simd_comparison,
         reference_seed,
     })
 }

@@ -1,0 +1,362 @@
+//! Lane types of the same layout as [`F32x8`] and [`F64x4`] whose operations are AVX
+//! instructions: kernels run in them inside the functions compiled for AVX2 or AVX-512
+//! (`bsdf::kernel::run_lanes`), where an explicit instruction per operation leaves
+//! nothing to the compiler's vectorizer (which kept part of the array form scalar).
+//! Never used outside such a function.
+
+use super::{F32x8, F64x4, Lanes, Real};
+use std::arch::x86_64::*;
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+/// A comparison's result: every bit of a lane set where it holds.
+macro_rules! avx_type {
+    ($name:ident, $mask:ident, $reg:ty, $t:ty, $n:literal, $array:ident,
+     add $add:ident, sub $sub:ident, mul $mul:ident, div $div:ident, sqrt $sqrt:ident,
+     min $min:ident, max $max:ident, set1 $set1:ident, cmp $cmp:ident,
+     blend $blend:ident, and $and:ident, or $or:ident, xor $xor:ident,
+     andnot $andnot:ident, movemask $movemask:ident, full $full:literal,
+     exp $exp:ident, exp_m1 $exp_m1:ident) => {
+        #[derive(Clone, Copy, Debug)]
+        #[repr(transparent)]
+        pub struct $name(pub $reg);
+        #[derive(Clone, Copy, Debug)]
+        #[repr(transparent)]
+        pub struct $mask(pub $reg);
+
+        // SAFETY (every `unsafe` below): these types exist only inside functions
+        // compiled with AVX2 (see the module's comment); the operations are the
+        // intrinsics of that extension on registers of the right type.
+        impl BitAnd for $mask {
+            type Output = Self;
+            #[inline(always)]
+            fn bitand(self, o: Self) -> Self {
+                unsafe { $mask($and(self.0, o.0)) }
+            }
+        }
+        impl BitOr for $mask {
+            type Output = Self;
+            #[inline(always)]
+            fn bitor(self, o: Self) -> Self {
+                unsafe { $mask($or(self.0, o.0)) }
+            }
+        }
+        impl Not for $mask {
+            type Output = Self;
+            #[inline(always)]
+            fn not(self) -> Self {
+                unsafe { $mask($xor(self.0, $cmp::<_CMP_EQ_UQ>(self.0, self.0))) }
+            }
+        }
+        impl Add for $name {
+            type Output = Self;
+            #[inline(always)]
+            fn add(self, o: Self) -> Self {
+                unsafe { $name($add(self.0, o.0)) }
+            }
+        }
+        impl Sub for $name {
+            type Output = Self;
+            #[inline(always)]
+            fn sub(self, o: Self) -> Self {
+                unsafe { $name($sub(self.0, o.0)) }
+            }
+        }
+        impl Mul for $name {
+            type Output = Self;
+            #[inline(always)]
+            fn mul(self, o: Self) -> Self {
+                unsafe { $name($mul(self.0, o.0)) }
+            }
+        }
+        impl Div for $name {
+            type Output = Self;
+            #[inline(always)]
+            fn div(self, o: Self) -> Self {
+                unsafe { $name($div(self.0, o.0)) }
+            }
+        }
+        impl Neg for $name {
+            type Output = Self;
+            #[inline(always)]
+            fn neg(self) -> Self {
+                unsafe { $name($xor(self.0, $set1(-0.0))) }
+            }
+        }
+        impl $name {
+            #[inline(always)]
+            fn array(self) -> $array {
+                // SAFETY: same size and layout.
+                unsafe { std::mem::transmute::<$reg, $array>(self.0) }
+            }
+            #[inline(always)]
+            fn from_array(a: $array) -> Self {
+                // SAFETY: same size and layout.
+                $name(unsafe { std::mem::transmute::<$array, $reg>(a) })
+            }
+        }
+        impl Real for $name {
+            type Mask = $mask;
+            const LANES: usize = $n;
+            #[inline(always)]
+            fn splat(x: f64) -> Self {
+                unsafe { $name($set1(x as $t)) }
+            }
+            #[inline(always)]
+            fn lane(self, i: usize) -> f64 {
+                self.array().0[i] as f64
+            }
+            #[inline(always)]
+            fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+                Self::from_array(<$array as Real>::from_fn(f))
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                unsafe { $name($sqrt(self.0)) }
+            }
+            #[inline(always)]
+            fn abs(self) -> Self {
+                unsafe { $name($andnot($set1(-0.0), self.0)) }
+            }
+            /// The other operand where one is NaN (as `f64::min`): minps returns its
+            /// second operand where either is NaN, and self where that one is.
+            #[inline(always)]
+            fn min(self, o: Self) -> Self {
+                unsafe {
+                    let m = $min(self.0, o.0);
+                    let nan = $cmp::<_CMP_UNORD_Q>(o.0, o.0);
+                    $name($blend(m, self.0, nan))
+                }
+            }
+            #[inline(always)]
+            fn max(self, o: Self) -> Self {
+                unsafe {
+                    let m = $max(self.0, o.0);
+                    let nan = $cmp::<_CMP_UNORD_Q>(o.0, o.0);
+                    $name($blend(m, self.0, nan))
+                }
+            }
+            #[inline(always)]
+            fn clamp(self, lo: f64, hi: f64) -> Self {
+                unsafe { $name($min($max(self.0, $set1(lo as $t)), $set1(hi as $t))) }
+            }
+            #[inline(always)]
+            fn exp(self) -> Self {
+                $name($exp(self.0))
+            }
+            #[inline(always)]
+            fn ln(self) -> Self {
+                Self::from_array(self.array().ln())
+            }
+            #[inline(always)]
+            fn acos(self) -> Self {
+                Self::from_array(self.array().acos())
+            }
+            #[inline(always)]
+            fn exp_m1(self) -> Self {
+                $name($exp_m1(self.0))
+            }
+            #[inline(always)]
+            fn powf(self, e: f64) -> Self {
+                Self::from_array(self.array().powf(e))
+            }
+            #[inline(always)]
+            fn lt(self, o: Self) -> $mask {
+                unsafe { $mask($cmp::<_CMP_LT_OQ>(self.0, o.0)) }
+            }
+            #[inline(always)]
+            fn le(self, o: Self) -> $mask {
+                unsafe { $mask($cmp::<_CMP_LE_OQ>(self.0, o.0)) }
+            }
+            #[inline(always)]
+            fn select(m: $mask, a: Self, b: Self) -> Self {
+                unsafe { $name($blend(b.0, a.0, m.0)) }
+            }
+            #[inline(always)]
+            fn any(m: $mask) -> bool {
+                unsafe { $movemask(m.0) != 0 }
+            }
+            #[inline(always)]
+            fn store_f64(&self, out: &mut [f64], stride: usize, count: usize) {
+                self.array().store_f64(out, stride, count)
+            }
+            #[inline(always)]
+            fn store_all_f64(&self, out: &mut [f64]) {
+                self.array().store_all_f64(out)
+            }
+            #[inline(always)]
+            fn same_bits(self, o: Self) -> bool {
+                unsafe {
+                    let eq = _mm256_cmpeq_epi64(
+                        std::mem::transmute::<$reg, __m256i>(self.0),
+                        std::mem::transmute::<$reg, __m256i>(o.0),
+                    );
+                    _mm256_movemask_epi8(eq) == -1
+                }
+            }
+        }
+        impl From<$mask> for Lanes<$n> {
+            fn from(m: $mask) -> Lanes<$n> {
+                let bits = unsafe { $movemask(m.0) };
+                Lanes(std::array::from_fn(|i| bits & (1 << i) != 0))
+            }
+        }
+        const _: () = assert!($full == (1 << $n) - 1);
+    };
+}
+
+avx_type!(Avx8, Avx8Mask, __m256, f32, 8, F32x8,
+    add _mm256_add_ps, sub _mm256_sub_ps, mul _mm256_mul_ps, div _mm256_div_ps,
+    sqrt _mm256_sqrt_ps, min _mm256_min_ps, max _mm256_max_ps, set1 _mm256_set1_ps,
+    cmp _mm256_cmp_ps, blend _mm256_blendv_ps, and _mm256_and_ps, or _mm256_or_ps,
+    xor _mm256_xor_ps, andnot _mm256_andnot_ps, movemask _mm256_movemask_ps, full 255,
+    exp exp_f32, exp_m1 exp_m1_f32);
+avx_type!(Avx4d, Avx4dMask, __m256d, f64, 4, F64x4,
+    add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
+    sqrt _mm256_sqrt_pd, min _mm256_min_pd, max _mm256_max_pd, set1 _mm256_set1_pd,
+    cmp _mm256_cmp_pd, blend _mm256_blendv_pd, and _mm256_and_pd, or _mm256_or_pd,
+    xor _mm256_xor_pd, andnot _mm256_andnot_pd, movemask _mm256_movemask_pd, full 15,
+    exp exp_f64, exp_m1 exp_m1_f64);
+
+/// e^x in eight f32 lanes: x = n ln 2 + r (Cody–Waite, |r| ≤ ½ ln 2), e^r by the
+/// degree-7 polynomial of Cephes' `expf`, 2^n by the exponent bits; x clamped to
+/// 88.7 above, and 0 below −87.3 (where f32's normal range ends). Relative error a few f32 ulps, where libm's per
+/// lane calls cost as much as a whole GGX evaluation.
+#[inline(always)]
+fn exp_f32(x: __m256) -> __m256 {
+    // SAFETY: AVX2 instructions only, inside AVX2 functions (module comment).
+    unsafe {
+        // Below −87.3 the result (subnormal or 0) is returned as 0.
+        let tiny = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(-87.3));
+        let x = _mm256_min_ps(
+            _mm256_max_ps(x, _mm256_set1_ps(-87.3)),
+            _mm256_set1_ps(88.7),
+        );
+        let n = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(
+            _mm256_mul_ps(x, _mm256_set1_ps(std::f32::consts::LOG2_E)),
+        );
+        let r = _mm256_sub_ps(x, _mm256_mul_ps(n, _mm256_set1_ps(0.693_359_4)));
+        let r = _mm256_sub_ps(r, _mm256_mul_ps(n, _mm256_set1_ps(-2.121_944_4e-4)));
+        let mut p = _mm256_set1_ps(1.987_569_1e-4);
+        for k in [
+            1.398_199_9e-3,
+            8.333_452e-3,
+            4.166_579_6e-2,
+            0.166_666_65,
+            0.5,
+        ] {
+            p = _mm256_add_ps(_mm256_mul_ps(p, r), _mm256_set1_ps(k));
+        }
+        let p = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(p, r), r), r),
+            _mm256_set1_ps(1.0),
+        );
+        let bits = _mm256_slli_epi32::<23>(_mm256_add_epi32(
+            _mm256_cvtps_epi32(n),
+            _mm256_set1_epi32(127),
+        ));
+        _mm256_andnot_ps(tiny, _mm256_mul_ps(p, _mm256_castsi256_ps(bits)))
+    }
+}
+
+/// e^x − 1 in eight f32 lanes without the cancellation near 0: its Taylor polynomial
+/// to x⁸/8! for |x| < ½ (truncation below 1e-8 relative), e^x − 1 beyond.
+#[inline(always)]
+fn exp_m1_f32(x: __m256) -> __m256 {
+    // SAFETY: as exp_f32.
+    unsafe {
+        let mut p = _mm256_set1_ps(1.0 / 40320.0);
+        for k in [
+            1.0 / 5040.0,
+            1.0 / 720.0,
+            1.0 / 120.0,
+            1.0 / 24.0,
+            1.0 / 6.0,
+            0.5,
+            1.0,
+        ] {
+            p = _mm256_add_ps(_mm256_mul_ps(p, x), _mm256_set1_ps(k));
+        }
+        let small = _mm256_mul_ps(p, x);
+        let large = _mm256_sub_ps(exp_f32(x), _mm256_set1_ps(1.0));
+        let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), x);
+        _mm256_blendv_ps(
+            large,
+            small,
+            _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(0.5)),
+        )
+    }
+}
+
+/// e^x in four f64 lanes: lane by lane (the f64 lanes serve models that need f64's
+/// accuracy, which a short polynomial would not keep).
+#[inline(always)]
+fn exp_f64(x: __m256d) -> __m256d {
+    // SAFETY: same size and layout.
+    let a: [f64; 4] = unsafe { std::mem::transmute::<__m256d, [f64; 4]>(x) };
+    unsafe { std::mem::transmute::<[f64; 4], __m256d>(a.map(f64::exp)) }
+}
+
+#[inline(always)]
+fn exp_m1_f64(x: __m256d) -> __m256d {
+    // SAFETY: same size and layout.
+    let a: [f64; 4] = unsafe { std::mem::transmute::<__m256d, [f64; 4]>(x) };
+    unsafe { std::mem::transmute::<[f64; 4], __m256d>(a.map(f64::exp_m1)) }
+}
+
+/// The AVX type of the same layout as an array lane type.
+pub trait Avx: Real {
+    type Reg: Real;
+    /// Same size and alignment (checked where a slice is cast).
+    const SAME_LAYOUT: () = assert!(
+        std::mem::size_of::<Self>() == std::mem::size_of::<Self::Reg>()
+            && std::mem::align_of::<Self>() == std::mem::align_of::<Self::Reg>()
+    );
+}
+impl Avx for F32x8 {
+    type Reg = Avx8;
+}
+impl Avx for F64x4 {
+    type Reg = Avx4d;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// e^x and e^x − 1 of the AVX f32 lanes against f64, over [−87, 88] and near 0:
+    /// within 4 f32 ulps (2.4e-7) relative, NaN never passing.
+    #[test]
+    fn vector_exp_is_within_a_few_ulps() {
+        if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {
+            eprintln!("no AVX2 on this processor: the AVX lanes are never used here");
+            return;
+        }
+        #[target_feature(enable = "avx2,fma")]
+        fn run(xs: &[f32]) -> Vec<(f32, f32)> {
+            xs.chunks_exact(8)
+                .flat_map(|c| {
+                    let v = Avx8(unsafe { _mm256_loadu_ps(c.as_ptr()) });
+                    let (e, m) = (v.exp(), v.exp_m1());
+                    (0..8).map(move |j| (e.lane(j) as f32, m.lane(j) as f32))
+                })
+                .collect()
+        }
+        let mut xs: Vec<f32> = (0..8000)
+            .map(|k| -87.0 + 175.0 * k as f32 / 8000.0)
+            .collect();
+        xs.extend((0..800).map(|k| (k as f32 - 400.0) * 1e-3));
+        xs.extend((0..800).map(|k| (k as f32 - 400.0) * 1e-7));
+        let got = unsafe { run(&xs) };
+        for (&x, &(e, m)) in xs.iter().zip(&got) {
+            let (we, wm) = ((x as f64).exp(), (x as f64).exp_m1());
+            let (re, rm) = (
+                ((e as f64) - we) / we,
+                ((m as f64) - wm) / wm.abs().max(1e-300),
+            );
+            assert!(re.abs() <= 2.4e-7, "exp({x}) = {e}, want {we} ({re:e})");
+            if x != 0.0 {
+                assert!(rm.abs() <= 2.4e-7, "exp_m1({x}) = {m}, want {wm} ({rm:e})");
+            }
+        }
+    }
+}
