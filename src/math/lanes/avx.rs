@@ -301,7 +301,7 @@ fn acos_f32(x: __m256) -> __m256 {
         let z = _mm256_blendv_ps(_mm256_mul_ps(a, a), z_big, big);
         let s = _mm256_blendv_ps(a, _mm256_sqrt_ps(z_big), big);
         let mut p = _mm256_set1_ps(4.216_32e-2);
-        for k in [2.418_131_1e-2, 4.547_002_6e-2, 7.495_300_3e-2, 0.166_667_52] {
+        for k in [2.418_131e-2, 4.547_002_6e-2, 7.495_300_3e-2, 0.166_667_52] {
             p = _mm256_add_ps(_mm256_mul_ps(p, z), _mm256_set1_ps(k));
         }
         // asin of s: s + s z P(z).
