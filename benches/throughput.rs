@@ -1,5 +1,5 @@
 //! Criterion benchmark: one compass poll batch (restarts × (2P + 1) candidates) over a
-//! realistic dataset, CPU reference vs GPU engine, reported as model-sample evaluations
+//! realistic dataset, CPU reference, SIMD engine and GPU engine, reported as model-sample evaluations
 //! per second (criterion's element throughput). `bsdfit bench` measures the same thing
 //! for the whole catalogue.
 
@@ -8,6 +8,7 @@ use bsdfit::data::Kind;
 use bsdfit::engine::cpu::CpuBackend;
 use bsdfit::engine::gpu::GpuBackend;
 use bsdfit::engine::loss::{Loss, Metric, Weights};
+use bsdfit::engine::simd::SimdBackend;
 use bsdfit::engine::{Backend, Problem};
 use bsdfit::workflows::bench::bench_dataset;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -21,6 +22,8 @@ fn throughput(c: &mut Criterion) {
     let mut backends: Vec<(&str, &dyn Backend)> = vec![];
     let cpu = CpuBackend::new();
     backends.push(("cpu", &cpu));
+    let simd = SimdBackend::new();
+    backends.push(("simd", &simd));
     if let Some(g) = gpu.as_ref() {
         backends.push(("gpu", g));
     }
