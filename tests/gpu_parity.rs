@@ -117,18 +117,8 @@ fn the_workgroup_reduced_shape_matches_too() {
                 data: &data,
                 loss: Loss::new(metric, Weights::Relunc),
             };
-            let c = CpuBackend::new()
-                .prepare(problem)
-                .unwrap()
-                .costs(&params)
-                .unwrap();
-            let g = forced.prepare(problem).unwrap().costs(&params).unwrap();
-            for (n, (cv, gv)) in c.iter().zip(&g).enumerate() {
-                assert!(
-                    cv.is_finite() && (gv - cv).abs() <= REL_COST * cv.abs() + 1e-12,
-                    "{spec} {metric}: candidate {n}: gpu {gv} cpu {cv}"
-                );
-            }
+            let failures = compare_costs(&forced, problem, &params, &format!("{spec} {metric}"));
+            assert_no_failures(&failures);
             let cv = CpuBackend::new()
                 .prepare(problem)
                 .unwrap()

@@ -79,27 +79,7 @@ fn every_model_matches_the_cpu_reference_at_grazing_angles() {
     for (kind, spec) in all_specs() {
         let channels = if kind == Kind::Brdf { 3 } else { 1 };
         let data = random_dataset_in(kind, channels, 200, 77, 86.0..89.9);
-        let model = Model::parse(&spec, channels).unwrap();
-        let params = random_params(&model, CANDIDATES, 78);
-        let loss = Loss::new(Metric::Chi2, Weights::Uniform);
-        let values = |d: &Dataset| {
-            CpuBackend::new()
-                .prepare(Problem {
-                    model: &model,
-                    data: d,
-                    loss,
-                })
-                .unwrap()
-                .values(&params)
-                .unwrap()
-        };
-        let (exact, rounded) = (values(&data), values(&with_f32_directions(&data)));
-        let inputs: Vec<f64> = exact
-            .iter()
-            .zip(&rounded)
-            .map(|(a, b)| 2.0 * (a - b).abs())
-            .collect();
-        match compare_model_values_within(&model, &data, &params, REL, &inputs) {
+        match compare_with_f32_direction_allowance(&spec, &data, 78) {
             Ok(worst) => eprintln!("{spec:<28} grazing: worst relative error {worst:.2e}"),
             Err(e) => failures.push(format!("{spec} (grazing): {e}")),
         }
@@ -130,6 +110,7 @@ fn lane_kinds_and_kernels_are_reported() {
 #[test]
 fn partial_lanes_add_nothing() {
     let model = Model::parse("ggx", 3).unwrap();
+    let mut failures = Vec::new();
     for n in [1usize, 7, 13] {
         let data = random_dataset(Kind::Brdf, 3, n, 40 + n as u64);
         let params = random_params(&model, 6, 41);
@@ -139,18 +120,9 @@ fn partial_lanes_add_nothing() {
                 data: &data,
                 loss: Loss::new(metric, Weights::Relunc),
             };
-            let c = CpuBackend::new()
-                .prepare(problem)
-                .unwrap()
-                .costs(&params)
-                .unwrap();
-            let s = tested().prepare(problem).unwrap().costs(&params).unwrap();
-            for (cv, sv) in c.iter().zip(&s) {
-                assert!(
-                    cv.is_finite() && (sv - cv).abs() <= REL_COST * cv.abs() + 1e-12,
-                    "{n} directions, {metric}: simd {sv} cpu {cv}"
-                );
-            }
+            let what = format!("{n} directions, {metric}");
+            failures.extend(compare_costs(tested(), problem, &params, &what));
         }
     }
+    assert_no_failures(&failures);
 }

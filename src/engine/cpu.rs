@@ -515,71 +515,56 @@ impl<'a> Part<'a> {
     /// take). The reference keeps one sum in row order.
     fn cost_sum_split(&self, lanes: &LaneDirs, w: &Window, scratch: &mut Scratch) -> f64 {
         let t = self.lane_terms.as_ref().expect("lane terms of a SIMD part");
-        let mut acc = [0.0f64; SPLIT];
-        let blocks = w.blocks.clone();
+        let (blocks, t_w) = (w.blocks.clone(), &t.w[..]);
         match t.term {
             // a and gy hold √w·a and √w·g(y) here (LaneDirs' terms, see Part::new).
-            Term::Square => self.blocks_in_lanes(
+            Term::Square => {
+                self.sum_in_lanes(lanes, blocks, scratch, [&t.a, &t.gy], |v, [a, gy]| {
+                    let d = a * v - gy;
+                    d * d
+                })
+            }
+            Term::LogSquare => self.sum_in_lanes(
                 lanes,
-                true,
                 blocks,
                 scratch,
-                #[inline(always)]
-                |start, values| {
-                    let r = start..start + values.len();
-                    let cols = [&t.a[r.clone()], &t.gy[r]];
-                    split_sum(
-                        &mut acc,
-                        values,
-                        cols,
-                        #[inline(always)]
-                        |v, [a, gy]| {
-                            let d = a * v - gy;
-                            d * d
-                        },
-                    )
+                [&t.a, &t.gy, t_w],
+                |v, [a, gy, w]| {
+                    let d = (a * v).ln_1p() - gy;
+                    w * d * d
                 },
             ),
-            Term::LogSquare => self.blocks_in_lanes(
-                lanes,
-                true,
-                blocks,
-                scratch,
-                #[inline(always)]
-                |start, values| {
-                    let r = start..start + values.len();
-                    let cols = [&t.a[r.clone()], &t.gy[r.clone()], &t.w[r]];
-                    split_sum(
-                        &mut acc,
-                        values,
-                        cols,
-                        #[inline(always)]
-                        |v, [a, gy, w]| {
-                            let d = (a * v).ln_1p() - gy;
-                            w * d * d
-                        },
-                    )
-                },
-            ),
-            Term::AbsRatio => self.blocks_in_lanes(
-                lanes,
-                true,
-                blocks,
-                scratch,
-                #[inline(always)]
-                |start, values| {
-                    let r = start..start + values.len();
-                    let cols = [&t.y[r.clone()], &t.w[r]];
-                    split_sum(
-                        &mut acc,
-                        values,
-                        cols,
-                        #[inline(always)]
-                        |v, [y, w]| w * (v - y).abs() / (v.abs() + y.abs() + EPS),
-                    )
-                },
-            ),
+            Term::AbsRatio => {
+                self.sum_in_lanes(lanes, blocks, scratch, [&t.y, t_w], |v, [y, w]| {
+                    w * (v - y).abs() / (v.abs() + y.abs() + EPS)
+                })
+            }
         }
+    }
+
+    /// Σ `term(value, constants)` over the blocks' values in lane order, the constants
+    /// the entries of `cols` (lane order too) at each value ([`split_sum`]).
+    #[inline(always)]
+    fn sum_in_lanes<const N: usize>(
+        &self,
+        lanes: &LaneDirs,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        cols: [&[f64]; N],
+        term: impl Fn(f64, [f64; N]) -> f64 + Copy,
+    ) -> f64 {
+        let mut acc = [0.0f64; SPLIT];
+        self.blocks_in_lanes(
+            lanes,
+            true,
+            blocks,
+            scratch,
+            #[inline(always)]
+            |start, values| {
+                let r = start..start + values.len();
+                split_sum(&mut acc, values, cols.map(|c| &c[r.clone()]), term)
+            },
+        );
         acc.iter().sum()
     }
 }
