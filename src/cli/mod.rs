@@ -215,8 +215,8 @@ impl ConstraintArgs {
 /// Where the models are evaluated, shared by every command that fits or measures.
 #[derive(Args, Clone, Copy, Debug)]
 pub struct BackendArgs {
-    /// auto: the GPU engine if a Vulkan adapter is found (lavapipe counts), else the CPU
-    /// reference; gpu: the GPU engine or an error; cpu: the CPU reference.
+    /// Which engine evaluates the models (`bench` measures all three where it is auto).
+    /// The f32 engines' fits are polished and concluded on the f64 reference.
     #[arg(long, value_parser = choice::<BackendChoice>(), default_value = "auto")]
     pub backend: BackendChoice,
 }
