@@ -29,7 +29,8 @@ pub struct BenchArgs {
     /// Minimum measuring time per model and backend (seconds).
     #[arg(long, default_value_t = 1.0)]
     pub seconds: f64,
-    /// Backends to compare: auto (CPU and, if present, GPU), cpu, gpu.
+    /// Backends to compare: auto (the CPU reference, the SIMD engine and, if an adapter
+    /// exists, the GPU engine), or one of cpu, simd, gpu.
     #[command(flatten)]
     pub backend: BackendArgs,
     /// Write the rows as JSON here (checked before measuring; if the write fails
@@ -37,9 +38,10 @@ pub struct BenchArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Also time a whole sweep (`bsdfit sweep` with its defaults, no pictures) once per
-    /// backend, each into its own temporary folder, and compare the two: wall time, fits,
-    /// evaluations, evals/s, the GPU's device submissions (how many; candidates,
-    /// evaluations and milliseconds each), the GPU/CPU time ratio, whether the rankings (per data set ×
+    /// backend, each into its own temporary folder, and compare the GPU's and the SIMD
+    /// engine's each with the CPU reference's: wall time, fits, evaluations, evals/s, the
+    /// GPU's device submissions (how many; candidates, evaluations and milliseconds each),
+    /// the GPU/CPU and SIMD/CPU time ratios, whether the rankings (per data set ×
     /// loss × weighting, models by best loss) are identical, and if not whether they agree
     /// up to ties (losses within the 1e-3 tolerance) or which pairs of models the two
     /// order oppositely, the fits at different local optima (losses more than 1e-3
@@ -65,7 +67,8 @@ pub struct BenchArgs {
     /// each size of --scale-sizes, the throughput of a fit's two batches (LM's normal
     /// equations of 16 restarts, the costs of 128 screened points) and the process's peak
     /// resident memory, for the models of --models (default: lambert, fa(eon),
-    /// btdf(gg)), on each backend in one run, with the GPU/CPU ratio.
+    /// btdf(gg)), on each backend in one run, with each engine's ratio to the CPU
+    /// reference.
     #[arg(long, conflicts_with_all = ["data", "sweep"])]
     pub scale: bool,
     /// With --scale: the data sizes (samples), comma-separated; 1e6 and 1_000_000 both
