@@ -33,7 +33,7 @@ use super::effect::{Adds, Effect};
 use super::ggx::{ETA, KS};
 use super::microfacet::{gg_lambda_table, Distribution, Gg, Masking, C2_MIN, MICROFACET_WGSL};
 use super::{
-    each_direction, pass_through, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, Role,
+    each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, Role,
     WgslFn,
 };
 use crate::data::Kind;
@@ -508,18 +508,7 @@ pub struct Aniso {
     kind: Kind,
 }
 
-impl super::kernel::Kernel for Aniso {
-    #[inline(always)]
-    fn block<R: crate::math::lanes::Real>(
-        &self,
-        p: Channels,
-        dirs: &[super::kernel::LaneDir<R>],
-        children: super::kernel::LaneChildren<R>,
-        out: &mut [R],
-    ) {
-        pass_through(p, dirs, children, out)
-    }
-}
+impl super::kernel::PassThrough for Aniso {}
 
 impl Bsdf for Aniso {
     fn entry(&self) -> &'static Entry {

@@ -128,11 +128,6 @@ impl Ndf {
         }
     }
 
-    /// f_t for this NDF with parameters `p` (in [`Ndf::params`] order).
-    pub fn eval(self, p: &[f64], wi: DVec3, wo: DVec3) -> f64 {
-        let p3 = [p[0], p[1], p.get(2).copied().unwrap_or(0.0)];
-        self.eval_in(p3, V3::from(wi), V3::from(wo))
-    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -252,8 +247,8 @@ pub struct Btdf {
 impl Kernel for Btdf {
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
-        let k = self.ndf.params().len();
-        let p3 = [p.get(0, 0), p.get(0, 1), if k > 2 { p.get(0, 2) } else { 0.0 }];
+        let third = if p.count() > 2 { p.get(0, 2) } else { 0.0 };
+        let p3 = [p.get(0, 0), p.get(0, 1), third];
         for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
             out.fill(self.ndf.eval_in(p3, wi, wo));
         }

@@ -1,8 +1,7 @@
 //! What node functions are handed: the parameters of the channels evaluated together
 //! ([`Channels`]), the children's values ([`Children`]), direction pairs ([`Dir`]), and
-//! the helpers of their loops ([`each_direction`], [`pass_through`], [`Memo`]).
+//! the helper of their loops ([`each_direction`]).
 
-use super::kernel;
 use glam::DVec3;
 
 /// Most children a node may have ([`Node::eval`] and the default
@@ -72,6 +71,10 @@ impl<'a> Channels<'a> {
         let at = self.groups[i] as usize * self.stride + self.offset;
         &self.scalars[at..at + self.nparams]
     }
+    /// The node's parameter count.
+    pub fn count(&self) -> usize {
+        self.nparams
+    }
     /// Parameter j of the node for channel i.
     #[inline]
     pub fn get(&self, i: usize, j: usize) -> f64 {
@@ -135,43 +138,5 @@ pub fn each_direction(
     }
     for (d, (&(wi, wo), o)) in dirs.iter().zip(out.chunks_exact_mut(n)).enumerate() {
         f(d, wi, wo, o);
-    }
-}
-
-/// [`kernel::Kernel::block`] of a node that passes its one child's values through (the
-/// suffixes `+peraxis` and `+aniso`, whose work is in the layout or in the nodes below).
-#[inline(always)]
-pub fn pass_through<R: crate::math::lanes::Real>(
-    p: Channels,
-    dirs: &[kernel::LaneDir<R>],
-    children: kernel::LaneChildren<R>,
-    out: &mut [R],
-) {
-    for (d, _, out) in kernel::lanes(dirs, p.len(), out) {
-        out.copy_from_slice(children.at(0, d))
-    }
-}
-
-/// A one-entry cache of a function of one f64, keyed on its bits: in a block of
-/// directions consecutive ones often share θi (a goniometer scans θo at a fixed θi) or
-/// θo (several φo at one θo), so a factor of μi or μo alone (a Fresnel transmittance) is
-/// computed once per run. Exact: the same argument gives the same value.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Memo {
-    last: Option<(u64, f64)>,
-}
-
-impl Memo {
-    /// f(x), from the cache when x is the previous argument.
-    #[inline]
-    pub fn get(&mut self, x: f64, f: impl FnOnce(f64) -> f64) -> f64 {
-        match self.last {
-            Some((key, value)) if key == x.to_bits() => value,
-            _ => {
-                let value = f(x);
-                self.last = Some((x.to_bits(), value));
-                value
-            }
-        }
     }
 }

@@ -5,7 +5,7 @@
 //! Twin: `shaders/bsdf/fa.wgsl`.
 
 use super::ggx::{GgxLobe, ALPHA, ETA, KS};
-use super::kernel::{lanes, Kernel, LaneChildren, LaneDir, LaneMemo};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir, Memo};
 use super::effect::{Adds, Effect};
 use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
@@ -24,19 +24,19 @@ impl Kernel for FresnelAggregate {
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
         let (alpha, eta, n) = (p.get(0, 0), p.get(0, 1), p.len());
         let zero = R::zero();
-        let (mut ti, mut to) = (LaneMemo::default(), LaneMemo::default());
+        let (mut ti, mut to) = (Memo::default(), Memo::default());
         for (d, (wi, wo), out) in lanes(dirs, n, out) {
             let below = wi.z.le(zero) | wo.z.le(zero);
             let lobe = GgxLobe::at_in(alpha, eta, wi, wo);
-            let t_i = match ti.get(wi.z) {
-                Some(t) => t,
-                None => ti.put(wi.z, fresnel_transmittance_in(wi.z, R::splat(eta))),
-            };
-            let t_o = match to.get(wo.z) {
-                Some(t) => t,
-                None => to.put(wo.z, fresnel_transmittance_in(wo.z, R::splat(eta))),
-            };
-            let transmit = t_i * t_o;
+            let transmit = ti.get(
+                wi.z,
+                #[inline(always)]
+                |mu| fresnel_transmittance_in(mu, R::splat(eta)),
+            ) * to.get(
+                wo.z,
+                #[inline(always)]
+                |mu| fresnel_transmittance_in(mu, R::splat(eta)),
+            );
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 let v = lobe.scaled(R::splat(p.get(i, 2))) + transmit * b;
                 *o = R::select(below, zero, v);

@@ -61,6 +61,25 @@ pub trait Kernel: Bsdf {
     );
 }
 
+/// A node that passes its one child's values through (the suffixes `+peraxis` and
+/// `+aniso`, whose work is in the layout or in the nodes below): its kernel copies them.
+pub trait PassThrough: Bsdf {}
+
+impl<T: PassThrough> Kernel for T {
+    #[inline(always)]
+    fn block<R: Real>(
+        &self,
+        p: Channels,
+        dirs: &[LaneDir<R>],
+        children: LaneChildren<R>,
+        out: &mut [R],
+    ) {
+        for (d, _, out) in lanes(dirs, p.len(), out) {
+            out.copy_from_slice(children.at(0, d))
+        }
+    }
+}
+
 /// Which lanes a model runs in on the SIMD engine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum LaneKind {
@@ -288,22 +307,19 @@ pub fn run_lanes<K: Kernel, R: LaneReal>(
     k.block::<R>(p, dirs, children, out)
 }
 
-/// A lane type a model tree can be evaluated in: calls the node's entry point for it.
+/// What a lane type needs besides [`Real`]: on x86-64, an AVX form of the same layout
+/// ([`run_lanes`] runs kernels in it where the processor has AVX2).
 #[cfg(target_arch = "x86_64")]
-pub trait LaneReal: crate::math::lanes::avx::Avx {
-    const KIND: LaneKind;
-    fn eval_node(
-        b: &dyn Bsdf,
-        p: Channels,
-        dirs: &[LaneDir<Self>],
-        children: LaneChildren<Self>,
-        out: &mut [Self],
-    );
-}
-/// A lane type a model tree can be evaluated in: calls the node's entry point for it.
+pub trait LaneBase: crate::math::lanes::avx::Avx {}
+#[cfg(target_arch = "x86_64")]
+impl<T: crate::math::lanes::avx::Avx> LaneBase for T {}
 #[cfg(not(target_arch = "x86_64"))]
-pub trait LaneReal: Real {
-    const KIND: LaneKind;
+pub trait LaneBase: Real {}
+#[cfg(not(target_arch = "x86_64"))]
+impl<T: Real> LaneBase for T {}
+
+/// A lane type a model tree can be evaluated in: calls the node's entry point for it.
+pub trait LaneReal: LaneBase {
     fn eval_node(
         b: &dyn Bsdf,
         p: Channels,
@@ -314,7 +330,6 @@ pub trait LaneReal: Real {
 }
 
 impl LaneReal for F32x8 {
-    const KIND: LaneKind = LaneKind::F32x8;
     #[inline]
     fn eval_node(
         b: &dyn Bsdf,
@@ -328,7 +343,6 @@ impl LaneReal for F32x8 {
 }
 
 impl LaneReal for F64x4 {
-    const KIND: LaneKind = LaneKind::F64x4;
     #[inline]
     fn eval_node(
         b: &dyn Bsdf,
@@ -358,32 +372,35 @@ pub fn lanes<'a, R: Real>(
         .map(|(d, (dir, o))| (d, (dir.wi, dir.wo), o))
 }
 
-/// A one-entry cache of a function of one value ([`super::Memo`] over a [`Real`]): in
-/// lanes it hits when every lane repeats.
+/// A one-entry cache of a function of one value, keyed on its bits: in a block of
+/// directions consecutive ones often share θi (a goniometer scans θo at a fixed θi) or
+/// θo (several φo at one θo), so a factor of μi or μo alone (a Fresnel transmittance) is
+/// computed once per run. Exact: the same argument gives the same value. In lanes it
+/// hits when every lane repeats.
 #[derive(Clone, Copy, Debug)]
-pub struct LaneMemo<R> {
+pub struct Memo<R> {
     last: Option<(R, R)>,
 }
 
-impl<R: Real> Default for LaneMemo<R> {
+impl<R: Real> Default for Memo<R> {
     fn default() -> Self {
-        LaneMemo { last: None }
+        Memo { last: None }
     }
 }
 
-impl<R: Real> LaneMemo<R> {
-    /// The value cached for `x`, if `x` is the previous argument.
+impl<R: Real> Memo<R> {
+    /// f(x), from the cache when x is the previous argument. (A closure passed here is
+    /// marked `#[inline(always)]`: out of line, it would be compiled without the vector
+    /// extensions of the kernel that calls it.)
     #[inline(always)]
-    pub fn get(&self, x: R) -> Option<R> {
+    pub fn get(&mut self, x: R, f: impl FnOnce(R) -> R) -> R {
         match self.last {
-            Some((key, value)) if key.same_bits(x) => Some(value),
-            _ => None,
+            Some((key, value)) if key.same_bits(x) => value,
+            _ => {
+                let value = f(x);
+                self.last = Some((x, value));
+                value
+            }
         }
-    }
-    /// Caches `value` for `x` and returns it.
-    #[inline(always)]
-    pub fn put(&mut self, x: R, value: R) -> R {
-        self.last = Some((x, value));
-        value
     }
 }

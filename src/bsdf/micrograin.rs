@@ -38,7 +38,7 @@
 //! inside w; G1/μ is computed as 1/(γβ (σ + Λσ)), finite at μ → 0, so nothing divides by
 //! zero at grazing.
 
-use super::kernel::LaneMemo;
+use super::kernel::Memo;
 use super::microfacet::{ggx_d, MICROFACET_WGSL};
 use super::{ParamDecl, Role, WgslFn};
 use crate::math::lanes::{Real, V3};
@@ -275,31 +275,20 @@ pub struct RoughGrain<R: Real = f64> {
 /// directions of one parameter vector: consecutive directions often share θi or θo.
 #[derive(Clone, Copy, Debug)]
 pub struct RoughGrainMemo<R: Real = f64> {
-    t_i: LaneMemo<R>,
-    t_o: LaneMemo<R>,
-    g_i: LaneMemo<R>,
-    g_o: LaneMemo<R>,
+    t_i: Memo<R>,
+    t_o: Memo<R>,
+    g_i: Memo<R>,
+    g_o: Memo<R>,
 }
 
 impl<R: Real> Default for RoughGrainMemo<R> {
     fn default() -> Self {
         RoughGrainMemo {
-            t_i: LaneMemo::default(),
-            t_o: LaneMemo::default(),
-            g_i: LaneMemo::default(),
-            g_o: LaneMemo::default(),
+            t_i: Memo::default(),
+            t_o: Memo::default(),
+            g_i: Memo::default(),
+            g_o: Memo::default(),
         }
-    }
-}
-
-/// `f(x)` from `memo` where x is its key, else computed and kept. (Closures passed to
-/// kernels' helpers are marked `#[inline(always)]`: out of line, one would be compiled
-/// without the vector extensions of the kernel that calls it.)
-#[inline(always)]
-fn memo_get<R: Real>(memo: &mut LaneMemo<R>, x: R, f: impl FnOnce(R) -> R) -> R {
-    match memo.get(x) {
-        Some(v) => v,
-        None => memo.put(x, f(x)),
     }
 }
 
@@ -339,13 +328,11 @@ impl<R: Real> RoughGrain<R> {
             };
         }
         let eta = R::splat(eta_g.max(1.0));
-        let transmit = memo_get(
-            &mut memo.t_i,
+        let transmit = memo.t_i.get(
             mu_i,
             #[inline(always)]
             |mu| fresnel_transmittance_in(mu, eta),
-        ) * memo_get(
-            &mut memo.t_o,
+        ) * memo.t_o.get(
             mu_o,
             #[inline(always)]
             |mu| fresnel_transmittance_in(mu, eta),
@@ -358,14 +345,12 @@ impl<R: Real> RoughGrain<R> {
         let cd = wi.dot(h).clamp(0.0, 1.0);
         let spec = fresnel_dielectric_in(cd, eta)
             * ndf_in(tau0, beta, h)
-            * memo_get(
-                &mut memo.g_i,
+            * memo.g_i.get(
                 mu_i,
                 #[inline(always)]
                 |mu| g1_over_mu_in(tau0, beta, mu),
             )
-            * memo_get(
-                &mut memo.g_o,
+            * memo.g_o.get(
                 mu_o,
                 #[inline(always)]
                 |mu| g1_over_mu_in(tau0, beta, mu),

@@ -10,7 +10,7 @@
 
 use crate::data::Kind;
 use crate::math::lanes::{F32x8, F64x4};
-pub use channels::{each_direction, pass_through, Channels, Children, Dir, Memo, MAX_CHILDREN};
+pub use channels::{each_direction, Channels, Children, Dir, MAX_CHILDREN};
 pub use decl::{
     Builder, Entry, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role, Scale,
 };

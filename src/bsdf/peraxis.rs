@@ -5,7 +5,7 @@
 //! parameters below it one scalar view per (plane, channel) group.
 //! Twin: `shaders/bsdf/peraxis.wgsl`.
 
-use super::{pass_through, Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 
 /// Registry entry: a suffix of either kind; in the catalogue, appended to the scaled
@@ -25,18 +25,7 @@ pub struct PerAxis {
     kind: Kind,
 }
 
-impl super::kernel::Kernel for PerAxis {
-    #[inline(always)]
-    fn block<R: crate::math::lanes::Real>(
-        &self,
-        p: Channels,
-        dirs: &[super::kernel::LaneDir<R>],
-        children: super::kernel::LaneChildren<R>,
-        out: &mut [R],
-    ) {
-        pass_through(p, dirs, children, out)
-    }
-}
+impl super::kernel::PassThrough for PerAxis {}
 
 impl Bsdf for PerAxis {
     fn entry(&self) -> &'static Entry {

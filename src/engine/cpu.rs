@@ -122,8 +122,6 @@ struct Part<'a> {
     widest: usize,
     /// The directions of every block in lanes, when the SIMD engine evaluates it.
     lanes: Option<LaneDirs>,
-    /// The loss constants in the lane order of `lanes`.
-    lane_terms: Option<LossTerms>,
     evaluations: AtomicU64,
 }
 
@@ -136,8 +134,8 @@ pub(crate) enum Arith {
 }
 
 /// Every block's directions as lane-directions (the last lane-direction of a block
-/// padded with its last direction), block after block, and the lane order of the
-/// block's values.
+/// padded with its last direction), block after block, and the loss constants in the
+/// lane order of the blocks' values.
 struct LaneDirs {
     dirs: LaneVec,
     /// Block b's first lane-direction.
@@ -145,8 +143,12 @@ struct LaneDirs {
     /// Block b's first value in lane order: its m lane-directions × n channels × L
     /// lanes, value (d · n + i) · L + j at lane j of lane-direction d, channel i.
     values_at: Vec<usize>,
-    /// The row of each value in lane order, or [`NO_SAMPLE`] for a padding lane.
-    rows: Vec<u32>,
+    /// The loss constants of the values in lane order (zero for a padding lane); a
+    /// squared term's √w taken into a and g(y): w (a y′ − g(y))² = (√w a y′ − √w g(y))²,
+    /// one product less per row.
+    terms: LossTerms,
+    /// The children's lane values the largest block needs ([`Model::scratch_len`]).
+    scratch_len: usize,
 }
 
 enum LaneVec {
@@ -155,7 +157,15 @@ enum LaneVec {
 }
 
 impl LaneDirs {
-    fn new(kind: LaneKind, dirs: &[Dir], blocks: &[Block]) -> LaneDirs {
+    /// The lanes of `blocks` of the model `model`, whose row-order loss constants are
+    /// `rows`.
+    fn new(
+        kind: LaneKind,
+        model: &Model,
+        dirs: &[Dir],
+        blocks: &[Block],
+        rows: &LossTerms,
+    ) -> LaneDirs {
         fn pack<R: Real>(dirs: &[Dir], blocks: &[Block]) -> Vec<LaneDir<R>> {
             let mut v = Vec::new();
             for b in blocks {
@@ -175,11 +185,13 @@ impl LaneDirs {
             LaneKind::F32x8 => (LaneVec::F32x8(pack(dirs, blocks)), F32x8::LANES),
             LaneKind::F64x4 => (LaneVec::F64x4(pack(dirs, blocks)), F64x4::LANES),
         };
-        let (mut at, mut values_at, mut rows) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut at, mut values_at) = (Vec::new(), Vec::new());
+        // The row of each value in lane order, or NO_SAMPLE for a padding lane.
+        let mut rows_of_values = Vec::new();
         let mut next = 0;
         for b in blocks {
             at.push(next);
-            values_at.push(rows.len());
+            values_at.push(rows_of_values.len());
             let (n, len) = (b.n, b.dirs.len());
             let m = len.div_ceil(l);
             next += m;
@@ -187,7 +199,7 @@ impl LaneDirs {
                 for i in 0..n {
                     for j in 0..l {
                         let direction = d * l + j;
-                        rows.push(if direction < len {
+                        rows_of_values.push(if direction < len {
                             (b.start + direction * n + i) as u32
                         } else {
                             NO_SAMPLE
@@ -196,11 +208,20 @@ impl LaneDirs {
                 }
             }
         }
+        let mut terms = rows.in_rows(rows_of_values.into_iter());
+        if terms.term == Term::Square {
+            for ((a, gy), s) in terms.a.iter_mut().zip(&mut terms.gy).zip(&terms.sqrt_w) {
+                *a *= s;
+                *gy *= s;
+            }
+        }
+        let widest = blocks.iter().map(|b| b.n * b.dirs.len().div_ceil(l)).max();
         LaneDirs {
             dirs,
             at,
             values_at,
-            rows,
+            terms,
+            scratch_len: model.scratch_len(widest.unwrap_or(0)),
         }
     }
 }
@@ -301,28 +322,15 @@ impl<'a> Part<'a> {
             }
         }
         let terms = problem.loss.terms(problem.data);
+        let rows = RowTerms::new(&terms, order);
         let lanes = match arith {
             Arith::Reference => None,
-            Arith::Lanes(kind) => Some(LaneDirs::new(kind, &first, &blocks)),
+            Arith::Lanes(kind) => Some(LaneDirs::new(kind, model, &first, &blocks, &rows.terms)),
         };
-        let rows = RowTerms::new(&terms, order);
-        // In lane order, a squared term's √w taken into a and g(y): w (a y′ − g(y))² =
-        // (√w a y′ − √w g(y))², one product less per row.
-        let lane_terms = lanes.as_ref().map(|l| {
-            let mut t = rows.terms.in_rows(l.rows.iter().copied());
-            if t.term == Term::Square {
-                for ((a, gy), s) in t.a.iter_mut().zip(&mut t.gy).zip(&t.sqrt_w) {
-                    *a *= s;
-                    *gy *= s;
-                }
-            }
-            t
-        });
         let part = Part {
             problem,
             widest: blocks.iter().map(|b| b.n * b.dirs.len()).max().unwrap_or(0),
             lanes,
-            lane_terms,
             dirs: first,
             blocks,
             windows,
@@ -413,9 +421,8 @@ impl<'a> Part<'a> {
             let first = lanes.at[k];
             let (values, children) = R::buffers(scratch);
             values.resize(n * m, R::zero());
-            let need = model.scratch_len(n * m);
-            if children.len() < need {
-                children.resize(need, R::zero());
+            if children.len() < lanes.scratch_len {
+                children.resize(lanes.scratch_len, R::zero());
             }
             if out.len() < n * m * l {
                 out.resize(n * m * l, 0.0);
@@ -514,10 +521,10 @@ impl<'a> Part<'a> {
     /// running sum costs an addition's latency per row, more than the model's lanes
     /// take). The reference keeps one sum in row order.
     fn cost_sum_split(&self, lanes: &LaneDirs, w: &Window, scratch: &mut Scratch) -> f64 {
-        let t = self.lane_terms.as_ref().expect("lane terms of a SIMD part");
+        let t = &lanes.terms;
         let (blocks, t_w) = (w.blocks.clone(), &t.w[..]);
         match t.term {
-            // a and gy hold √w·a and √w·g(y) here (LaneDirs' terms, see Part::new).
+            // a and gy hold √w·a and √w·g(y) here (LaneDirs::terms).
             Term::Square => {
                 self.sum_in_lanes(lanes, blocks, scratch, [&t.a, &t.gy], |v, [a, gy]| {
                     let d = a * v - gy;

@@ -4,7 +4,7 @@
 //! nothing to the compiler's vectorizer (which kept part of the array form scalar).
 //! Never used outside such a function.
 
-use super::{F32x8, F64x4, Lanes, Real};
+use super::{F32x8, F64x4, Real};
 use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -14,7 +14,7 @@ macro_rules! avx_type {
      add $add:ident, sub $sub:ident, mul $mul:ident, div $div:ident, sqrt $sqrt:ident,
      min $min:ident, max $max:ident, set1 $set1:ident, cmp $cmp:ident,
      blend $blend:ident, and $and:ident, or $or:ident, xor $xor:ident,
-     andnot $andnot:ident, movemask $movemask:ident, full $full:literal,
+     andnot $andnot:ident, movemask $movemask:ident,
      exp $exp:ident, exp_m1 $exp_m1:ident, acos $acos:ident) => {
         #[derive(Clone, Copy, Debug)]
         #[repr(transparent)]
@@ -194,13 +194,6 @@ macro_rules! avx_type {
                 }
             }
         }
-        impl From<$mask> for Lanes<$n> {
-            fn from(m: $mask) -> Lanes<$n> {
-                let bits = unsafe { $movemask(m.0) };
-                Lanes(std::array::from_fn(|i| bits & (1 << i) != 0))
-            }
-        }
-        const _: () = assert!($full == (1 << $n) - 1);
     };
 }
 
@@ -208,13 +201,13 @@ avx_type!(Avx8, Avx8Mask, __m256, f32, 8, F32x8,
     add _mm256_add_ps, sub _mm256_sub_ps, mul _mm256_mul_ps, div _mm256_div_ps,
     sqrt _mm256_sqrt_ps, min _mm256_min_ps, max _mm256_max_ps, set1 _mm256_set1_ps,
     cmp _mm256_cmp_ps, blend _mm256_blendv_ps, and _mm256_and_ps, or _mm256_or_ps,
-    xor _mm256_xor_ps, andnot _mm256_andnot_ps, movemask _mm256_movemask_ps, full 255,
+    xor _mm256_xor_ps, andnot _mm256_andnot_ps, movemask _mm256_movemask_ps,
     exp exp_f32, exp_m1 exp_m1_f32, acos acos_f32);
 avx_type!(Avx4d, Avx4dMask, __m256d, f64, 4, F64x4,
     add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
     sqrt _mm256_sqrt_pd, min _mm256_min_pd, max _mm256_max_pd, set1 _mm256_set1_pd,
     cmp _mm256_cmp_pd, blend _mm256_blendv_pd, and _mm256_and_pd, or _mm256_or_pd,
-    xor _mm256_xor_pd, andnot _mm256_andnot_pd, movemask _mm256_movemask_pd, full 15,
+    xor _mm256_xor_pd, andnot _mm256_andnot_pd, movemask _mm256_movemask_pd,
     exp exp_f64, exp_m1 exp_m1_f64, acos acos_f64);
 
 /// e^x in eight f32 lanes: x = n ln 2 + r (Cody–Waite, |r| ≤ ½ ln 2), e^r by the
