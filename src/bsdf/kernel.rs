@@ -11,7 +11,7 @@
 //! call its f64 `eval_channels` ([`by_reference`]).
 
 use super::{Bsdf, Channels, Children, Dir};
-use crate::math::lanes::{level, F32x8, F64x4, Level, Real, V3};
+use crate::math::lanes::{level, vectorized, F32x8, F64x4, Level, Real, V3};
 use glam::DVec3;
 
 /// A direction pair (ωi, ωo) in lanes.
@@ -243,6 +243,9 @@ pub fn run_lanes<K: Kernel, R: LaneReal>(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if level() == Level::Baseline {
+            return k.block::<R>(p, dirs, children, out);
+        }
         #[allow(clippy::let_unit_value)]
         let () = R::SAME_LAYOUT;
         // SAFETY: R and R::Reg have one size and alignment (SAME_LAYOUT), LaneDir and
@@ -258,50 +261,12 @@ pub fn run_lanes<K: Kernel, R: LaneReal>(
             )
         };
         let children = LaneChildren::new(values, children.m, children.n);
-        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
-        fn avx512<K: Kernel, R: Real>(
-            k: &K,
-            p: Channels,
-            dirs: &[LaneDir<R>],
-            children: LaneChildren<R>,
-            out: &mut [R],
-        ) {
-            k.block::<R>(p, dirs, children, out)
-        }
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<K: Kernel, R: Real>(
-            k: &K,
-            p: Channels,
-            dirs: &[LaneDir<R>],
-            children: LaneChildren<R>,
-            out: &mut [R],
-        ) {
-            k.block::<R>(p, dirs, children, out)
-        }
-        match level() {
-            // SAFETY: `level` found these features on this processor.
-            Level::Avx512 => unsafe { avx512::<K, R::Reg>(k, p, dirs, children, out) },
-            Level::Avx2 => unsafe { avx2::<K, R::Reg>(k, p, dirs, children, out) },
-            Level::Baseline => {
-                // Back to the array types (the same memory) for the portable form.
-                let (dirs, values, out) = unsafe {
-                    (
-                        std::slice::from_raw_parts(dirs.as_ptr() as *const LaneDir<R>, dirs.len()),
-                        std::slice::from_raw_parts(
-                            children.values.as_ptr() as *const R,
-                            children.values.len(),
-                        ),
-                        std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut R, out.len()),
-                    )
-                };
-                k.block::<R>(
-                    p,
-                    dirs,
-                    LaneChildren::new(values, children.m, children.n),
-                    out,
-                )
-            }
-        }
+        // Past the baseline test, `vectorized` runs this in its AVX2 or AVX-512 function,
+        // the only places the AVX types may be used.
+        vectorized(
+            #[inline(always)]
+            || k.block::<R::Reg>(p, dirs, children, out),
+        )
     }
     #[cfg(not(target_arch = "x86_64"))]
     k.block::<R>(p, dirs, children, out)
