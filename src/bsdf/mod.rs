@@ -678,12 +678,8 @@ impl Model {
     /// A lobe is left as it is unless `free` holds for its three flat indices (a user's
     /// bounds, fixed values or priors are not carried over a swap).
     pub fn canonical_form(&self, flat: &mut [f64], free: impl Fn(usize) -> bool) {
-        for node in self.nodes() {
-            let Some(local) = node.bsdf.frame_params() else {
-                continue;
-            };
-            let [u, v, phi] = local.map(|k| self.params[node.offset + k].index);
-            if self.params[node.offset + local[0]].axes > 1 || ![u, v, phi].into_iter().all(&free) {
+        for [u, v, phi] in self.frames() {
+            if ![u, v, phi].into_iter().all(&free) {
                 continue;
             }
             if flat[phi].abs() > 45.0 {
@@ -691,6 +687,19 @@ impl Model {
                 flat[phi] -= 90.0f64.copysign(flat[phi]);
             }
         }
+    }
+
+    /// The flat indices (α_u, α_v, φ0) of every anisotropic lobe with one frame (not
+    /// per-plane), in pre-order.
+    pub fn frames(&self) -> Vec<[usize; 3]> {
+        self.nodes()
+            .into_iter()
+            .filter_map(|node| {
+                let local = node.bsdf.frame_params()?;
+                (self.params[node.offset + local[0]].axes == 1)
+                    .then(|| local.map(|k| self.params[node.offset + k].index))
+            })
+            .collect()
     }
 
     /// The lanes the SIMD engine evaluates the model in: f64 where a node needs it.

@@ -1,11 +1,13 @@
 //! Measurements in: the in-memory [`Dataset`], the v1 CSV format and its validation,
 //! channel selection, [`readers`] for the other formats (ALTA text, MERL binary, …),
 //! chosen by content, and the named [`geometries`] of synthetic and sampled data.
+mod azimuths;
 mod builder;
 mod channels;
 mod dataset;
 pub mod geometries;
 pub mod readers;
+pub use azimuths::{min_plane_samples, AzimuthCoverage};
 pub(crate) use builder::{Builder, Cells};
 pub use dataset::*;
 

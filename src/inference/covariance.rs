@@ -236,7 +236,63 @@ pub fn covariance(
     set_std_and_correlation(&mut out, &cov, &undetermined);
     let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
-    Ok(expand(out, free, model.dim))
+    let mut out = expand(out, free, model.dim);
+    out.warnings
+        .extend(one_azimuth_warnings(model, data, flat, &out.std, free));
+    Ok(out)
+}
+
+/// Frames this many standard uncertainties or fewer from the plane of incidence (or
+/// across it) count as lying on it.
+const ON_PLANE_SIGMAS: f64 = 3.0;
+
+/// On data measured at one incidence azimuth (`crate::data::AzimuthCoverage::One`), what
+/// each fitted anisotropic frame means there: a frame on (or across) the plane of
+/// incidence is mirror-symmetric about it like an isotropic lobe, so α_u and α_v then
+/// measure a lobe shape across the plane against along it that this geometry cannot tell
+/// from anisotropy; a frame turned off the plane rests on the mirror symmetry it breaks.
+fn one_azimuth_warnings(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    std: &[Option<f64>],
+    free: &[usize],
+) -> Vec<String> {
+    let frames: Vec<[usize; 3]> = model
+        .frames()
+        .into_iter()
+        .filter(|f| free.contains(&f[2]))
+        .collect();
+    if frames.is_empty() {
+        return vec![];
+    }
+    let Some(plane) = data.azimuth_coverage().one_azimuth() else {
+        return vec![];
+    };
+    let names = model.flat_names();
+    frames
+        .iter()
+        .map(|&[u, v, phi]| {
+            // Distance of the frame from the plane or from across it, in [0°, 45°].
+            let r = (flat[phi] - plane).rem_euclid(90.0);
+            let off = r.min(90.0 - r);
+            let sd = std[phi];
+            let frame = match sd {
+                Some(s) => format!("{} = {:.1}° ± {s:.1}°", names[phi], flat[phi]),
+                None => format!("{} = {:.1}° (undetermined)", names[phi], flat[phi]),
+            };
+            if sd.is_none_or(|s| off <= ON_PLANE_SIGMAS * s) {
+                format!(
+                    "measured at one incidence azimuth (φi = {plane:.0}°), the frame {frame} lies on the plane of incidence or across it: so aligned, an anisotropic lobe is mirror-symmetric about that plane like any isotropic lobe, and {} and {} measure a lobe shape across the plane against along it that this geometry cannot tell from anisotropy (`diagnose` does not name anisotropy here); measure at a second incidence azimuth to tell",
+                    names[u], names[v]
+                )
+            } else {
+                format!(
+                    "measured at one incidence azimuth (φi = {plane:.0}°), the anisotropy rests on the frame {frame} breaking the mirror symmetry about the plane of incidence ({off:.1}° off it); `diagnose` tests whether that break is significant"
+                )
+            }
+        })
+        .collect()
 }
 
 /// The covariance of every parameter of `model` at the fitted point `flat` (none fixed),

@@ -48,6 +48,7 @@ mod path;
 mod regions;
 mod report;
 mod score;
+mod symmetry;
 #[cfg(test)]
 mod testdata;
 
@@ -59,6 +60,7 @@ pub use path::diagnose;
 pub use regions::{describe_regions, region_stats, RegionStat};
 pub use report::{residual_panel, staircase_panel, write_report};
 pub use score::{irregular_null, PTest, Scored};
+pub use symmetry::MirrorTest;
 
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;

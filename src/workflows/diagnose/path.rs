@@ -4,6 +4,7 @@
 use super::fit::{calibrate_round, fit_all};
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
+use super::symmetry::mirror_test;
 use super::{
     describe_regions, extensions, fit_model, Candidate, DiagnoseOptions, Diagnosis, Effect,
     FitResult, RoundSeconds, Scored, Step,
@@ -199,6 +200,13 @@ fn adopt_step(
     if !best.identifiable_note.is_empty() {
         notes += &format!(" Determined: {}.", best.identifiable_note);
     }
+    if let Some(m) = best.mirror.as_ref().filter(|m| m.broken()) {
+        notes += &format!(
+            " Measured at one incidence azimuth (φi = {:.0}°), the frame breaks the mirror symmetry about the plane of incidence: {}.",
+            m.plane,
+            m.describe()
+        );
+    }
     let siblings: Vec<String> = scored
         .iter()
         .filter(|s| s.candidate.effect == effect && s.candidate.spec != best.candidate.spec)
@@ -377,6 +385,7 @@ fn score_round(
         .zip(fits)
         .map(|(c, f)| score(data, current, &flagged, c, f, m, opts))
         .collect();
+    test_mirror_symmetry(&mut scored, data, backend, opts, log, cache);
     let scored_at = std::time::Instant::now();
     defer_undeciding(&mut scored, data.len(), opts, log);
     calibrate_round(&mut scored, data, backend, opts, current, log);
@@ -386,6 +395,63 @@ fn score_round(
         bootstraps: scored_at.elapsed().as_secs_f64(),
     };
     (scored, seconds)
+}
+
+/// On data measured at one incidence azimuth, test whether each anisotropic candidate
+/// that could be adopted breaks the mirror symmetry about the plane of incidence
+/// ([`mirror_test`]); one that does not is refused, in words. Elsewhere the geometry
+/// shows anisotropy directly and nothing is done. The fits with the frame held on the
+/// plane are cached like the candidates'.
+fn test_mirror_symmetry(
+    scored: &mut [Scored],
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    cache: &mut FitCache,
+) {
+    let could_adopt = |s: &Scored| {
+        s.candidate.effect == Effect::Anisotropy
+            && s.identifiable
+            && s.delta_bic_scaled < 0.0
+            && s.fit.is_some()
+    };
+    if !scored.iter().any(could_adopt) {
+        return;
+    }
+    let Some(plane) = data.azimuth_coverage().one_azimuth() else {
+        return;
+    };
+    for s in scored.iter_mut().filter(|s| could_adopt(s)) {
+        let fit = s.fit.as_ref().expect("could_adopt checks the fit");
+        let key = format!(
+            "{} [frame held on the plane of incidence]",
+            s.candidate.spec
+        );
+        let cached = cache.get(&key).and_then(|r| r.as_ref().ok()).cloned();
+        match mirror_test(fit, data, backend, opts, plane, s.level, cached.as_ref()) {
+            Ok(Some((test, aligned))) => {
+                log(format!(
+                    "    mirror symmetry of {} about the plane of incidence φi = {plane:.0}°: {} ({})",
+                    s.candidate.spec,
+                    if test.broken() { "broken" } else { "not broken" },
+                    test.describe()
+                ));
+                cache.insert(key, Ok(aligned));
+                s.set_mirror(test);
+            }
+            Ok(None) => {}
+            Err(e) => {
+                log(format!(
+                    "    mirror symmetry of {}: the fit with the frame held failed ({e:#}); not adopted",
+                    s.candidate.spec
+                ));
+                s.refuse(format!(
+                    "its frame could not be tested against the plane of incidence ({e:#})"
+                ));
+            }
+        }
+    }
 }
 
 /// Race the round before its bootstraps: where the round adopts the same candidate whether

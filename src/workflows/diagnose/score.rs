@@ -3,6 +3,7 @@
 //! new parameters, and the consistency test of a fit.
 
 use super::regions::RegionStat;
+use super::symmetry::MirrorTest;
 use super::{Candidate, DiagnoseOptions, FitResult};
 use crate::bsdf::{Model, ParamDecl};
 use crate::data::Dataset;
@@ -110,14 +111,38 @@ pub struct Scored {
     /// region is flagged or the fit failed.
     pub removal_flagged: Option<f64>,
     pub removal_outside: Option<f64>,
+    /// For an anisotropic candidate on data measured at one incidence azimuth: whether its
+    /// frame breaks the mirror symmetry about the plane of incidence ([`MirrorTest`]).
+    pub mirror: Option<MirrorTest>,
     pub verdict: String,
 }
 
 impl Scored {
-    /// Significant, and its new parameters determined by the data. A new parameter on a
-    /// bound of its range does not stop it: the evidence says what the bound means.
+    /// Significant, its new parameters determined by the data, and (an anisotropic lobe
+    /// at one incidence azimuth) its frame off the plane of incidence. A new parameter on
+    /// a bound of its range does not stop it: the evidence says what the bound means.
     pub fn adoptable(&self) -> bool {
-        self.significant && self.identifiable
+        self.significant && self.identifiable && !self.confounded()
+    }
+
+    /// An anisotropic candidate whose gain, at one incidence azimuth, this geometry cannot
+    /// tell from an isotropic lobe of another shape: its frame does not break the mirror
+    /// symmetry about the plane of incidence.
+    pub fn confounded(&self) -> bool {
+        self.mirror.as_ref().is_some_and(|m| !m.broken())
+    }
+
+    /// Not identifiable after all, for `why`; judge again.
+    pub(super) fn refuse(&mut self, why: String) {
+        self.identifiable = false;
+        self.identifiable_why = why;
+        self.judge();
+    }
+
+    /// Record the mirror-symmetry test and judge again.
+    pub(super) fn set_mirror(&mut self, test: MirrorTest) {
+        self.mirror = Some(test);
+        self.judge();
     }
 }
 
@@ -438,6 +463,7 @@ pub(super) fn score(
                 removal: vec![],
                 removal_flagged: None,
                 removal_outside: None,
+                mirror: None,
                 verdict: format!("fit failed: {e:#}"),
             }
         }
@@ -487,6 +513,7 @@ pub(super) fn score(
         removal,
         removal_flagged,
         removal_outside,
+        mirror: None,
         verdict: String::new(),
     };
     scored.judge();
@@ -565,6 +592,8 @@ impl Scored {
                 "significant but not identifiable: {}",
                 self.identifiable_why
             )
+        } else if let Some(m) = self.mirror.as_ref().filter(|_| self.confounded()) {
+            format!("significant, but {}", m.confounded_words())
         } else if !self.on_bound.is_empty() {
             format!(
                 "significant; a new parameter ends on a bound: {}",
