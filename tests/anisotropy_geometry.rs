@@ -211,8 +211,8 @@ fn isotropic_truths_outside_the_catalogue_never_get_anisotropy_at_one_azimuth() 
                 && c.delta_bic_scaled < 0.0
                 && c.p_nominal.is_some_and(|p| p < c.level)
             {
-                let m = c.mirror.as_ref().expect("the mirror test ran");
-                assert!(!m.broken() && c.confounded(), "{name}: {m:?}");
+                let t = c.frame_test.as_ref().expect("the frame test ran");
+                assert!(!t.shows_anisotropy() && c.confounded(), "{name}: {t:?}");
                 // A deferred test's verdict says so; every other one says why in words.
                 assert!(
                     c.is_deferred()
@@ -266,9 +266,9 @@ fn anisotropy_is_named_where_the_geometry_shows_it() {
     assert!(matches!(two.azimuth_coverage(), AzimuthCoverage::Planes(p) if p.len() == 2));
     let d = one_round("aligned frame, two azimuths", &two);
     assert_eq!(d.effects[0], Effect::Anisotropy, "{:#}", d.to_json());
-    assert!(anisotropic_candidates(&d)
-        .iter()
-        .all(|c| c.mirror.is_none()));
+    let c = anisotropic_candidates(&d)[0];
+    let t = c.frame_test.as_ref().expect("the frame test ran");
+    assert!(t.shows_anisotropy() && t.one_azimuth.is_none(), "{t:?}");
 }
 
 /// `fit` of an anisotropic model on one-azimuth data says what the frame means there.

@@ -22,6 +22,7 @@ fn one_random_truth_per_effect_and_null_cases() {
     let opts = BatteryOptions {
         cases: 1,
         nulls: 4,
+        misspecified: 0,
         seed: 7,
         effects: effects.clone(),
         signal: (8.0, 30.0),
@@ -86,4 +87,80 @@ fn one_random_truth_per_effect_and_null_cases() {
         hidden_false <= 1,
         "{hidden_false} hidden cases with a false effect"
     );
+}
+
+/// The misspecified null cases: one isotropic truth per family outside the catalogue
+/// (Beckmann, GTR γ ≠ 2, two-scale, V-cavity shadowing, Schlick Fresnel; written in the
+/// library's `misspecified` module from textbook formulas, not through its models),
+/// measured at one incidence azimuth, then one at several, diagnosed from `fa(lambert)`.
+/// Anisotropy is never named on them (every outcome is read here, not the library's
+/// summary), and the rates table reports them apart from the regular null cases.
+#[test]
+fn misspecified_isotropic_truths_never_get_anisotropy() {
+    let families = bsdfit::workflows::diagnose::misspecified::FAMILIES;
+    let opts = BatteryOptions {
+        cases: 0,
+        nulls: 0,
+        misspecified: families.len() + 1,
+        seed: 11,
+        effects: vec![],
+        signal: (1.0, 30.0),
+        samples: (300, 700),
+        diagnose: DiagnoseOptions {
+            seed: 11,
+            restarts: 6,
+            max_steps: 2,
+            backtrack: false,
+            bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
+                replicates: 0,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        only: None,
+    };
+    let backend = bsdfit::engine::simd::SimdBackend::new();
+    let outcomes = run_battery(&opts, &backend, &mut |o| {
+        eprintln!(
+            "case {} {:?} [{}] {} named {:?} χ²_red {:.2} → {:.2} refused anisotropy {}",
+            o.case.id,
+            o.case.misspecified,
+            o.case.geometry,
+            o.case.truth,
+            o.named,
+            o.chi2_red_start,
+            o.chi2_red_final,
+            o.anisotropy_refused
+        )
+    });
+    let table = rates_table(&outcomes);
+    eprintln!("{table}");
+    assert_eq!(outcomes.len(), families.len() + 1);
+    for (k, o) in outcomes.iter().enumerate() {
+        assert!(o.error.is_none(), "case {k}: {:?}", o.error);
+        let family = families[k % families.len()];
+        assert_eq!(o.case.misspecified.as_deref(), Some(family));
+        assert!(o.case.truth.starts_with(family), "{}", o.case.truth);
+        assert_eq!(o.case.hidden, None);
+        let several = k >= families.len();
+        assert_eq!(
+            o.case.geometry.starts_with("hemisphere at 1 "),
+            !several,
+            "{}",
+            o.case.geometry
+        );
+        assert!(
+            !o.named.iter().any(|n| n == "anisotropy"),
+            "anisotropy named on isotropic truth {}: {:?}",
+            o.case.truth,
+            o.named
+        );
+        // The false effects, judged here: anything but a second specular lobe.
+        let false_here = o.named.iter().any(|n| n != "specular_lobe");
+        assert_eq!(o.false_effect, false_here, "{:?}", o.named);
+    }
+    assert!(
+        table.contains("Misspecified null cases") && table.contains("| `v-cavity` | one | 1 |")
+    );
+    assert!(table.contains("| none (null cases) |") && table.contains("| – | – |\n"));
 }

@@ -1077,6 +1077,7 @@ def battery(
     *,
     cases: int = _BATTERY_DEFAULTS["cases"],
     nulls: int = _BATTERY_DEFAULTS["nulls"],
+    misspecified: int = _BATTERY_DEFAULTS["misspecified"],
     seed: int = _BATTERY_DEFAULTS["seed"],
     effects: Optional[Sequence[str]] = None,
     signal: Tuple[float, float] = _BATTERY_DEFAULTS["signal"],
@@ -1088,7 +1089,8 @@ def battery(
 ) -> Battery:
     """Run the diagnosis's randomized battery (``bsdfit battery``): ``cases`` cases per
     hidden effect (``effects``: names as ``diagnose`` gives them; default every effect)
-    and ``nulls`` cases with nothing hidden, the effect's pre-fit ``signal`` and the
+    and ``nulls`` cases with nothing hidden, then ``misspecified`` null cases whose
+    isotropic truths lie outside the catalogue (diagnosed from ``fa(lambert)``), the effect's pre-fit ``signal`` and the
     sample counts drawn log-uniformly from their ``(lo, hi)`` ranges, each diagnosed with
     ``restarts`` restarts per fit. The same ``seed`` draws the same battery; ``case=ID``
     runs that case only. ``progress``: True (the default) for a bar on stderr, False or
@@ -1100,6 +1102,7 @@ def battery(
         text, table = _bsdfit.battery(
             _int("cases", cases, 0),
             _int("nulls", nulls, 0),
+            _int("misspecified", misspecified, 0),
             _int("seed", seed, 0),
             listed,
             _range("signal", signal, integer=False),

@@ -157,6 +157,7 @@ def battery_defaults() -> Dict[str, Any]:
 def battery(
     cases: int,
     nulls: int,
+    misspecified: int,
     seed: int,
     effects: Optional[List[str]],
     signal: Tuple[float, float],

@@ -922,6 +922,7 @@ fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let dict = PyDict::new(py);
     dict.set_item("cases", d.cases)?;
     dict.set_item("nulls", d.nulls)?;
+    dict.set_item("misspecified", d.misspecified)?;
     dict.set_item("seed", d.seed)?;
     dict.set_item("signal", d.signal)?;
     dict.set_item("samples", d.samples)?;
@@ -934,11 +935,12 @@ fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// the command line prints. `progress` (a callable or None) hears of each case as it
 /// ends (stage `battery`).
 #[pyfunction]
-#[pyo3(signature = (cases, nulls, seed, effects, signal, samples, restarts, backend, case, progress))]
+#[pyo3(signature = (cases, nulls, misspecified, seed, effects, signal, samples, restarts, backend, case, progress))]
 fn battery(
     py: Python<'_>,
     cases: usize,
     nulls: usize,
+    misspecified: usize,
     seed: u64,
     effects: Option<Vec<String>>,
     signal: (f64, f64),
@@ -957,6 +959,7 @@ fn battery(
         let opts = BatteryOptions {
             cases,
             nulls,
+            misspecified,
             seed,
             effects: match effects {
                 None => defaults.effects.clone(),

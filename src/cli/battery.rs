@@ -19,6 +19,12 @@ pub struct BatteryArgs {
     /// Cases with no hidden effect (the truth is the start model).
     #[arg(long, default_value_t = BatteryOptions::default().nulls)]
     pub nulls: usize,
+    /// Misspecified null cases: isotropic truths whose highlight lies outside the
+    /// catalogue (Beckmann, GTR with γ ≠ 2 and two-scale NDFs, V-cavity shadowing, Schlick
+    /// Fresnel), at one incidence azimuth and at several, diagnosed from fa(lambert); the
+    /// table says which effects were named on them.
+    #[arg(long, default_value_t = BatteryOptions::default().misspecified)]
+    pub misspecified: usize,
     /// Seed of the cases (a non-negative integer): the same seed draws the same battery.
     #[arg(long, default_value_t = BatteryOptions::default().seed, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
@@ -78,6 +84,7 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
     let opts = BatteryOptions {
         cases: a.cases,
         nulls: a.nulls,
+        misspecified: a.misspecified,
         seed: a.seed,
         effects,
         signal: pair(&a.signal, "--signal")?,

@@ -103,6 +103,25 @@ impl Sector {
 }
 
 impl Dataset {
+    /// The data turned, sample by sample, about the normal so that each sample's plane of
+    /// incidence lies at φ = 0 (a sample at normal incidence: its outgoing plane). An
+    /// isotropic BSDF takes the same values here; an anisotropic lobe with φ0 = 0 here is
+    /// the lobe whose frame turns with each sample's plane of incidence: an isotropic lobe
+    /// of another shape, the null against which anisotropy is tested.
+    pub fn turned_to_incidence_planes(&self) -> Dataset {
+        let mut d = self.clone();
+        for s in &mut d.samples {
+            let turn = if s.theta_i.to_degrees() > NORMAL_DEG {
+                s.phi_i
+            } else {
+                s.phi_o
+            };
+            s.phi_i -= turn;
+            s.phi_o -= turn;
+        }
+        d
+    }
+
     /// Whether the data's incidence azimuths can show anisotropy ([`AzimuthCoverage`]).
     pub fn azimuth_coverage(&self) -> AzimuthCoverage {
         if self.direction_planes() < 2 {
@@ -198,6 +217,34 @@ mod tests {
         // A few normal-incidence samples on many planes do not make it separable.
         let d = data(&hemisphere(&[0.0], &[0.0, 20.0, 40.0, 60.0, 70.0]));
         assert_eq!(d.azimuth_coverage(), AzimuthCoverage::One(0.0));
+    }
+
+    /// Turned to their planes of incidence, samples keep their relative azimuth (φo − φi),
+    /// and normal-incidence samples land on φ = 0.
+    #[test]
+    fn turning_to_the_incidence_planes_keeps_the_relative_azimuth() {
+        let d = data(&[
+            [30.0, 40.0, 50.0, 100.0],
+            [0.0, 0.0, 50.0, 70.0],
+            [20.0, 200.0, 10.0, 0.0],
+        ]);
+        let t = d.turned_to_incidence_planes();
+        for (a, b) in d.samples.iter().zip(&t.samples) {
+            let rel = |s: &crate::data::Sample| (s.phi_o - s.phi_i).to_degrees().rem_euclid(360.0);
+            assert!((rel(a) - rel(b)).abs() < 1e-9);
+            assert_eq!(
+                (a.theta_i, a.theta_o, a.value),
+                (b.theta_i, b.theta_o, b.value)
+            );
+            let incidence = if b.theta_i > 1e-3 { b.phi_i } else { b.phi_o };
+            assert!(
+                incidence
+                    .to_degrees()
+                    .rem_euclid(360.0)
+                    .min(360.0 - incidence.to_degrees().rem_euclid(360.0))
+                    < 1e-9
+            );
+        }
     }
 
     #[test]

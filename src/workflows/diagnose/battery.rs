@@ -39,6 +39,10 @@ pub struct BatteryOptions {
     pub cases: usize,
     /// Cases with nothing hidden.
     pub nulls: usize,
+    /// Misspecified null cases: isotropic truths outside the catalogue
+    /// ([`super::misspecified`]), diagnosed from `fa(lambert)`; they cycle through the
+    /// families, at one incidence azimuth and then at several.
+    pub misspecified: usize,
     pub seed: u64,
     /// The effects to hide (default: every effect of the table).
     pub effects: Vec<Effect>,
@@ -57,6 +61,7 @@ impl Default for BatteryOptions {
         BatteryOptions {
             cases: 20,
             nulls: 40,
+            misspecified: 10,
             seed: 1,
             effects: Effect::all().collect(),
             signal: (1.0, 30.0),
@@ -91,7 +96,7 @@ impl BatteryOptions {
         if self.only.is_some() {
             1
         } else {
-            self.effects.len() * self.cases + self.nulls
+            self.effects.len() * self.cases + self.nulls + self.misspecified
         }
     }
 }
@@ -122,6 +127,10 @@ pub struct Case {
     pub id: usize,
     /// The hidden effect (None: a null case).
     pub hidden: Option<String>,
+    /// A misspecified null case's family ([`super::misspecified::FAMILIES`]); its truth
+    /// is described in `truth`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub misspecified: Option<String>,
     pub start: String,
     pub truth: String,
     /// The truth's flat parameters (physical).
@@ -149,6 +158,10 @@ pub struct Outcome {
     pub consistent: bool,
     pub detected: bool,
     pub false_effect: bool,
+    /// Anisotropic candidates significant on their F test and identifiable that the frame
+    /// test refused (no better than an isotropic lobe of the same shape): anisotropy the
+    /// F test alone would have let through.
+    pub anisotropy_refused: usize,
     pub seconds: f64,
     /// Set when the diagnosis failed.
     pub error: Option<String>,
@@ -315,6 +328,7 @@ pub fn generate(
         let case = Case {
             id,
             hidden: hidden.map(|e| e.name().to_string()),
+            misspecified: None,
             start,
             truth: truth_model.spec.clone(),
             truth_params,
@@ -591,14 +605,32 @@ pub fn run_case(
             let last = d.steps.last().expect("a step");
             let consistent = last.fit.p_consistent() >= opts.diagnose.alpha;
             let (detected, false_effect) = match &case.hidden {
+                // An isotropic truth without backscatter, retroreflection or decay: only
+                // a second specular lobe (a reshaped highlight) is not a false effect.
+                None if case.misspecified.is_some() => (
+                    false,
+                    named.iter().any(|n| n != Effect::SpecularLobe.name()),
+                ),
                 None => (false, !named.is_empty()),
                 Some(h) => (
                     named.contains(h) && consistent,
                     named.first().is_some_and(|n| n != h) || named.iter().any(|n| n != h),
                 ),
             };
+            let anisotropy_refused = d
+                .steps
+                .iter()
+                .flat_map(|s| &s.candidates)
+                .filter(|c| {
+                    c.confounded()
+                        && c.identifiable
+                        && c.delta_bic_scaled < 0.0
+                        && c.p_nominal.is_some_and(|p| p < c.level)
+                })
+                .count();
             Outcome {
                 named,
+                anisotropy_refused,
                 final_model: d.final_model.clone(),
                 chi2_red_start: first,
                 chi2_red_final: last.chi2_red,
@@ -633,6 +665,7 @@ impl Outcome {
             consistent: false,
             detected: false,
             false_effect: false,
+            anisotropy_refused: 0,
             seconds: 0.0,
             error: Some(format!("{error:#}")),
             log: vec![],
@@ -647,22 +680,38 @@ pub fn run_battery(
     backend: &dyn Backend,
     progress: &mut dyn FnMut(&Outcome),
 ) -> Vec<Outcome> {
-    let mut plan: Vec<Option<Effect>> = Vec::new();
-    for &e in &opts.effects {
-        plan.extend(std::iter::repeat_n(Some(e), opts.cases));
+    /// What a case of the plan draws.
+    #[derive(Clone, Copy)]
+    enum Draw {
+        Hidden(Option<Effect>),
+        Misspecified(usize),
     }
-    plan.extend(std::iter::repeat_n(None, opts.nulls));
+    let mut plan: Vec<Draw> = Vec::new();
+    for &e in &opts.effects {
+        plan.extend(std::iter::repeat_n(Draw::Hidden(Some(e)), opts.cases));
+    }
+    plan.extend(std::iter::repeat_n(Draw::Hidden(None), opts.nulls));
+    plan.extend((0..opts.misspecified).map(Draw::Misspecified));
     let mut out = Vec::with_capacity(plan.len());
-    for (id, hidden) in plan.into_iter().enumerate() {
+    for (id, draw) in plan.into_iter().enumerate() {
         if opts.only.is_some_and(|o| o != id) {
             continue;
         }
-        let outcome = match generate(hidden, id, opts) {
+        let drawn = match draw {
+            Draw::Hidden(hidden) => generate(hidden, id, opts),
+            Draw::Misspecified(k) => generate_misspecified(k, id, opts),
+        };
+        let outcome = match drawn {
             Ok((case, data)) => run_case(case, &data, backend, opts),
             Err(e) => {
+                let (hidden, misspecified) = match draw {
+                    Draw::Hidden(h) => (h.map(|e| e.name().to_string()), None),
+                    Draw::Misspecified(k) => (None, Some(family_of(k).0.to_string())),
+                };
                 let case = Case {
                     id,
-                    hidden: hidden.map(|e| e.name().to_string()),
+                    hidden,
+                    misspecified,
                     start: String::new(),
                     truth: String::new(),
                     truth_params: vec![],
@@ -680,6 +729,75 @@ pub fn run_battery(
         out.push(outcome);
     }
     out
+}
+
+/// The `k`-th misspecified case's family, and whether it is measured at several
+/// incidence azimuths: the families in turn at one azimuth, then in turn at several.
+fn family_of(k: usize) -> (&'static str, bool) {
+    let n = super::misspecified::FAMILIES.len();
+    (super::misspecified::FAMILIES[k % n], (k / n) % 2 == 1)
+}
+
+/// The start model of the misspecified cases: the catalogue's GGX highlight over a
+/// Lambertian body, the model the truths depart from.
+pub const MISSPECIFIED_START: &str = "fa(lambert)";
+
+/// Draw the `k`-th misspecified null case ([`super::misspecified`]): an isotropic truth
+/// of the family [`family_of`] gives, one or three channels, about a log-uniform number of
+/// samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
+pub fn generate_misspecified(
+    k: usize,
+    id: usize,
+    opts: &BatteryOptions,
+) -> Result<(Case, Dataset)> {
+    use super::misspecified::{measure, Truth};
+    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (family, several) = family_of(k);
+    let channels = if rng.random::<f64>() < 0.5 { 3 } else { 1 };
+    let truth = Truth::draw(family, channels, &mut rng);
+    let first: f64 = rng.random_range(0.0..180.0);
+    let azimuths: Vec<f64> = if several {
+        let n = rng.random_range(2..=3);
+        (0..n)
+            .map(|j| first + 180.0 * j as f64 / n as f64)
+            .collect()
+    } else {
+        vec![first]
+    };
+    let (lo, hi) = (
+        opts.samples.0.max(20) as f64,
+        opts.samples.1.clamp(20, 4000) as f64,
+    );
+    let count = log_uniform(lo, hi.max(lo), &mut rng) as usize;
+    let noise = (rng.random_range(0.01..0.05), rng.random_range(1e-4..1e-3));
+    let mut data = measure(&truth, &azimuths, count, noise, &mut rng)?;
+    data.material = format!("battery case {id}");
+    let geometry = format!(
+        "hemisphere at {} incidence azimuth{} ({})",
+        azimuths.len(),
+        if azimuths.len() > 1 { "s" } else { "" },
+        azimuths
+            .iter()
+            .map(|a| format!("{a:.0}°"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let case = Case {
+        id,
+        hidden: None,
+        misspecified: Some(family.to_string()),
+        start: MISSPECIFIED_START.to_string(),
+        truth: truth.describe(),
+        truth_params: vec![],
+        geometry,
+        samples: data.len(),
+        channels,
+        noise_rel: noise.0,
+        signal: 0.0,
+        seed,
+    };
+    Ok((case, data))
 }
 
 /// The SNR bins of the rates table: [lo, hi).
@@ -743,15 +861,18 @@ pub fn rates_table(outcomes: &[Outcome]) -> String {
     }
     let nulls: Vec<&Outcome> = outcomes
         .iter()
-        .filter(|o| o.case.hidden.is_none() && o.error.is_none())
+        .filter(|o| o.case.hidden.is_none() && o.case.misspecified.is_none() && o.error.is_none())
         .collect();
     s += &format!(
         "| none (null cases) |{} – | {} |\n",
         " |".repeat(SNR_BINS.len()),
         rate(nulls.iter().filter(|o| o.false_effect).count(), nulls.len())
     );
-    let done: Vec<&Outcome> = outcomes.iter().filter(|o| o.error.is_none()).collect();
-    let failed = outcomes.len() - done.len();
+    let done: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.error.is_none() && o.case.misspecified.is_none())
+        .collect();
+    let failed = outcomes.iter().filter(|o| o.error.is_some()).count();
     s += &format!(
         "\nFalse effects over every case: {}.{}\n",
         rate(done.iter().filter(|o| o.false_effect).count(), done.len()),
@@ -760,6 +881,82 @@ pub fn rates_table(outcomes: &[Outcome]) -> String {
         } else {
             String::new()
         }
+    );
+    s += &misspecified_table(outcomes);
+    s
+}
+
+/// The misspecified null cases as a markdown table: per family and geometry (one
+/// incidence azimuth or several), how many cases named each effect, and the false
+/// effects (any effect but a second specular lobe); empty without such cases.
+pub fn misspecified_table(outcomes: &[Outcome]) -> String {
+    let cases: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.case.misspecified.is_some() && o.error.is_none())
+        .collect();
+    if cases.is_empty() {
+        return String::new();
+    }
+    let mut s = format!(
+        "\nMisspecified null cases (isotropic truths outside the catalogue, diagnosed from `{MISSPECIFIED_START}`):\n\n| truth | incidence azimuths | cases | anisotropy named | anisotropy refused (cases) | retro_lobe named | other effects named | false effects |\n|---|---|---|---|---|---|---|---|\n"
+    );
+    let several = |o: &Outcome| !o.case.geometry.starts_with("hemisphere at 1 ");
+    for family in super::misspecified::FAMILIES {
+        for multi in [false, true] {
+            let group: Vec<&&Outcome> = cases
+                .iter()
+                .filter(|o| o.case.misspecified.as_deref() == Some(family) && several(o) == multi)
+                .collect();
+            if group.is_empty() {
+                continue;
+            }
+            let named = |e: Effect| {
+                group
+                    .iter()
+                    .filter(|o| o.named.iter().any(|n| n == e.name()))
+                    .count()
+            };
+            let mut others: Vec<(String, usize)> = Vec::new();
+            for o in &group {
+                for n in &o.named {
+                    if n == Effect::Anisotropy.name() || n == Effect::RetroLobe.name() {
+                        continue;
+                    }
+                    match others.iter_mut().find(|(m, _)| m == n) {
+                        Some((_, c)) => *c += 1,
+                        None => others.push((n.clone(), 1)),
+                    }
+                }
+            }
+            let others = if others.is_empty() {
+                "–".to_string()
+            } else {
+                others
+                    .iter()
+                    .map(|(n, c)| format!("`{n}` {c}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            s += &format!(
+                "| `{family}` | {} | {} | {} | {} | {} | {others} | {} |\n",
+                if multi { "several" } else { "one" },
+                group.len(),
+                named(Effect::Anisotropy),
+                group.iter().filter(|o| o.anisotropy_refused > 0).count(),
+                named(Effect::RetroLobe),
+                rate(group.iter().filter(|o| o.false_effect).count(), group.len())
+            );
+        }
+    }
+    let anis = cases
+        .iter()
+        .filter(|o| o.named.iter().any(|n| n == Effect::Anisotropy.name()))
+        .count();
+    s += &format!(
+        "\nAnisotropy named on {} of {} isotropic truths; false effects on {}. Anisotropy refused: cases where a significant, identifiable `+aniso` candidate was refused because its surface-fixed frame did no better than an isotropic lobe of the same shape (at one incidence azimuth: did not break the mirror symmetry about the plane of incidence).\n",
+        anis,
+        cases.len(),
+        rate(cases.iter().filter(|o| o.false_effect).count(), cases.len())
     );
     s
 }

@@ -54,7 +54,7 @@ impl Diagnosis {
                             "removal_in_flagged_regions": c.removal_flagged.map(num),
                             "removal_outside": c.removal_outside.map(num),
                             "removal_by_region": c.removal.iter().map(|(w, r)| json!({"region": w, "removed": num(*r)})).collect::<Vec<_>>(),
-                            "mirror_symmetry": c.mirror.as_ref().map(|m| m.to_json()),
+                            "frame_test": c.frame_test.as_ref().map(|m| m.to_json()),
                             "adoptable": c.adoptable(),
                             "verdict": c.verdict,
                         })).collect::<Vec<_>>(),

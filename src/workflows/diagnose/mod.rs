@@ -44,6 +44,7 @@ mod explore;
 mod extensions;
 mod fit;
 mod json;
+pub mod misspecified;
 mod path;
 mod regions;
 mod report;
@@ -60,7 +61,7 @@ pub use path::diagnose;
 pub use regions::{describe_regions, region_stats, RegionStat};
 pub use report::{residual_panel, staircase_panel, write_report};
 pub use score::{irregular_null, PTest, Scored};
-pub use symmetry::MirrorTest;
+pub use symmetry::FrameTest;
 
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;

@@ -4,7 +4,7 @@
 use super::fit::{calibrate_round, fit_all};
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
-use super::symmetry::mirror_test;
+use super::symmetry::frame_test;
 use super::{
     describe_regions, extensions, fit_model, Candidate, DiagnoseOptions, Diagnosis, Effect,
     FitResult, RoundSeconds, Scored, Step,
@@ -200,12 +200,8 @@ fn adopt_step(
     if !best.identifiable_note.is_empty() {
         notes += &format!(" Determined: {}.", best.identifiable_note);
     }
-    if let Some(m) = best.mirror.as_ref().filter(|m| m.broken()) {
-        notes += &format!(
-            " Measured at one incidence azimuth (φi = {:.0}°), the frame breaks the mirror symmetry about the plane of incidence: {}.",
-            m.plane,
-            m.describe()
-        );
+    if let Some(t) = best.frame_test.as_ref().filter(|t| t.shows_anisotropy()) {
+        notes += &format!(" {}", t.shown_words());
     }
     let siblings: Vec<String> = scored
         .iter()
@@ -385,7 +381,7 @@ fn score_round(
         .zip(fits)
         .map(|(c, f)| score(data, current, &flagged, c, f, m, opts))
         .collect();
-    test_mirror_symmetry(&mut scored, data, backend, opts, log, cache);
+    test_frames(&mut scored, data, backend, opts, log, cache);
     let scored_at = std::time::Instant::now();
     defer_undeciding(&mut scored, data.len(), opts, log);
     calibrate_round(&mut scored, data, backend, opts, current, log);
@@ -397,12 +393,11 @@ fn score_round(
     (scored, seconds)
 }
 
-/// On data measured at one incidence azimuth, test whether each anisotropic candidate
-/// that could be adopted breaks the mirror symmetry about the plane of incidence
-/// ([`mirror_test`]); one that does not is refused, in words. Elsewhere the geometry
-/// shows anisotropy directly and nothing is done. The fits with the frame held on the
-/// plane are cached like the candidates'.
-fn test_mirror_symmetry(
+/// Test whether each anisotropic candidate that could be adopted does better than an
+/// isotropic lobe of the same shape ([`frame_test`]; at one incidence azimuth, whether its
+/// frame breaks the mirror symmetry about the plane of incidence); one that does not is
+/// refused, in words. The isotropic twins' fits are cached like the candidates'.
+fn test_frames(
     scored: &mut [Scored],
     data: &Dataset,
     backend: &dyn Backend,
@@ -419,35 +414,37 @@ fn test_mirror_symmetry(
     if !scored.iter().any(could_adopt) {
         return;
     }
-    let Some(plane) = data.azimuth_coverage().one_azimuth() else {
-        return;
-    };
+    let turned = data.turned_to_incidence_planes();
     for s in scored.iter_mut().filter(|s| could_adopt(s)) {
         let fit = s.fit.as_ref().expect("could_adopt checks the fit");
         let key = format!(
-            "{} [frame held on the plane of incidence]",
+            "{} [frame turned with the plane of incidence]",
             s.candidate.spec
         );
         let cached = cache.get(&key).and_then(|r| r.as_ref().ok()).cloned();
-        match mirror_test(fit, data, backend, opts, plane, s.level, cached.as_ref()) {
-            Ok(Some((test, aligned))) => {
+        match frame_test(fit, data, &turned, backend, opts, s.level, cached.as_ref()) {
+            Ok(Some((test, twin))) => {
                 log(format!(
-                    "    mirror symmetry of {} about the plane of incidence φi = {plane:.0}°: {} ({})",
+                    "    frame test of {}: {} ({})",
                     s.candidate.spec,
-                    if test.broken() { "broken" } else { "not broken" },
+                    if test.shows_anisotropy() {
+                        "anisotropic"
+                    } else {
+                        "not told from an isotropic lobe"
+                    },
                     test.describe()
                 ));
-                cache.insert(key, Ok(aligned));
-                s.set_mirror(test);
+                cache.insert(key, Ok(twin));
+                s.set_frame_test(test);
             }
             Ok(None) => {}
             Err(e) => {
                 log(format!(
-                    "    mirror symmetry of {}: the fit with the frame held failed ({e:#}); not adopted",
+                    "    frame test of {}: the isotropic twin's fit failed ({e:#}); not adopted",
                     s.candidate.spec
                 ));
                 s.refuse(format!(
-                    "its frame could not be tested against the plane of incidence ({e:#})"
+                    "its frame could not be tested against an isotropic lobe ({e:#})"
                 ));
             }
         }

@@ -54,7 +54,7 @@ fn scored(spec: &str, effect: Effect, pending: bool, dbic: f64, removal: f64, ch
         removal: vec![],
         removal_flagged: Some(removal),
         removal_outside: None,
-        mirror: None,
+        frame_test: None,
         verdict: String::new(),
     }
 }

@@ -3,7 +3,7 @@
 //! new parameters, and the consistency test of a fit.
 
 use super::regions::RegionStat;
-use super::symmetry::MirrorTest;
+use super::symmetry::FrameTest;
 use super::{Candidate, DiagnoseOptions, FitResult};
 use crate::bsdf::{Model, ParamDecl};
 use crate::data::Dataset;
@@ -111,25 +111,26 @@ pub struct Scored {
     /// region is flagged or the fit failed.
     pub removal_flagged: Option<f64>,
     pub removal_outside: Option<f64>,
-    /// For an anisotropic candidate on data measured at one incidence azimuth: whether its
-    /// frame breaks the mirror symmetry about the plane of incidence ([`MirrorTest`]).
-    pub mirror: Option<MirrorTest>,
+    /// For an anisotropic candidate: whether its surface-fixed frame does better than an
+    /// isotropic lobe of the same shape ([`FrameTest`]).
+    pub frame_test: Option<FrameTest>,
     pub verdict: String,
 }
 
 impl Scored {
-    /// Significant, its new parameters determined by the data, and (an anisotropic lobe
-    /// at one incidence azimuth) its frame off the plane of incidence. A new parameter on
-    /// a bound of its range does not stop it: the evidence says what the bound means.
+    /// Significant, its new parameters determined by the data, and (an anisotropic lobe)
+    /// shown anisotropic by its frame test. A new parameter on a bound of its range does
+    /// not stop it: the evidence says what the bound means.
     pub fn adoptable(&self) -> bool {
         self.significant && self.identifiable && !self.confounded()
     }
 
-    /// An anisotropic candidate whose gain, at one incidence azimuth, this geometry cannot
-    /// tell from an isotropic lobe of another shape: its frame does not break the mirror
-    /// symmetry about the plane of incidence.
+    /// An anisotropic candidate whose gain the data cannot tell from an isotropic lobe
+    /// of another shape ([`FrameTest`]).
     pub fn confounded(&self) -> bool {
-        self.mirror.as_ref().is_some_and(|m| !m.broken())
+        self.frame_test
+            .as_ref()
+            .is_some_and(|t| !t.shows_anisotropy())
     }
 
     /// Not identifiable after all, for `why`; judge again.
@@ -139,9 +140,9 @@ impl Scored {
         self.judge();
     }
 
-    /// Record the mirror-symmetry test and judge again.
-    pub(super) fn set_mirror(&mut self, test: MirrorTest) {
-        self.mirror = Some(test);
+    /// Record the frame test and judge again.
+    pub(super) fn set_frame_test(&mut self, test: FrameTest) {
+        self.frame_test = Some(test);
         self.judge();
     }
 }
@@ -463,7 +464,7 @@ pub(super) fn score(
                 removal: vec![],
                 removal_flagged: None,
                 removal_outside: None,
-                mirror: None,
+                frame_test: None,
                 verdict: format!("fit failed: {e:#}"),
             }
         }
@@ -513,7 +514,7 @@ pub(super) fn score(
         removal,
         removal_flagged,
         removal_outside,
-        mirror: None,
+        frame_test: None,
         verdict: String::new(),
     };
     scored.judge();
@@ -563,7 +564,7 @@ impl Scored {
         let level = self.level;
         self.significant = match self.p {
             Some(p) => p < level && self.delta_bic_scaled < 0.0,
-            None => self.delta_bic_scaled < -10.0,
+            None => self.delta_bic_scaled < -SWAP_BIC,
         };
         let test = match &self.p_test {
             PTest::None | PTest::F => String::new(),
@@ -592,7 +593,7 @@ impl Scored {
                 "significant but not identifiable: {}",
                 self.identifiable_why
             )
-        } else if let Some(m) = self.mirror.as_ref().filter(|_| self.confounded()) {
+        } else if let Some(m) = self.frame_test.as_ref().filter(|_| self.confounded()) {
             format!("significant, but {}", m.confounded_words())
         } else if !self.on_bound.is_empty() {
             format!(
@@ -608,6 +609,10 @@ impl Scored {
         };
     }
 }
+
+/// A swap that is not nested must lower the scaled BIC by more than this: Kass &
+/// Raftery's "very strong" evidence.
+pub const SWAP_BIC: f64 = 10.0;
 
 /// A nominal p-value this far below the level (times the level) settles the verdict
 /// without the bootstrap ([`Scored::needs_calibration`]).
