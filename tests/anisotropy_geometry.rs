@@ -271,52 +271,37 @@ fn anisotropy_is_named_where_the_geometry_shows_it() {
     assert!(t.shows_anisotropy() && t.one_azimuth.is_none(), "{t:?}");
 }
 
-/// `fit` of an anisotropic model on one-azimuth data says what the frame means there.
+/// `fit` of an anisotropic model says what the frame means at one incidence azimuth: on
+/// the plane of incidence, a lobe shape it cannot tell from anisotropy; turned off it, a
+/// break of the mirror symmetry. At two incidence planes it says neither.
 #[test]
-fn fit_warns_about_a_frame_on_the_plane_of_incidence() {
-    let aligned = |wi, wo| aniso_ggx(wi, wo, 0.08, 0.25, 0.0);
-    let data = measure(&[0.0], &aligned, 31);
-    let model = bsdfit::bsdf::Model::for_data("fa(lambert)+aniso", &data).unwrap();
-    let opts = bsdfit::inference::fit::FitOptions {
-        restarts: 8,
-        ..Default::default()
+fn fit_warns_what_a_frame_means_at_one_azimuth() {
+    let warnings = |data: &Dataset| -> String {
+        let model = bsdfit::bsdf::Model::for_data("fa(lambert)+aniso", data).unwrap();
+        let opts = bsdfit::inference::fit::FitOptions {
+            restarts: 8,
+            ..Default::default()
+        };
+        let loss = bsdfit::engine::loss::Loss::new(
+            bsdfit::engine::loss::Metric::Chi2,
+            bsdfit::engine::loss::Weights::Uniform,
+        );
+        let backend = SimdBackend::new();
+        let o =
+            bsdfit::inference::fit::fit_outcome(&model, data, loss, &backend, &opts, &mut |_| {})
+                .unwrap();
+        o.cov.warnings.join("\n")
     };
-    let loss = bsdfit::engine::loss::Loss::new(
-        bsdfit::engine::loss::Metric::Chi2,
-        bsdfit::engine::loss::Weights::Uniform,
-    );
-    let o = bsdfit::inference::fit::fit_outcome(
-        &model,
-        &data,
-        loss,
-        &SimdBackend::new(),
-        &opts,
-        &mut |_| {},
-    )
-    .unwrap();
-    let w = o.cov.warnings.join("\n");
+    let aligned = |wi, wo| aniso_ggx(wi, wo, 0.08, 0.25, 0.0);
+    let w = warnings(&measure(&[0.0], &aligned, 31));
     assert!(
         w.contains("lies on the plane of incidence or across it")
             && w.contains("cannot tell from anisotropy"),
         "{w}"
     );
-    // Two incidence planes: no such warning.
-    let data = measure(&[0.0, 90.0], &aligned, 32);
-    let o = bsdfit::inference::fit::fit_outcome(
-        &model,
-        &data,
-        loss,
-        &SimdBackend::new(),
-        &opts,
-        &mut |_| {},
-    )
-    .unwrap();
-    assert!(
-        !o.cov
-            .warnings
-            .iter()
-            .any(|w| w.contains("incidence azimuth")),
-        "{:?}",
-        o.cov.warnings
-    );
+    let turned = |wi, wo| aniso_ggx(wi, wo, 0.08, 0.25, 35.0);
+    let w = warnings(&measure(&[0.0], &turned, 33));
+    assert!(w.contains("breaking the mirror symmetry"), "{w}");
+    let w = warnings(&measure(&[0.0, 90.0], &aligned, 32));
+    assert!(!w.contains("incidence azimuth"), "{w}");
 }
