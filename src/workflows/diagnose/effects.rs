@@ -9,7 +9,7 @@ use crate::bsdf::{registry, Entry};
 use crate::data::Kind;
 
 /// One row of the catalogue.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EffectEntry {
     pub effect: Effect,
     /// The residual signature docs/diagnose.md gives for the effect.
@@ -17,6 +17,10 @@ pub struct EffectEntry {
     /// For an effect that adds a lobe: the direction its residual signature is centred
     /// on, whose flagged regions seed the new lobe's width (`diagnose`'s evidence starts).
     pub lobe_around: Option<Around>,
+    /// For an effect whose signature is a sharp lobe: the widest half width at half
+    /// maximum (degrees, about 1.3 α rad for a GGX lobe of roughness α) at which a fitted
+    /// lobe still is that effect. A wider one reshapes the whole hemisphere instead.
+    pub max_half_width_deg: Option<f64>,
 }
 
 /// The signatures, in the order of [`Effect::ALL`].
@@ -25,51 +29,65 @@ pub const EFFECTS: &[EffectEntry] = &[
         effect: Effect::Backscatter,
         signature: "excess toward the retro direction, growing with θi",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::SpecularLobe,
         signature: "excess around the mirror direction",
         lobe_around: Some(Around::Mirror),
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::LongTail,
         signature: "excess in the tails far from the peak",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::Scale,
         signature: "one-signed residual everywhere",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::Absorption,
         signature: "deficit growing with θt",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::DiffuseFloor,
         signature: "a flat excess far from every lobe",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::GrazingDecay,
         signature: "model too bright at large θo",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::RetroLobe,
         signature: "a sharp excess within a few degrees of ωo = ωi",
         lobe_around: Some(Around::Retro),
+        // Retroreflective sheets and tapes have lobes a few degrees wide; the battery's
+        // retro truths reach α_r = 0.5 (37°). Fitted to isotropic truths without any
+        // backscatter, `+retro` ends at α_r ≈ 0.9–1 (70°): a broad glow that reshapes
+        // the body, not a retro lobe.
+        max_half_width_deg: Some(40.0),
     },
     EffectEntry {
         effect: Effect::RetroFalloff,
         signature: "the retro peak too bright at large θi and too dark at small θi",
         lobe_around: None,
+        max_half_width_deg: None,
     },
     EffectEntry {
         effect: Effect::Anisotropy,
         signature: "different widths on the two φ axes",
         lobe_around: None,
+        max_half_width_deg: None,
     },
 ];
 

@@ -55,6 +55,7 @@ impl Diagnosis {
                             "removal_outside": c.removal_outside.map(num),
                             "removal_by_region": c.removal.iter().map(|(w, r)| json!({"region": w, "removed": num(*r)})).collect::<Vec<_>>(),
                             "frame_test": c.frame_test.as_ref().map(|m| m.to_json()),
+                            "too_wide": c.too_wide,
                             "adoptable": c.adoptable(),
                             "verdict": c.verdict,
                         })).collect::<Vec<_>>(),

@@ -55,6 +55,7 @@ fn scored(spec: &str, effect: Effect, pending: bool, dbic: f64, removal: f64, ch
         removal_flagged: Some(removal),
         removal_outside: None,
         frame_test: None,
+        too_wide: None,
         verdict: String::new(),
     }
 }

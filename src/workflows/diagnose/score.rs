@@ -114,6 +114,9 @@ pub struct Scored {
     /// For an anisotropic candidate: whether its surface-fixed frame does better than an
     /// isotropic lobe of the same shape ([`FrameTest`]).
     pub frame_test: Option<FrameTest>,
+    /// Why a lobe the candidate adds is too wide to be its effect (the effect's
+    /// [`super::effects::EffectEntry::max_half_width_deg`]); None when it is not.
+    pub too_wide: Option<String>,
     pub verdict: String,
 }
 
@@ -122,7 +125,7 @@ impl Scored {
     /// shown anisotropic by its frame test. A new parameter on a bound of its range does
     /// not stop it: the evidence says what the bound means.
     pub fn adoptable(&self) -> bool {
-        self.significant && self.identifiable && !self.confounded()
+        self.significant && self.identifiable && !self.confounded() && self.too_wide.is_none()
     }
 
     /// An anisotropic candidate whose gain the data cannot tell from an isotropic lobe
@@ -219,6 +222,28 @@ fn new_params_on_bound(old: &Model, fit: &FitResult) -> Vec<String> {
             ))
         })
         .collect()
+}
+
+/// Why a new lobe of `fit` is too wide to be `effect` (whose signature is a sharp lobe):
+/// its half width at half maximum, about 1.3 α rad for a GGX lobe of roughness α, beyond
+/// the effect's [`super::effects::EffectEntry::max_half_width_deg`].
+fn too_wide(old: &Model, fit: &FitResult, effect: super::Effect) -> Option<String> {
+    let max = effect.entry().max_half_width_deg?;
+    let names = fit.model.flat_names();
+    let decls = fit.model.flat_decls();
+    new_param_indices(old, &fit.model)
+        .into_iter()
+        .filter(|&j| decls[j].lobe == crate::bsdf::LobePart::Width)
+        .map(|j| (j, (1.3 * fit.flat[j]).to_degrees()))
+        .find(|&(_, hwhm)| hwhm > max)
+        .map(|(j, hwhm)| {
+            format!(
+                "its lobe is {hwhm:.0}° wide ({} = {:.3}; half width at half maximum, the effect's signature allows {max:.0}°): no longer a sharp excess ({}) but a broad glow that reshapes the whole hemisphere, an angular profile of the body that the catalogue lacks",
+                names[j],
+                fit.flat[j],
+                effect.signature()
+            )
+        })
 }
 
 /// How much of the current misfit a candidate removes inside each flagged region, in them
@@ -465,6 +490,7 @@ pub(super) fn score(
                 removal_flagged: None,
                 removal_outside: None,
                 frame_test: None,
+                too_wide: None,
                 verdict: format!("fit failed: {e:#}"),
             }
         }
@@ -493,6 +519,7 @@ pub(super) fn score(
     let (identifiable, why, note) = new_params_determined(&current.model, &fit, data, opts);
     let on_bound = new_params_on_bound(&current.model, &fit);
     let (removal, removal_flagged, removal_outside) = removal(flagged, current, &fit);
+    let too_wide = too_wide(&current.model, &fit, candidate.effect);
     let mut scored = Scored {
         candidate,
         fit: Some(fit),
@@ -515,6 +542,7 @@ pub(super) fn score(
         removal_flagged,
         removal_outside,
         frame_test: None,
+        too_wide,
         verdict: String::new(),
     };
     scored.judge();
@@ -593,6 +621,8 @@ impl Scored {
                 "significant but not identifiable: {}",
                 self.identifiable_why
             )
+        } else if let Some(w) = &self.too_wide {
+            format!("significant, but {w}")
         } else if let Some(m) = self.frame_test.as_ref().filter(|_| self.confounded()) {
             format!("significant, but {}", m.confounded_words())
         } else if !self.on_bound.is_empty() {

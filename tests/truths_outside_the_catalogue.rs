@@ -1,8 +1,9 @@
-//! Anisotropy only where the data can show it (docs/diagnose.md, "Anisotropy and the
-//! geometry"). At one incidence azimuth an anisotropic lobe whose frame lies on the plane
+//! What `diagnose` names on truths outside the catalogue. Anisotropy only where the data
+//! can show it (docs/diagnose.md, "Anisotropy and the geometry"): at one incidence azimuth an anisotropic lobe whose frame lies on the plane
 //! of incidence is mirror-symmetric about it like an isotropic lobe, so it can soak up any
 //! lobe shape the catalogue lacks; `diagnose` then names anisotropy only when the fitted
-//! frame breaks that mirror symmetry significantly.
+//! frame breaks that mirror symmetry significantly. And no retroreflective lobe on a truth
+//! without one: a back-vector lobe fitted there ends broad, reshaping the body.
 //!
 //! Every truth here is written in this file from textbook formulas, not through the
 //! library's models: isotropic Cook–Torrance lobes with NDFs outside the catalogue
@@ -304,4 +305,43 @@ fn fit_warns_what_a_frame_means_at_one_azimuth() {
     assert!(w.contains("breaking the mirror symmetry"), "{w}");
     let w = warnings(&measure(&[0.0, 90.0], &aligned, 32));
     assert!(!w.contains("incidence azimuth"), "{w}");
+}
+
+/// Isotropic truths without any backscatter: `+retro` fits them better (a broad glow that
+/// reshapes the Lambertian body where the truth's Fresnel and masking differ from the
+/// catalogue's), but a lobe that wide is not a retroreflective one, and no retro lobe is
+/// named.
+#[test]
+fn no_retro_lobe_is_named_on_truths_without_backscatter() {
+    let truths: [(&str, Ndf); 2] = [
+        ("beckmann", |c| beckmann(c, 0.2)),
+        ("gtr γ=1.5", |c| gtr(c, 0.15, 1.5)),
+    ];
+    let mut too_wide = 0;
+    for (k, (name, d)) in truths.into_iter().enumerate() {
+        let lobe = Isotropic::new(d);
+        let data = measure(&[0.0], &|wi, wo| lobe.brdf(wi, wo), 41 + k as u64);
+        let diag = one_round(name, &data);
+        assert!(
+            !diag.effects.contains(&Effect::RetroLobe),
+            "{name}: retro lobe named: {:#}",
+            diag.to_json()
+        );
+        for c in diag
+            .steps
+            .iter()
+            .flat_map(|s| &s.candidates)
+            .filter(|c| c.candidate.effect == Effect::RetroLobe && c.too_wide.is_some())
+        {
+            assert!(!c.adoptable());
+            let f = c.fit.as_ref().unwrap();
+            let names = f.model.flat_names();
+            let j = names.iter().position(|n| n == "alpha_r").unwrap();
+            // Computed here: half width at half maximum of a GGX lobe ≈ 1.3 α rad.
+            assert!((1.3 * f.flat[j]).to_degrees() > 40.0, "{}", c.verdict);
+            assert!(c.verdict.contains("wide"), "{}", c.verdict);
+            too_wide += 1;
+        }
+    }
+    assert!(too_wide >= 1, "no retro candidate was refused as too wide");
 }
