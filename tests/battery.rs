@@ -160,7 +160,8 @@ fn misspecified_isotropic_truths_never_get_anisotropy() {
         assert_eq!(o.false_effect, false_here, "{:?}", o.named);
     }
     assert!(
-        table.contains("Misspecified null cases") && table.contains("| `v-cavity` | one | 1 |")
+        table.contains("Misspecified null cases")
+            && table.contains("| `v-cavity-shadowing` | one | 1 |")
     );
     assert!(table.contains("| none (null cases) |") && table.contains("| – | – |\n"));
 }

@@ -826,7 +826,7 @@ def test_battery_is_the_command_lines_battery(tmp_path):
             o.pop("seconds")
     assert result.outcomes == expected
     assert [o["case"]["hidden"] for o in expected] == ["scale", None, None]
-    assert [o["case"].get("misspecified") for o in expected] == [None, None, "beckmann"]
+    assert [o["case"].get("misspecified") for o in expected] == [None, None, "beckmann-ndf"]
     assert "Misspecified null cases" in result.table
     assert result.table.strip() in cli.stdout
     assert [(e.stage, e.done, e.total) for e in events] == [

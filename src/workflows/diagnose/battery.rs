@@ -20,6 +20,7 @@
 //! stated uncertainties).
 
 use super::extensions::{embed, extensions};
+use super::misspecified;
 use super::score::new_param_indices;
 use super::{diagnose, DiagnoseOptions, Effect};
 use crate::bsdf::{every_spec, LobePart, Model, ParamDecl, Scale};
@@ -356,7 +357,7 @@ struct Measurement {
 }
 
 /// A draw from [lo, hi], log-uniform: sample counts and signal sizes span decades.
-fn log_uniform(lo: f64, hi: f64, rng: &mut ChaCha8Rng) -> f64 {
+pub(super) fn log_uniform(lo: f64, hi: f64, rng: &mut ChaCha8Rng) -> f64 {
     (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
 }
 
@@ -699,14 +700,14 @@ pub fn run_battery(
         }
         let drawn = match draw {
             Draw::Hidden(hidden) => generate(hidden, id, opts),
-            Draw::Misspecified(k) => generate_misspecified(k, id, opts),
+            Draw::Misspecified(k) => misspecified::generate(k, id, opts),
         };
         let outcome = match drawn {
             Ok((case, data)) => run_case(case, &data, backend, opts),
             Err(e) => {
                 let (hidden, misspecified) = match draw {
                     Draw::Hidden(h) => (h.map(|e| e.name().to_string()), None),
-                    Draw::Misspecified(k) => (None, Some(family_of(k).0.to_string())),
+                    Draw::Misspecified(k) => (None, Some(misspecified::family_of(k).0.to_string())),
                 };
                 let case = Case {
                     id,
@@ -731,75 +732,6 @@ pub fn run_battery(
     out
 }
 
-/// The `k`-th misspecified case's family, and whether it is measured at several
-/// incidence azimuths: the families in turn at one azimuth, then in turn at several.
-fn family_of(k: usize) -> (&'static str, bool) {
-    let n = super::misspecified::FAMILIES.len();
-    (super::misspecified::FAMILIES[k % n], (k / n) % 2 == 1)
-}
-
-/// The start model of the misspecified cases: the catalogue's GGX highlight over a
-/// Lambertian body, the model the truths depart from.
-pub const MISSPECIFIED_START: &str = "fa(lambert)";
-
-/// Draw the `k`-th misspecified null case ([`super::misspecified`]): an isotropic truth
-/// of the family [`family_of`] gives, one or three channels, about a log-uniform number of
-/// samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
-pub fn generate_misspecified(
-    k: usize,
-    id: usize,
-    opts: &BatteryOptions,
-) -> Result<(Case, Dataset)> {
-    use super::misspecified::{measure, Truth};
-    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (family, several) = family_of(k);
-    let channels = if rng.random::<f64>() < 0.5 { 3 } else { 1 };
-    let truth = Truth::draw(family, channels, &mut rng);
-    let first: f64 = rng.random_range(0.0..180.0);
-    let azimuths: Vec<f64> = if several {
-        let n = rng.random_range(2..=3);
-        (0..n)
-            .map(|j| first + 180.0 * j as f64 / n as f64)
-            .collect()
-    } else {
-        vec![first]
-    };
-    let (lo, hi) = (
-        opts.samples.0.max(20) as f64,
-        opts.samples.1.clamp(20, 4000) as f64,
-    );
-    let count = log_uniform(lo, hi.max(lo), &mut rng) as usize;
-    let noise = (rng.random_range(0.01..0.05), rng.random_range(1e-4..1e-3));
-    let mut data = measure(&truth, &azimuths, count, noise, &mut rng)?;
-    data.material = format!("battery case {id}");
-    let geometry = format!(
-        "hemisphere at {} incidence azimuth{} ({})",
-        azimuths.len(),
-        if azimuths.len() > 1 { "s" } else { "" },
-        azimuths
-            .iter()
-            .map(|a| format!("{a:.0}°"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-    let case = Case {
-        id,
-        hidden: None,
-        misspecified: Some(family.to_string()),
-        start: MISSPECIFIED_START.to_string(),
-        truth: truth.describe(),
-        truth_params: vec![],
-        geometry,
-        samples: data.len(),
-        channels,
-        noise_rel: noise.0,
-        signal: 0.0,
-        seed,
-    };
-    Ok((case, data))
-}
-
 /// The SNR bins of the rates table: [lo, hi).
 pub const SNR_BINS: [(f64, f64); 5] = [
     (0.0, 1.0),
@@ -810,7 +742,7 @@ pub const SNR_BINS: [(f64, f64); 5] = [
 ];
 
 /// "k/n" with the share, or "–" for no case.
-fn rate(k: usize, n: usize) -> String {
+pub(super) fn rate(k: usize, n: usize) -> String {
     if n == 0 {
         "–".into()
     } else {
@@ -882,81 +814,6 @@ pub fn rates_table(outcomes: &[Outcome]) -> String {
             String::new()
         }
     );
-    s += &misspecified_table(outcomes);
-    s
-}
-
-/// The misspecified null cases as a markdown table: per family and geometry (one
-/// incidence azimuth or several), how many cases named each effect, and the false
-/// effects (any effect but a second specular lobe); empty without such cases.
-pub fn misspecified_table(outcomes: &[Outcome]) -> String {
-    let cases: Vec<&Outcome> = outcomes
-        .iter()
-        .filter(|o| o.case.misspecified.is_some() && o.error.is_none())
-        .collect();
-    if cases.is_empty() {
-        return String::new();
-    }
-    let mut s = format!(
-        "\nMisspecified null cases (isotropic truths outside the catalogue, diagnosed from `{MISSPECIFIED_START}`):\n\n| truth | incidence azimuths | cases | anisotropy named | anisotropy refused (cases) | retro_lobe named | other effects named | false effects |\n|---|---|---|---|---|---|---|---|\n"
-    );
-    let several = |o: &Outcome| !o.case.geometry.starts_with("hemisphere at 1 ");
-    for family in super::misspecified::FAMILIES {
-        for multi in [false, true] {
-            let group: Vec<&&Outcome> = cases
-                .iter()
-                .filter(|o| o.case.misspecified.as_deref() == Some(family) && several(o) == multi)
-                .collect();
-            if group.is_empty() {
-                continue;
-            }
-            let named = |e: Effect| {
-                group
-                    .iter()
-                    .filter(|o| o.named.iter().any(|n| n == e.name()))
-                    .count()
-            };
-            let mut others: Vec<(String, usize)> = Vec::new();
-            for o in &group {
-                for n in &o.named {
-                    if n == Effect::Anisotropy.name() || n == Effect::RetroLobe.name() {
-                        continue;
-                    }
-                    match others.iter_mut().find(|(m, _)| m == n) {
-                        Some((_, c)) => *c += 1,
-                        None => others.push((n.clone(), 1)),
-                    }
-                }
-            }
-            let others = if others.is_empty() {
-                "–".to_string()
-            } else {
-                others
-                    .iter()
-                    .map(|(n, c)| format!("`{n}` {c}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            };
-            s += &format!(
-                "| `{family}` | {} | {} | {} | {} | {} | {others} | {} |\n",
-                if multi { "several" } else { "one" },
-                group.len(),
-                named(Effect::Anisotropy),
-                group.iter().filter(|o| o.anisotropy_refused > 0).count(),
-                named(Effect::RetroLobe),
-                rate(group.iter().filter(|o| o.false_effect).count(), group.len())
-            );
-        }
-    }
-    let anis = cases
-        .iter()
-        .filter(|o| o.named.iter().any(|n| n == Effect::Anisotropy.name()))
-        .count();
-    s += &format!(
-        "\nAnisotropy named on {} of {} isotropic truths; false effects on {}. Anisotropy refused: cases where a significant, identifiable `+aniso` candidate was refused because its surface-fixed frame did no better than an isotropic lobe of the same shape (at one incidence azimuth: did not break the mirror symmetry about the plane of incidence).\n",
-        anis,
-        cases.len(),
-        rate(cases.iter().filter(|o| o.false_effect).count(), cases.len())
-    );
+    s += &misspecified::table(outcomes);
     s
 }

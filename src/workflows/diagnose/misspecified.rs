@@ -22,17 +22,26 @@
 //! no anisotropy and no grazing decay of their own: a diagnosis that names one of them on
 //! these data names a false effect.
 
+use super::battery::{log_uniform, rate, BatteryOptions, Case, Outcome};
+use super::Effect;
 use crate::data::{Dataset, Kind, RawRow, ReadOptions};
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use glam::DVec3;
 use rand::seq::IndexedRandom;
 use rand::Rng;
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use std::f64::consts::PI;
 
 /// The families, in the order the battery cycles through them.
-pub const FAMILIES: [&str; 5] = ["beckmann", "gtr", "two-scale", "v-cavity", "schlick"];
+pub const FAMILIES: [&str; 5] = [
+    "beckmann-ndf",
+    "gtr-ndf",
+    "two-scale-ndf",
+    "v-cavity-shadowing",
+    "schlick-fresnel",
+];
 
 /// The isotropic normal distributions of the truths, D(cos θm), each normalised so that
 /// ∫ D cos θm dω = 1.
@@ -125,18 +134,18 @@ impl Truth {
         let eta = rng.random_range(1.3..1.8);
         let alpha = (rng.random_range(0.05f64.ln()..0.4f64.ln())).exp();
         let (ndf, fresnel, smith) = match family {
-            "beckmann" => (Ndf::Beckmann(alpha), Fresnel::Exact(eta), true),
-            "gtr" => {
+            "beckmann-ndf" => (Ndf::Beckmann(alpha), Fresnel::Exact(eta), true),
+            "gtr-ndf" => {
                 let gamma = *[1.3, 1.5, 1.7, 2.7, 3.5].choose(rng).expect("non-empty");
                 (Ndf::Gtr { alpha, gamma }, Fresnel::Exact(eta), true)
             }
-            "two-scale" => {
+            "two-scale-ndf" => {
                 let a1 = rng.random_range(0.03..0.08);
                 let a2 = rng.random_range(0.2..0.45);
                 let w = rng.random_range(0.3..0.7);
                 (Ndf::TwoScale { a1, a2, w }, Fresnel::Exact(eta), true)
             }
-            "v-cavity" => (Ndf::Ggx(alpha), Fresnel::Exact(eta), false),
+            "v-cavity-shadowing" => (Ndf::Ggx(alpha), Fresnel::Exact(eta), false),
             _ => {
                 let f0 = rng.random_range(0.02..0.15);
                 (Ndf::Ggx(alpha), Fresnel::Schlick(f0), true)
@@ -148,7 +157,7 @@ impl Truth {
                 .iter()
                 .copied()
                 .find(|f| *f == family)
-                .unwrap_or("schlick"),
+                .unwrap_or("schlick-fresnel"),
             ndf,
             fresnel,
             lambda,
@@ -314,6 +323,161 @@ pub fn measure(
 fn direction(theta_deg: f64, phi_deg: f64) -> DVec3 {
     let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
     DVec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
+}
+
+// ---------------------------------------------------------------------------------------
+// The battery's misspecified cases
+
+/// The `k`-th misspecified case's family, and whether it is measured at several
+/// incidence azimuths: the families in turn at one azimuth, then in turn at several.
+pub(super) fn family_of(k: usize) -> (&'static str, bool) {
+    let n = FAMILIES.len();
+    (FAMILIES[k % n], (k / n) % 2 == 1)
+}
+
+/// The start model of the misspecified cases, from the effect table: the first BRDF model
+/// of the catalogue (a Lambertian body) with its first extension that adds a specular
+/// lobe (`fa(lambert)`, the catalogue's GGX highlight over it), the model the truths
+/// depart from.
+pub fn start_model(data: &Dataset) -> Result<String> {
+    let body = crate::bsdf::catalogue(Kind::Brdf)
+        .into_iter()
+        .next()
+        .ok_or_else(|| anyhow!("no BRDF model in the catalogue"))?;
+    super::extensions(&body, data)?
+        .into_iter()
+        .find(|c| c.effect == Effect::SpecularLobe)
+        .map(|c| c.spec)
+        .ok_or_else(|| anyhow!("no specular lobe extends {body}"))
+}
+
+/// Draw the `k`-th misspecified null case of a battery: an isotropic truth
+/// of the family [`family_of`] gives, one or three channels, about a log-uniform number of
+/// samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
+pub fn generate(k: usize, id: usize, opts: &BatteryOptions) -> Result<(Case, Dataset)> {
+    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (family, several) = family_of(k);
+    let channels = if rng.random::<f64>() < 0.5 { 3 } else { 1 };
+    let truth = Truth::draw(family, channels, &mut rng);
+    let first: f64 = rng.random_range(0.0..180.0);
+    let azimuths: Vec<f64> = if several {
+        let n = rng.random_range(2..=3);
+        (0..n)
+            .map(|j| first + 180.0 * j as f64 / n as f64)
+            .collect()
+    } else {
+        vec![first]
+    };
+    let (lo, hi) = (
+        opts.samples.0.max(20) as f64,
+        opts.samples.1.clamp(20, 4000) as f64,
+    );
+    let count = log_uniform(lo, hi.max(lo), &mut rng) as usize;
+    let noise = (rng.random_range(0.01..0.05), rng.random_range(1e-4..1e-3));
+    let mut data = measure(&truth, &azimuths, count, noise, &mut rng)?;
+    data.material = format!("battery case {id}");
+    let geometry = format!(
+        "hemisphere at {} incidence azimuth{} ({})",
+        azimuths.len(),
+        if azimuths.len() > 1 { "s" } else { "" },
+        azimuths
+            .iter()
+            .map(|a| format!("{a:.0}°"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let case = Case {
+        id,
+        hidden: None,
+        misspecified: Some(family.to_string()),
+        start: start_model(&data)?,
+        truth: truth.describe(),
+        truth_params: vec![],
+        geometry,
+        samples: data.len(),
+        channels,
+        noise_rel: noise.0,
+        signal: 0.0,
+        seed,
+    };
+    Ok((case, data))
+}
+
+/// The misspecified null cases as a markdown table: per family and geometry (one
+/// incidence azimuth or several), how many cases named each effect, and the false
+/// effects (any effect but a second specular lobe); empty without such cases.
+pub fn table(outcomes: &[Outcome]) -> String {
+    let cases: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.case.misspecified.is_some() && o.error.is_none())
+        .collect();
+    if cases.is_empty() {
+        return String::new();
+    }
+    let start = &cases[0].case.start;
+    let mut s = format!(
+        "\nMisspecified null cases (isotropic truths outside the catalogue, diagnosed from `{start}`):\n\n| truth | incidence azimuths | cases | anisotropy named | anisotropy refused (cases) | retro_lobe named | other effects named | false effects |\n|---|---|---|---|---|---|---|---|\n"
+    );
+    let several = |o: &Outcome| !o.case.geometry.starts_with("hemisphere at 1 ");
+    for family in FAMILIES {
+        for multi in [false, true] {
+            let group: Vec<&&Outcome> = cases
+                .iter()
+                .filter(|o| o.case.misspecified.as_deref() == Some(family) && several(o) == multi)
+                .collect();
+            if group.is_empty() {
+                continue;
+            }
+            let named = |e: Effect| {
+                group
+                    .iter()
+                    .filter(|o| o.named.iter().any(|n| n == e.name()))
+                    .count()
+            };
+            let mut others: Vec<(String, usize)> = Vec::new();
+            for o in &group {
+                for n in &o.named {
+                    if n == Effect::Anisotropy.name() || n == Effect::RetroLobe.name() {
+                        continue;
+                    }
+                    match others.iter_mut().find(|(m, _)| m == n) {
+                        Some((_, c)) => *c += 1,
+                        None => others.push((n.clone(), 1)),
+                    }
+                }
+            }
+            let others = if others.is_empty() {
+                "–".to_string()
+            } else {
+                others
+                    .iter()
+                    .map(|(n, c)| format!("`{n}` {c}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            s += &format!(
+                "| `{family}` | {} | {} | {} | {} | {} | {others} | {} |\n",
+                if multi { "several" } else { "one" },
+                group.len(),
+                named(Effect::Anisotropy),
+                group.iter().filter(|o| o.anisotropy_refused > 0).count(),
+                named(Effect::RetroLobe),
+                rate(group.iter().filter(|o| o.false_effect).count(), group.len())
+            );
+        }
+    }
+    let anis = cases
+        .iter()
+        .filter(|o| o.named.iter().any(|n| n == Effect::Anisotropy.name()))
+        .count();
+    s += &format!(
+        "\nAnisotropy named on {} of {} isotropic truths; false effects on {}. Anisotropy refused: cases where a significant, identifiable `+aniso` candidate was refused because its surface-fixed frame did no better than an isotropic lobe of the same shape (at one incidence azimuth: did not break the mirror symmetry about the plane of incidence).\n",
+        anis,
+        cases.len(),
+        rate(cases.iter().filter(|o| o.false_effect).count(), cases.len())
+    );
+    s
 }
 
 #[cfg(test)]

@@ -151,7 +151,7 @@ impl FrameTest {
             "one_incidence_azimuth_deg": self.one_azimuth,
             "frames": self.frames.iter().map(|(n, v)| serde_json::json!({"name": n, "deg": v})).collect::<Vec<_>>(),
             "delta_chi2": self.delta_chi2,
-            "scale": self.scale,
+            "chi2_red_scale": self.scale,
             "twin_excess_chi2": self.twin_excess,
             "share_of_twin_excess": if self.share().is_finite() { serde_json::json!(self.share()) } else { serde_json::Value::Null },
             "F": self.f,
