@@ -223,38 +223,26 @@ pub(super) fn frame_test(
         Some(f) => f.clone(),
         None => {
             let mut held = opts.clone();
-            let mut starts = vec![fit.flat.clone()];
-            match (&coverage, one_azimuth) {
-                (_, Some(plane)) => {
-                    for &j in &free {
-                        held.constraints.items.push(Constraint::new(
-                            ConstraintKind::Fix,
-                            &names[j],
-                            &[0.0],
-                        )?);
-                    }
-                    // The fit's frames relative to the plane are held at 0 anyway.
-                    starts[0].iter_mut().enumerate().for_each(|(j, v)| {
-                        if free.contains(&j) {
-                            *v = fold(*v - plane);
-                        }
-                    });
+            if one_azimuth.is_some() {
+                for &j in &free {
+                    let fix = Constraint::new(ConstraintKind::Fix, &names[j], &[0.0])?;
+                    held.constraints.items.push(fix);
                 }
-                (AzimuthCoverage::Planes(planes), None) => {
-                    // The fit's frame relative to each plane of incidence.
-                    starts = planes
-                        .iter()
-                        .map(|&plane| {
-                            let mut x = fit.flat.clone();
-                            for &j in &free {
-                                x[j] = fold(x[j] - plane);
-                            }
-                            x
-                        })
-                        .collect();
-                }
-                _ => {}
             }
+            // Start from the fit's frames taken relative to each plane of incidence (the
+            // turned data's φ = 0), as they are, turned by 90°, and made isotropic.
+            let planes = match &coverage {
+                AzimuthCoverage::One(plane) => vec![*plane],
+                AzimuthCoverage::Planes(planes) => planes.clone(),
+                AzimuthCoverage::InPlane => vec![0.0],
+            };
+            let starts = planes.iter().map(|&plane| {
+                let mut x = fit.flat.clone();
+                for &j in &free {
+                    x[j] = fold(x[j] - plane);
+                }
+                x
+            });
             let mut seeds = Vec::new();
             for x in starts {
                 seeds.push(swapped(&frames, &x));
