@@ -90,7 +90,9 @@ impl FrameTest {
             .map(|(n, v)| format!("{n} = {v:.1}°"))
             .collect();
         let fitted = fitted.join(", ");
-        let share = if self.share().is_finite() {
+        let share = if self.delta_chi2 <= 0.0 {
+            "; the isotropic lobe fits as well or better".to_string()
+        } else if self.share().is_finite() {
             format!(
                 "; it removes {:.0} % of the misfit the isotropic lobe leaves beyond the noise, need ≥ {:.0} %",
                 100.0 * self.share(),
