@@ -288,13 +288,19 @@ fn signal(a: &[f64], b: &[f64], noise: Noise) -> f64 {
     (s / a.len().max(1) as f64).sqrt()
 }
 
+/// The seed of case `id` of a battery: each case draws from a stream of its own, so one
+/// case can be run alone (`--case`).
+pub(super) fn case_seed(opts: &BatteryOptions, id: usize) -> u64 {
+    opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64)
+}
+
 /// Draw one case: `hidden` in a random truth, or nothing (null).
 pub fn generate(
     hidden: Option<Effect>,
     id: usize,
     opts: &BatteryOptions,
 ) -> Result<(Case, Dataset)> {
-    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
+    let seed = case_seed(opts, id);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for _attempt in 0..200 {
         let m = draw_measurement(hidden, opts, &mut rng)?;

@@ -22,7 +22,7 @@
 //! no anisotropy and no grazing decay of their own: a diagnosis that names one of them on
 //! these data names a false effect.
 
-use super::battery::{log_uniform, rate, BatteryOptions, Case, Outcome};
+use super::battery::{case_seed, log_uniform, rate, BatteryOptions, Case, Outcome};
 use super::Effect;
 use crate::data::{Dataset, Kind, RawRow, ReadOptions};
 use anyhow::{anyhow, Result};
@@ -355,7 +355,7 @@ pub fn start_model(data: &Dataset) -> Result<String> {
 /// of the family [`family_of`] gives, one or three channels, about a log-uniform number of
 /// samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
 pub fn generate(k: usize, id: usize, opts: &BatteryOptions) -> Result<(Case, Dataset)> {
-    let seed = opts.seed.wrapping_mul(0x9e37_79b9).wrapping_add(id as u64);
+    let seed = case_seed(opts, id);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (family, several) = family_of(k);
     let channels = if rng.random::<f64>() < 0.5 { 3 } else { 1 };
