@@ -23,7 +23,7 @@ const NORMAL_DEG: f64 = 0.5;
 const SECTOR_DEG: f64 = 15.0;
 
 /// The fewest samples a plane must hold to count: 10, and a twentieth of the data.
-pub fn min_plane_samples(samples: usize) -> usize {
+fn min_plane_samples(samples: usize) -> usize {
     10usize.max(samples.div_ceil(20))
 }
 
@@ -48,21 +48,6 @@ impl AzimuthCoverage {
         match self {
             AzimuthCoverage::One(phi) => Some(*phi),
             _ => None,
-        }
-    }
-
-    /// "one incidence azimuth (φi = 30°)", "incidence planes φ = 0°, 90°", "one plane".
-    pub fn describe(&self) -> String {
-        match self {
-            AzimuthCoverage::One(phi) => format!("one incidence azimuth (φi = {phi:.0}°)"),
-            AzimuthCoverage::Planes(p) => format!(
-                "incidence planes φ = {}",
-                p.iter()
-                    .map(|x| format!("{x:.0}°"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-            AzimuthCoverage::InPlane => "one plane".into(),
         }
     }
 }

@@ -7,7 +7,7 @@ mod channels;
 mod dataset;
 pub mod geometries;
 pub mod readers;
-pub use azimuths::{min_plane_samples, AzimuthCoverage};
+pub use azimuths::AzimuthCoverage;
 pub(crate) use builder::{Builder, Cells};
 pub use dataset::*;
 

@@ -414,6 +414,7 @@ fn test_frames(
     if !scored.iter().any(could_adopt) {
         return;
     }
+    let coverage = data.azimuth_coverage();
     let turned = data.turned_to_incidence_planes();
     for s in scored.iter_mut().filter(|s| could_adopt(s)) {
         let fit = s.fit.as_ref().expect("could_adopt checks the fit");
@@ -422,7 +423,15 @@ fn test_frames(
             s.candidate.spec
         );
         let cached = cache.get(&key).and_then(|r| r.as_ref().ok()).cloned();
-        match frame_test(fit, data, &turned, backend, opts, s.level, cached.as_ref()) {
+        match frame_test(
+            fit,
+            &coverage,
+            &turned,
+            backend,
+            opts,
+            s.level,
+            cached.as_ref(),
+        ) {
             Ok(Some((test, twin))) => {
                 log(format!(
                     "    frame test of {}: {} ({})",

@@ -193,14 +193,15 @@ fn isotropic(frames: &[[usize; 3]], flat: &[f64]) -> Vec<f64> {
     out
 }
 
-/// Fit `fit`'s model (an anisotropic candidate) as its isotropic twin, on `turned` (the
-/// data turned to their planes of incidence) with every free frame azimuth held at 0,
-/// and compare ([`FrameTest`]); `cached` is that fit from an earlier round. None when the
-/// options hold every frame already (the user has named it).
+/// Fit `fit`'s model (an anisotropic candidate) as its isotropic twin on `turned` (the
+/// data turned to their planes of incidence, whose `coverage` says how many there are),
+/// its free frame azimuths held at 0 at one azimuth, and compare ([`FrameTest`]);
+/// `cached` is that fit from an earlier round. None when the options hold every frame
+/// already (the user has named it).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn frame_test(
     fit: &FitResult,
-    data: &Dataset,
+    coverage: &AzimuthCoverage,
     turned: &Dataset,
     backend: &dyn Backend,
     opts: &DiagnoseOptions,
@@ -219,7 +220,6 @@ pub(super) fn frame_test(
     if free.is_empty() {
         return Ok(None);
     }
-    let coverage = data.azimuth_coverage();
     let one_azimuth = coverage.one_azimuth();
     let twin = match cached {
         Some(f) => f.clone(),
@@ -233,7 +233,7 @@ pub(super) fn frame_test(
             }
             // Start from the fit's frames taken relative to each plane of incidence (the
             // turned data's φ = 0), as they are, turned by 90°, and made isotropic.
-            let planes = match &coverage {
+            let planes = match coverage {
                 AzimuthCoverage::One(plane) => vec![*plane],
                 AzimuthCoverage::Planes(planes) => planes.clone(),
                 AzimuthCoverage::InPlane => vec![0.0],
