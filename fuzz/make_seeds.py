@@ -475,11 +475,55 @@ def astm_seeds():
     return out
 
 
+# --- Real files (tests/fixtures/real/, sources and licences in its README) ------------
+
+REAL = os.path.join(ROOT, "tests", "fixtures", "real")
+
+
+def real_zemax(name, tables=3):
+    """A vendored Zemax file cut to its first `tables` incidences (the fuzzers' 8 KiB
+    inputs): the AngleOfIncidence line rewritten to match, the rest as the file has it."""
+    with open(os.path.join(REAL, name), newline="") as f:
+        lines = f.read().split("\n")
+    at = next(k for k, l in enumerate(lines) if l.startswith("AngleOfIncidence"))
+    angles = lines[at + 1].split()
+    lines[at] = "AngleOfIncidence  %d" % tables
+    lines[at + 1] = "\t".join(angles[:tables]) + "\t"
+    begin = lines.index("DataBegin")
+    tis = [k for k, l in enumerate(lines) if l.startswith("TIS")]
+    end = tis[tables] if tables < len(tis) else lines.index("DataEnd")
+    return "\n".join(lines[: begin + 1] + lines[tis[0]:end] + ["DataEnd", ""])
+
+
+def real_astm(name, rows=18):
+    """A vendored ASTM file cut to its first `rows` rows, NUM_POINTS rewritten to match."""
+    with open(os.path.join(REAL, name), newline="") as f:
+        lines = f.read().split("\n")
+    at = next(k for k, l in enumerate(lines) if l.startswith("VARS"))
+    head = ["NUM_POINTS %d" % rows if l.startswith("NUM_POINTS") else l for l in lines[: at + 1]]
+    body = [l for l in lines[at + 1:] if l.strip()][:rows]
+    return "\n".join(head + body) + "\n"
+
+
+def real_seeds():
+    zemax = {
+        "real-imaging-sphere-brdf.bsdf": real_zemax("zemax_planesymmetric_brdf.bsdf"),
+        "real-imaging-sphere-btdf.bsdf": real_zemax("zemax_planesymmetric_btdf.bsdf"),
+    }
+    astm = {"real-cornell-acryl-blue.astm": real_astm("cornell_acryl_blue.astm")}
+    for name, data in zemax.items():
+        write("zemax", name, data)
+    for name, data in astm.items():
+        write("astm", name, data)
+    return zemax, astm
+
+
 def main():
     if os.path.isdir(OUT):
         shutil.rmtree(OUT)
     v1, alta, merl, rgl = v1_seeds(), alta_seeds(), merl_seeds(), rgl_seeds()
     zemax, astm = zemax_seeds(), astm_seeds()
+    real_zemax_seeds, real_astm_seeds = real_seeds()
     for name, data in [
         ("v1-" + "brdf-inplane-rgb.csv", v1["brdf-inplane-rgb.csv"]),
         ("v1-" + "crlf-bom.csv", v1["crlf-bom.csv"]),
@@ -492,6 +536,8 @@ def main():
         ("zemax-btdf-matte.bsdf", zemax["btdf-matte.bsdf"]),
         ("astm-cornell-spectral-radians.astm", astm["cornell-spectral-radians.astm"]),
         ("astm-btdf-uncertainty.astm", astm["btdf-uncertainty.astm"]),
+        ("zemax-real-imaging-sphere-brdf.bsdf", real_zemax_seeds["real-imaging-sphere-brdf.bsdf"]),
+        ("astm-real-cornell-acryl-blue.astm", real_astm_seeds["real-cornell-acryl-blue.astm"]),
     ]:
         write("any", name, data)
     total = 0

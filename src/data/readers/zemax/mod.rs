@@ -462,7 +462,9 @@ impl Reading<'_> {
         }
         let (rel, abs) = self.assumed;
         for (mut r, sum, n, lo, hi, at) in cells {
-            r.value = sum / n as f64;
+            // Repeated directions (the radial-0 column) usually repeat one value: keep
+            // it exactly rather than a mean that rounds it by an ulp.
+            r.value = if lo == hi { lo } else { sum / n as f64 };
             r.uncertainty = super::assumed_uncertainty(r.value, rel, abs);
             if n > 1 {
                 let spread = (hi - lo) / r.value.abs().max(f64::MIN_POSITIVE);

@@ -1,0 +1,365 @@
+//! Real measurement files made elsewhere (`tests/fixtures/real/`, their sources and
+//! licences in the README there), read as a new user would read them, each against an
+//! oracle written here from the file's own text:
+//!
+//! - a Cornell ASTM E1392 file (a blue acrylic on the Cornell/Kodak gonioreflectometer,
+//!   31 bands): every value at every wavelength against a parse of its rows written here;
+//! - a Zemax tabular BRDF from an imaging sphere: every cell where the rotation oracle puts
+//!   it; the table's own integral against its `TIS` lines; a fit exported back to Zemax
+//!   whose TIS lies near the measured one; the same file relabelled `ScatterType BTDF`
+//!   (as its source ships it) read as the same values on the transmitted side.
+
+mod common;
+
+use bsdfit::data::{Dataset, Kind, ReadOptions};
+use common::cli::{assert_ok, bsdfit, p, text};
+use common::optical::{key, oracle, sample_key};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn real(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/real")
+        .join(name)
+}
+
+/// The files carry no uncertainties: the reader asks for an assumption.
+fn assumed() -> ReadOptions {
+    ReadOptions {
+        assume_uncertainty: Some((0.05, 1e-3)),
+        ..Default::default()
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Cornell ASTM E1392
+
+#[test]
+fn the_cornell_astm_file_reads_every_value_at_every_wavelength() {
+    let path = real("cornell_acryl_blue.astm");
+    let body = std::fs::read_to_string(&path).unwrap();
+    // The format as this file writes it: keyword lines up to `VARS`, whose list names the
+    // four angles (radians: no unit declared, and θ up to 1.4 only fits radians) then one
+    // column per wavelength ("400nm"); then comma-separated rows.
+    let mut lines = body.lines();
+    let vars: Vec<&str> = lines
+        .by_ref()
+        .find_map(|l| l.strip_prefix("VARS "))
+        .expect("a VARS line")
+        .split(',')
+        .map(str::trim)
+        .collect();
+    assert_eq!(&vars[..4], ["theta_i", "phi_i", "theta_s", "phi_s"]);
+    let wavelengths: Vec<f64> = vars[4..]
+        .iter()
+        .map(|v| v.strip_suffix("nm").unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(wavelengths.len(), 31);
+    let declared: usize = body
+        .lines()
+        .find_map(|l| l.strip_prefix("NUM_POINTS "))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let mut want: HashMap<[i64; 5], Vec<f64>> = HashMap::new();
+    let mut rows = 0;
+    for l in lines.filter(|l| !l.trim().is_empty()) {
+        let cells: Vec<f64> = l.split(',').map(|c| c.trim().parse().unwrap()).collect();
+        assert_eq!(cells.len(), 4 + wavelengths.len(), "{l}");
+        let g = [0, 1, 2, 3].map(|k| cells[k].to_degrees());
+        for (k, &w) in wavelengths.iter().enumerate() {
+            want.entry(key(g, w)).or_default().push(cells[4 + k]);
+        }
+        rows += 1;
+    }
+    assert_eq!(rows, declared, "rows vs NUM_POINTS");
+
+    let data = Dataset::read(&path, &assumed()).unwrap();
+    assert_eq!(data.kind, Kind::Brdf);
+    assert_eq!(data.channels, wavelengths);
+    assert_eq!(data.len(), rows * wavelengths.len(), "every value read");
+    for s in &data.samples {
+        let v = want
+            .get(&sample_key(s))
+            .unwrap_or_else(|| panic!("no row of the file at {s:?}"));
+        assert!(
+            v.iter().any(|&x| (s.value - x).abs() <= 1e-12 * x.abs()),
+            "{s:?}: the file has {v:?}"
+        );
+        // The assumed uncertainty, as the option states it.
+        let u = ((0.05 * s.value).powi(2) + 1e-6).sqrt();
+        assert!((s.uncertainty - u).abs() <= 1e-12 * u, "{s:?}");
+    }
+    // Without an assumption the reader refuses, naming the file and what is missing.
+    let e = Dataset::read(&path, &ReadOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cornell_acryl_blue.astm") && e.contains("uncertaint"),
+        "{e}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Zemax tabular BSDF (imaging sphere)
+
+/// A Zemax file's axes, `TIS` lines and tables, parsed here from its text: keyword
+/// lines give each axis's count, the next line its values; after `DataBegin`, per
+/// (rotation, incidence) a `TIS` line then one row per azimuth of one value per radial.
+struct ZemaxTables {
+    kind: String,
+    aoi: Vec<f64>,
+    azimuths: Vec<f64>,
+    radials: Vec<f64>,
+    tis: Vec<f64>,
+    /// `[incidence][azimuth][radial]`.
+    values: Vec<Vec<Vec<f64>>>,
+}
+
+fn parse_zemax(text: &str) -> ZemaxTables {
+    let lines: Vec<&str> = text.lines().map(str::trim).collect();
+    let numbers =
+        |l: &str| -> Vec<f64> { l.split_whitespace().map(|x| x.parse().unwrap()).collect() };
+    let axis = |name: &str| -> Vec<f64> {
+        let at = lines.iter().position(|l| l.starts_with(name)).unwrap();
+        let n: usize = lines[at][name.len()..].trim().parse().unwrap();
+        let v = numbers(lines[at + 1]);
+        assert_eq!(v.len(), n, "{name}");
+        v
+    };
+    let word = |name: &str| {
+        lines
+            .iter()
+            .find_map(|l| l.strip_prefix(name))
+            .unwrap()
+            .trim()
+            .to_string()
+    };
+    assert_eq!(axis("SampleRotation"), vec![0.0]);
+    let (aoi, azimuths, radials) = (
+        axis("AngleOfIncidence"),
+        axis("ScatterAzimuth"),
+        axis("ScatterRadial"),
+    );
+    let mut rest = lines
+        .iter()
+        .skip_while(|l| **l != "DataBegin")
+        .skip(1)
+        .filter(|l| !l.is_empty());
+    let (mut tis, mut values) = (Vec::new(), Vec::new());
+    for _ in &aoi {
+        let t = rest.next().unwrap().strip_prefix("TIS").unwrap();
+        tis.push(t.trim().parse().unwrap());
+        values.push(
+            azimuths
+                .iter()
+                .map(|_| {
+                    let row = numbers(rest.next().unwrap());
+                    assert_eq!(row.len(), radials.len());
+                    row
+                })
+                .collect(),
+        );
+    }
+    assert_eq!(rest.next().copied(), Some("DataEnd"));
+    ZemaxTables {
+        kind: word("ScatterType"),
+        aoi,
+        azimuths,
+        radials,
+        tis,
+        values,
+    }
+}
+
+/// ∫ f cos θs dω over the cells of one incidence's table: the format's TIS convention
+/// (total integrated scatter, the BSDF weighted by the cosine of the scattered direction
+/// over the hemisphere). The cells are a grid in the frame centred on the specular
+/// direction (dω = sin r dr da); a plane-symmetric table holds azimuths 0–180°, the other
+/// half its mirror image. Trapezoids in r and a; cells beyond the horizon count 0.
+fn table_integral(z: &ZemaxTables, k: usize) -> f64 {
+    let trapezoid = |x: &[f64]| -> Vec<f64> {
+        (0..x.len())
+            .map(|j| {
+                let lo = if j > 0 { x[j] - x[j - 1] } else { 0.0 };
+                let hi = if j + 1 < x.len() {
+                    x[j + 1] - x[j]
+                } else {
+                    0.0
+                };
+                0.5 * (lo + hi).to_radians()
+            })
+            .collect()
+    };
+    let (wa, wr) = (trapezoid(&z.azimuths), trapezoid(&z.radials));
+    let mut sum = 0.0;
+    for (j, &a) in z.azimuths.iter().enumerate() {
+        for (l, &r) in z.radials.iter().enumerate() {
+            let Some(g) = oracle(0.0, z.aoi[k], a, r) else {
+                continue;
+            };
+            let cos_s = g[2].to_radians().cos();
+            sum += wa[j] * wr[l] * r.to_radians().sin() * cos_s * z.values[k][j][l];
+        }
+    }
+    2.0 * sum
+}
+
+#[test]
+fn the_imaging_sphere_zemax_brdf_reads_where_the_oracle_puts_each_cell() {
+    let path = real("zemax_planesymmetric_brdf.bsdf");
+    let z = parse_zemax(&std::fs::read_to_string(&path).unwrap());
+    assert_eq!(z.kind, "BRDF");
+    let data = Dataset::read(&path, &assumed()).unwrap();
+    assert_eq!(data.kind, Kind::Brdf);
+    // Every above-horizon cell with a value; the radial-0 column is one direction per
+    // table (read once); a cell the file masks (0) is not data.
+    let mut want: HashMap<[i64; 5], f64> = HashMap::new();
+    for (k, &aoi) in z.aoi.iter().enumerate() {
+        for (j, &a) in z.azimuths.iter().enumerate() {
+            for (l, &r) in z.radials.iter().enumerate() {
+                let v = z.values[k][j][l];
+                if let (Some(g), true) = (oracle(0.0, aoi, a, r), v > 0.0) {
+                    let key = key(g, data.channels[0]);
+                    if let Some(old) = want.insert(key, v) {
+                        assert!(r == 0.0 && old == v, "{aoi} {a} {r}: {old} then {v}");
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(data.len(), want.len());
+    for s in &data.samples {
+        let v = want
+            .get(&sample_key(s))
+            .unwrap_or_else(|| panic!("no cell of the file at {s:?}"));
+        assert_eq!(s.value, *v, "{s:?}");
+    }
+}
+
+#[test]
+fn the_imaging_sphere_tables_integrate_to_their_tis_lines() {
+    let path = real("zemax_planesymmetric_brdf.bsdf");
+    let z = parse_zemax(&std::fs::read_to_string(&path).unwrap());
+    let ratios: Vec<f64> = (0..z.aoi.len())
+        .map(|k| table_integral(&z, k) / z.tis[k])
+        .collect();
+    for (k, r) in ratios.iter().enumerate() {
+        eprintln!("θi {:>4}°: ∫ f cos θs dω / TIS = {r:.3}", z.aoi[k]);
+    }
+    // The table covers radials up to 80° from the specular direction, not the whole
+    // hemisphere, so its integral falls short of the TIS by what lies beyond (most at
+    // small incidences, whose far side is more than 80° from specular); and it can never
+    // exceed it by more than the trapezoid rule's error. Measured 0.81–0.96.
+    assert!(
+        ratios.iter().all(|r| (0.7..=1.02).contains(r)),
+        "{ratios:?}"
+    );
+    // The reader's own check of the same quantity says the same, to its two digits.
+    let data = Dataset::read(&path, &assumed()).unwrap();
+    let notice = data
+        .notices
+        .iter()
+        .find(|n| n.contains("of their TIS lines"))
+        .unwrap_or_else(|| panic!("no TIS notice: {:?}", data.notices));
+    let (lo, hi) = ratios
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &r| (a.min(r), b.max(r)));
+    let said = format!("{lo:.2}")[..3].to_string();
+    assert!(
+        notice.contains(&said) && notice.contains(&format!("{hi:.2}")[..3]),
+        "{notice} vs {lo:.3}–{hi:.3}"
+    );
+}
+
+#[test]
+fn a_fit_of_the_imaging_sphere_exports_a_zemax_table_with_its_tis() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = real("zemax_planesymmetric_brdf.bsdf");
+    let measured = parse_zemax(&std::fs::read_to_string(&path).unwrap());
+    let json = dir.path().join("fit.json");
+    let out = bsdfit(&[
+        "fit",
+        p(&path),
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "2",
+        "--assume-uncertainty",
+        "0.05,0.001",
+        "--json",
+        p(&json),
+    ]);
+    assert_ok(&out, "fit");
+    let exported = dir.path().join("export.bsdf");
+    let out = bsdfit(&[
+        "export",
+        p(&json),
+        "--format",
+        "zemax",
+        "--out",
+        p(&exported),
+    ]);
+    assert_ok(&out, "export");
+    let z = parse_zemax(&std::fs::read_to_string(&exported).unwrap());
+    assert_eq!(
+        (&z.aoi, &z.azimuths, &z.radials),
+        (&measured.aoi, &measured.azimuths, &measured.radials)
+    );
+    // A Lambertian's TIS is its albedo ρ at every incidence, and every cell above the
+    // horizon is ρ/π.
+    let fit: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rho = fit["flat_params"][0].as_f64().unwrap();
+    for (k, table) in z.values.iter().enumerate() {
+        assert!(
+            (z.tis[k] - rho).abs() <= 1e-6 * rho,
+            "TIS {} vs ρ {rho}",
+            z.tis[k]
+        );
+        for (j, row) in table.iter().enumerate() {
+            for (l, &v) in row.iter().enumerate() {
+                if oracle(0.0, z.aoi[k], z.azimuths[j], z.radials[l]).is_some() {
+                    assert!((v - rho / std::f64::consts::PI).abs() <= 1e-6 * v, "{v}");
+                }
+            }
+        }
+    }
+    // The measured TIS rises from 0.13 at 15° to 0.26 at 75° (the sample brightens toward
+    // grazing, which a Lambertian cannot follow); the fitted ρ ≈ 0.15 lies within a factor
+    // of two of it at every incidence (measured: exported / measured 0.59–1.14).
+    for (k, aoi) in measured.aoi.iter().enumerate() {
+        let ratio = z.tis[k] / measured.tis[k];
+        eprintln!(
+            "θi {aoi}°: exported TIS {} / measured {} = {ratio:.3}",
+            z.tis[k], measured.tis[k]
+        );
+        assert!((0.5..2.0).contains(&ratio), "θi {aoi}°: {ratio}");
+    }
+    assert!(text(&out.stderr).contains("the grid of the fit's data"));
+}
+
+#[test]
+fn the_relabelled_btdf_file_reads_the_same_values_on_the_transmitted_side() {
+    // The source ships the imaging-sphere file twice, the second with `ScatterType BTDF`
+    // and every number the same: a real file layout for the BTDF path, whose values are
+    // the BRDF's, mirrored below the surface.
+    let brdf = Dataset::read(&real("zemax_planesymmetric_brdf.bsdf"), &assumed()).unwrap();
+    let btdf = Dataset::read(&real("zemax_planesymmetric_btdf.bsdf"), &assumed()).unwrap();
+    let z = parse_zemax(&std::fs::read_to_string(real("zemax_planesymmetric_btdf.bsdf")).unwrap());
+    assert_eq!(z.kind, "BTDF");
+    assert_eq!(btdf.kind, Kind::Btdf);
+    assert_eq!(btdf.len(), brdf.len());
+    let by_key: HashMap<[i64; 5], f64> = brdf
+        .samples
+        .iter()
+        .map(|s| (sample_key(s), s.value))
+        .collect();
+    for s in &btdf.samples {
+        assert!(s.transmitted && s.wo().z < 0.0, "{s:?}");
+        assert_eq!(by_key.get(&sample_key(s)), Some(&s.value), "{s:?}");
+    }
+}
