@@ -114,9 +114,19 @@ fn an_asymmetrical4d_btdf_puts_every_cell_where_the_oracle_does() {
         radials: vec![0.0, 3.0, 10.0, 25.0, 45.0, 70.0, 100.0],
         eol: "\n",
     };
-    // A value that names its cell.
+    // A value that names its cell: the cell's number among the 3 × 3 × 12 × 7, an integer
+    // that the file's seven significant digits hold exactly (so a permutation of any one
+    // index, the radial one included, moves a value to a cell that names another). The
+    // radial-0 column is one direction per table: one number for all its azimuths.
+    let index = |axis: &[f64], v: f64| axis.iter().position(|&x| x == v).unwrap() as f64;
     let f = |_: usize, rot: f64, aoi: f64, a: f64, r: f64| {
-        1.0 + rot * 1e-2 + aoi * 1e-4 + a * 1e-6 + r * 1e-8 + if r == 0.0 { -a * 1e-6 } else { 0.0 }
+        let (i, j, k, l) = (
+            index(&z.rotations, rot),
+            index(&z.aoi, aoi),
+            if r == 0.0 { 0.0 } else { index(&z.azimuths, a) },
+            index(&z.radials, r),
+        );
+        1.0 + l + 7.0 * (k + 12.0 * (j + 3.0 * i))
     };
     let text = zemax_text(&z, &f, 0.8);
     let ds = read(&text, "btdf.bsdf", &assume()).unwrap();
@@ -139,7 +149,7 @@ fn an_asymmetrical4d_btdf_puts_every_cell_where_the_oracle_does() {
         let v = want
             .get(&sample_key(s))
             .unwrap_or_else(|| panic!("no cell at {s:?}"));
-        assert!((s.value - v).abs() < 1e-6, "{s:?}: {v}");
+        assert!((s.value - v).abs() < 1e-9 * v, "{s:?}: {v}");
     }
     // The radial-0 column is one direction per table, read once.
     assert!(
@@ -292,11 +302,19 @@ fn astm_spectral(eol: &str) -> (String, SpectralRows) {
     let mut rows = Vec::new();
     for ti in [0.0f64, 20.0, 40.0, 60.0] {
         for ts in [10.0f64, 30.0, 50.0, 70.0] {
-            for ps in [-150.0f64, -90.0, -30.0, 30.0, 90.0, 150.0, 180.0] {
+            // An asymmetric set of scatter azimuths, and values that change with every
+            // angle (φs with its sign), so that a φs sign flip, a θi/θs swap or a lost
+            // angle puts a value where another is expected.
+            for ps in [-120.0f64, -90.0, -30.0, 30.0, 60.0, 150.0, 180.0] {
                 let g = [ti, 0.0, ts, ps];
                 let v: Vec<f64> = wl
                     .iter()
-                    .map(|w| 0.05 + 0.2 * (w - 400.0) / 300.0 + 0.001 * ts)
+                    .map(|w| {
+                        0.05 + 0.2 * (w - 400.0) / 300.0
+                            + 0.001 * ts
+                            + 0.0003 * ti
+                            + 0.0001 * (ps + 180.0)
+                    })
                     .collect();
                 rows.push((g, v));
             }

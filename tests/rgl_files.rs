@@ -163,15 +163,6 @@ fn sample_angles(s: &bsdfit::data::Sample) -> (f64, f64, f64, f64) {
     (theta_i, u_theta(theta_i), u_theta(theta_m), wo[2])
 }
 
-/// A `[rows × cols]` table whose value at column x = j/(cols − 1) is `f(x)`, the same in
-/// every row.
-fn linear_in_x(rows: usize, cols: usize, f: impl Fn(f64) -> f64) -> Vec<f64> {
-    (0..rows)
-        .flat_map(|_| (0..cols).map(|j| j as f64 / (cols - 1) as f64))
-        .map(f)
-        .collect()
-}
-
 /// R, G, B: the nominal wavelengths bsdfit gives an RGB file's channels, and the
 /// coefficients of each channel's table (distinct, so that a swap shows).
 const RGB_NM: [f64; 3] = [650.0, 550.0, 450.0];
@@ -282,16 +273,43 @@ fn database_layout(
     ndf: impl Fn(f64) -> f64,
     sigma: impl Fn(f64) -> f64,
 ) -> Vec<Field> {
+    database_layout_2d(
+        nt,
+        n,
+        |x, _| vndf_density(x),
+        |x, _, ti, k| value(x, ti, k),
+        |x, _| ndf(x),
+        |x, _| sigma(x),
+    )
+}
+
+/// A `[n × n]` table over (x, y) = (u_θ, u_φ): rows along u_φ, columns along u_θ.
+fn grid(n: usize, f: impl Fn(f64, f64) -> f64) -> Vec<f64> {
+    let at = |j: usize| j as f64 / (n - 1) as f64;
+    (0..n)
+        .flat_map(|r| (0..n).map(move |c| (at(c), at(r))))
+        .map(|(x, y)| f(x, y))
+        .collect()
+}
+
+/// [`database_layout`] with tables over both coordinates: `vndf_density(x, y)`,
+/// `value(x, y, θi, k)`, `ndf(x, y)`, `sigma(x, y)`.
+fn database_layout_2d(
+    nt: usize,
+    n: usize,
+    vndf_density: impl Fn(f64, f64) -> f64,
+    value: impl Fn(f64, f64, f64, usize) -> f64,
+    ndf: impl Fn(f64, f64) -> f64,
+    sigma: impl Fn(f64, f64) -> f64,
+) -> Vec<Field> {
     let theta_i: Vec<f64> = (0..nt).map(|j| 1.5 * j as f64 / (nt - 1) as f64).collect();
     let mut rgb = Vec::new();
     for &ti in &theta_i {
         for k in 0..3 {
-            rgb.extend(linear_in_x(n, n, |x| value(x, ti, k)));
+            rgb.extend(grid(n, |x, y| value(x, y, ti, k)));
         }
     }
-    let vndf: Vec<f64> = (0..nt)
-        .flat_map(|_| linear_in_x(n, n, &vndf_density))
-        .collect();
+    let vndf: Vec<f64> = (0..nt).flat_map(|_| grid(n, &vndf_density)).collect();
     use ElementType::{F32, U32, U8};
     vec![
         field(
@@ -304,8 +322,8 @@ fn database_layout(
         field("jacobian", U8, &[1], vec![1.0]),
         field("theta_i", F32, &[nt], theta_i),
         field("phi_i", F32, &[1], vec![0.0]),
-        field("ndf", F32, &[n, n], linear_in_x(n, n, ndf)),
-        field("sigma", F32, &[n, n], linear_in_x(n, n, sigma)),
+        field("ndf", F32, &[n, n], grid(n, ndf)),
+        field("sigma", F32, &[n, n], grid(n, sigma)),
         field("vndf", F32, &[1, nt, n, n], vndf.clone()),
         field("luminance", F32, &[1, nt, n, n], vndf),
         field("rgb", F32, &[1, nt, 3, n, n], rgb),
@@ -360,6 +378,89 @@ fn a_file_laid_out_as_the_database_reads_to_its_closed_form() {
         checked[k] += 1;
     }
     assert!(checked.iter().all(|&c| c > 100), "{checked:?}");
+}
+
+/// A periodic, asymmetric profile along u_φ, linear between the table's nodes (n = 17:
+/// nodes at j/16, the kink at 1/4 one of them), so that bilinear interpolation reproduces
+/// it: 1 at φ = ±π, 2 at y = 1/4 (φ = −π/2), back to 1 at y = 1. A φ read with the
+/// wrong sign (y → 1 − y) or not relative to φi moves every value.
+fn g(y: f64) -> f64 {
+    if y <= 0.25 {
+        1.0 + 4.0 * y
+    } else {
+        2.0 - (y - 0.25) * 4.0 / 3.0
+    }
+}
+
+/// ∫₀^y g.
+fn g_integral(y: f64) -> f64 {
+    if y <= 0.25 {
+        y + 2.0 * y * y
+    } else {
+        let t = y - 0.25;
+        0.375 + 2.0 * t - 2.0 / 3.0 * t * t
+    }
+}
+
+/// The isotropic closed form with tables that vary along u_φ: a VNDF density
+/// p(x, y) = 1 + 3x·g(y) that is not separable, so the warp's inverse is the 2-D
+/// conditional one (the row first: s_y = ∫₀^y m / ∫₀^1 m with m(y) = 1 + 1.5 g(y); then
+/// s_x = (x + 1.5 g(y) x²) / (1 + 1.5 g(y)) along the row at y), a value table
+/// (a_k + b_k θi)(1 + 2x)·g(y) in the warped coordinates, an NDF 2 + x·g(y) at the half
+/// vector's (u_θ, u_φ) with φ relative to φi. σ is constant along u_φ, as in the
+/// database's isotropic files (whose NDF and σ are the material's, the same at every
+/// azimuth; renderers differ on which azimuth of ωi they look σ up at).
+#[test]
+fn a_database_file_varying_along_u_phi_reads_to_its_closed_form() {
+    let (a, b) = ([0.30, 0.20, 0.10], [0.05, -0.04, 0.02]);
+    let fields = database_layout_2d(
+        7,
+        17,
+        |x, y| 1.0 + 3.0 * x * g(y),
+        |x, y, ti, k| (a[k] + b[k] * ti) * (1.0 + 2.0 * x) * g(y),
+        |x, y| 2.0 + x * g(y),
+        |x, _| 1.0 + 0.5 * x,
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("material_rgb.bsdf");
+    std::fs::write(&path, tensor_file(&fields)).unwrap();
+    // Incidence azimuths 0…150° (`azimuths`) as well as 0 (`hemi`).
+    let data = read(&path, "hemi+azimuths").unwrap();
+    let mut checked = [0usize; 3];
+    let mut incidence_azimuths = std::collections::BTreeSet::new();
+    for s in &data.samples {
+        let k = RGB_NM.iter().position(|&w| w == s.wavelength_nm).unwrap();
+        let (wi, wo) = (dir(s.theta_i, s.phi_i), dir(s.theta_o, s.phi_o));
+        let h: Vec<f64> = (0..3).map(|c| wi[c] + wo[c]).collect();
+        let len = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+        let (ti, xm) = (wi[2].acos(), u_theta((h[2] / len).clamp(-1.0, 1.0).acos()));
+        // At the mirror direction the half vector's azimuth is rounding noise.
+        if xm < 1e-3 {
+            continue;
+        }
+        let relative = h[1].atan2(h[0]) - s.phi_i;
+        let ym = ((relative + PI) / (2.0 * PI)).rem_euclid(1.0);
+        let sy = (ym + 1.5 * g_integral(ym)) / (1.0 + 1.5 * g_integral(1.0));
+        let sx = (xm + 1.5 * g(ym) * xm * xm) / (1.0 + 1.5 * g(ym));
+        let want = (a[k] + b[k] * ti) * (1.0 + 2.0 * sx) * g(sy) * (2.0 + xm * g(ym))
+            / (4.0 * (1.0 + 0.5 * u_theta(ti)))
+            / wo[2];
+        assert!(
+            (s.value - want).abs() <= 2e-5 * want,
+            "{} nm, θi {:.1}° φi {:.1}° θo {:.1}° φo {:.1}°: {} vs {want}",
+            s.wavelength_nm,
+            s.theta_i.to_degrees(),
+            s.phi_i.to_degrees(),
+            s.theta_o.to_degrees(),
+            s.phi_o.to_degrees(),
+            s.value
+        );
+        checked[k] += 1;
+        incidence_azimuths.insert((s.phi_i.to_degrees() * 1e3).round() as i64);
+    }
+    eprintln!("checked {checked:?} at incidence azimuths {incidence_azimuths:?} (mdeg)");
+    assert!(checked.iter().all(|&c| c > 100), "{checked:?}");
+    assert!(incidence_azimuths.len() >= 6, "{incidence_azimuths:?}");
 }
 
 /// An anisotropic material laid out by hand from the format's definition: five incidence

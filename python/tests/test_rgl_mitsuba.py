@@ -8,7 +8,6 @@ that fails (the README's test command installs Mitsuba into the test environment
 """
 
 import math
-import os
 import zlib
 from pathlib import Path
 
@@ -19,12 +18,14 @@ import bsdfit
 from rgl_helpers import export
 from test_bsdfit import DATA
 
+from conftest import in_ci
+
 try:
     import mitsuba as mi
 except ImportError:
-    # The README's test command installs Mitsuba: under CI its absence is a failure, not a
-    # skip that would hide these checks.
-    if os.environ.get("CI") == "true":
+    # The README's test command installs Mitsuba: under CI (conftest.in_ci, the one rule
+    # for every test) its absence is a failure, not a skip that would hide these checks.
+    if in_ci():
         raise
     pytest.skip("Mitsuba 3 is not installed (pip install mitsuba)", allow_module_level=True)
 

@@ -33,7 +33,9 @@ pub fn shuffled_dataset(
 /// Whether this run is CI (`CI=true`), where the README's test command has installed
 /// everything a test needs from the machine (lavapipe, Mitsuba, Slurm).
 pub fn in_ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| v == "true")
+    // One rule with the Python tests' conftest.py: `true`, `1` or `yes`, any case.
+    std::env::var("CI")
+        .is_ok_and(|v| matches!(v.trim().to_ascii_lowercase().as_str(), "true" | "1" | "yes"))
 }
 
 /// Something a test needs from the machine is missing: under CI that fails the test (a
