@@ -1,6 +1,7 @@
 //! A fixed-seed subset of the diagnosis's randomized battery (`bsdfit battery`, the full
 //! rates in docs/diagnose.md): one random truth per effect of the effect table (drawn by
-//! the battery from the table itself, so a new effect is tested here without new code)
+//! the battery from the table itself; the verdicts read the final model with the
+//! catalogue's words in `effects_added`, which a new effect joins)
 //! and four null cases, with effects large enough to be seen (a pre-fit signal of 8–30
 //! uncertainties RMS) on 200–1,500 samples.
 //!
@@ -11,7 +12,7 @@
 
 mod common;
 
-use bsdfit::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions};
+use bsdfit::workflows::diagnose::battery::{rates_table, run_battery, BatteryOptions, Outcome};
 use bsdfit::workflows::diagnose::{DiagnoseOptions, Effect};
 
 #[test]
@@ -56,16 +57,42 @@ fn one_random_truth_per_effect_and_null_cases() {
     eprintln!("{}", rates_table(&outcomes));
     assert_eq!(outcomes.len(), effects.len() + 4);
     assert!(outcomes.iter().all(|o| o.error.is_none()), "a case failed");
-    let hidden: Vec<_> = outcomes
+    // Every verdict judged here from the outcome's raw facts (the truth's hidden effect,
+    // the start and final model specs, the χ² values), not from the library's own
+    // `detected`, `false_effect` and SNR; the library's verdicts must agree.
+    let alpha = opts.diagnose.alpha;
+    let judged: Vec<Judged> = outcomes.iter().map(|o| judge(o, alpha)).collect();
+    for (o, j) in outcomes.iter().zip(&judged) {
+        let mut named = o.named.clone();
+        named.sort();
+        let mut added: Vec<String> = j.added.clone();
+        added.sort();
+        assert_eq!(
+            named, added,
+            "case {}: named {:?}, but {} → {} adds {:?}",
+            o.case.id, o.named, o.case.start, o.final_model, j.added
+        );
+        assert!(
+            (o.snr - j.snr).abs() <= 1e-12 * j.snr.max(1.0),
+            "case {}",
+            o.case.id
+        );
+        assert_eq!(o.false_effect, j.false_effect, "case {}", o.case.id);
+        if !j.borderline {
+            assert_eq!(o.detected, j.detected, "case {}: p {}", o.case.id, j.p);
+        }
+    }
+    let hidden: Vec<(&Outcome, &Judged)> = outcomes
         .iter()
-        .filter(|o| o.case.hidden.is_some())
+        .zip(&judged)
+        .filter(|(o, _)| o.case.hidden.is_some())
         .collect();
     // A case whose start model already fits within the noise (SNR < 1: the drawn
     // effect was absorbed when S0 was refitted, e.g. a coat's anisotropy seen at three
     // near-mirror points) leaves nothing to find; the rates are reported by SNR for that
     // reason. Among the others at most one miss.
-    let visible: Vec<_> = hidden.iter().filter(|o| o.snr >= 1.0).collect();
-    let detected = visible.iter().filter(|o| o.detected).count();
+    let visible: Vec<_> = hidden.iter().filter(|(_, j)| j.snr >= 1.0).collect();
+    let detected = visible.iter().filter(|(_, j)| j.detected).count();
     assert!(
         visible.len() * 10 >= hidden.len() * 6,
         "only {} of {} hidden effects visible (SNR ≥ 1): the draws are too weak to test",
@@ -79,14 +106,158 @@ fn one_random_truth_per_effect_and_null_cases() {
     );
     let null_false = outcomes
         .iter()
-        .filter(|o| o.case.hidden.is_none() && o.false_effect)
+        .zip(&judged)
+        .filter(|(o, j)| o.case.hidden.is_none() && j.false_effect)
         .count();
     assert_eq!(null_false, 0, "an effect named on a null case");
-    let hidden_false = hidden.iter().filter(|o| o.false_effect).count();
+    let hidden_false = hidden.iter().filter(|(_, j)| j.false_effect).count();
     assert!(
         hidden_false <= 1,
         "{hidden_false} hidden cases with a false effect"
     );
+}
+
+/// A case's verdicts, computed in the test.
+struct Judged {
+    /// The effects the final model adds over the start, from the two specs.
+    added: Vec<String>,
+    /// √(χ²_red − 1) of the start fit (0 below 1): the signal the start model leaves.
+    snr: f64,
+    /// The probability of a χ² at least the final one under the final model.
+    p: f64,
+    /// p within a factor 1.5 of α: the test's χ² tail (Wilson–Hilferty) and the library's
+    /// (exact) may fall on either side.
+    borderline: bool,
+    detected: bool,
+    false_effect: bool,
+}
+
+fn judge(o: &Outcome, alpha: f64) -> Judged {
+    let added = effects_added(&o.case.start, &o.final_model);
+    let snr = (o.chi2_red_start - 1.0).max(0.0).sqrt();
+    let model = bsdfit::bsdf::Model::parse(&o.final_model, o.case.channels).unwrap();
+    let dof = (o.case.samples - model.dim) as f64;
+    let p = chi2_tail(o.chi2_red_final * dof, dof);
+    let consistent = p >= alpha;
+    let (detected, false_effect) = match &o.case.hidden {
+        None => (false, !added.is_empty()),
+        Some(h) => (
+            added.contains(h) && consistent,
+            added.iter().any(|a| a != h),
+        ),
+    };
+    Judged {
+        added,
+        snr,
+        p,
+        borderline: (p / alpha).ln().abs() < 1.5f64.ln(),
+        detected,
+        false_effect,
+    }
+}
+
+/// The effects `fin` adds over `start`, read from the specs' words with the catalogue's
+/// table (docs/diagnose.md): a suffix or wrapper names its effect; a diffuse base that
+/// replaces `lambert` is backscatter; a heavier-tailed NDF that replaces a lighter one is
+/// a long tail. Any other change is named by its words, so that it counts as false.
+fn effects_added(start: &str, fin: &str) -> Vec<String> {
+    let words = |s: &str| -> Vec<String> {
+        s.split(|c: char| !c.is_ascii_alphanumeric())
+            .filter(|w| !w.is_empty())
+            .map(str::to_string)
+            .collect()
+    };
+    let (mut gained, mut lost) = (words(fin), words(start));
+    // The multiset difference both ways.
+    let mut k = 0;
+    while k < gained.len() {
+        if let Some(j) = lost.iter().position(|w| *w == gained[k]) {
+            lost.remove(j);
+            gained.remove(k);
+        } else {
+            k += 1;
+        }
+    }
+    let mut out = Vec::new();
+    let mut take =
+        |gained: &mut Vec<String>, lost: &mut Vec<String>, g: &[&str], l: &[&str], effect: &str| {
+            if let Some(i) = gained.iter().position(|w| g.contains(&w.as_str())) {
+                if l.is_empty() {
+                    gained.remove(i);
+                    out.push(effect.to_string());
+                } else if let Some(j) = lost.iter().position(|w| l.contains(&w.as_str())) {
+                    gained.remove(i);
+                    lost.remove(j);
+                    out.push(effect.to_string());
+                }
+            }
+        };
+    for _ in 0..3 {
+        take(
+            &mut gained,
+            &mut lost,
+            &["on", "eon", "vmf"],
+            &["lambert"],
+            "backscatter",
+        );
+        take(
+            &mut gained,
+            &mut lost,
+            &["tr"],
+            &["beckmann", "gg"],
+            "long_tail",
+        );
+        take(&mut gained, &mut lost, &["gtr"], &["tr"], "long_tail");
+        take(
+            &mut gained,
+            &mut lost,
+            &["coat", "fa"],
+            &[],
+            "specular_lobe",
+        );
+        take(&mut gained, &mut lost, &["falloff"], &[], "retro_falloff");
+        take(
+            &mut gained,
+            &mut lost,
+            &["retro", "mrm", "mrm82"],
+            &[],
+            "retro_lobe",
+        );
+        take(
+            &mut gained,
+            &mut lost,
+            &["dmg", "rmg"],
+            &[],
+            "grazing_decay",
+        );
+        take(&mut gained, &mut lost, &["scale"], &[], "scale");
+        take(&mut gained, &mut lost, &["absorb"], &[], "absorption");
+        take(&mut gained, &mut lost, &["diffuse"], &[], "diffuse_floor");
+        take(&mut gained, &mut lost, &["aniso"], &[], "anisotropy");
+    }
+    out.extend(gained.iter().map(|w| format!("+{w}")));
+    out.extend(lost.iter().map(|w| format!("-{w}")));
+    out
+}
+
+/// P(χ²_k ≥ x): the Wilson–Hilferty normal approximation (relative error well under 1 %
+/// of the tail at k ≥ 100 for p ≥ 1e-4, ample beside the factor 1.5 `borderline` allows),
+/// with erfc from Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7).
+fn chi2_tail(x: f64, k: f64) -> f64 {
+    let v = 2.0 / (9.0 * k);
+    let z = ((x / k).cbrt() - (1.0 - v)) / v.sqrt();
+    0.5 * erfc(z / std::f64::consts::SQRT_2)
+}
+
+fn erfc(x: f64) -> f64 {
+    if x < 0.0 {
+        return 2.0 - erfc(-x);
+    }
+    let t = 1.0 / (1.0 + 0.3275911 * x);
+    let poly = t
+        * (0.254829592
+            + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+    poly * (-x * x).exp()
 }
 
 /// The misspecified null cases: one isotropic truth per family outside the catalogue
