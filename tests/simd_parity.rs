@@ -13,6 +13,8 @@
 //! once more with the baseline) caps it. Also: a model without a kernel (evaluated lane
 //! by lane through the reference) and a data set whose blocks end in partial lanes.
 
+mod common;
+
 use bsdfit::engine::simd::SimdBackend;
 
 const ENGINE: &str = "simd";
@@ -102,6 +104,59 @@ fn lane_kinds_and_kernels_are_reported() {
         "instruction set: {}",
         bsdfit::math::lanes::instruction_set()
     );
+}
+
+/// The level that runs is the one `BSDFIT_SIMD` asks for (CI runs this file three times:
+/// no cap, `avx2`, `baseline`), judged from the processor's own feature flags here: a cap
+/// that was ignored would test the widest level three times and pass.
+#[test]
+fn the_level_that_runs_is_the_one_asked_for() {
+    use bsdfit::math::lanes::{instruction_set, level, Level};
+    let cap = std::env::var("BSDFIT_SIMD").unwrap_or_default();
+    #[cfg(target_arch = "x86_64")]
+    {
+        let has = |f: &str| match f {
+            "avx2" => std::arch::is_x86_feature_detected!("avx2"),
+            "fma" => std::arch::is_x86_feature_detected!("fma"),
+            "avx512f" => std::arch::is_x86_feature_detected!("avx512f"),
+            "avx512vl" => std::arch::is_x86_feature_detected!("avx512vl"),
+            "avx512dq" => std::arch::is_x86_feature_detected!("avx512dq"),
+            "avx512bw" => std::arch::is_x86_feature_detected!("avx512bw"),
+            _ => unreachable!(),
+        };
+        let avx2 = has("avx2") && has("fma");
+        let avx512 = avx2
+            && ["avx512f", "avx512vl", "avx512dq", "avx512bw"]
+                .iter()
+                .all(|f| has(f));
+        let widest = if avx512 {
+            Level::Avx512
+        } else if avx2 {
+            Level::Avx2
+        } else {
+            Level::Baseline
+        };
+        let want = match cap.as_str() {
+            "baseline" => Level::Baseline,
+            "avx2" => {
+                if !avx2 {
+                    common::missing("AVX2 (BSDFIT_SIMD=avx2 on a processor without it)");
+                    return;
+                }
+                Level::Avx2
+            }
+            "" | "avx512" => widest,
+            other => panic!("BSDFIT_SIMD={other}: this test knows baseline, avx2, avx512"),
+        };
+        assert_eq!(
+            level(),
+            want,
+            "BSDFIT_SIMD={cap:?}: ran {}",
+            instruction_set()
+        );
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    assert_eq!(level(), Level::Baseline, "BSDFIT_SIMD={cap:?}");
 }
 
 /// Costs of the SIMD engine (summed in lane order, in partial sums) against the

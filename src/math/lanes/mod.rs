@@ -464,12 +464,35 @@ pub fn level() -> Level {
                 && std::arch::is_x86_feature_detected!("avx512vl")
                 && std::arch::is_x86_feature_detected!("avx512dq")
                 && std::arch::is_x86_feature_detected!("avx512bw");
-            match cap.as_str() {
+            let widest = if avx512 {
+                Level::Avx512
+            } else if avx2 {
+                Level::Avx2
+            } else {
+                Level::Baseline
+            };
+            match cap.trim() {
+                "" | "avx512" => widest,
                 "baseline" => Level::Baseline,
                 "avx2" if avx2 => Level::Avx2,
-                _ if avx512 => Level::Avx512,
-                _ if avx2 => Level::Avx2,
-                _ => Level::Baseline,
+                other => {
+                    // A cap the processor cannot honour (or a misspelt one) must not pass
+                    // silently for the level it asked for.
+                    eprintln!(
+                        "warning: BSDFIT_SIMD={other} {}: running {}",
+                        if other == "avx2" {
+                            "asks for AVX2, which this processor lacks"
+                        } else {
+                            "is not one of baseline, avx2, avx512"
+                        },
+                        match widest {
+                            Level::Avx512 => "AVX-512",
+                            Level::Avx2 => "AVX2+FMA",
+                            Level::Baseline => "the baseline",
+                        }
+                    );
+                    widest
+                }
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
