@@ -344,6 +344,109 @@ fn unwritable_destinations_fail_before_the_work() {
     clear_error(&o, &["is a directory"]);
 }
 
+/// Every command refuses a bad option before its work, not after: each run below would
+/// take long if it started (4,000 restarts, a 30 s bench, a 1,200-pixel render), and
+/// progress lines are asked for every 0.05 s. A refusal names the option, prints nothing
+/// of the work on stdout and no progress line, and leaves no output behind.
+#[test]
+fn bad_options_are_refused_before_the_work_in_every_command() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (brdf, _) = data(tmp.path());
+    let out = tmp.path().join("out");
+    let refused = |args: &[&str], names: &[&str]| {
+        let o = bin()
+            .env("BSDFIT_PROGRESS_SECS", "0.05")
+            .args(args)
+            .output()
+            .unwrap();
+        let err = clear_error(&o, names);
+        let what = args.join(" ");
+        assert!(
+            text(&o.stdout).is_empty(),
+            "{what}: the work ran: {}",
+            text(&o.stdout)
+        );
+        assert!(
+            !err.lines()
+                .any(|l| l.contains("elapsed") || l.contains("step 0")),
+            "{what}: progress of the work:\n{err}"
+        );
+        assert!(!out.exists(), "{what}: left {}", out.display());
+    };
+    let diagnose = |extra: &[&str], names: &[&str]| {
+        let mut a = vec![
+            "diagnose",
+            p(&brdf),
+            "--model",
+            "lambert",
+            "--backend",
+            "cpu",
+            "--restarts",
+            "4000",
+        ];
+        a.extend_from_slice(extra);
+        refused(&a, names);
+    };
+    diagnose(&["--fix", "sigmaa=1"], &["--fix", "sigmaa"]);
+    diagnose(&["--loss", "nosuch"], &["--loss", "nosuch"]);
+    diagnose(&["--json", "/proc/x/d.json"], &["--json /proc/x/d.json"]);
+    diagnose(&["--report", "/proc/x/rep"], &["--report /proc/x/rep"]);
+    let bench = |extra: &[&str], names: &[&str]| {
+        let mut a = vec!["bench", "--backend", "cpu", "--seconds", "30"];
+        a.extend_from_slice(extra);
+        refused(&a, names);
+    };
+    bench(&["--models", "nosuch"], &["--models", "nosuch"]);
+    bench(&["--json", "/proc/x/b.json"], &["--json /proc/x/b.json"]);
+    bench(&["--data", "/nonexistent/d.csv"], &["/nonexistent/d.csv"]);
+    let sweep = |extra: &[&str], names: &[&str]| {
+        let mut a = vec![
+            "sweep",
+            p(&brdf),
+            "--models",
+            "lambert,on",
+            "--backend",
+            "cpu",
+            "--restarts",
+            "4000",
+            "--no-pictures",
+            "--out",
+            p(&out),
+        ];
+        a.extend_from_slice(extra);
+        refused(&a, names);
+    };
+    sweep(&["--fix", "sigmaa=0.3"], &["--fix sigmaa"]);
+    sweep(&["--losses", "rmse,nosuch"], &["--losses", "nosuch"]);
+    sweep(&["--shard", "3/2"], &["--shard"]);
+    let render = |extra: &[&str], names: &[&str]| {
+        let mut a = vec![
+            "render",
+            p(&brdf),
+            "--model",
+            "on",
+            "--size",
+            "1200",
+            "--out",
+            p(&out),
+        ];
+        a.extend_from_slice(extra);
+        refused(&a, names);
+    };
+    render(
+        &["--params", "rho=0.5,sigma=0.3,bogus=1"],
+        &["--params", "bogus"],
+    );
+    render(
+        &["--params", "rho=0.5,sigma=0.3", "--light", "0,0,-1"],
+        &["--light"],
+    );
+    render(
+        &["--params", "rho=0.5,sigma=0.3", "--error-scale", "0"],
+        &["--error-scale"],
+    );
+}
+
 #[test]
 fn outputs_are_written_whole_and_leave_no_temporaries() {
     let tmp = tempfile::tempdir().unwrap();

@@ -57,7 +57,6 @@ pub struct RenderArgs {
 /// The `render` command.
 pub fn run(a: &RenderArgs) -> Result<()> {
     use anyhow::Context;
-    crate::output::check_writable_dir(&a.out, "--out")?;
     let data = a.data_args.read(&a.data)?;
     let baseline = match &a.baseline {
         Some(p) => a.data_args.read(p)?,
@@ -101,6 +100,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         .context("--light: expected THETA,PHI in degrees")?;
     anyhow::ensure!((0.0..90.0).contains(&lt), "--light: θ must be in [0, 90)");
     anyhow::ensure!((8..=4096).contains(&a.size), "--size must be in 8..=4096");
+    if let Some(scale) = a.error_scale {
+        anyhow::ensure!(
+            scale.is_finite() && scale > 0.0,
+            "--error-scale: the error that maps to full colour must be a positive number, got {scale}"
+        );
+    }
+    // Every option is checked before the output folder is made and the render starts.
+    crate::output::check_writable_dir(&a.out, "--out")?;
     let o = RenderOptions {
         size: a.size,
         light_theta: lt,

@@ -225,7 +225,9 @@ impl ConstraintSpec {
         for c in kinds.into_iter().flat_map(|k| self.of(k)) {
             let name = &c.name;
             if !models.iter().any(|m| resolve(m, name).is_ok()) {
-                let specs: Vec<&str> = models.iter().map(|m| m.spec.as_str()).collect();
+                let mut specs: Vec<&str> = models.iter().map(|m| m.spec.as_str()).collect();
+                specs.sort_unstable();
+                specs.dedup();
                 return Err(field_error(format!(
                     "{} {name}: no model of this run has a parameter '{name}' (models: {})",
                     c.kind.option(),

@@ -256,6 +256,18 @@ pub fn run(cfg: &SweepConfig, obs: &mut dyn SweepObserver) -> Result<SweepStats>
         .enumerate()
         .filter(|(i, _)| place.mine(*i))
         .collect();
+    // A constraint that names no parameter of any model is refused before the folder is
+    // created or locked (each model built once per data set).
+    if !cfg.constraints.is_empty() {
+        let pairs: BTreeSet<(&str, usize)> =
+            all.iter().map(|t| (t.model.as_str(), t.data)).collect();
+        let models: Vec<Model> = pairs
+            .into_iter()
+            .filter_map(|(spec, d)| Model::for_data(spec, &files[d].data).ok())
+            .collect();
+        cfg.constraints
+            .check_names_against(&models.iter().collect::<Vec<_>>())?;
+    }
     // The folder is checked and locked before anything is read from it or fitted.
     let _lock = if cfg.dry_run {
         None
