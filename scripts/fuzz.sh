@@ -14,7 +14,7 @@
 # rustc take the -Z flags cargo-fuzz passes. Sanitizer: AddressSanitizer by default
 # (FUZZ_SANITIZER=none to turn it off); debug assertions and overflow checks on (-a), so
 # an integer overflow is a crash too. Other settings: FUZZ_SEED (libFuzzer -seed,
-# default 1), FUZZ_NICE (niceness, default 10). Needs `cargo install cargo-fuzz`.
+# default 1), FUZZ_NICE (niceness, default 10). Installs cargo-fuzz when it is missing.
 #
 # The growing corpus is fuzz/corpus/TARGET/ (not committed); the committed seeds are
 # fuzz/seeds/TARGET/ (python3 fuzz/make_seeds.py writes them). Logs: fuzz/logs/.
@@ -36,9 +36,14 @@ sanitizer=${FUZZ_SANITIZER:-address}
 nice_level=${FUZZ_NICE:-10}
 export RUSTC_BOOTSTRAP=1
 
+# cargo-fuzz is installed when missing (the version the record runs used), as
+# scripts/test.sh installs what the tests need.
 if ! cargo fuzz --version >/dev/null 2>&1; then
-    echo "cargo-fuzz is not installed: cargo install cargo-fuzz" >&2
-    exit 2
+    echo "== installing cargo-fuzz 0.13.2 (cargo install --locked) =="
+    cargo install --locked --version 0.13.2 cargo-fuzz || {
+        echo "cargo-fuzz could not be installed: cargo install cargo-fuzz" >&2
+        exit 2
+    }
 fi
 
 # One build of every target (release, debug assertions, the sanitizer).
