@@ -118,9 +118,12 @@ fn a_lost_device_is_a_typed_fault_that_check_errors_reports() {
     assert!(device_fault(&g.prepare_kernels(&model).unwrap_err()).is_some());
 }
 
-/// `hang@1`: the first read-back never completes; the timeout ends the wait with a typed
-/// `Hung` naming the timeout's variable, and the backend refuses further work. (On a
-/// thread of its own, so that a broken timeout fails the test instead of hanging it.)
+/// `hang@1`: the first submission is made behind device work that outlasts the timeout
+/// (the injection's stall), so the device's own wait for it (the poll with its timeout)
+/// ends with a typed `Hung` naming the timeout's variable, and the backend refuses
+/// further work. (On a thread of its own, so that a broken timeout fails the test
+/// instead of hanging it; a wait without its timeout returns once the stall is done,
+/// and the test fails on the read-back that completed.)
 #[test]
 fn a_read_back_that_never_completes_times_out_as_a_typed_fault() {
     let Some(g) = gpu("hang@1") else { return };
@@ -351,7 +354,7 @@ fn a_sweep_that_loses_its_gpu_ends_with_the_cpu_sweeps_rows() {
     );
 }
 
-/// `hang@N` mid-sweep: submission N never completes; a short timeout ends the wait (short
+/// `hang@N` mid-sweep: submission N does not complete in time; a short timeout ends the wait (short
 /// for a test, yet far above what this sweep's submissions take: every read-back before
 /// the hang is bounded by it too).
 #[test]

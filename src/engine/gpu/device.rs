@@ -31,6 +31,23 @@ pub struct Device {
     plan: Option<FaultPlan>,
     /// How long a read-back waits for its submission ([`fault::TIMEOUT_VAR`]).
     timeout: Duration,
+    /// The `hang@N` injection's workload, made when first needed.
+    stall: std::sync::OnceLock<super::stall::Stall>,
+}
+
+/// A device that ran the `hang@N` injection's stall waits for it before it goes: wgpu
+/// waits only a few seconds for a queue's work before freeing what it uses.
+impl Drop for Device {
+    fn drop(&mut self) {
+        if self.stall.get().is_some_and(|s| s.submitted()) {
+            self.device
+                .poll(wgpu::PollType::Wait {
+                    submission_index: None,
+                    timeout: Some(Duration::from_secs(600)),
+                })
+                .ok();
+        }
+    }
 }
 
 /// What a device has been through: its submissions (numbered from 1) and its fault.
@@ -128,7 +145,7 @@ impl Device {
                 detail,
             });
         });
-        Ok(Device {
+        let d = Device {
             mappable: features.contains(wgpu::Features::MAPPABLE_PRIMARY_BUFFERS),
             device,
             queue,
@@ -138,12 +155,36 @@ impl Device {
             health,
             plan,
             timeout,
-        })
+            stall: std::sync::OnceLock::new(),
+        };
+        d.prepare_plan()?;
+        Ok(d)
+    }
+
+    /// A command buffer that keeps the device busy past the read-back timeout (three
+    /// times as long, and a second more: a measure taken while other work ran can make it
+    /// up to three times shorter): the `hang@N` injection runs it ahead of the N-th
+    /// submission's work. The device waits for it before it is dropped.
+    pub fn stall_past_timeout(&self) -> Result<wgpu::CommandBuffer> {
+        let stall = self.stall.get_or_init(|| super::stall::Stall::new(self));
+        stall.command_buffer(self, 3.0 * self.timeout.as_secs_f64() + 1.0)
+    }
+
+    /// Where a hang is planned, measure its workload now, while the device is idle (a
+    /// measure taken amid other work would make the stall too short).
+    fn prepare_plan(&self) -> Result<()> {
+        if self.plan.is_some_and(|p| p.what == fault::Injected::Hang) {
+            let stall = self.stall.get_or_init(|| super::stall::Stall::new(self));
+            stall.calibrate(self)?;
+        }
+        Ok(())
     }
 
     /// Inject `plan` instead of what [`fault::FAULT_VAR`] says (tests).
     pub fn set_fault_plan(&mut self, plan: Option<FaultPlan>) {
         self.plan = plan;
+        // A measure that fails now is tried again, and reported, at the planned hang.
+        self.prepare_plan().ok();
     }
 
     /// Wait at most `timeout` for each read-back instead of [`fault::TIMEOUT_VAR`]'s.
@@ -232,13 +273,13 @@ impl Device {
         }
     }
 
-    /// Wait for submission `n` (wgpu's `index`; `None` where it was never submitted)
-    /// and for its read-back's mapping, `mapped`, each at most the timeout. A timeout
+    /// Wait for submission `n` (wgpu's `index`) and for its read-back's mapping,
+    /// `mapped`, each at most the timeout. A timeout
     /// marks the device hung.
     pub fn wait_read_back(
         &self,
         n: u64,
-        index: Option<wgpu::SubmissionIndex>,
+        index: wgpu::SubmissionIndex,
         mapped: &Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
     ) -> Result<()> {
         let hung = || -> anyhow::Error {
@@ -249,16 +290,14 @@ impl Device {
                 })
                 .into()
         };
-        if let Some(index) = index {
-            match self.poll(wgpu::PollType::Wait {
-                submission_index: Some(index),
-                timeout: Some(self.timeout),
-            }) {
-                Ok(()) => {}
-                Err(PollFailed::Timeout) => return Err(hung()),
-                Err(PollFailed::Other(e)) => {
-                    return Err(self.read_back_error(format!("GPU poll failed: {e}")))
-                }
+        match self.poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: Some(self.timeout),
+        }) {
+            Ok(()) => {}
+            Err(PollFailed::Timeout) => return Err(hung()),
+            Err(PollFailed::Other(e)) => {
+                return Err(self.read_back_error(format!("GPU poll failed: {e}")))
             }
         }
         match mapped.recv_timeout(self.timeout) {

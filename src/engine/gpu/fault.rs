@@ -15,8 +15,9 @@
 //! **The switch.** `BSDFIT_GPU_FAULT=lost@N` destroys the device (`wgpu::Device::destroy`)
 //! just before the N-th submission, so that submission and everything after it fail
 //! through wgpu's own channels, as for a device the driver lost: the failed submission,
-//! the failed mapping and the device-lost callback. `BSDFIT_GPU_FAULT=hang@N` leaves the
-//! N-th submission unsubmitted, so its read-back never completes, as for a device that
+//! the failed mapping and the device-lost callback. `BSDFIT_GPU_FAULT=hang@N` submits,
+//! ahead of the N-th submission's work, compute work that outlasts the read-back timeout
+//! (`stall.rs`), so the device's wait for that submission times out, as for a device that
 //! stopped answering: only the timeout ends the wait.
 
 use anyhow::{anyhow, bail, Result};
@@ -82,7 +83,7 @@ pub fn device_fault(e: &anyhow::Error) -> Option<&DeviceFault> {
 pub enum Injected {
     /// Destroy the device before submitting.
     Lost,
-    /// Do not submit: the read-back waits for nothing.
+    /// Keep the device busy past the timeout ahead of the submission's work.
     Hang,
 }
 

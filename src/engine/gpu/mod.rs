@@ -44,6 +44,7 @@ pub mod pipelines;
 mod recorder;
 pub mod records;
 mod runner;
+mod stall;
 
 use super::wgsl::Shape;
 use super::{Backend, Evaluator, Problem};

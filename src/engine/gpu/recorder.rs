@@ -83,17 +83,20 @@ impl<'d> Recorder<'d> {
         };
         let slice = staging.slice(0..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
-        // `hang@N` (fault::FAULT_VAR): the submission is never made, so its read-back
-        // never completes (the sender stays alive, unused, until the wait ends).
-        let (index, _unsent) = if injected == Some(Injected::Hang) {
-            (None, Some(tx))
-        } else {
-            let index = self.device.queue.submit(Some(self.encoder.finish()));
-            slice.map_async(wgpu::MapMode::Read, move |r| {
-                tx.send(r).ok();
-            });
-            (Some(index), None)
+        // `hang@N` (fault::FAULT_VAR): work that outlasts the read-back timeout runs
+        // ahead of this submission's own, so the wait below times out on the device, as
+        // for a device that stopped answering.
+        let stall = match injected {
+            Some(Injected::Hang) => Some(self.device.stall_past_timeout()?),
+            _ => None,
         };
+        let index = self
+            .device
+            .queue
+            .submit(stall.into_iter().chain(Some(self.encoder.finish())));
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            tx.send(r).ok();
+        });
         self.device.wait_read_back(n, index, &rx)?;
         let out = {
             let view = slice.get_mapped_range().map_err(|e| {

@@ -1,0 +1,158 @@
+//! The workload of the `hang@N` fault injection ([`super::fault::FAULT_VAR`]): compute
+//! work that keeps the device busy for longer than the read-back timeout, submitted
+//! ahead of the N-th submission's own work, so that the device's wait for that
+//! submission (the poll with its timeout in `Device::wait_read_back`) is what ends it, as
+//! for a device that stopped answering.
+//!
+//! llvmpipe (lavapipe) ends an invocation's loops once they have run 65,535 iterations
+//! in all (shaders/engine/kernel.wgsl, `loops_completed`), so the work is spread over
+//! many invocations, each a loop within that bound. How long a workgroup takes is
+//! measured on the device first (two short passes: the slope between them leaves out
+//! the cost of a submission), then the grid is scaled to the time wanted.
+
+use super::device::Device;
+use anyhow::{Context, Result};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+const SHADER: &str = "
+@group(0) @binding(0) var<storage, read_write> sink: array<u32>;
+
+@compute @workgroup_size(64)
+fn stall(@builtin(global_invocation_id) id: vec3<u32>) {
+    var x = id.x * 2654435761u + id.y;
+    for (var i = 0u; i < 60000u; i++) {
+        x = (x ^ (x >> 13u)) * 1664525u + i;
+    }
+    // Stored so that the loop is not removed; which invocation's value lands is moot.
+    sink[(id.x + id.y) & 1023u] = x;
+}
+";
+
+/// Workgroups of the calibration passes.
+const SMALL: u32 = 8;
+const LARGE: u32 = 40;
+
+pub struct Stall {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    _sink: wgpu::Buffer,
+    /// Seconds one workgroup adds to a pass, measured once.
+    per_group: OnceLock<f64>,
+    /// Whether a stall was handed out (the device then waits for it before it goes).
+    submitted: std::sync::atomic::AtomicBool,
+}
+
+impl Stall {
+    pub fn new(device: &Device) -> Stall {
+        let d = &device.device;
+        let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("bsdfit stall (hang injection)"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let pipeline = d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("bsdfit stall"),
+            layout: None,
+            module: &module,
+            entry_point: Some("stall"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let sink = d.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("bsdfit stall sink"),
+            size: 4 * 1024,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let bind_group = d.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("bsdfit stall"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: sink.as_entire_binding(),
+            }],
+        });
+        Stall {
+            pipeline,
+            bind_group,
+            _sink: sink,
+            per_group: OnceLock::new(),
+            submitted: Default::default(),
+        }
+    }
+
+    pub fn submitted(&self) -> bool {
+        self.submitted.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Measure how long a workgroup takes, once (the device should be idle: the device
+    /// does it when the injection is planned, before any other work).
+    pub fn calibrate(&self, device: &Device) -> Result<f64> {
+        match self.per_group.get() {
+            Some(&s) => Ok(s),
+            None => {
+                let s = self.measure(device)?;
+                Ok(*self.per_group.get_or_init(|| s))
+            }
+        }
+    }
+
+    /// A command buffer that keeps `device` busy for about `seconds` (at least).
+    pub fn command_buffer(&self, device: &Device, seconds: f64) -> Result<wgpu::CommandBuffer> {
+        let per_group = self.calibrate(device)?;
+        let groups = (seconds / per_group).ceil().clamp(1.0, 65_535.0 * 65_535.0) as u64;
+        let x = groups.min(65_535) as u32;
+        let y = groups.div_ceil(65_535) as u32;
+        self.submitted
+            .store(true, std::sync::atomic::Ordering::SeqCst);
+        Ok(self.encode(device, [x, y]))
+    }
+
+    fn encode(&self, device: &Device, grid: [u32; 2]) -> wgpu::CommandBuffer {
+        let mut encoder = device
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("bsdfit stall"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("stall"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(grid[0], grid[1], 1);
+        }
+        encoder.finish()
+    }
+
+    /// Seconds per workgroup: the slope between a small and a large pass, each waited
+    /// for in full.
+    fn measure(&self, device: &Device) -> Result<f64> {
+        let time = |groups: u32| -> Result<f64> {
+            let t0 = Instant::now();
+            let index = device.queue.submit(Some(self.encode(device, [groups, 1])));
+            device
+                .device
+                .poll(wgpu::PollType::Wait {
+                    submission_index: Some(index),
+                    timeout: Some(Duration::from_secs(120)),
+                })
+                .context("the hang injection's calibration pass did not complete")?;
+            Ok(t0.elapsed().as_secs_f64())
+        };
+        // The least of two tries of each: work of other threads on the device can only
+        // lengthen a pass, and a stall sized from a lengthened pass would be too short.
+        let (small, large) = (
+            time(SMALL)?.min(time(SMALL)?),
+            time(LARGE)?.min(time(LARGE)?),
+        );
+        let slope = (large - small) / f64::from(LARGE - SMALL);
+        Ok(if slope > 0.0 {
+            slope
+        } else {
+            large / f64::from(LARGE)
+        }
+        .max(1e-7))
+    }
+}
