@@ -3,7 +3,7 @@
 #
 #   scripts/fuzz-coverage.sh [TARGET...]
 #
-# For each target (default: v1 alta merl rgl any), `cargo fuzz coverage` replays its
+# For each target (default: all seven, v1 alta merl rgl zemax astm any), `cargo fuzz coverage` replays its
 # corpus (fuzz/corpus/TARGET, grown by scripts/fuzz.sh, with fuzz/seeds/TARGET and
 # fuzz/regressions/TARGET) through a coverage-instrumented build, then llvm-cov prints
 # the coverage of the files under src/data/ that the target reads through. Needs
@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(v1 alta merl rgl any)
+    targets=(v1 alta merl rgl zemax astm any)
 fi
 export RUSTC_BOOTSTRAP=1
 host=$(rustc -vV | sed -n 's/^host: //p')
@@ -31,8 +31,10 @@ files() {
         v1) echo "src/data/readers/v1.rs" ;;
         alta) echo "src/data/readers/alta/" ;;
         merl) echo "src/data/readers/merl.rs" ;;
-        rgl) echo "src/data/readers/rgl.rs" ;;
-        any) echo "src/data/readers/mod.rs" ;;
+        rgl) echo "src/data/readers/rgl.rs src/data/readers/tensor.rs" ;;
+        zemax) echo "src/data/readers/zemax/" ;;
+        astm) echo "src/data/readers/astm/" ;;
+        any) echo "src/data/readers/mod.rs src/data/readers/text.rs" ;;
     esac
 }
 

@@ -244,8 +244,15 @@ def test_bsdfit_reads_a_database_layout_file_as_mitsuba_evaluates_it(spectral, v
     samples a material written here as the database's files are."""
     path = tmp_path / ("spectral.bsdf" if spectral else "rgb.bsdf")
     database_material(path, spectral, seed=2)
-    data = bsdfit.Dataset.read(path, assume_uncertainty=(0.01, 1e-6), sample_geometry="hemi")
+    # Incidence azimuths 0…150° besides 0: the relative azimuth is checked, not only u_θ.
+    data = bsdfit.Dataset.read(path, assume_uncertainty=(0.01, 1e-6), sample_geometry="hemi+azimuths")
     assert data.channels == [450.0, 550.0, 650.0]
+    assert len(set(np.round(data.phi_i).tolist())) == 6
+    # Mirror directions left out: their half vector is the normal, whose azimuth is
+    # rounding noise, and random tables differ along u_φ at u_θ = 0 (a real material's
+    # hold one value there).
+    mirror = (np.abs(data.theta_o - data.theta_i) < 1e-6) & (
+        np.abs(np.cos(np.radians(data.phi_o - data.phi_i)) + 1.0) < 1e-9)
     if spectral:
         mi.set_variant("scalar_spectral")
     try:
@@ -254,7 +261,7 @@ def test_bsdfit_reads_a_database_layout_file_as_mitsuba_evaluates_it(spectral, v
             # azimuth of ωi = (0, 0, 1) through a symmetry flag it leaves unset for
             # isotropic files, and the result can turn by 180° from one loaded object to
             # the next.
-            sel = (data.channel == data.channels.index(nm)) & (data.theta_i > 0)
+            sel = (data.channel == data.channels.index(nm)) & (data.theta_i > 0) & ~mirror
             ti, pi, to, po = (getattr(data, k)[sel] for k in ("theta_i", "phi_i", "theta_o", "phi_o"))
             assert len(ti) > 250
             if spectral:
@@ -265,9 +272,9 @@ def test_bsdfit_reads_a_database_layout_file_as_mitsuba_evaluates_it(spectral, v
             rel = np.abs(ours - got) / got
             assert np.all(np.isfinite(got)) and np.all(got > 0)
             print(f"{path.name} {nm} nm: median {np.median(rel):.1e}, largest {np.max(rel):.1e}")
-            # f32 tables and CDFs in Mitsuba, f64 in bsdfit: measured 1e-7 median, 2.5e-4
-            # largest (a direction whose half vector sits on a cell edge of the warp).
-            assert np.median(rel) < 1e-5 and np.max(rel) < 2e-3, (nm, np.median(rel), np.max(rel))
+            # f32 tables and CDFs in Mitsuba, f64 in bsdfit: measured 1.2e-7 median, 1.4e-6
+            # largest (the mirror directions left out, as said above).
+            assert np.median(rel) < 1e-5 and np.max(rel) < 1e-4, (nm, np.median(rel), np.max(rel))
     finally:
         mi.set_variant("scalar_rgb")
 
@@ -300,8 +307,9 @@ def test_bsdfit_reads_an_anisotropic_database_layout_file_as_mitsuba_evaluates_i
         assert np.all(np.isfinite(got)) and np.all(got > 0)
         rel = np.abs(ours - got) / got
         print(f"anisotropic {nm} nm: median {np.median(rel):.1e}, largest {np.max(rel):.1e}")
-        # As the isotropic file: f32 tables in Mitsuba, f64 in bsdfit.
-        assert np.median(rel) < 1e-5 and np.max(rel) < 2e-3, (nm, np.median(rel), np.max(rel))
+        # As the isotropic file: f32 tables in Mitsuba, f64 in bsdfit (measured 1.3e-7
+        # median, 1.1e-6 largest).
+        assert np.median(rel) < 1e-5 and np.max(rel) < 1e-4, (nm, np.median(rel), np.max(rel))
 
 
 def mitsuba_spectral(path, ti, pi, to, po, nm):
