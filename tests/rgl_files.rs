@@ -163,6 +163,20 @@ fn sample_angles(s: &bsdfit::data::Sample) -> (f64, f64, f64, f64) {
     (theta_i, u_theta(theta_i), u_theta(theta_m), wo[2])
 }
 
+/// The sample's value is `want` to `tol` relative, or the failure names the sample.
+fn assert_read_as(s: &bsdfit::data::Sample, want: f64, tol: f64) {
+    assert!(
+        (s.value - want).abs() <= tol * want.abs(),
+        "{} nm, θi {:.1}° φi {:.1}° θo {:.1}° φo {:.1}°: {} vs {want}",
+        s.wavelength_nm,
+        s.theta_i.to_degrees(),
+        s.phi_i.to_degrees(),
+        s.theta_o.to_degrees(),
+        s.phi_o.to_degrees(),
+        s.value
+    );
+}
+
 /// R, G, B: the nominal wavelengths bsdfit gives an RGB file's channels, and the
 /// coefficients of each channel's table (distinct, so that a swap shows).
 const RGB_NM: [f64; 3] = [650.0, 550.0, 450.0];
@@ -445,16 +459,7 @@ fn a_database_file_varying_along_u_phi_reads_to_its_closed_form() {
         let want = (a[k] + b[k] * ti) * (1.0 + 2.0 * sx) * g(sy) * (2.0 + xm * g(ym))
             / (4.0 * (1.0 + 0.5 * u_theta(ti)))
             / wo[2];
-        assert!(
-            (s.value - want).abs() <= 2e-5 * want,
-            "{} nm, θi {:.1}° φi {:.1}° θo {:.1}° φo {:.1}°: {} vs {want}",
-            s.wavelength_nm,
-            s.theta_i.to_degrees(),
-            s.phi_i.to_degrees(),
-            s.theta_o.to_degrees(),
-            s.phi_o.to_degrees(),
-            s.value
-        );
+        assert_read_as(s, want, 2e-5);
         checked[k] += 1;
         incidence_azimuths.insert((s.phi_i.to_degrees() * 1e3).round() as i64);
     }
@@ -552,16 +557,7 @@ fn an_anisotropic_file_reads_to_its_closed_form() {
         let want = coefficient(k, ti, pi) * (1.0 + 2.0 * x) * (1.0 + y) / wo[2];
         // float32 tables; near the pole u_θ carries the rounding of acos (as above).
         let tol = if x < 1e-3 { 1e-3 } else { 2e-5 };
-        assert!(
-            (s.value - want).abs() <= tol * want.abs(),
-            "{} nm, θi {:.1}° φi {:.1}° θo {:.1}° φo {:.1}°: {} vs {want}",
-            s.wavelength_nm,
-            s.theta_i.to_degrees(),
-            s.phi_i.to_degrees(),
-            s.theta_o.to_degrees(),
-            s.phi_o.to_degrees(),
-            s.value
-        );
+        assert_read_as(s, want, tol);
         checked += 1;
     }
     assert!(checked > 1000, "{checked}");

@@ -373,78 +373,85 @@ fn bad_options_are_refused_before_the_work_in_every_command() {
         );
         assert!(!out.exists(), "{what}: left {}", out.display());
     };
-    let diagnose = |extra: &[&str], names: &[&str]| {
-        let mut a = vec![
-            "diagnose",
-            p(&brdf),
-            "--model",
-            "lambert",
-            "--backend",
-            "cpu",
-            "--restarts",
-            "4000",
-        ];
-        a.extend_from_slice(extra);
-        refused(&a, names);
-    };
-    diagnose(&["--fix", "sigmaa=1"], &["--fix", "sigmaa"]);
-    diagnose(&["--loss", "nosuch"], &["--loss", "nosuch"]);
-    diagnose(&["--json", "/proc/x/d.json"], &["--json /proc/x/d.json"]);
-    diagnose(&["--report", "/proc/x/rep"], &["--report /proc/x/rep"]);
-    let bench = |extra: &[&str], names: &[&str]| {
-        let mut a = vec!["bench", "--backend", "cpu", "--seconds", "30"];
-        a.extend_from_slice(extra);
-        refused(&a, names);
-    };
-    bench(&["--models", "nosuch"], &["--models", "nosuch"]);
-    bench(&["--json", "/proc/x/b.json"], &["--json /proc/x/b.json"]);
-    bench(&["--data", "/nonexistent/d.csv"], &["/nonexistent/d.csv"]);
-    let sweep = |extra: &[&str], names: &[&str]| {
-        let mut a = vec![
-            "sweep",
-            p(&brdf),
-            "--models",
-            "lambert,on",
-            "--backend",
-            "cpu",
-            "--restarts",
-            "4000",
-            "--no-pictures",
-            "--out",
-            p(&out),
-        ];
-        a.extend_from_slice(extra);
-        refused(&a, names);
-    };
-    sweep(&["--fix", "sigmaa=0.3"], &["--fix sigmaa"]);
-    sweep(&["--losses", "rmse,nosuch"], &["--losses", "nosuch"]);
-    sweep(&["--shard", "3/2"], &["--shard"]);
-    let render = |extra: &[&str], names: &[&str]| {
-        let mut a = vec![
-            "render",
-            p(&brdf),
-            "--model",
-            "on",
-            "--size",
-            "1200",
-            "--out",
-            p(&out),
-        ];
-        a.extend_from_slice(extra);
-        refused(&a, names);
-    };
-    render(
-        &["--params", "rho=0.5,sigma=0.3,bogus=1"],
-        &["--params", "bogus"],
-    );
-    render(
-        &["--params", "rho=0.5,sigma=0.3", "--light", "0,0,-1"],
-        &["--light"],
-    );
-    render(
-        &["--params", "rho=0.5,sigma=0.3", "--error-scale", "0"],
-        &["--error-scale"],
-    );
+    let (brdf_s, out_s) = (p(&brdf), p(&out));
+    let diagnose = [
+        "diagnose",
+        brdf_s,
+        "--model",
+        "lambert",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "4000",
+    ];
+    let bench = ["bench", "--backend", "cpu", "--seconds", "30"];
+    let sweep = [
+        "sweep",
+        brdf_s,
+        "--models",
+        "lambert,on",
+        "--backend",
+        "cpu",
+        "--restarts",
+        "4000",
+        "--no-pictures",
+        "--out",
+        out_s,
+    ];
+    let render = [
+        "render", brdf_s, "--model", "on", "--size", "1200", "--out", out_s,
+    ];
+    let params = "rho=0.5,sigma=0.3";
+    let cases: [(&[&str], &[&str], &[&str]); 13] = [
+        (&diagnose, &["--fix", "sigmaa=1"], &["--fix", "sigmaa"]),
+        (&diagnose, &["--loss", "nosuch"], &["--loss", "nosuch"]),
+        (
+            &diagnose,
+            &["--json", "/proc/x/d.json"],
+            &["--json /proc/x/d.json"],
+        ),
+        (
+            &diagnose,
+            &["--report", "/proc/x/rep"],
+            &["--report /proc/x/rep"],
+        ),
+        (&bench, &["--models", "nosuch"], &["--models", "nosuch"]),
+        (
+            &bench,
+            &["--json", "/proc/x/b.json"],
+            &["--json /proc/x/b.json"],
+        ),
+        (
+            &bench,
+            &["--data", "/nonexistent/d.csv"],
+            &["/nonexistent/d.csv"],
+        ),
+        (&sweep, &["--fix", "sigmaa=0.3"], &["--fix sigmaa"]),
+        (
+            &sweep,
+            &["--losses", "rmse,nosuch"],
+            &["--losses", "nosuch"],
+        ),
+        (&sweep, &["--shard", "3/2"], &["--shard"]),
+        (
+            &render,
+            &["--params", "rho=0.5,sigma=0.3,bogus=1"],
+            &["--params", "bogus"],
+        ),
+        (
+            &render,
+            &["--params", params, "--light", "0,0,-1"],
+            &["--light"],
+        ),
+        (
+            &render,
+            &["--params", params, "--error-scale", "0"],
+            &["--error-scale"],
+        ),
+    ];
+    for (command, extra, names) in cases {
+        refused(&[command, extra].concat(), names);
+    }
 }
 
 #[test]
