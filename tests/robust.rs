@@ -689,3 +689,65 @@ fn non_finite_fits_name_the_samples_that_cause_them() {
     );
     assert!(m.lines().count() <= 6, "at most 5 samples: {m}");
 }
+
+/// Help that tells the truth: every command that reads data names every format the
+/// readers recognise, and every option of every command has a description (a flag line
+/// followed at once by its `[default: …]` has none).
+#[test]
+fn every_command_names_every_format_and_every_option_has_help() {
+    use bsdfit::data::readers::Format;
+    let formats = [
+        Format::V1Csv,
+        Format::AltaText,
+        Format::MerlBinary,
+        Format::RglBsdf,
+        Format::ZemaxBsdf,
+        Format::AstmE1392,
+    ]
+    .map(|f| f.to_string());
+    let top = text(&run(&["--help"]).stdout);
+    let commands: Vec<String> = top
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| !l.trim().is_empty())
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|c| c != "help")
+        .collect();
+    assert!(commands.len() >= 12, "{commands:?}");
+    let mut missing = Vec::new();
+    for c in &commands {
+        let help = text(&run(&[c, "--help"]).stdout);
+        let reads_data = [
+            "fit", "diagnose", "convert", "sweep", "render", "eval", "bench",
+        ];
+        if reads_data.contains(&c.as_str()) {
+            // Help wraps lines: compare with whitespace collapsed.
+            let flat = help.split_whitespace().collect::<Vec<_>>().join(" ");
+            for f in &formats {
+                if !flat.contains(f.as_str()) {
+                    missing.push(format!("{c}: the format '{f}' is not named"));
+                }
+            }
+        }
+        let lines: Vec<&str> = help.lines().collect();
+        for (k, l) in lines.iter().enumerate() {
+            let t = l.trim_start();
+            if !(t.starts_with("--") || t.starts_with("-") && t.get(2..4) == Some(", ")) {
+                continue;
+            }
+            if t.starts_with("-h, --help") || t.starts_with("-V, --version") {
+                continue;
+            }
+            // Short help sits on the flag's line after two spaces; long help on the next.
+            let same_line = t
+                .split_once("  ")
+                .is_some_and(|(_, h)| !h.trim().is_empty());
+            let next = lines.get(k + 1).map(|n| n.trim()).unwrap_or("");
+            if !same_line && (next.is_empty() || next.starts_with('[') || next.starts_with('-')) {
+                missing.push(format!("{c}: {} has no help", t.split(' ').next().unwrap()));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "{}", missing.join("\n"));
+}

@@ -16,8 +16,9 @@ pub struct BenchArgs {
     /// BRDF and BTDF; with --data, the catalogue of the data's kind).
     #[arg(long, value_delimiter = ',')]
     pub models: Option<Vec<String>>,
-    /// Measure on this data file (any format `fit` reads) instead of the built-in
-    /// synthetic sets (816 BRDF samples in 3 channels, 195 BTDF samples).
+    /// Measure on this data file instead of the built-in synthetic sets (816 BRDF samples
+    /// in 3 channels, 195 BTDF samples): any format read (bsdfit v1 CSV, ALTA text, MERL
+    /// binary, RGL .bsdf, Zemax BSDF, ASTM E1392; recognised by content).
     #[arg(long, value_name = "FILE")]
     pub data: Option<PathBuf>,
     /// Reading options of --data.

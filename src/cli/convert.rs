@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct ConvertArgs {
-    /// Input file (format recognised by content: v1 CSV, ALTA text, MERL binary).
+    #[arg(help = super::DATA_FILE_HELP)]
     pub input: PathBuf,
     /// Output v1 CSV file.
     #[arg(long)]

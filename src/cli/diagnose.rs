@@ -18,7 +18,7 @@ use std::path::PathBuf;
 /// `bsdfit diagnose DATA --model START [--json OUT] [--report DIR]`.
 #[derive(Args, Clone, Debug)]
 pub struct DiagnoseArgs {
-    /// Dataset file (bsdfit CSV v1).
+    #[arg(help = super::DATA_FILE_HELP)]
     pub data: PathBuf,
     /// Start model spec, e.g. lambert, on, btdf(beckmann).
     #[arg(long)]
@@ -26,6 +26,8 @@ pub struct DiagnoseArgs {
     /// Loss that drives each fit (the statistics always use χ²).
     #[arg(long, default_value_t = DiagnoseOptions::default().loss.metric.to_string())]
     pub loss: String,
+    /// Weighting of that loss: uniform, relunc, invunc, or unc (the kind's uncertainty
+    /// weighting); χ² weights by 1/u² whatever is given.
     #[arg(long, default_value_t = DiagnoseOptions::default().loss.weights.to_string())]
     pub weights: String,
     #[arg(long, value_parser = super::choice::<Optimizer>(), default_value_t = DiagnoseOptions::default().optimizer)]

@@ -17,8 +17,9 @@ pub struct EvalArgs {
     /// evaluated with the fit of its own plane).
     pub fit: PathBuf,
     /// Evaluate at every sample (geometry and wavelength) of this data file, in any format
-    /// the readers accept (v1 CSV, ALTA text, MERL binary). Only its geometries are used:
-    /// files without uncertainties need no --assume-uncertainty here.
+    /// read (bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392;
+    /// recognised by content). Only its geometries are used: files without uncertainties
+    /// need no --assume-uncertainty here.
     #[arg(long, value_name = "DATA")]
     pub at: Option<PathBuf>,
     /// Evaluate on a named geometry (see `bsdfit models`), or names joined by `+`, at every

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct FitArgs {
-    /// Dataset file (bsdfit CSV v1).
+    #[arg(help = super::DATA_FILE_HELP)]
     pub data: PathBuf,
     /// Model spec, e.g. lambert, on, fa(eon), rmg(ggx), btdf(tr)+scale.
     #[arg(long)]

@@ -98,8 +98,9 @@ enum Command {
     /// their ranges), add null cases, run `diagnose` on each, and print the detection and
     /// false-effect rates by signal-to-noise.
     Battery(battery::BatteryArgs),
-    /// Convert a data file of any supported format (v1 CSV, ALTA text, MERL binary) to
-    /// bsdfit v1 CSV, applying the data-selection options.
+    /// Convert a data file of any format read (bsdfit v1 CSV, ALTA text, MERL binary, RGL
+    /// .bsdf, Zemax BSDF, ASTM E1392; recognised by content) to bsdfit v1 CSV, applying the
+    /// data-selection options.
     Convert(convert::ConvertArgs),
     /// Evaluate a saved fit (`fit --json`) at the geometries of a data file or of a named
     /// geometry: a v1 CSV of model values with their standard uncertainties propagated
@@ -121,6 +122,11 @@ enum Command {
     /// roughconductor with k = 0) and names them when it refuses a model.
     Export(export::ExportArgs),
 }
+
+/// The help of a data-file argument: every format the readers recognise by content
+/// (`data::readers::Format`'s names; `tests/cli.rs` checks each command's help names
+/// them all).
+pub const DATA_FILE_HELP: &str = "Data file, in any format read (recognised by content): bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392";
 
 /// Data selection and validation, shared by every command that reads measurements.
 #[derive(Args, Clone, Debug)]

@@ -11,7 +11,9 @@ use clap::Args;
 /// `bsdfit render` arguments.
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// BRDF data set whose samples make the tabulated baseline (and to which the fit belongs).
+    /// BRDF data set whose samples make the tabulated baseline (and to which the fit
+    /// belongs), in any format read (bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf,
+    /// Zemax BSDF, ASTM E1392; recognised by content).
     pub data: std::path::PathBuf,
     /// A fit: the JSON of `bsdfit fit --json`, or results.json of a sweep (then pick the row
     /// with --model and, if several match, --loss/--weights/--optimizer).
@@ -23,22 +25,28 @@ pub struct RenderArgs {
     /// Parameters as name=value,... (with --model, instead of --fit).
     #[arg(long)]
     pub params: Option<String>,
+    /// With a sweep's results.json as --fit: the loss of the row to render.
     #[arg(long)]
     pub loss: Option<String>,
+    /// With a sweep's results.json as --fit: the weighting of the row to render.
     #[arg(long)]
     pub weights: Option<String>,
+    /// With a sweep's results.json as --fit: the optimizer of the row to render.
     #[arg(long)]
     pub optimizer: Option<String>,
     /// Another data set of the same material for the baseline (e.g. one with off-plane and
     /// near-specular samples, as the paper's Fig. 1).
     #[arg(long)]
     pub baseline: Option<std::path::PathBuf>,
+    /// Image width and height in pixels (8–4096).
     #[arg(long, default_value_t = 256)]
     pub size: u32,
     /// Light direction THETA,PHI in degrees (polar angle from the view axis, azimuth in the
     /// image plane; 135 = upper left).
     #[arg(long, default_value = "45,135")]
     pub light: String,
+    /// How the tabulated baseline finds a pixel's value among the samples: nearest (the
+    /// nearest sample's) or idw (an inverse-distance blend of the 4 nearest).
     #[arg(long, value_parser = super::choice::<Lookup>(), default_value = "idw")]
     pub lookup: Lookup,
     #[arg(long, value_parser = super::choice::<ErrorMetric>(), default_value = "smape")]

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct SynthArgs {
+    /// Model spec whose values are written (see `bsdfit models`).
     #[arg(long)]
     pub model: String,
     /// Parameter values, e.g. rho=0.5,sigma=0.7 or rho=0.4:0.5:0.6 (one per channel).
