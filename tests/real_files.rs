@@ -363,3 +363,62 @@ fn the_relabelled_btdf_file_reads_the_same_values_on_the_transmitted_side() {
         assert_eq!(by_key.get(&sample_key(s)), Some(&s.value), "{s:?}");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The diagnosis on a real isotropic file
+
+/// The Cornell acrylic is an isotropic surface measured at one incidence azimuth (φi =
+/// 0°): an aligned anisotropic lobe fits it significantly better than the isotropic one
+/// (a lobe shape across the plane of incidence that the catalogue lacks), and diagnose
+/// must not call that anisotropy: the frame test refuses it, and it is never adopted.
+#[test]
+fn diagnose_names_no_anisotropy_on_the_real_cornell_file() {
+    let backend = common::gpu_backend_flag();
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report");
+    let out = bsdfit(&[
+        "diagnose",
+        p(&real("cornell_acryl_blue.astm")),
+        "--model",
+        "fa(lambert)",
+        "--assume-uncertainty",
+        "0.05,0.001",
+        "--wavelengths",
+        "450,550,650",
+        "--backend",
+        backend,
+        "--bootstrap",
+        "0",
+        "--max-steps",
+        "1",
+        "--report",
+        p(&report),
+    ]);
+    assert_ok(&out, "diagnose");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
+    };
+    let steps = read("candidates.json");
+    let aniso: Vec<&serde_json::Value> = steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|s| s["candidates"].as_array().unwrap())
+        .filter(|c| c["effect"] == "anisotropy")
+        .collect();
+    assert!(!aniso.is_empty(), "no anisotropic candidate was tried");
+    for c in &aniso {
+        let test = &c["frame_test"];
+        assert_eq!(test["one_incidence_azimuth_deg"], 0.0, "{c}");
+        assert_eq!(test["shows_anisotropy"], false, "{c}");
+        assert_eq!(c["adoptable"], false, "{c}");
+    }
+    // The refusal is not for want of a gain: the F test alone would have adopted it.
+    assert!(aniso.iter().any(|c| c["significant"] == true), "{aniso:?}");
+    let diagnosis = read("diagnosis.json");
+    let effects = diagnosis["effects"].as_array().unwrap();
+    assert!(
+        !effects.iter().any(|e| e == "anisotropy"),
+        "anisotropy named: {effects:?}"
+    );
+}

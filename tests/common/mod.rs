@@ -48,6 +48,19 @@ pub fn missing(what: &str) {
     eprintln!("skipped: {what}");
 }
 
+/// The `--backend` of a command-line test that claims GPU coverage: `gpu` where a Vulkan
+/// adapter opens (lavapipe in CI, where its absence fails), else `simd`, saying so.
+pub fn gpu_backend_flag() -> &'static str {
+    match bsdfit::engine::gpu::GpuBackend::new() {
+        Ok(_) => "gpu",
+        Err(e) => {
+            missing(&format!("no Vulkan adapter for the GPU engine ({e})"));
+            eprintln!("running on the SIMD CPU engine instead: this is not GPU coverage");
+            "simd"
+        }
+    }
+}
+
 /// The engine of the tests that claim GPU coverage without needing it to be correct: the
 /// GPU engine (lavapipe in CI). Without a Vulkan adapter that fails under CI; elsewhere
 /// the test runs on the CPU reference, saying so, rather than passing as GPU coverage.
