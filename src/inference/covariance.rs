@@ -206,7 +206,11 @@ pub fn covariance(
         warnings: vec![],
         ridges: vec![],
     };
-    let (inv, singular) = match pseudo_inverse(&jtj) {
+    let slopes: Vec<f64> = free
+        .iter()
+        .map(|&j| unit_slope(&decls[j], flat[j]))
+        .collect();
+    let (inv, singular) = match pseudo_inverse(&jtj, &slopes) {
         Ok(found) => found,
         Err(why) => {
             out.warnings.push(why.into());
@@ -230,6 +234,32 @@ pub fn covariance(
                 names_in_plane.join(", ")
             ));
         }
+    }
+    // A frame the data leave free leaves the roughnesses along its axes free with it: the
+    // data see the lobe's widths along the measured planes, and which axes those belong
+    // to turns with φ0. (At normal incidence on two planes: two widths for three
+    // parameters, along a curved ridge; where it runs along φ0 alone, the linearised σ of
+    // α_u and α_v would hold φ0 at its fitted value.)
+    for [au, av, phi] in model.frames() {
+        let at = |j: usize| free.iter().position(|&f| f == j);
+        let Some(c) = at(phi).filter(|&c| singular[c]) else {
+            continue;
+        };
+        let pair: Vec<usize> = [au, av]
+            .into_iter()
+            .filter_map(at)
+            .filter(|&k| !undetermined[k])
+            .collect();
+        if pair.is_empty() {
+            continue;
+        }
+        pair.iter().for_each(|&k| undetermined[k] = true);
+        let pair_names: Vec<&str> = pair.iter().map(|&k| names[k]).collect();
+        out.warnings.push(format!(
+            "not determined: {} along the axes of the frame {}, which the data do not determine (they determine the lobe's widths along the measured planes, and the axes turn with the frame)",
+            pair_names.join(", "),
+            names[c]
+        ));
     }
     let cov = &inv * meat * &inv * birge;
     out.ridges = ridges(&jtj, birge, free, flat, decls);
@@ -360,8 +390,15 @@ fn add_prior_rows(jtj: &mut DMatrix<f64>, meat: &mut DMatrix<f64>, space: &Const
 }
 
 /// B⁺ by SVD, and which parameters lie along a direction the data do not constrain; or
-/// why there are no uncertainties.
-fn pseudo_inverse(jtj: &DMatrix<f64>) -> Result<(DMatrix<f64>, Vec<bool>), &'static str> {
+/// why there are no uncertainties. Which parameters a direction involves is judged in the
+/// parameters' unit boxes (`slopes`: each one's dθ/du), not in physical units, where a
+/// parameter in degrees would dwarf a roughness moving with it along the same ridge (an
+/// anisotropic lobe seen at normal incidence on two planes: α_u, α_v and φ0 trade along
+/// one direction, which in physical units is almost all φ0).
+fn pseudo_inverse(
+    jtj: &DMatrix<f64>,
+    slopes: &[f64],
+) -> Result<(DMatrix<f64>, Vec<bool>), &'static str> {
     let p = jtj.nrows();
     if jtj.iter().any(|v| !v.is_finite()) {
         return Err("the Jacobian is not finite at the optimum; no parameter uncertainties");
@@ -377,9 +414,17 @@ fn pseudo_inverse(jtj: &DMatrix<f64>) -> Result<(DMatrix<f64>, Vec<bool>), &'sta
         if s > RCOND * smax && s > 0.0 {
             inv += (vt.row(m).transpose() * u.column(m).transpose()) / s;
         } else {
-            // A direction the data does not constrain: flag the parameters along it.
+            // A direction the data does not constrain: flag the parameters along it, its
+            // components taken in the unit boxes (du = dθ / slope).
+            let unit: Vec<f64> = (0..p)
+                .map(|j| match slopes[j] {
+                    s if s.is_finite() && s > 0.0 => vt[(m, j)] / s,
+                    _ => vt[(m, j)],
+                })
+                .collect();
+            let norm = unit.iter().map(|x| x * x).sum::<f64>().sqrt();
             for j in 0..p {
-                if vt[(m, j)].abs() > 0.1 {
+                if unit[j].abs() > 0.1 * norm || vt[(m, j)].abs() > 0.1 {
                     undetermined[j] = true;
                 }
             }

@@ -309,30 +309,34 @@ fn priors_add_one_over_sd_squared_to_their_diagonal() {
 fn the_pseudo_inverse_inverts_what_is_determined_and_flags_the_rest() {
     let close = |a: &DMatrix<f64>, b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
     // [[4, 2], [2, 3]]⁻¹ = [[3, −2], [−2, 4]]/8.
-    let (inv, und) = pseudo_inverse(&DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0])).unwrap();
+    let (inv, und) = pseudo_inverse(
+        &DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0]),
+        &[1.0, 1.0],
+    )
+    .unwrap();
     assert!(close(&inv, &[0.375, -0.25, -0.25, 0.5]), "{inv}");
     assert_eq!(und, [false, false]);
     // [[1, 1], [1, 1]] = 2vvᵀ, v = (1, 1)/√2: B⁺ = vvᵀ/2; both lie along the null space.
-    let (inv, und) = pseudo_inverse(&DMatrix::from_element(2, 2, 1.0)).unwrap();
+    let (inv, und) = pseudo_inverse(&DMatrix::from_element(2, 2, 1.0), &[1.0, 1.0]).unwrap();
     assert!(close(&inv, &[0.25; 4]), "{inv}");
     assert_eq!(und, [true, true]);
     // Singular values below 1e-10 of the largest count as 0, those above do not.
     let diag = |a: f64, b: f64| DMatrix::from_row_slice(2, 2, &[a, 0.0, 0.0, b]);
-    let (inv, und) = pseudo_inverse(&diag(4.0, 1e-10)).unwrap();
+    let (inv, und) = pseudo_inverse(&diag(4.0, 1e-10), &[1.0, 1.0]).unwrap();
     assert!(close(&inv, &[0.25, 0.0, 0.0, 0.0]), "{inv}");
     assert_eq!(und, [false, true]);
     // Exactly 1e-10 of the largest is not above it.
-    let (_, und) = pseudo_inverse(&diag(1.0, 1e-10)).unwrap();
+    let (_, und) = pseudo_inverse(&diag(1.0, 1e-10), &[1.0, 1.0]).unwrap();
     assert_eq!(und, [false, true]);
-    let (inv, und) = pseudo_inverse(&diag(4.0, 1e-9)).unwrap();
+    let (inv, und) = pseudo_inverse(&diag(4.0, 1e-9), &[1.0, 1.0]).unwrap();
     assert!(
         (inv[(1, 1)] / 1e9 - 1.0).abs() < 1e-9 && und == [false, false],
         "{inv}"
     );
-    let (inv, und) = pseudo_inverse(&diag(0.0, 0.0)).unwrap();
+    let (inv, und) = pseudo_inverse(&diag(0.0, 0.0), &[1.0, 1.0]).unwrap();
     assert!(close(&inv, &[0.0; 4]) && und == [true, true]);
-    assert!(pseudo_inverse(&diag(f64::NAN, 1.0)).is_err());
-    assert!(pseudo_inverse(&diag(1.0, f64::INFINITY)).is_err());
+    assert!(pseudo_inverse(&diag(f64::NAN, 1.0), &[1.0, 1.0]).is_err());
+    assert!(pseudo_inverse(&diag(1.0, f64::INFINITY), &[1.0, 1.0]).is_err());
 }
 
 fn empty(p: usize) -> Covariance {

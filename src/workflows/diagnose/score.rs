@@ -352,11 +352,11 @@ impl<'a> NewParams<'a> {
             .filter(|r| r.components.iter().any(|(j, _)| self.idx.contains(j)))
             .map(|r| {
                 let std = if r.unit_std.is_finite() {
-                    format!("± {:.2} of the range", r.unit_std)
+                    format!("which the data locate to ± {:.2} of the range", r.unit_std)
                 } else {
-                    "not at all".into()
+                    "which the data do not locate at all".into()
                 };
-                format!("{} (constrained {std})", r.words(&self.names))
+                format!("{}, {std}", r.words(&self.names))
             })
             .collect::<Vec<_>>()
             .join("; ")
@@ -383,7 +383,7 @@ impl<'a> NewParams<'a> {
             if r.is_empty() {
                 String::new()
             } else {
-                format!(": the data constrain only {r}")
+                format!(": they move together along {r}")
             }
         )
     }
@@ -413,14 +413,14 @@ impl<'a> NewParams<'a> {
                     let held: Vec<&str> = hold.iter().map(|&j| self.names[j].as_str()).collect();
                     let r = self.ridges(cov);
                     return Some(format!(
-                        "{} is determined (± {:.2} of its range) with {} held at the fitted values{}",
+                        "{} is determined (± {} of its range) with {} held at the fitted values{}",
                         self.names[free],
-                        self.unit(&c, free).unwrap_or(f64::NAN),
+                        share(self.unit(&c, free).unwrap_or(f64::NAN)),
                         held.join(", "),
                         if r.is_empty() {
                             String::new()
                         } else {
-                            format!(": the data constrain only {r}")
+                            format!("; the fit moves along {r}")
                         }
                     ));
                 }
@@ -448,7 +448,7 @@ impl<'a> NewParams<'a> {
             if r.is_empty() {
                 String::new()
             } else {
-                format!(" (the data constrain only {r})")
+                format!(" (they move together along {r})")
             }
         )
     }
@@ -666,4 +666,13 @@ pub(super) fn consistency(fit: &FitResult, alpha: f64) -> (bool, String) {
             format_p(p)
         ),
     )
+}
+
+/// A share of a range in words with two significant digits ("0.12", "2.1e-3").
+fn share(u: f64) -> String {
+    if u < 0.01 {
+        format!("{u:.1e}")
+    } else {
+        format!("{u:.2}")
+    }
 }
