@@ -104,6 +104,30 @@ fn lane_kinds_and_kernels_are_reported() {
         "instruction set: {}",
         bsdfit::math::lanes::instruction_set()
     );
+    // Which catalogue nodes still run lane by lane through the reference, over every
+    // spec the registry derives: exactly these, so that a kernel lost fails here and a
+    // kernel added must strike its node off the list. Outside `+aniso` specs only the MRM
+    // lobes; in them, the anisotropic lobes too (named as their isotropic parents).
+    let mut isotropic: Vec<&str> = Vec::new();
+    let mut anisotropic: Vec<&str> = Vec::new();
+    for spec in [Kind::Brdf, Kind::Btdf].into_iter().flat_map(every_spec) {
+        let missing = Model::parse(&spec, 3).unwrap().nodes_without_kernel();
+        if spec.contains("+aniso") {
+            anisotropic.extend(missing);
+        } else {
+            isotropic.extend(missing);
+        }
+    }
+    for v in [&mut isotropic, &mut anisotropic] {
+        v.sort_unstable();
+        v.dedup();
+    }
+    assert_eq!(isotropic, ["mrm", "mrm82"], "nodes without a kernel");
+    assert_eq!(
+        anisotropic,
+        ["btdf", "coat", "fa", "ggx"],
+        "nodes without a kernel in +aniso specs"
+    );
 }
 
 /// The level that runs is the one `BSDFIT_SIMD` asks for (CI runs this file three times:

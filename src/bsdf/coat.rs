@@ -7,24 +7,33 @@
 //! lobe's directional albedo is at most 1 (Smith G only loses energy), so the blend keeps
 //! M's energy bound; k_c = 0 is M (nested). Twin: `shaders/bsdf/coat.wgsl`.
 
-use super::microfacet::{single_wgsl, Ggx};
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::microfacet::{ggx_reflection, single_wgsl};
+use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
+use crate::math::lanes::Real;
 
 #[derive(Debug, Clone, Copy)]
 pub struct Coat;
 
-/// The lobe without its scale k_c (None below the surface, where the lobe is 0): what
-/// the channels of one direction share.
-fn coat_kernel(alpha: f64, wi: DVec3, wo: DVec3) -> Option<f64> {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return None;
+impl Kernel for Coat {
+    /// The lobe without its scale k_c once per direction (0 below the surface, where the
+    /// lobe is 0; it takes the unnormalised half vector, not 0 above); per channel only
+    /// k_c and M's value differ.
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
+        let alpha = R::splat(p.get(0, 1));
+        let (zero, one) = (R::zero(), R::splat(1.0));
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            let kernel = R::select(above, ggx_reflection(alpha, wi, wo, wi + wo), zero);
+            for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
+                let kc = R::splat(p.get(i, 0));
+                *o = (one - kc) * m + kc * kernel;
+            }
+        }
     }
-    // The kernel takes the unnormalised half vector (both directions are above, so the
-    // sum is not 0).
-    Some(Ggx { alpha }.reflection(wi, wo, wi + wo))
 }
 
 /// The coat's weight in the blend.
@@ -46,20 +55,7 @@ impl Bsdf for Coat {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        (1.0 - p[0]) * children[0] + coat_kernel(p[1], wi, wo).map_or(0.0, |k| p[0] * k)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        let alpha = p.get(0, 1);
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            let kernel = coat_kernel(alpha, wi, wo);
-            let inner = children.at(0, d);
-            for (i, o) in out.iter_mut().enumerate() {
-                let kc = p.get(i, 0);
-                *o = (1.0 - kc) * inner[i] + kernel.map_or(0.0, |k| kc * k);
-            }
-        });
-    }
+    super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::coat())
     }

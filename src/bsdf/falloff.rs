@@ -20,19 +20,12 @@
 //! of M never see E. Twin: `shaders/bsdf/falloff.wgsl`.
 
 use super::effect::{Adds, Effect};
-use super::{Bsdf, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
+use crate::math::lanes::Real;
 
 const WGSL: (&str, &str) = ("falloff", include_str!("../../shaders/bsdf/falloff.wgsl"));
-
-/// The efficiency E = (μi μo)^q (0 below the surface, where every retro lobe is 0).
-pub fn efficiency(q: f64, wi: DVec3, wo: DVec3) -> f64 {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
-    }
-    (wi.z * wo.z).powf(q)
-}
 
 /// The exponent q of [`efficiency`].
 pub const Q: ParamDecl = ParamDecl::shared(
@@ -58,6 +51,15 @@ const NO_FALLOFF: Entry = Entry::suffix(
     |_| Err("the efficiency slot is not a spec suffix".into()),
 );
 
+impl Kernel for NoFalloff {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        for (_, _, out) in lanes(dirs, p.len(), out) {
+            out.fill(R::splat(1.0));
+        }
+    }
+}
+
 impl Bsdf for NoFalloff {
     fn entry(&self) -> &'static Entry {
         &NO_FALLOFF
@@ -65,9 +67,7 @@ impl Bsdf for NoFalloff {
     fn params(&self) -> Vec<ParamDecl> {
         vec![]
     }
-    fn eval(&self, _p: &[f64], _wi: DVec3, _wo: DVec3, _children: &[f64]) -> f64 {
-        1.0
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn {
             sources: vec![WGSL],
@@ -80,6 +80,21 @@ impl Bsdf for NoFalloff {
 #[derive(Debug, Clone, Copy)]
 pub struct Falloff;
 
+impl Kernel for Falloff {
+    /// The efficiency E = (μi μo)^q, the same in every channel (0 below the surface,
+    /// where every retro lobe is 0).
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let q = p.get(0, 0);
+        let zero = R::zero();
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            let e = R::select(above, (wi.z * wo.z).powf(q), zero);
+            out.fill(e);
+        }
+    }
+}
+
 impl Bsdf for Falloff {
     fn entry(&self) -> &'static Entry {
         &ENTRY
@@ -87,9 +102,7 @@ impl Bsdf for Falloff {
     fn params(&self) -> Vec<ParamDecl> {
         vec![Q]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        efficiency(p[0], wi, wo)
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         WgslFn::single("falloff", WGSL.1)
     }

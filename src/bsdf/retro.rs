@@ -5,34 +5,36 @@
 //! (`+falloff`, [`super::falloff`]): f = f_M + E · lobe, E = 1 without `+falloff`.
 //! Twin: `shaders/bsdf/retro.wgsl`.
 
-use super::falloff;
-use super::microfacet::{single_wgsl, Ggx};
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::falloff;
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::microfacet::{ggx_reflection, single_wgsl};
+use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use glam::DVec3;
+use crate::math::lanes::{Real, V3};
 
 #[derive(Debug, Clone, Copy)]
 pub struct Retro;
 
-/// The back-vector retro lobe alone.
-pub fn retro_lobe(kr: f64, alpha: f64, wi: DVec3, wo: DVec3) -> f64 {
-    match retro_kernel(alpha, wi, wo) {
-        Some(kernel) => kr * kernel,
-        None => 0.0,
+impl Kernel for Retro {
+    /// The lobe without its scale k_r once per direction: GGX on the back-vector half
+    /// vector ωi + ω̄o, ω̄o = (−o_x, −o_y, o_z) (unnormalised; 0 below the surface); per
+    /// channel k_r, M's value and the efficiency slot's.
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], children: LaneChildren<R>, out: &mut [R]) {
+        let alpha = R::splat(p.get(0, 1));
+        let zero = R::zero();
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            let back = V3::new(-wo.x, -wo.y, wo.z);
+            let kernel = R::select(above, ggx_reflection(alpha, wi, back, wi + back), zero);
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = R::splat(p.get(i, 0)) * kernel;
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        }
     }
-}
-
-/// The lobe without its scale k_r (None below the surface, where the lobe is 0): what
-/// the channels of one direction share.
-fn retro_kernel(alpha: f64, wi: DVec3, wo: DVec3) -> Option<f64> {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return None;
-    }
-    let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
-    // The kernel takes the unnormalised half vector (both directions are above, so the
-    // sum is not 0).
-    Some(Ggx { alpha }.reflection(wi, wo_back, wi + wo_back))
 }
 
 impl Bsdf for Retro {
@@ -53,23 +55,7 @@ impl Bsdf for Retro {
         // The wrapped model M and the efficiency slot, both unprefixed.
         &["", ""]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        children[0] + children[1] * retro_lobe(p[0], p[1], wi, wo)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        let alpha = p.get(0, 1);
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            let kernel = retro_kernel(alpha, wi, wo);
-            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
-            for (i, o) in out.iter_mut().enumerate() {
-                let lobe = match kernel {
-                    Some(k) => p.get(i, 0) * k,
-                    None => 0.0,
-                };
-                *o = inner[i] + efficiency[i] * lobe;
-            }
-        });
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         single_wgsl("retro", include_str!("../../shaders/bsdf/retro.wgsl"))
     }
