@@ -106,8 +106,8 @@ fn lane_kinds_and_kernels_are_reported() {
     );
     // Which catalogue nodes still run lane by lane through the reference, over every
     // spec the registry derives: exactly these, so that a kernel lost fails here and a
-    // kernel added must strike its node off the list. Outside `+aniso` specs only the MRM
-    // lobes; in them, the anisotropic lobes too (named as their isotropic parents).
+    // kernel added must strike its node off the list. Outside `+aniso` specs none; in
+    // them, the anisotropic lobes (named as their isotropic parents).
     let mut isotropic: Vec<&str> = Vec::new();
     let mut anisotropic: Vec<&str> = Vec::new();
     for spec in [Kind::Brdf, Kind::Btdf].into_iter().flat_map(every_spec) {
@@ -122,7 +122,10 @@ fn lane_kinds_and_kernels_are_reported() {
         v.sort_unstable();
         v.dedup();
     }
-    assert_eq!(isotropic, ["mrm", "mrm82"], "nodes without a kernel");
+    assert!(
+        isotropic.is_empty(),
+        "nodes without a kernel: {isotropic:?}"
+    );
     assert_eq!(
         anisotropic,
         ["btdf", "coat", "fa", "ggx"],

@@ -35,12 +35,14 @@
 //! α² sin²θ / (2 (μ + √(μ² + α² sin²θ))), which has no division by μ and no cancellation.
 //! Twin: `shaders/bsdf/mrm.wgsl`.
 
-use super::falloff;
-use super::microfacet::{single_wgsl, Distribution, Ggx};
 use super::effect::{Adds, Effect};
-use super::{each_direction, Bsdf, Channels, Children, Dir, Entry, InCatalogue, Node, ParamDecl, WgslFn};
+use super::falloff;
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::microfacet::{ggx_d, single_wgsl};
+use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use crate::math::{fresnel_dielectric, half_vector};
+use crate::math::fresnel_dielectric_in;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 
 /// The Fresnel factor on the back-vector.
@@ -58,32 +60,52 @@ pub struct Mrm {
 }
 
 /// μ Λ(ω) of GGX: α² sin²θ / (2 (μ + √(μ² + α² sin²θ))), finite at μ = 0 (= α sinθ / 2).
-fn mu_lambda(alpha: f64, w: DVec3) -> f64 {
+#[inline(always)]
+fn mu_lambda<R: Real>(alpha: f64, w: V3<R>) -> R {
     let mu = w.z.abs();
-    let as2 = alpha * alpha * (w.x * w.x + w.y * w.y);
-    as2 / (2.0 * (mu + (mu * mu + as2).sqrt()))
+    let as2 = R::splat(alpha * alpha) * (w.x * w.x + w.y * w.y);
+    as2 / (R::splat(2.0) * (mu + (mu * mu + as2).sqrt()))
 }
 
 /// D(b) G2(ωi, ω̄o) / (4 μi μo) with the height-correlated Smith G2 of GGX, for ωi and
 /// ω̄o above the surface and b their unit half vector (both then see b from its front).
-pub fn kernel(alpha: f64, wi: DVec3, wo_back: DVec3, b: DVec3) -> f64 {
+#[inline(always)]
+pub fn kernel<R: Real>(alpha: f64, wi: V3<R>, wo_back: V3<R>, b: V3<R>) -> R {
     let (mi, mo) = (wi.z, wo_back.z);
     let denom = mi * mo + mo * mu_lambda(alpha, wi) + mi * mu_lambda(alpha, wo_back);
-    Ggx { alpha }.d(b) / (4.0 * denom)
+    ggx_d(alpha, b) / (R::splat(4.0) * denom)
 }
 
 /// μ̄ = 1/7 of the F82-tint form (cos 81.8°, where F82 is specified).
 const MU_BAR: f64 = 1.0 / 7.0;
 
-/// OpenPBR's F82-tint Fresnel at cos θ = `mu`, clamped to [0, 1] (see the module doc).
-pub fn fresnel_f82(mu: f64, f0: f64, f82: f64) -> f64 {
-    let schlick = |m: f64| f0 + (1.0 - f0) * (1.0 - m).powi(5);
-    let c = 1.0 - mu;
-    let peak = MU_BAR * (1.0 - MU_BAR).powi(6);
-    (schlick(mu) - mu * c.powi(6) * (1.0 - f82) * schlick(MU_BAR) / peak).clamp(0.0, 1.0)
+/// Schlick's form F0 + (1 − F0)(1 − μ)⁵, the fifth power as `powi` computes it (x·(x²)²).
+#[inline(always)]
+fn schlick<R: Real>(mu: R, f0: f64) -> R {
+    let x = R::splat(1.0) - mu;
+    let x2 = x * x;
+    R::splat(f0) + R::splat(1.0 - f0) * (x * (x2 * x2))
 }
 
-/// The MRM lobe alone (without M and the efficiency), `fresnel` evaluated at ωi·b.
+/// OpenPBR's F82-tint Fresnel at cos θ = `mu`, clamped to [0, 1] (see the module doc).
+pub fn fresnel_f82(mu: f64, f0: f64, f82: f64) -> f64 {
+    fresnel_f82_in(mu, f0, f82)
+}
+
+/// [`fresnel_f82`] over any [`Real`] (the sixth power as `powi` computes it, x²·(x²)²).
+#[inline(always)]
+fn fresnel_f82_in<R: Real>(mu: R, f0: f64, f82: f64) -> R {
+    let c = R::splat(1.0) - mu;
+    let c2 = c * c;
+    let c6 = c2 * (c2 * c2);
+    let peak = MU_BAR * (1.0 - MU_BAR).powi(6);
+    let at_bar = schlick(MU_BAR, f0);
+    (schlick(mu, f0) - mu * c6 * R::splat(1.0 - f82) * R::splat(at_bar) / R::splat(peak))
+        .clamp(0.0, 1.0)
+}
+
+/// The MRM lobe alone (without M and the efficiency), `fresnel` evaluated at ωi·b: the
+/// f64 form of [`Mrm`]'s kernel, for checks.
 pub fn mrm_lobe(
     kr: f64,
     alpha: f64,
@@ -91,26 +113,45 @@ pub fn mrm_lobe(
     wi: DVec3,
     wo: DVec3,
 ) -> f64 {
-    match mrm_parts(alpha, fresnel, wi, wo) {
-        Some((f, k)) => kr * f * k,
-        None => 0.0,
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return 0.0;
     }
+    let back = V3::new(-wo.x, -wo.y, wo.z);
+    let b = crate::math::half_vector(wi, back.into());
+    kr * fresnel(wi.dot(b)) * kernel(alpha, wi.into(), back, b.into())
 }
 
-/// The Fresnel factor and the kernel of [`mrm_lobe`] (None below the surface, where the
-/// lobe is 0): what the channels of one direction share; k_r is the only rgb parameter.
-fn mrm_parts(
-    alpha: f64,
-    fresnel: impl Fn(f64) -> f64,
-    wi: DVec3,
-    wo: DVec3,
-) -> Option<(f64, f64)> {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return None;
+impl Kernel for Mrm {
+    /// Per direction the back-vector ω̄o = (−o_x, −o_y, o_z), the unit half vector b of ωi
+    /// and ω̄o (the normal where they cancel), the Fresnel factor at ωi·b and the kernel;
+    /// per channel k_r, M's value and the efficiency slot's. 0 below the surface.
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], children: LaneChildren<R>, out: &mut [R]) {
+        let alpha = p.get(0, 1);
+        let (zero, one) = (R::zero(), R::splat(1.0));
+        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            let back = V3::new(-wo.x, -wo.y, wo.z);
+            let sum = wi + back;
+            let len = sum.length();
+            let b = V3::select(
+                len.lt(R::splat(1e-12)),
+                V3::new(zero, zero, one),
+                sum.scale(one / len),
+            );
+            let cos = wi.dot(b);
+            let fresnel = match self.fresnel {
+                Fresnel::Dielectric => fresnel_dielectric_in(cos, R::splat(p.get(0, 2))),
+                Fresnel::F82Tint => fresnel_f82_in(cos, p.get(0, 2), p.get(0, 3)),
+            };
+            let k = kernel(alpha, wi, back, b);
+            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
+            for (i, o) in out.iter_mut().enumerate() {
+                let lobe = R::select(above, R::splat(p.get(i, 0)) * fresnel * k, zero);
+                *o = inner[i] + efficiency[i] * lobe;
+            }
+        }
     }
-    let wo_back = DVec3::new(-wo.x, -wo.y, wo.z);
-    let b = half_vector(wi, wo_back);
-    Some((fresnel(wi.dot(b)), kernel(alpha, wi, wo_back, b)))
 }
 
 /// The lobe's scale (the paper's colour multiplier ρ): the lobe vanishes at k_r = 0.
@@ -170,38 +211,7 @@ impl Bsdf for Mrm {
         // The wrapped model M and the efficiency slot, both unprefixed.
         &["", ""]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        let lobe = match self.fresnel {
-            Fresnel::Dielectric => {
-                mrm_lobe(p[0], p[1], |c| fresnel_dielectric(c, p[2]), wi, wo)
-            }
-            Fresnel::F82Tint => mrm_lobe(p[0], p[1], |c| fresnel_f82(c, p[2], p[3]), wi, wo),
-        };
-        children[0] + children[1] * lobe
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], children: Children, out: &mut [f64]) {
-        let alpha = p.get(0, 1);
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            let parts = match self.fresnel {
-                Fresnel::Dielectric => {
-                    let eta = p.get(0, 2);
-                    mrm_parts(alpha, |c| fresnel_dielectric(c, eta), wi, wo)
-                }
-                Fresnel::F82Tint => {
-                    let (f0, f82) = (p.get(0, 2), p.get(0, 3));
-                    mrm_parts(alpha, |c| fresnel_f82(c, f0, f82), wi, wo)
-                }
-            };
-            let (inner, efficiency) = (children.at(0, d), children.at(1, d));
-            for (i, o) in out.iter_mut().enumerate() {
-                let lobe = match parts {
-                    Some((f, k)) => p.get(i, 0) * f * k,
-                    None => 0.0,
-                };
-                *o = inner[i] + efficiency[i] * lobe;
-            }
-        });
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         let source = include_str!("../../shaders/bsdf/mrm.wgsl");
         match self.fresnel {
