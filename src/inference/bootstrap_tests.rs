@@ -428,11 +428,22 @@ fn when_the_test_stops() {
     };
     // Ten of the first 20 reach T = 1 (the 10th at l = 20): stopped at the first batch,
     // p = h/l = 0.5.
+    // The even ones are 0 (below ZERO) before 12 and 0.3 from 12 on: positive but below
+    // T, so the share of positive replicates is 18 of 24.
     let reps: Vec<f64> = (0..24)
-        .map(|i| if i % 2 == 1 { 2.0 } else { 0.0 })
+        .map(|i| match (i % 2, i < 12) {
+            (1, _) => 2.0,
+            (_, true) => 0.0,
+            _ => 0.3,
+        })
         .collect();
-    let (p, source, ..) = settle(&gathered(1.0, reps), 0.01, &boot, false).unwrap();
-    assert_eq!((p, source), (0.5, PSource::Sequential));
+    let (p, source, share, ..) = settle(&gathered(1.0, reps), 0.01, &boot, false).unwrap();
+    assert_eq!((p, source, share), (0.5, PSource::Sequential, 0.75));
+    // A bound exactly at the level (99 replicates, 1/100 = 0.01) does not decide: the
+    // count must fall below it. (Five positive: no tail is fitted.)
+    let mut reps = vec![0.0; 99];
+    reps[..5].fill(0.5);
+    assert!(settle(&gathered(9.0, reps), 0.01, &boot, false).is_none());
     // Three of 49 reach T: not settled before the planned 99 ...
     let mut reps = vec![0.0; 49];
     reps[..3].fill(5.0);
@@ -443,8 +454,10 @@ fn when_the_test_stops() {
     assert_eq!((p, source, why), (0.04, PSource::Empirical, None));
     // None of 99 reaches T and 5 are positive: the bound 0.01 cannot reach 0.002, so
     // more are drawn; at the last batch it says why it could not decide.
+    // (Two more sit exactly at ZERO: they count as 0, not as positive.)
     let mut reps = vec![0.0; 99];
     reps[..5].fill(0.5);
+    reps[5..7].fill(ZERO);
     assert!(settle(&gathered(9.0, reps.clone()), 0.002, &boot, false).is_none());
     let (p, source, _, _, why) = settle(&gathered(9.0, reps.clone()), 0.002, &boot, true).unwrap();
     assert_eq!((p, source), (0.01, PSource::EmpiricalBound));
