@@ -428,11 +428,12 @@ fn when_the_test_stops() {
     };
     // Ten of the first 20 reach T = 1 (the 10th at l = 20): stopped at the first batch,
     // p = h/l = 0.5.
-    // The even ones are 0 (below ZERO) before 12 and 0.3 from 12 on: positive but below
-    // T, so the share of positive replicates is 18 of 24.
+    // The even ones are 0 or exactly ZERO (counted as 0) before 12 and 0.3 from 12 on:
+    // positive but below T, so the share of positive replicates is 18 of 24.
     let reps: Vec<f64> = (0..24)
         .map(|i| match (i % 2, i < 12) {
             (1, _) => 2.0,
+            (_, true) if i % 4 == 0 => ZERO,
             (_, true) => 0.0,
             _ => 0.3,
         })
