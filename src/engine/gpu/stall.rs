@@ -15,19 +15,7 @@ use anyhow::{Context, Result};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-const SHADER: &str = "
-@group(0) @binding(0) var<storage, read_write> sink: array<u32>;
-
-@compute @workgroup_size(64)
-fn stall(@builtin(global_invocation_id) id: vec3<u32>) {
-    var x = id.x * 2654435761u + id.y;
-    for (var i = 0u; i < 60000u; i++) {
-        x = (x ^ (x >> 13u)) * 1664525u + i;
-    }
-    // Stored so that the loop is not removed; which invocation's value lands is moot.
-    sink[(id.x + id.y) & 1023u] = x;
-}
-";
+const SHADER: &str = include_str!("../../../shaders/engine/stall.wgsl");
 
 /// Workgroups of the calibration passes.
 const SMALL: u32 = 8;
