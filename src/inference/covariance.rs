@@ -206,10 +206,7 @@ pub fn covariance(
         warnings: vec![],
         ridges: vec![],
     };
-    let slopes: Vec<f64> = free
-        .iter()
-        .map(|&j| unit_slope(&decls[j], flat[j]))
-        .collect();
+    let slopes = unit_slopes(free, flat, decls);
     let (inv, singular) = match pseudo_inverse(&jtj, &slopes) {
         Ok(found) => found,
         Err(why) => {
@@ -262,7 +259,7 @@ pub fn covariance(
         ));
     }
     let cov = &inv * meat * &inv * birge;
-    out.ridges = ridges(&jtj, birge, free, flat, decls);
+    out.ridges = ridges(&jtj, birge, free, &slopes);
     set_std_and_correlation(&mut out, &cov, &undetermined);
     let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
@@ -543,21 +540,18 @@ fn multiple_correlation_warnings(out: &Covariance, names: &[&str]) -> Vec<String
     warnings
 }
 
-/// The weak directions of the normal matrix `jtj` (free parameters, physical units) in
-/// the parameters' unit boxes: the eigenvectors of D·JᵀJ·D (D the unit-box slopes) whose
-/// standard uncertainty √(birge/λ) exceeds [`RIDGE_UNIT_STD`], mapped to flat indices.
-fn ridges(
-    jtj: &DMatrix<f64>,
-    birge: f64,
-    free: &[usize],
-    flat: &[f64],
-    decls: &[crate::bsdf::ParamDecl],
-) -> Vec<Ridge> {
-    let p = free.len();
-    let d: Vec<f64> = free
-        .iter()
+/// The unit-box slopes dθ/du of the free parameters at `flat` ([`unit_slope`]).
+fn unit_slopes(free: &[usize], flat: &[f64], decls: &[crate::bsdf::ParamDecl]) -> Vec<f64> {
+    free.iter()
         .map(|&j| unit_slope(&decls[j], flat[j]))
-        .collect();
+        .collect()
+}
+
+/// The weak directions of the normal matrix `jtj` (free parameters, physical units) in
+/// the parameters' unit boxes: the eigenvectors of D·JᵀJ·D (D = `d`, the slopes) whose
+/// standard uncertainty √(birge/λ) exceeds [`RIDGE_UNIT_STD`], mapped to flat indices.
+fn ridges(jtj: &DMatrix<f64>, birge: f64, free: &[usize], d: &[f64]) -> Vec<Ridge> {
+    let p = free.len();
     let scaled = DMatrix::from_fn(p, p, |a, b| jtj[(a, b)] * d[a] * d[b]);
     if scaled.iter().any(|v| !v.is_finite()) {
         return vec![];

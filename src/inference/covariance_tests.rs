@@ -466,7 +466,7 @@ fn ridges_are_the_weak_eigenvectors_in_the_unit_box() {
     // [[a, b], [b, a]] with a = 200.5, b = −199.5: eigenvalue a − b = 400 along
     // (1, −1)/√2 (σ 0.05: no ridge) and a + b = 1 along (1, 1)/√2 (σ 1: a ridge).
     let jtj = DMatrix::from_row_slice(2, 2, &[200.5, -199.5, -199.5, 200.5]);
-    let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 1], &unit_slopes(&[0, 1], &flat, &decls));
     assert_eq!(r.len(), 1, "{r:?}");
     assert!((r[0].unit_std - 1.0).abs() < 1e-12, "{r:?}");
     let h = std::f64::consts::FRAC_1_SQRT_2;
@@ -476,12 +476,12 @@ fn ridges_are_the_weak_eigenvectors_in_the_unit_box() {
     assert!((i, j) == (0, 1) || (i, j) == (1, 0), "{r:?}");
     assert!((a.abs() - h).abs() < 1e-9 && (a - b).abs() < 1e-9, "{r:?}");
     // χ²_red scales the standard uncertainty by its root.
-    let r = ridges(&jtj, 4.0, &[0, 1], &flat, &decls);
+    let r = ridges(&jtj, 4.0, &[0, 1], &unit_slopes(&[0, 1], &flat, &decls));
     assert!((r[0].unit_std - 2.0).abs() < 1e-12, "{r:?}");
     // The weakest direction first: one the data do not constrain at all (σ ∞), then
     // σ = 1/√50 along the first parameter.
     let jtj = DMatrix::from_row_slice(2, 2, &[50.0, 0.0, 0.0, 0.0]);
-    let r = ridges(&jtj, 1.0, &[0, 2], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 2], &unit_slopes(&[0, 2], &flat, &decls));
     assert_eq!(r.len(), 2, "{r:?}");
     assert!(r[0].unit_std.is_infinite() && r[0].components.len() == 1);
     assert_eq!(r[0].components[0].0, 2);
@@ -493,7 +493,7 @@ fn ridges_are_the_weak_eigenvectors_in_the_unit_box() {
     // In unit-box terms: the third parameter's range is 4, so JᵀJ = 1 in physical
     // units is 16 in the box (σ 0.25), and 400 on the first σ 0.05 (no ridge).
     let jtj = DMatrix::from_row_slice(2, 2, &[400.0, 0.0, 0.0, 1.0]);
-    let r = ridges(&jtj, 1.0, &[0, 2], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 2], &unit_slopes(&[0, 2], &flat, &decls));
     assert_eq!(r.len(), 1, "{r:?}");
     assert!((r[0].unit_std - 0.25).abs() < 1e-9, "{r:?}");
     assert_eq!(r[0].components.len(), 1);
@@ -511,8 +511,7 @@ fn ridges_are_the_weak_eigenvectors_in_the_unit_box() {
         &DMatrix::from_row_slice(2, 2, &m),
         1.0,
         &[0, 1],
-        &flat,
-        &decls,
+        &unit_slopes(&[0, 1], &flat, &decls),
     );
     assert_eq!(r.len(), 1, "{r:?}");
     assert_eq!(r[0].components.len(), 2, "{r:?}");
@@ -529,29 +528,28 @@ fn ridges_are_the_weak_eigenvectors_in_the_unit_box() {
         &DMatrix::from_row_slice(2, 2, &m),
         1.0,
         &[0, 1],
-        &flat,
-        &decls,
+        &unit_slopes(&[0, 1], &flat, &decls),
     );
     assert_eq!(r[0].components.len(), 1, "{r:?}");
     let jtj = DMatrix::from_row_slice(2, 2, &[400.0, 0.0, 0.0, 1600.0]);
-    assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
+    assert!(ridges(&jtj, 1.0, &[0, 2], &unit_slopes(&[0, 2], &flat, &decls)).is_empty());
     let jtj = DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0]);
-    assert!(ridges(&jtj, 1.0, &[0, 2], &flat, &decls).is_empty());
+    assert!(ridges(&jtj, 1.0, &[0, 2], &unit_slopes(&[0, 2], &flat, &decls)).is_empty());
     // A standard uncertainty of exactly 0.1 (λ = 100) is a ridge ("at least" 0.1).
     let jtj = DMatrix::from_row_slice(2, 2, &[400.0, 0.0, 0.0, 100.0]);
-    let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 1], &unit_slopes(&[0, 1], &flat, &decls));
     assert_eq!(r.len(), 1, "{r:?}");
     assert_eq!((r[0].unit_std, r[0].components[0].0), (0.1, 1));
     // An eigenvalue of exactly 1e-10 of the largest is no constraint at all; nor is
     // one above 0 but below that.
     let jtj = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1e-10]);
-    let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 1], &unit_slopes(&[0, 1], &flat, &decls));
     assert!(
         r[0].unit_std.is_infinite() && r[0].components[0].0 == 1,
         "{r:?}"
     );
     let jtj = DMatrix::from_row_slice(2, 2, &[50.0, 0.0, 0.0, 3e-12]);
-    let r = ridges(&jtj, 1.0, &[0, 1], &flat, &decls);
+    let r = ridges(&jtj, 1.0, &[0, 1], &unit_slopes(&[0, 1], &flat, &decls));
     assert!(
         r[0].unit_std.is_infinite() && r[0].components[0].0 == 1,
         "{r:?}"

@@ -166,16 +166,20 @@ impl Device {
     /// up to three times shorter): the `hang@N` injection runs it ahead of the N-th
     /// submission's work. The device waits for it before it is dropped.
     pub fn stall_past_timeout(&self) -> Result<wgpu::CommandBuffer> {
-        let stall = self.stall.get_or_init(|| super::stall::Stall::new(self));
-        stall.command_buffer(self, 3.0 * self.timeout.as_secs_f64() + 1.0)
+        self.stall()
+            .command_buffer(self, 3.0 * self.timeout.as_secs_f64() + 1.0)
+    }
+
+    /// The hang injection's workload, made on first use.
+    fn stall(&self) -> &super::stall::Stall {
+        self.stall.get_or_init(|| super::stall::Stall::new(self))
     }
 
     /// Where a hang is planned, measure its workload now, while the device is idle (a
     /// measure taken amid other work would make the stall too short).
     fn prepare_plan(&self) -> Result<()> {
         if self.plan.is_some_and(|p| p.what == fault::Injected::Hang) {
-            let stall = self.stall.get_or_init(|| super::stall::Stall::new(self));
-            stall.calibrate(self)?;
+            self.stall().calibrate(self)?;
         }
         Ok(())
     }

@@ -432,7 +432,12 @@ impl From<glam::DVec3> for V3<f64> {
 
 /// The instruction set [`vectorized`] compiles for on this machine, in words.
 pub fn instruction_set() -> &'static str {
-    match level() {
+    level_name(level())
+}
+
+/// A level in words, as [`instruction_set`] gives it.
+fn level_name(level: Level) -> &'static str {
+    match level {
         Level::Avx512 => "AVX-512",
         Level::Avx2 => "AVX2+FMA",
         Level::Baseline if cfg!(target_arch = "aarch64") => "NEON",
@@ -485,11 +490,7 @@ pub fn level() -> Level {
                         } else {
                             "is not one of baseline, avx2, avx512"
                         },
-                        match widest {
-                            Level::Avx512 => "AVX-512",
-                            Level::Avx2 => "AVX2+FMA",
-                            Level::Baseline => "the baseline",
-                        }
+                        level_name(widest)
                     );
                     widest
                 }
