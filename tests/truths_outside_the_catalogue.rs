@@ -11,94 +11,14 @@
 //! numerically from the same D, exact dielectric Fresnel, over a Lambertian body; and an
 //! anisotropic GGX lobe (Heitz 2014, Eq. 85–86) for the positive controls.
 
-use bsdfit::data::{AzimuthCoverage, Dataset, Kind, RawRow, ReadOptions};
+mod common;
+
+use bsdfit::data::{AzimuthCoverage, Dataset};
 use bsdfit::engine::simd::SimdBackend;
 use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Diagnosis, Effect, Scored};
+use common::truths::{beckmann, fresnel, gtr, measure, Isotropic, Ndf, RHO};
 use glam::DVec3;
-use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
 use std::f64::consts::PI;
-
-const RHO: f64 = 0.25;
-const ETA: f64 = 1.5;
-
-fn dir(theta_deg: f64, phi_deg: f64) -> DVec3 {
-    let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
-    DVec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
-}
-
-/// Unpolarised Fresnel reflectance of a dielectric of index `ETA`.
-fn fresnel(c: f64) -> f64 {
-    let t = (1.0 - (1.0 - c * c) / (ETA * ETA)).max(0.0).sqrt();
-    let rs = (c - ETA * t) / (c + ETA * t);
-    let rp = (ETA * c - t) / (ETA * c + t);
-    0.5 * (rs * rs + rp * rp)
-}
-
-fn beckmann(c: f64, a: f64) -> f64 {
-    let c2 = c * c;
-    (-(1.0 - c2) / (c2 * a * a)).exp() / (PI * a * a * c2 * c2)
-}
-
-/// Burley's GTR with exponent γ, normalised: ∫ D cos θm dω = 1.
-fn gtr(c: f64, a: f64, g: f64) -> f64 {
-    let a2 = a * a;
-    let k = (g - 1.0) * (a2 - 1.0) / (PI * (1.0 - a2.powf(1.0 - g)));
-    k / (1.0 + (a2 - 1.0) * c * c).powf(g)
-}
-
-/// An isotropic normal distribution D(cos θm).
-type Ndf = fn(f64) -> f64;
-
-/// An isotropic microfacet lobe D(cos θm) with its Smith Λ tabulated from D itself:
-/// 1 + Λ(ω) = (1/cos θ) ∫ ⟨ω·m⟩ D(m) dm over the hemisphere of normals.
-struct Isotropic {
-    d: Ndf,
-    lambda: Vec<f64>,
-}
-
-const TABLE: usize = 256;
-
-impl Isotropic {
-    fn new(d: Ndf) -> Isotropic {
-        let (nt, np) = (400, 96);
-        let lambda = (0..TABLE)
-            .map(|k| {
-                let mu = (k as f64 + 0.5) / TABLE as f64;
-                let so = (1.0 - mu * mu).sqrt();
-                let mut sum = 0.0;
-                for i in 0..nt {
-                    let th = (i as f64 + 0.5) * (PI / 2.0) / nt as f64;
-                    let (st, ct) = th.sin_cos();
-                    let w = d(ct) * st * (PI / 2.0) / nt as f64;
-                    for j in 0..np {
-                        let ph = (j as f64 + 0.5) * 2.0 * PI / np as f64;
-                        let dot = st * ph.cos() * so + ct * mu;
-                        if dot > 0.0 {
-                            sum += dot * w * 2.0 * PI / np as f64;
-                        }
-                    }
-                }
-                sum / mu - 1.0
-            })
-            .collect();
-        Isotropic { d, lambda }
-    }
-
-    fn g1(&self, mu: f64) -> f64 {
-        let x = (mu * TABLE as f64 - 0.5).clamp(0.0, (TABLE - 1) as f64);
-        let k = (x as usize).min(TABLE - 2);
-        let t = x - k as f64;
-        1.0 / (1.0 + self.lambda[k] * (1.0 - t) + self.lambda[k + 1] * t)
-    }
-
-    fn brdf(&self, wi: DVec3, wo: DVec3) -> f64 {
-        let h = (wi + wo).normalize();
-        let spec = fresnel(wi.dot(h)) * (self.d)(h.z) * self.g1(wi.z) * self.g1(wo.z)
-            / (4.0 * wi.z * wo.z);
-        RHO / PI + spec
-    }
-}
 
 /// An anisotropic GGX lobe (α_u along the tangent at azimuth φ0) over the same body,
 /// with the separable Smith masking of the anisotropic GGX.
@@ -115,41 +35,6 @@ fn aniso_ggx(wi: DVec3, wo: DVec3, au: f64, av: f64, phi0_deg: f64) -> f64 {
     let d = 1.0 / (PI * au * av * q * q);
     let g = 1.0 / ((1.0 + lambda(wi)) * (1.0 + lambda(wo)));
     RHO / PI + fresnel(wi.dot(h)) * d * g / (4.0 * wi.z * wo.z)
-}
-
-/// A goniometer at the incidence azimuths `phi_i`: θi 10…70°, θo 5…80° by 7.5°, φo every
-/// 20° about the plane of incidence, the source direction left out; values of `f` with
-/// 1 % noise and a floor of 3e-4 sr⁻¹, stated as the uncertainty.
-fn measure(phi_i: &[f64], f: &dyn Fn(DVec3, DVec3) -> f64, seed: u64) -> Dataset {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let normal = Normal::new(0.0, 1.0).unwrap();
-    let mut raw = Vec::new();
-    for &pi in phi_i {
-        for ti in [10.0, 25.0, 40.0, 55.0, 70.0] {
-            for k in 0..11 {
-                let to = 5.0 + 7.5 * k as f64;
-                for j in 0..18 {
-                    if j == 0 && (to - ti).abs() < 3.0 {
-                        continue;
-                    }
-                    let po = pi + 20.0 * j as f64;
-                    let v = f(dir(ti, pi), dir(to, po));
-                    let u = ((0.01 * v).powi(2) + 1e-7).sqrt();
-                    let row = RawRow {
-                        theta_i: ti,
-                        phi_i: pi,
-                        theta_o: to,
-                        phi_o: po,
-                        wavelength_nm: 550.0,
-                        value: v + u * normal.sample(&mut rng),
-                        uncertainty: u,
-                    };
-                    raw.push((raw.len() + 1, row));
-                }
-            }
-        }
-    }
-    Dataset::from_rows(Kind::Brdf, "truth", &raw, "<test>", &ReadOptions::default()).unwrap()
 }
 
 /// Two rounds of candidates from `fa(lambert)` (no backtracking): enough to see every

@@ -11,36 +11,56 @@ use super::{Bsdf, Channels, Entry, Node, ParamDecl, Role, WgslFn};
 use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_transmittance_in;
-use crate::math::lanes::Real;
+use crate::math::lanes::{Real, V3};
 
 #[derive(Debug, Clone, Copy)]
 pub struct FresnelAggregate;
 
 impl Kernel for FresnelAggregate {
-    /// The lobe's F and kernel and the two Fresnel transmittances once per direction
-    /// (the transmittances once per run of directions with the same μi, μo: a memo);
-    /// per channel only k_s and the base's value differ.
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
-        let (alpha, eta, n) = (p.get(0, 0), p.get(0, 1), p.len());
-        let zero = R::zero();
-        let (mut ti, mut to) = (Memo::default(), Memo::default());
-        for (d, (wi, wo), out) in lanes(dirs, n, out) {
-            let below = wi.z.le(zero) | wo.z.le(zero);
-            let lobe = GgxLobe::at_in(alpha, eta, wi, wo);
-            let transmit = ti.get(
-                wi.z,
-                #[inline(always)]
-                |mu| fresnel_transmittance_in(mu, R::splat(eta)),
-            ) * to.get(
-                wo.z,
-                #[inline(always)]
-                |mu| fresnel_transmittance_in(mu, R::splat(eta)),
-            );
-            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
-                let v = lobe.scaled(R::splat(p.get(i, 2))) + transmit * b;
-                *o = R::select(below, zero, v);
-            }
+        let (alpha, eta) = (p.get(0, 0), p.get(0, 1));
+        aggregate_block(
+            p,
+            dirs,
+            base,
+            out,
+            #[inline(always)]
+            |wi, wo| GgxLobe::at_in(alpha, eta, wi, wo),
+        );
+    }
+}
+
+/// The aggregate's values when its parameters begin `lobe.alpha, lobe.eta, lobe.ks`:
+/// the lobe's F and kernel and the two Fresnel transmittances once per direction (the
+/// transmittances once per run of directions with the same μi, μo: a memo); per channel
+/// only k_s and the base's value differ (`fa(B)` and its `+ndf` form).
+#[inline(always)]
+pub fn aggregate_block<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    base: LaneChildren<R>,
+    out: &mut [R],
+    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
+) {
+    let (eta, n) = (p.get(0, 1), p.len());
+    let zero = R::zero();
+    let (mut ti, mut to) = (Memo::default(), Memo::default());
+    for (d, (wi, wo), out) in lanes(dirs, n, out) {
+        let below = wi.z.le(zero) | wo.z.le(zero);
+        let lobe = lobe(wi, wo);
+        let transmit = ti.get(
+            wi.z,
+            #[inline(always)]
+            |mu| fresnel_transmittance_in(mu, R::splat(eta)),
+        ) * to.get(
+            wo.z,
+            #[inline(always)]
+            |mu| fresnel_transmittance_in(mu, R::splat(eta)),
+        );
+        for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+            let v = lobe.scaled(R::splat(p.get(i, 2))) + transmit * b;
+            *o = R::select(below, zero, v);
         }
     }
 }
@@ -62,6 +82,9 @@ impl Bsdf for FresnelAggregate {
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::fa())
+    }
+    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::ndf::fa())
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {

@@ -50,6 +50,19 @@ impl<R: Real> GgxLobe<R> {
     /// [`crate::math::half_vector`] takes it.)
     #[inline(always)]
     pub fn at_in(alpha: f64, eta: f64, wi: V3<R>, wo: V3<R>) -> GgxLobe<R> {
+        GgxLobe::at_with(
+            eta,
+            wi,
+            wo,
+            #[inline(always)]
+            |m| microfacet::ggx_reflection(R::splat(alpha), wi, wo, m),
+        )
+    }
+    /// The lobe of another distribution, whose kernel D G1 G1 / (4 μi μo) `kernel` gives
+    /// at any positive multiple m of the half vector (the data-driven NDF of `+ndf`):
+    /// the Fresnel factor and the side tests are the GGX lobe's.
+    #[inline(always)]
+    pub fn at_with(eta: f64, wi: V3<R>, wo: V3<R>, kernel: impl FnOnce(V3<R>) -> R) -> GgxLobe<R> {
         let zero = R::zero();
         let above = zero.lt(wi.z) & zero.lt(wo.z);
         if !R::any(above) {
@@ -67,7 +80,7 @@ impl<R: Real> GgxLobe<R> {
         let cos_h = R::select(at_normal, wi.z, R::splat(0.5) * len);
         GgxLobe {
             fresnel: fresnel_dielectric_in(cos_h, R::splat(eta)),
-            kernel: microfacet::ggx_reflection(R::splat(alpha), wi, wo, m),
+            kernel: kernel(m),
             above,
         }
     }
@@ -96,11 +109,29 @@ impl Kernel for Ggx {
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
         let (alpha, eta) = (p.get(0, 1), p.get(0, 2));
-        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
-            let lobe = GgxLobe::at_in(alpha, eta, wi, wo);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = lobe.scaled(R::splat(p.get(i, 0)));
-            }
+        lobe_block(
+            p,
+            dirs,
+            out,
+            #[inline(always)]
+            |wi, wo| GgxLobe::at_in(alpha, eta, wi, wo),
+        );
+    }
+}
+
+/// A lobe's values when k_s (rgb) is the node's first parameter: the lobe once per
+/// direction, scaled per channel (`ggx` and its `+ndf` form).
+#[inline(always)]
+pub fn lobe_block<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    out: &mut [R],
+    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
+) {
+    for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+        let lobe = lobe(wi, wo);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = lobe.scaled(R::splat(p.get(i, 0)));
         }
     }
 }
@@ -115,6 +146,9 @@ impl Bsdf for Ggx {
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::ggx())
+    }
+    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::ndf::ggx())
     }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))

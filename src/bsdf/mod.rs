@@ -58,6 +58,7 @@ models! {
     btdf => [ENTRY, SCALE_ENTRY, ABSORB_ENTRY, DIFFUSE_ENTRY],
     peraxis => [ENTRY],
     aniso => [ENTRY],
+    ndf => [ENTRY],
 }
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]
@@ -153,6 +154,11 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     /// The node's anisotropic form (two roughnesses and a tangent azimuth in place of
     /// its roughness), which `+aniso` puts in its place; `None` where it has none.
     fn anisotropic(&self) -> Option<Arc<dyn Bsdf>> {
+        None
+    }
+    /// The node's form with a data-driven NDF ([`ndf`]: GGX times a tabulated factor),
+    /// which `+ndf` puts in its place; `None` where it has no GGX highlight.
+    fn data_driven(&self) -> Option<Arc<dyn Bsdf>> {
         None
     }
     /// An anisotropic lobe's (α_u, α_v, φ0): the positions of the two roughnesses and of

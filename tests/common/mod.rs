@@ -3,6 +3,7 @@
 
 pub mod cli;
 pub mod optical;
+pub mod truths;
 
 use bsdfit::bsdf::Model;
 use glam::DVec3;
