@@ -1,5 +1,5 @@
 // The data-driven NDF of a GGX highlight (`+ndf`): D = D_GGX(alpha) exp(s(theta_m)) / N with
-// s linear between 16 knots (s = 0 at the normal), and the Smith G1 = mu / (mu + C(mu)) of
+// s a Catmull-Rom spline through 16 knots (s = 0 at the normal), and the Smith G1 = mu / (mu + C(mu)) of
 // that same D, C read from a 65-entry table at mu_j = (j/64)^2. f32 twin of src/bsdf/ndf.rs, which documents
 // the distribution, the knots and the quadrature. The table of a candidate is built into
 // NDF_TABLE by ggx_ndf_prepare / fa_ndf_prepare after the candidate is loaded (a model has
@@ -22,12 +22,25 @@ fn ndf_knot_coordinate(y: f32) -> f32 {
     return 15.0 * sqrt(sqrt(max(y, 0.0)));
 }
 
-// s at knot coordinate x, linear between the knots.
+// s at knot coordinate x: the Catmull-Rom spline through the knots, even through the
+// normal (s_-1 = s_1) and linear past the last knot.
 fn ndf_deviation(x: f32) -> f32 {
     let xc = clamp(x, 0.0, 15.0);
     let k = min(u32(xc), NDF_KNOTS - 2u);
-    let f = xc - f32(k);
-    return NDF_TABLE.s[k] + f * (NDF_TABLE.s[k + 1u] - NDF_TABLE.s[k]);
+    let t = xc - f32(k);
+    var p0 = NDF_TABLE.s[1];
+    if (k > 0u) {
+        p0 = NDF_TABLE.s[k - 1u];
+    }
+    let p1 = NDF_TABLE.s[k];
+    let p2 = NDF_TABLE.s[k + 1u];
+    var p3 = 2.0 * NDF_TABLE.s[NDF_KNOTS - 1u] - NDF_TABLE.s[NDF_KNOTS - 2u];
+    if (k + 2u < NDF_KNOTS) {
+        p3 = NDF_TABLE.s[k + 2u];
+    }
+    let a = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
+    let b = -p0 + 3.0 * (p1 - p2) + p3;
+    return 0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)));
 }
 
 // t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) of knot k (y_k = (k/15)^4).

@@ -66,6 +66,10 @@ pub struct ParamDecl {
     /// an anisotropic lobe's two roughnesses and its frame, of which one plane sees a
     /// single combination.
     pub needs_planes: bool,
+    /// One knot of a tabulated function (`+ndf`'s log-factor): the knots a node declares
+    /// in a row form a chain anchored at 0 before its first knot, whose second
+    /// differences the fit's smoothness prior penalises ([`crate::inference::constraints`]).
+    pub knot: bool,
 }
 
 impl ParamDecl {
@@ -88,6 +92,7 @@ impl ParamDecl {
             per_axis: false,
             lobe: LobePart::Other,
             needs_planes: false,
+            knot: false,
         }
     }
     /// One value per channel.
@@ -157,6 +162,10 @@ impl ParamDecl {
             needs_planes: true,
             ..self
         }
+    }
+    /// A knot of a tabulated function ([`ParamDecl::knot`]).
+    pub const fn knot(self) -> Self {
+        ParamDecl { knot: true, ..self }
     }
     /// A lobe's width ([`LobePart::Width`]).
     pub const fn lobe_width(self) -> Self {

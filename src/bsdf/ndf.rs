@@ -3,7 +3,7 @@
 //!
 //!   D(m) = D_GGX(m; α) · exp(s(θm)) / N(α, s),   N = ∫ D_GGX e^s cos θm dω_m,
 //!
-//! where s is piecewise linear between K = 16 knots in θm, dense near the normal, with
+//! where s is a Catmull–Rom spline through K = 16 knots in θm, dense near the normal, with
 //! s = 0 at the normal and one free value `ndf1` … `ndf15` at each other knot: any
 //! isotropic NDF is GGX times a positive factor, and the knots tabulate that factor's
 //! logarithm (the tabulated NDF in the spirit of Dupuy et al. 2015's data-driven
@@ -25,7 +25,7 @@
 //!
 //! The knots: x = 15 · (2 sin²(θm/2))^(1/4) is the knot coordinate, knot k at x = k
 //! (θ_k = 0, 0.36, 1.44, 3.24, 5.76, 9.01, 13.0, 17.7, 23.2, 29.5, 36.6, 44.7, 53.8, 64.2,
-//! 76.0 and 90 degrees), s linear in x between knots. 2 sin²(θ/2) = sin²θ / (1 + cos θ)
+//! 76.0 and 90 degrees), s a Catmull–Rom spline in x. 2 sin²(θ/2) = sin²θ / (1 + cos θ)
 //! is taken from the components (never 1 − cos θ, which loses the near-normal angles).
 //!
 //! Twin: `shaders/bsdf/ndf.wgsl`.
@@ -68,7 +68,8 @@ const KNOT: ParamDecl = ParamDecl::shared(
     0.0,
     "ln(D / D_GGX) at this knot of the data-driven NDF (0: GGX; see the knots' angles in docs/models.md)",
 )
-.neutral_at(0.0);
+.neutral_at(0.0)
+.knot();
 
 fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
     names.iter().map(|n| KNOT.renamed(n))
@@ -81,7 +82,7 @@ fn knot_coordinate(y: f64) -> f64 {
 }
 
 /// (cos θ_k, sin² θ_k) of knot k: y_k = (k/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y).
-fn knot_angle(k: usize) -> (f64, f64) {
+pub fn knot_angle(k: usize) -> (f64, f64) {
     let r = k as f64 / (KNOTS - 1) as f64;
     let y = r * r * r * r;
     (1.0 - y, y * (2.0 - y))
@@ -95,13 +96,27 @@ pub fn knot_degrees() -> [f64; KNOTS] {
     })
 }
 
-/// s at knot coordinate x, linear between the knots (`s[0]` = 0 at the normal).
+/// s at knot coordinate x: the Catmull–Rom spline through the knots (C¹, exact for
+/// quadratics, so a smooth log-factor is followed to O(h⁴) between knots where a linear
+/// one would leave O(h²)), continued evenly through the normal (s_{−1} = s_1: D is
+/// smooth there) and linearly past the last knot.
 #[inline]
 fn deviation(s: &[f64; KNOTS], x: f64) -> f64 {
     let x = x.clamp(0.0, (KNOTS - 1) as f64);
     let k = (x as usize).min(KNOTS - 2);
-    let f = x - k as f64;
-    s[k] + f * (s[k + 1] - s[k])
+    let t = x - k as f64;
+    let p0 = if k == 0 { s[1] } else { s[k - 1] };
+    let (p1, p2) = (s[k], s[k + 1]);
+    let p3 = if k + 2 < KNOTS { s[k + 2] } else { 2.0 * s[KNOTS - 1] - s[KNOTS - 2] };
+    catmull_rom(p0, p1, p2, p3, t)
+}
+
+/// The Catmull–Rom segment between p1 (t = 0) and p2 (t = 1).
+#[inline]
+fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
+    let a = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
+    let b = -p0 + 3.0 * (p1 - p2) + p3;
+    0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)))
 }
 
 /// 8-point Gauss–Legendre nodes (±) and weights on [−1, 1].
@@ -544,8 +559,7 @@ mod tests {
                 ring.push((th, d));
             }
             assert!((norm - 1.0).abs() < 1e-3, "α {alpha}: ∫ D cos dω = {norm}");
-            for theta_deg in [30.0, 60.0, 75.0, 83.0, 88.0] {
-                let w = dir(f64::to_radians(theta_deg), 0.0);
+            let brute_g1 = |w: DVec3| {
                 let mut area = 0.0;
                 for &(th, d) in &ring {
                     let mut around = 0.0;
@@ -554,13 +568,23 @@ mod tests {
                     }
                     area += d * th.sin() * dt * around * dp;
                 }
-                let brute = w.z / area;
+                w.z / area
+            };
+            for theta_deg in [30.0, 60.0, 75.0, 83.0, 88.0] {
+                let w = dir(f64::to_radians(theta_deg), 0.0);
+                let brute = brute_g1(w);
                 let table_g1 = w.z / (w.z + table.facing_away(w.z));
                 assert!(
                     (brute - table_g1).abs() < 2e-3 * brute,
                     "α {alpha} θ {theta_deg}: G1 {table_g1} (table), {brute} (brute force)"
                 );
             }
+            // The lobe's kernel uses that masking: D G1 G1 / (4 μi μo).
+            let (wi, wo) = (dir(70f64.to_radians(), 0.0), dir(80f64.to_radians(), 2.0));
+            let h = (wi + wo).normalize();
+            let want = table.d(h) * brute_g1(wi) * brute_g1(wo) / (4.0 * wi.z * wo.z);
+            let got = table.reflection::<f64>(wi.into(), wo.into(), (wi + wo).into());
+            assert!((got - want).abs() < 4e-3 * want, "α {alpha}: kernel {got}, brute force {want}");
         }
     }
 
@@ -574,10 +598,18 @@ mod tests {
             let (c, s2) = knot_angle(k);
             assert!((knot_coordinate(s2 / (1.0 + c)) - k as f64).abs() < 1e-9);
         }
+        // The spline reproduces a quadratic between interior knots, passes through every
+        // knot, and is even about the normal.
         let s: [f64; KNOTS] = std::array::from_fn(|k| (k * k) as f64);
         assert_eq!(deviation(&s, 3.0), 9.0);
-        assert_eq!(deviation(&s, 3.25), 9.0 + 0.25 * 7.0);
+        assert!((deviation(&s, 3.25) - 3.25 * 3.25).abs() < 1e-12);
         assert_eq!(deviation(&s, 20.0), 225.0);
+        let t: [f64; KNOTS] = std::array::from_fn(|k| ((k as f64) * 0.7).sin());
+        for k in 0..KNOTS {
+            assert!((deviation(&t, k as f64) - t[k]).abs() < 1e-12);
+        }
+        let slope = (deviation(&t, 1e-6) - deviation(&t, 0.0)) / 1e-6;
+        assert!(slope.abs() < 1e-5, "ds/dx at the normal: {slope}");
     }
 
     /// +ndf takes the highlight of ggx and fa(B) wherever it sits, once, and refuses

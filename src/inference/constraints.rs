@@ -264,9 +264,42 @@ pub struct Constraints {
     /// Flat indices of the fitted parameters, ascending.
     pub free: Vec<usize>,
     pub priors: Vec<Prior>,
+    /// The smoothness prior's rows: the second differences of each chain of knots the
+    /// model declares ([`crate::bsdf::ParamDecl::knot`]), as (flat index, coefficient).
+    /// Each is one more residual (Σ c_j θ_j)/`smooth_sd` where `smooth_sd` is set.
+    pub smooth: Vec<Vec<(usize, f64)>>,
+    /// The smoothness prior's standard deviation of a second difference (in the knots'
+    /// units), chosen by the fit ([`crate::inference::fit::Smoothness`]); None: no prior.
+    pub smooth_sd: Option<f64>,
     /// Flat indices whose bounds were narrowed.
     pub narrowed: Vec<usize>,
     names: Vec<String>,
+}
+
+/// The second differences s_{k−1} − 2 s_k + s_{k+1} along each run of consecutive knot
+/// parameters (a chain anchored at s_0 = 0 before its first knot, which has no parameter).
+fn smoothness_rows(decls: &[ParamDecl]) -> Vec<Vec<(usize, f64)>> {
+    let mut rows = Vec::new();
+    let mut j = 0;
+    while j < decls.len() {
+        if !decls[j].knot {
+            j += 1;
+            continue;
+        }
+        let start = j;
+        while j < decls.len() && decls[j].knot {
+            j += 1;
+        }
+        // Knots start..j are s_1 … s_n.
+        for k in start..j - 1 {
+            let mut row = vec![(k, -2.0), (k + 1, 1.0)];
+            if k > start {
+                row.insert(0, (k - 1, 1.0));
+            }
+            rows.push(row);
+        }
+    }
+    rows
 }
 
 /// Flat indices a name stands for (see the module doc), or a message listing the names.
@@ -328,6 +361,8 @@ impl Constraints {
             fixed: vec![None; model.dim],
             free: (0..model.dim).collect(),
             priors: vec![],
+            smooth: smoothness_rows(&model.flat_decls()),
+            smooth_sd: None,
             narrowed: vec![],
             names: model.flat_names(),
         }
@@ -450,7 +485,13 @@ impl Constraints {
 
     /// Whether anything is constrained (else the fit is the plain one).
     pub fn is_trivial(&self) -> bool {
-        self.free.len() == self.fixed.len() && self.priors.is_empty() && self.narrowed.is_empty()
+        self.free.len() == self.fixed.len() && self.prior_rows() == 0 && self.narrowed.is_empty()
+    }
+
+    /// The residual rows the priors add beside the data's: one per `--prior`, and the
+    /// smoothness prior's where it is on.
+    pub fn prior_rows(&self) -> usize {
+        self.priors.len() + self.smooth_sd.map_or(0, |_| self.smooth.len())
     }
 
     /// Free unit-box coordinates → full physical vector.
@@ -475,9 +516,38 @@ impl Constraints {
             .collect()
     }
 
-    /// The prior residuals (θ − mean)/sd at a full physical vector.
+    /// The prior residuals at a full physical vector: (θ − mean)/sd per `--prior`, then
+    /// the smoothness rows (Σ c_j θ_j)/sd.
     pub fn prior_residuals<'a>(&'a self, flat: &'a [f64]) -> impl Iterator<Item = f64> + 'a {
-        self.priors.iter().map(|p| (flat[p.index] - p.mean) / p.sd)
+        let smooth = self.smooth_sd.into_iter().flat_map(move |sd| {
+            self.smooth
+                .iter()
+                .map(move |row| row.iter().map(|&(j, c)| c * flat[j]).sum::<f64>() / sd)
+        });
+        self.priors
+            .iter()
+            .map(|p| (flat[p.index] - p.mean) / p.sd)
+            .chain(smooth)
+    }
+
+    /// The prior rows' gradients over the free parameters, each scaled by 1/sd: a `--prior`
+    /// row has 1/sd at its parameter, a smoothness row c_j/sd at its knots (the rows of
+    /// JᵀJ that the priors add; their residuals have unit variance).
+    pub fn prior_gradients(&self) -> Vec<Vec<(usize, f64)>> {
+        let at = |j: usize| self.free.iter().position(|&f| f == j);
+        let mut out: Vec<Vec<(usize, f64)>> = self
+            .priors
+            .iter()
+            .map(|p| at(p.index).map(|c| (c, 1.0 / p.sd)).into_iter().collect())
+            .collect();
+        if let Some(sd) = self.smooth_sd {
+            out.extend(self.smooth.iter().map(|row| {
+                row.iter()
+                    .filter_map(|&(j, c)| at(j).map(|k| (k, c / sd)))
+                    .collect()
+            }));
+        }
+        out
     }
 
     /// Σ of the squared prior residuals.
@@ -530,7 +600,12 @@ impl Constraints {
                 serde_json::json!([self.decls[j].lo, self.decls[j].hi]),
             );
         }
-        serde_json::json!({ "fixed": fixed, "bounds": bounds, "priors": self.priors })
+        let mut out =
+            serde_json::json!({ "fixed": fixed, "bounds": bounds, "priors": self.priors });
+        if let Some(sd) = self.smooth_sd {
+            out["smoothness_sd"] = serde_json::json!(sd);
+        }
+        out
     }
 }
 

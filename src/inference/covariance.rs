@@ -34,6 +34,23 @@ pub struct Covariance {
     /// uncertainty in the unit box (at least [`RIDGE_UNIT_STD`]; infinite where the data
     /// do not constrain it at all). Weakest first.
     pub ridges: Vec<Ridge>,
+    /// The effective number of fitted parameters, tr(B⁻¹ B_data) with B = B_data +
+    /// B_prior the normal matrix with the priors' rows: the parameter count where there
+    /// is no prior, less where a prior holds some of them (None without a covariance).
+    pub effective_params: Option<f64>,
+    /// With the smoothness prior on: the full covariance of the flat parameters (rows
+    /// and columns of fixed ones 0), the prior's information included, from a
+    /// pseudo-inverse of the Jacobi-scaled normal matrix. A knot the data do not see is
+    /// held by the prior alone: its variance is then the prior's, not "undetermined" as
+    /// [`Covariance::std`] says (whose judgement compares information across all
+    /// parameters in their own units). For the tabulated functions' bands
+    /// ([`crate::inference::knots::bands`]).
+    pub with_prior: Option<Vec<Vec<f64>>>,
+    /// With the smoothness prior on: the information the data alone hold on each flat
+    /// parameter, B_data,jj = Σ (∂r/∂θ_j)² (1/σ² of the parameter were it the only one
+    /// fitted; None where fixed). A knot with less than 1 (in ln D: the data alone would
+    /// not place it within a factor e) is set by the prior, not measured.
+    pub data_information: Vec<Option<f64>>,
 }
 
 /// One weakly determined direction ([`Covariance::ridges`]).
@@ -189,10 +206,11 @@ pub fn covariance(
 ) -> anyhow::Result<Covariance> {
     let free = &space.free;
     let p = free.len();
-    let k = data.len() + space.priors.len();
+    let k = data.len() + space.prior_rows();
     let decls = &space.decls;
     let (batch, steps) = central_difference_batch(flat, space);
     let (mut jtj, mut meat, chi2) = jacobian_sums(data, loss, eval, &batch, &steps)?;
+    let data_jtj = jtj.clone();
     add_prior_rows(&mut jtj, &mut meat, space);
     let chi2 = chi2 + space.prior_chi2(flat);
     let dof = (k.saturating_sub(p)).max(1) as f64;
@@ -205,6 +223,9 @@ pub fn covariance(
         correlation: vec![vec![None; p]; p],
         warnings: vec![],
         ridges: vec![],
+        effective_params: None,
+        with_prior: None,
+        data_information: vec![],
     };
     let slopes = unit_slopes(free, flat, decls);
     let (inv, singular) = match pseudo_inverse(&jtj, &slopes) {
@@ -258,15 +279,64 @@ pub fn covariance(
             names[c]
         ));
     }
-    let cov = &inv * meat * &inv * birge;
+    out.effective_params = Some((&inv * &data_jtj).trace());
+    let cov = &inv * &meat * &inv * birge;
+    let with_prior = (space.smooth_sd.is_some()).then(|| {
+        let scaled = jacobi_scaled_inverse(&jtj);
+        let full = &scaled * &meat * &scaled * birge;
+        let information = (0..p).map(|c| data_jtj[(c, c)]).collect::<Vec<_>>();
+        (full, information)
+    });
     out.ridges = ridges(&jtj, birge, free, &slopes);
     set_std_and_correlation(&mut out, &cov, &undetermined);
     let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
     let mut out = expand(out, free, model.dim);
+    if let Some((full, information)) = with_prior {
+        let mut m = vec![vec![0.0; model.dim]; model.dim];
+        let mut shares = vec![None; model.dim];
+        for (a, &ja) in free.iter().enumerate() {
+            shares[ja] = Some(information[a]);
+            for (b, &jb) in free.iter().enumerate() {
+                m[ja][jb] = full[(a, b)];
+            }
+        }
+        out.with_prior = Some(m);
+        out.data_information = shares;
+    }
     out.warnings
         .extend(one_azimuth_warnings(model, data, flat, &out.std, free));
     Ok(out)
+}
+
+/// B⁻¹ through the Jacobi scaling S B S, S = diag(B)^(-1/2), whose singular values
+/// measure how collinear the parameters' information is rather than its units; the
+/// directions below [`RCOND`] there (none unless the information is collinear) are left
+/// out as in [`pseudo_inverse`].
+fn jacobi_scaled_inverse(b: &DMatrix<f64>) -> DMatrix<f64> {
+    let p = b.nrows();
+    let scale: Vec<f64> = (0..p)
+        .map(|j| {
+            if b[(j, j)] > 0.0 {
+                1.0 / b[(j, j)].sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let scaled = DMatrix::from_fn(p, p, |i, j| b[(i, j)] * scale[i] * scale[j]);
+    let svd = scaled.svd(true, true);
+    let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
+        return DMatrix::zeros(p, p);
+    };
+    let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
+    let mut inv = DMatrix::<f64>::zeros(p, p);
+    for (m, &s) in svd.singular_values.iter().enumerate() {
+        if s > RCOND * smax && s > 0.0 {
+            inv += (vt.row(m).transpose() * u.column(m).transpose()) / s;
+        }
+    }
+    DMatrix::from_fn(p, p, |i, j| inv[(i, j)] * scale[i] * scale[j])
 }
 
 /// Frames this many standard uncertainties or fewer from the plane of incidence (or
@@ -375,13 +445,15 @@ fn central_difference_batch(flat: &[f64], space: &Constraints) -> (Vec<f64>, Vec
     (batch, steps)
 }
 
-/// The priors' rows in B and M: ∂((θ_j − mean)/sd)/∂θ_j = 1/sd, with unit variance.
+/// The priors' rows in B and M: a `--prior`'s ∂((θ_j − mean)/sd)/∂θ_j = 1/sd, a
+/// smoothness row's c_j/sd at its knots; each residual with unit variance.
 fn add_prior_rows(jtj: &mut DMatrix<f64>, meat: &mut DMatrix<f64>, space: &Constraints) {
-    for prior in &space.priors {
-        if let Some(c) = space.free.iter().position(|&j| j == prior.index) {
-            let d = 1.0 / (prior.sd * prior.sd);
-            jtj[(c, c)] += d;
-            meat[(c, c)] += d;
+    for row in space.prior_gradients() {
+        for &(a, ga) in &row {
+            for &(b, gb) in &row {
+                jtj[(a, b)] += ga * gb;
+                meat[(a, b)] += ga * gb;
+            }
         }
     }
 }
@@ -593,6 +665,9 @@ fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
         correlation: vec![vec![None; dim]; dim],
         warnings: free_cov.warnings,
         ridges: free_cov.ridges,
+        effective_params: free_cov.effective_params,
+        with_prior: None,
+        data_information: vec![],
     };
     for (a, &ja) in free.iter().enumerate() {
         out.std[ja] = free_cov.std[a];

@@ -345,6 +345,9 @@ fn empty(p: usize) -> Covariance {
         correlation: vec![vec![None; p]; p],
         warnings: vec![],
         ridges: vec![],
+        effective_params: None,
+        with_prior: None,
+        data_information: vec![],
     }
 }
 

@@ -6,6 +6,7 @@ pub mod bootstrap;
 pub mod constraints;
 pub mod covariance;
 pub mod fit;
+pub mod knots;
 pub mod mc;
 pub mod mc_summary;
 pub mod saved;

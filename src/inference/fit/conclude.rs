@@ -34,6 +34,8 @@ pub struct Conclusions {
     pub seconds: f64,
     /// Why the best restart stopped.
     pub stop: crate::optim::Stop,
+    /// How the smoothness prior's σ_s was chosen ([`super::Smoothness::Auto`]).
+    pub smoothness: Option<super::SmoothnessChoice>,
 }
 
 /// χ², the covariance and the warnings at a problem's optimum, in f64 on the CPU
@@ -71,7 +73,7 @@ pub(super) fn conclude(
     Ok(Conclusions {
         loss: best.loss,
         chi2_prior: space.prior_chi2(&flat),
-        dof: data.len() + space.priors.len() - space.dim(),
+        dof: data.len() + space.prior_rows() - space.dim(),
         constraints: space,
         flat,
         values,
@@ -79,6 +81,7 @@ pub(super) fn conclude(
         cov,
         within: best.within,
         stop: best.stop,
+        smoothness: None,
         evaluations: searched + eval.evaluations(),
         seconds: t0.elapsed().as_secs_f64(),
     })

@@ -2,6 +2,7 @@
 //! problems × restarts stepped together, one backend submission per optimizer step.
 
 use super::polish::{polish_in_f64, search_options};
+use super::smoothness::Smoothness;
 use super::starts::screened_starts;
 use super::{FitOptions, Optimizer, UnitBox};
 use crate::bsdf::Model;
@@ -114,7 +115,19 @@ fn check_request(
 ) -> anyhow::Result<Constraints> {
     anyhow::ensure!(!datas.is_empty(), "no data set to fit");
     anyhow::ensure!(datas.len() == losses.len(), "one loss per data set");
-    let space = Constraints::resolve(model, &opts.constraints, opts.constraints.lenient)?;
+    let mut space = Constraints::resolve(model, &opts.constraints, opts.constraints.lenient)?;
+    if let (Smoothness::Sd(sd), false) = (opts.smoothness, space.smooth.is_empty()) {
+        if let Some(loss) = losses
+            .iter()
+            .find(|l| l.metric != crate::engine::loss::Metric::Chi2)
+        {
+            return Err(field_error(format!(
+                "{{smoothness}} needs {{loss=chi2}}: the smoothness prior is a χ² term, and {} is not in χ²'s units",
+                loss.metric
+            )));
+        }
+        space.smooth_sd = Some(sd);
+    }
     for (data, loss) in datas.iter().zip(losses) {
         anyhow::ensure!(
             model.kind == data.kind,
@@ -131,7 +144,7 @@ fn check_request(
             )));
         }
         anyhow::ensure!(
-            data.len() + space.priors.len() > space.dim(),
+            data.len() + space.prior_rows() > space.dim(),
             "{}: {} cannot determine the {} parameters of {}",
             data.source.display(),
             crate::text::plural_with(data.len(), "sample", "samples"),

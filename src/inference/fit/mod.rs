@@ -11,6 +11,7 @@ mod many;
 mod options;
 mod polish;
 mod report;
+pub mod smoothness;
 mod starts;
 mod unit_box;
 
@@ -19,11 +20,12 @@ pub use many::{fit_many, ManyStats, Optimum, PhaseSeconds};
 pub use options::{FitOptions, Optimizer};
 pub use polish::{POLISHED_SEARCH_FD_STEP, POLISHED_SEARCH_FTOL, POLISHED_SEARCH_STALL};
 pub use report::{Best, FitReport};
+pub use smoothness::{Smoothness, SmoothnessChoice};
 pub use unit_box::UnitBox;
 
 use crate::bsdf::Model;
 use crate::data::Dataset;
-use crate::engine::loss::Loss;
+use crate::engine::loss::{Loss, Metric};
 use crate::engine::Backend;
 use conclude::conclude;
 use report::make_report;
@@ -52,6 +54,12 @@ pub fn fit_outcome(
     opts: &FitOptions,
     progress: &mut dyn FnMut(usize),
 ) -> anyhow::Result<Conclusions> {
+    let knots = model.flat_decls().iter().any(|d| d.knot);
+    if knots && opts.smoothness == Smoothness::Auto && loss.metric == Metric::Chi2 {
+        return smoothness::choose(opts, |o| {
+            fit_outcome(model, data, loss, backend, o, &mut *progress)
+        });
+    }
     let t0 = Instant::now();
     let (optima, space, stats) = fit_many(model, &[data], &[loss], backend, opts, progress)?;
     if std::env::var_os("BSDFIT_TRACE").is_some() {

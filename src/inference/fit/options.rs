@@ -1,6 +1,7 @@
 //! What a fit is asked to do: the optimizer and its settings, restarts, seeds and
 //! starting points, the f64 polish and the user's constraints.
 
+use super::smoothness::Smoothness;
 use crate::inference::constraints::ConstraintSpec;
 use crate::optim::{compass, lm};
 use serde::Serialize;
@@ -59,6 +60,10 @@ pub struct FitOptions {
     pub polish: bool,
     /// `--fix`, `--bounds`, `--prior` (resolved against each model fitted).
     pub constraints: ConstraintSpec,
+    /// The smoothness prior of tabulated knots (`+ndf`), where the model has any:
+    /// [`Smoothness::Auto`] is resolved by [`super::fit_outcome`]; [`super::fit_many`]
+    /// (sweeps) treats it as off.
+    pub smoothness: Smoothness,
 }
 
 impl Default for FitOptions {
@@ -74,6 +79,7 @@ impl Default for FitOptions {
             lm: Default::default(),
             polish: true,
             constraints: Default::default(),
+            smoothness: Smoothness::Auto,
         }
     }
 }

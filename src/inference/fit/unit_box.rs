@@ -44,7 +44,7 @@ impl UnitBox<'_, '_> {
     ) -> anyhow::Result<Vec<f64>> {
         let phys = self.to_physical(points);
         let mut costs = self.eval.costs_of(problems, &phys)?;
-        if !self.space.priors.is_empty() {
+        if self.space.prior_rows() > 0 {
             // Priors come with the χ² loss only, whose cost is the plain sum of squares.
             for (c, flat) in costs.iter_mut().zip(phys.chunks(self.model.dim)) {
                 *c += self.space.prior_chi2(flat);
@@ -64,7 +64,7 @@ impl UnitBox<'_, '_> {
     ) -> anyhow::Result<Vec<Vec<f64>>> {
         let mut rows: Vec<Vec<f64>> = problems
             .iter()
-            .map(|&q| Vec::with_capacity(self.eval.samples_of(q) + self.space.priors.len()))
+            .map(|&q| Vec::with_capacity(self.eval.samples_of(q) + self.space.prior_rows()))
             .collect();
         self.eval.value_windows(problems, phys, &mut |w| {
             for part in w.parts {
@@ -107,7 +107,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
         Ok(self.problem_residuals(&vec![0; n], &phys)?.concat())
     }
     fn residual_count(&self) -> usize {
-        self.eval.samples_of(0) + self.space.priors.len()
+        self.eval.samples_of(0) + self.space.prior_rows()
     }
     fn normal_equations(
         &mut self,
@@ -132,7 +132,7 @@ impl BatchResiduals for UnitBox<'_, '_> {
         let unit = crate::optim::difference_points(points, steps, p);
         let phys = self.to_physical(&unit);
         let mut normal = self.eval.normal_equations_of(&problems, &phys, steps)?;
-        if !self.space.priors.is_empty() {
+        if self.space.prior_rows() > 0 {
             let dim = self.model.dim;
             for ((ne, group), h) in normal
                 .iter_mut()

@@ -1,0 +1,151 @@
+//! The fitted data-driven NDF of a model with `+ndf` ([`crate::bsdf::ndf`]) at its knots,
+//! with bands: D at each knot's angle, the standard uncertainty of ln D propagated from
+//! the fit's covariance with the smoothness prior's information, and whether the data see
+//! the lobe there or the prior sets it.
+
+use crate::bsdf::ndf::{knot_angle, knot_degrees, NdfTable, KNOTS};
+use crate::bsdf::Model;
+use crate::data::Dataset;
+use crate::inference::covariance::Covariance;
+
+/// One knot of a fitted data-driven NDF, for reports: the normalised D at the knot's
+/// angle with its standard uncertainty in ln D, and whether the data see the lobe there.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct KnotBand {
+    /// θ_k in degrees.
+    pub theta_deg: f64,
+    /// D(θ_k) (sr⁻¹), normalised: ∫ D cos θm dω = 1.
+    pub d: f64,
+    /// Standard uncertainty of ln D(θ_k), linearised from the fit's covariance with the
+    /// prior's information ([`Covariance::with_prior`]);
+    /// None without it. Where the knot is not measured it is the prior's spread, and a
+    /// linearisation of what is only an upper bound.
+    pub sigma_ln_d: Option<f64>,
+    /// The lobe's own signal near the knot: √Σ (f_lobe/u)² over the samples whose half
+    /// vector lies between the knot's neighbours, f_lobe the highlight's part of the
+    /// fitted value.
+    pub signal: f64,
+    /// Whether that signal is at least [`MEASURED_SIGNAL`]: the data see the lobe at this
+    /// knot. Else the smoothness prior sets it (no half vectors there, or a lobe too faint
+    /// against the uncertainties), and D there is not measured.
+    pub measured: bool,
+}
+
+/// The lobe's signal near a knot from which D there counts as measured: a 3σ detection.
+/// (A weak prior lets a few knots absorb noise where the lobe is absent; such a fitted
+/// lobe shows a signal of about 1 to 3, the square root of the few degrees of freedom it
+/// took.)
+pub const MEASURED_SIGNAL: f64 = 3.0;
+
+/// The fitted D at the knots of each data-driven NDF of `model` fitted to `data` (one
+/// list per `+ndf` highlight, with its parameters' prefix: `lobe.` for `fa(B)+ndf`).
+pub fn bands(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    cov: &Covariance,
+) -> Vec<(String, Vec<KnotBand>)> {
+    let find = |name: &str| model.params.iter().find(|p| p.name == name);
+    let mut out = Vec::new();
+    for p in model
+        .params
+        .iter()
+        .filter(|p| p.decl.knot && p.name.ends_with("ndf1"))
+    {
+        let prefix = p.name.trim_end_matches("ndf1").to_string();
+        let (Some(alpha), Some(ks)) = (
+            find(&format!("{prefix}alpha")),
+            find(&format!("{prefix}ks")),
+        ) else {
+            continue;
+        };
+        let Some(knots) = (1..KNOTS)
+            .map(|k| find(&format!("{prefix}ndf{k}")).map(|q| q.index))
+            .collect::<Option<Vec<usize>>>()
+        else {
+            continue;
+        };
+        let params: Vec<usize> = std::iter::once(alpha.index)
+            .chain(knots.iter().copied())
+            .collect();
+        let ln_d = |v: &[f64], k: usize| {
+            let s: [f64; KNOTS] = std::array::from_fn(|i| if i == 0 { 0.0 } else { v[i] });
+            // At 90° D is its limit from above (d is 0 at m.z = 0, below the surface).
+            let (c, s2) = knot_angle(k);
+            let m = glam::DVec3::new(s2.sqrt(), 0.0, c.max(1e-9));
+            NdfTable::new(v[0], s).d(m).ln()
+        };
+        let values: Vec<f64> = params.iter().map(|&j| flat[j]).collect();
+        let signal = lobe_signal(
+            model,
+            data,
+            flat,
+            ks.index..ks.index + ks.width(model.channels),
+        );
+        let degrees = knot_degrees();
+        let rows = (0..KNOTS)
+            .map(|k| {
+                let sigma = cov.with_prior.as_ref().map(|m| {
+                    // Central differences in α and the knots, through N.
+                    let grad: Vec<f64> = (0..params.len())
+                        .map(|a| {
+                            let h = 1e-6 * values[a].abs().max(1e-3);
+                            let (mut up, mut down) = (values.clone(), values.clone());
+                            up[a] += h;
+                            down[a] -= h;
+                            (ln_d(&up, k) - ln_d(&down, k)) / (2.0 * h)
+                        })
+                        .collect();
+                    let mut var = 0.0;
+                    for (a, &ja) in params.iter().enumerate() {
+                        for (b, &jb) in params.iter().enumerate() {
+                            var += grad[a] * grad[b] * m[ja][jb];
+                        }
+                    }
+                    var.max(0.0).sqrt()
+                });
+                // Between the knot's neighbours (from the normal for the first).
+                let lo = degrees[k.saturating_sub(1)];
+                let hi = degrees[(k + 1).min(KNOTS - 1)];
+                let s2: f64 = signal
+                    .iter()
+                    .filter(|(deg, _)| *deg >= lo && *deg <= hi)
+                    .map(|(_, z)| z * z)
+                    .sum();
+                KnotBand {
+                    theta_deg: degrees[k],
+                    d: ln_d(&values, k).exp(),
+                    sigma_ln_d: sigma,
+                    signal: s2.sqrt(),
+                    measured: s2.sqrt() >= MEASURED_SIGNAL,
+                }
+            })
+            .collect();
+        out.push((prefix, rows));
+    }
+    out
+}
+
+/// Per sample: the half vector's angle θh (degrees) and the highlight's part of the
+/// fitted value in units of the sample's uncertainty, f − f(k_s = 0) (the lobe is k_s
+/// times a kernel; what remains at k_s = 0 is the rest of the model).
+fn lobe_signal(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    ks: std::ops::Range<usize>,
+) -> Vec<(f64, f64)> {
+    let mut off = flat.to_vec();
+    off[ks].fill(0.0);
+    data.samples
+        .iter()
+        .map(|s| {
+            let (wi, wo) = (s.wi(), s.wo());
+            let g = model.group_of(s);
+            let lobe = model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo);
+            let h = wi + wo;
+            let deg = (h.x.hypot(h.y)).atan2(h.z).to_degrees();
+            (deg, lobe / s.uncertainty)
+        })
+        .collect()
+}
