@@ -81,7 +81,7 @@ fn data_driven_ndfs_of_truths_outside_the_catalogue_come_back() {
 
         let all = bands(&ndf, &data, &driven.flat, &driven.cov);
         assert_eq!(all.len(), 1);
-        assert_eq!(all[0].0, "lobe.");
+        assert_eq!(all[0].0, "lobe.ndf");
         let mut measured = 0;
         for knot in &all[0].1 {
             let truth = d(knot.theta_deg.to_radians().cos());

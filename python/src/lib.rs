@@ -501,6 +501,7 @@ fn fit_json<'py>(
             mc,
             mc_scale,
             mc_restarts,
+            ..Default::default()
         };
         // Every check runs before the backend starts, as on the command line.
         let (model, _, _) = request.prepare(&data)?;

@@ -1,9 +1,10 @@
-// The data-driven NDF of a GGX highlight (`+ndf`): D = D_GGX(alpha) exp(s(theta_m)) / N with
-// s a Catmull-Rom spline through 16 knots (s = 0 at the normal), and the Smith G1 = mu / (mu + C(mu)) of
-// that same D, C read from a 65-entry table at mu_j = (j/64)^2. f32 twin of src/bsdf/ndf.rs, which documents
-// the distribution, the knots and the quadrature. The table of a candidate is built into
-// NDF_TABLE by ggx_ndf_prepare / fa_ndf_prepare after the candidate is loaded (a model has
-// at most one data-driven highlight); without the prepared constant, per record.
+// The data-driven NDF of a GGX lobe (`+ndf`): D = D_GGX(alpha) exp(s(theta_m)) / N with s a
+// Catmull-Rom spline through 16 knots (s = 0 at the normal), and the Smith G1 = mu / (mu +
+// C(mu)) of that same D, C read from a 65-entry table at mu_j = (j/64)^2. f32 twin of
+// src/bsdf/ndf.rs, which documents the distribution, the knots and the quadrature. A
+// candidate's table is built by its node's prepare function after the candidate is loaded
+// (into NDF_TABLE for the highlight of ggx or fa, COAT_NDF_TABLE for a coat: a model has
+// at most one of each); without the prepared constant, per record.
 
 const NDF_KNOTS: u32 = 16u;
 const NDF_MU_POINTS: u32 = 65u;
@@ -15,7 +16,9 @@ struct NdfTable {
     c: array<f32, 65>,
 }
 
+// The table of the highlight (ggx or fa) and of a coat lobe: a model has at most one of each.
 var<private> NDF_TABLE: NdfTable;
+var<private> COAT_NDF_TABLE: NdfTable;
 
 // The knot coordinate x in [0, 15] of y = 2 sin^2(theta/2): knot k at x = k.
 fn ndf_knot_coordinate(y: f32) -> f32 {
@@ -24,32 +27,42 @@ fn ndf_knot_coordinate(y: f32) -> f32 {
 
 // s at knot coordinate x: the Catmull-Rom spline through the knots, even through the
 // normal (s_-1 = s_1) and linear past the last knot.
-fn ndf_deviation(x: f32) -> f32 {
+fn ndf_deviation(tab: ptr<private, NdfTable>, x: f32) -> f32 {
     let xc = clamp(x, 0.0, 15.0);
     let k = min(u32(xc), NDF_KNOTS - 2u);
     let t = xc - f32(k);
-    var p0 = NDF_TABLE.s[1];
+    var p0 = (*tab).s[1];
     if (k > 0u) {
-        p0 = NDF_TABLE.s[k - 1u];
+        p0 = (*tab).s[k - 1u];
     }
-    let p1 = NDF_TABLE.s[k];
-    let p2 = NDF_TABLE.s[k + 1u];
-    var p3 = 2.0 * NDF_TABLE.s[NDF_KNOTS - 1u] - NDF_TABLE.s[NDF_KNOTS - 2u];
+    let p1 = (*tab).s[k];
+    let p2 = (*tab).s[k + 1u];
+    var p3 = 2.0 * (*tab).s[NDF_KNOTS - 1u] - (*tab).s[NDF_KNOTS - 2u];
     if (k + 2u < NDF_KNOTS) {
-        p3 = NDF_TABLE.s[k + 2u];
+        p3 = (*tab).s[k + 2u];
     }
     let a = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
     let b = -p0 + 3.0 * (p1 - p2) + p3;
     return 0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)));
 }
 
-// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) of knot k (y_k = (k/15)^4).
-fn ndf_knot_t(k: u32, alpha: f32) -> f32 {
-    let r = f32(k) / 15.0;
+// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) at knot coordinate x (y = (x/15)^4).
+fn ndf_knot_t(x: f32, alpha: f32) -> f32 {
+    let r = x / 15.0;
     let y = r * r * r * r;
     let c = 1.0 - y;
     let s2 = y * (2.0 - y);
     return alpha * c / sqrt(alpha * alpha * c * c + s2);
+}
+
+// The quadrature pieces of a knot interval: one per 4 units of change of s, 1 to 4.
+fn ndf_pieces(a: f32, b: f32) -> u32 {
+    return u32(clamp(ceil(abs(b - a) / 4.0), 1.0, 4.0));
+}
+
+// The table's cosines a node at sin(theta_m) = sm faces away from (mu_j < sm).
+fn ndf_facing_count(sm: f32) -> u32 {
+    return min(u32(ceil(f32(NDF_MU_POINTS - 1u) * sqrt(sm))) + 1u, NDF_MU_POINTS);
 }
 
 // The azimuth integral of (-(w.m))+ for w at (mu, sw) and m at (cm, sm).
@@ -65,82 +78,88 @@ fn ndf_facing_away(mu: f32, sw: f32, cm: f32, sm: f32) -> f32 {
 }
 
 // The table of alpha and the 15 free knots: 1/N and C(mu_j).
-fn ndf_build(alpha: f32, knots: array<f32, 15>) {
-    NDF_TABLE.alpha = alpha;
-    NDF_TABLE.s[0] = 0.0;
+fn ndf_build(tab: ptr<private, NdfTable>, alpha: f32, knots: array<f32, 15>) {
+    (*tab).alpha = alpha;
+    (*tab).s[0] = 0.0;
     var free = knots;
     for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
-        NDF_TABLE.s[k] = free[k - 1u];
+        (*tab).s[k] = free[k - 1u];
     }
     for (var j = 0u; j < NDF_MU_POINTS; j = j + 1u) {
-        NDF_TABLE.c[j] = 0.0;
+        (*tab).c[j] = 0.0;
     }
     var gx = array<f32, 4>(0.1834346424956498, 0.5255324099163290, 0.7966664774136267, 0.9602898564975363);
     var gw = array<f32, 4>(0.3626837833783620, 0.3137066458778873, 0.2223810344533745, 0.1012285362903763);
     let a2 = alpha * alpha;
     var norm = 0.0;
     for (var k = 0u; k < NDF_KNOTS - 1u; k = k + 1u) {
-        let hi = ndf_knot_t(k, alpha);
-        let lo = ndf_knot_t(k + 1u, alpha);
-        let mid = 0.5 * (hi + lo);
-        let half = 0.5 * (hi - lo);
-        for (var g = 0u; g < 8u; g = g + 1u) {
-            var t = mid + half * gx[g / 2u];
-            if (g % 2u == 0u) {
-                t = mid - half * gx[g / 2u];
-            }
-            let wt = half * gw[g / 2u];
-            let q = t * t + a2 * (1.0 - t * t);
-            let rq = sqrt(q);
-            let cm = t / rq;
-            let sm2 = a2 * (1.0 - t * t) / q;
-            let sm = sqrt(sm2);
-            let x = clamp(ndf_knot_coordinate(sm2 / (1.0 + cm)), f32(k), f32(k + 1u));
-            let e = exp(ndf_deviation(x));
-            norm = norm + e * 2.0 * t * wt;
-            let weight = e * rq * INV_PI * wt;
-            for (var j = 0u; j < NDF_MU_POINTS; j = j + 1u) {
-                let r = f32(j) / f32(NDF_MU_POINTS - 1u);
-                let mu = r * r;
-                let sw = sqrt(max(1.0 - mu * mu, 0.0));
-                NDF_TABLE.c[j] = NDF_TABLE.c[j] + weight * ndf_facing_away(mu, sw, cm, sm);
+        let pieces = ndf_pieces((*tab).s[k], (*tab).s[k + 1u]);
+        for (var piece = 0u; piece < pieces; piece = piece + 1u) {
+            let x0 = f32(k) + f32(piece) / f32(pieces);
+            let x1 = f32(k) + f32(piece + 1u) / f32(pieces);
+            let hi = ndf_knot_t(x0, alpha);
+            let lo = ndf_knot_t(x1, alpha);
+            let mid = 0.5 * (hi + lo);
+            let half = 0.5 * (hi - lo);
+            for (var g = 0u; g < 8u; g = g + 1u) {
+                var t = mid + half * gx[g / 2u];
+                if (g % 2u == 0u) {
+                    t = mid - half * gx[g / 2u];
+                }
+                let wt = half * gw[g / 2u];
+                let q = t * t + a2 * (1.0 - t * t);
+                let rq = sqrt(q);
+                let cm = t / rq;
+                let sm2 = a2 * (1.0 - t * t) / q;
+                let sm = sqrt(sm2);
+                let x = clamp(ndf_knot_coordinate(sm2 / (1.0 + cm)), x0, x1);
+                let e = exp(ndf_deviation(tab, x));
+                norm = norm + e * 2.0 * t * wt;
+                let weight = e * rq * INV_PI * wt;
+                let count = ndf_facing_count(sm);
+                for (var j = 0u; j < count; j = j + 1u) {
+                    let r = f32(j) / f32(NDF_MU_POINTS - 1u);
+                    let mu = r * r;
+                    let sw = sqrt(max(1.0 - mu * mu, 0.0));
+                    (*tab).c[j] = (*tab).c[j] + weight * ndf_facing_away(mu, sw, cm, sm);
+                }
             }
         }
     }
     let inv = 1.0 / norm;
-    NDF_TABLE.inv_norm = inv;
+    (*tab).inv_norm = inv;
     for (var j = 0u; j < NDF_MU_POINTS; j = j + 1u) {
-        NDF_TABLE.c[j] = NDF_TABLE.c[j] * inv;
+        (*tab).c[j] = (*tab).c[j] * inv;
     }
 }
 
 // C(mu), linear in sqrt(mu) between the table's cosines mu_j = (j/64)^2.
-fn ndf_c(mu: f32) -> f32 {
+fn ndf_c(tab: ptr<private, NdfTable>, mu: f32) -> f32 {
     let x = sqrt(clamp(mu, 0.0, 1.0)) * f32(NDF_MU_POINTS - 1u);
     let j = min(u32(x), NDF_MU_POINTS - 2u);
     let f = x - f32(j);
-    return NDF_TABLE.c[j] + f * (NDF_TABLE.c[j + 1u] - NDF_TABLE.c[j]);
+    return (*tab).c[j] + f * ((*tab).c[j + 1u] - (*tab).c[j]);
 }
 
 // D(h) G1(wi) G1(wo) / (4 mu_i mu_o) at m = any positive multiple of the half vector, with
 // the chi+ side tests of Smith G1; wi and wo above the surface.
-fn ndf_reflection(wi: vec3<f32>, wo: vec3<f32>, m: vec3<f32>) -> f32 {
+fn ndf_reflection(tab: ptr<private, NdfTable>, wi: vec3<f32>, wo: vec3<f32>, m: vec3<f32>) -> f32 {
     if (m.z <= 0.0 || dot(wi, m) * wi.z <= 0.0 || dot(wo, m) * wo.z <= 0.0) {
         return 0.0;
     }
-    let a2 = NDF_TABLE.alpha * NDF_TABLE.alpha;
+    let a2 = (*tab).alpha * (*tab).alpha;
     let c2 = m.z * m.z;
     let s2 = m.x * m.x + m.y * m.y;
     let len2 = c2 + s2;
     let len = sqrt(len2);
     let t = a2 * c2 + s2;
     let ggx = a2 * (len2 * len2) / (PI * t * t);
-    let e = exp(ndf_deviation(ndf_knot_coordinate(s2 / (len * (len + m.z))))) * NDF_TABLE.inv_norm;
-    return ggx * e / (4.0 * (wi.z + ndf_c(wi.z)) * (wo.z + ndf_c(wo.z)));
+    let e = exp(ndf_deviation(tab, ndf_knot_coordinate(s2 / (len * (len + m.z))))) * (*tab).inv_norm;
+    return ggx * e / (4.0 * (wi.z + ndf_c(tab, wi.z)) * (wo.z + ndf_c(tab, wo.z)));
 }
 
 // F(wi.h; eta) times the kernel, as the GGX lobe takes them (h from the unnormalised sum).
-fn ndf_lobe(eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+fn ndf_lobe(tab: ptr<private, NdfTable>, eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     let sum = wi + wo;
     let len = length(sum);
     var m = sum;
@@ -149,12 +168,12 @@ fn ndf_lobe(eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
         m = vec3<f32>(0.0, 0.0, 1.0);
         cos_h = wi.z;
     }
-    return fresnel_dielectric(cos_h, eta) * ndf_reflection(wi, wo, m);
+    return fresnel_dielectric(cos_h, eta) * ndf_reflection(tab, wi, wo, m);
 }
 
 // `ggx` with the data-driven NDF. Parameters: ks, alpha, eta, ndf1 .. ndf15.
 fn ggx_ndf_prepare(o: u32) {
-    ndf_build(ggx_ndf_alpha(o), array<f32, 15>(
+    ndf_build(&NDF_TABLE, ggx_ndf_alpha(o), array<f32, 15>(
         ggx_ndf_ndf1(o),
         ggx_ndf_ndf2(o),
         ggx_ndf_ndf3(o),
@@ -180,12 +199,12 @@ fn ggx_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     if (wi.z <= 0.0 || wo.z <= 0.0) {
         return 0.0;
     }
-    return ggx_ndf_ks(o) * ndf_lobe(ggx_ndf_eta(o), wi, wo);
+    return ggx_ndf_ks(o) * ndf_lobe(&NDF_TABLE, ggx_ndf_eta(o), wi, wo);
 }
 
 // `fa(B)` with the data-driven NDF. Parameters: lobe.alpha, lobe.eta, lobe.ks, lobe.ndf1 .. 15.
 fn fa_ndf_prepare(o: u32) {
-    ndf_build(fa_ndf_lobe_alpha(o), array<f32, 15>(
+    ndf_build(&NDF_TABLE, fa_ndf_lobe_alpha(o), array<f32, 15>(
         fa_ndf_lobe_ndf1(o),
         fa_ndf_lobe_ndf2(o),
         fa_ndf_lobe_ndf3(o),
@@ -213,7 +232,39 @@ fn fa_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
     }
     let eta = fa_ndf_lobe_eta(o);
     let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
-    return fa_ndf_lobe_ks(o) * ndf_lobe(eta, wi, wo) + transmit * base;
+    return fa_ndf_lobe_ks(o) * ndf_lobe(&NDF_TABLE, eta, wi, wo) + transmit * base;
+}
+
+// `M+coat` with a data-driven coat lobe. Parameters: kc, alpha_c, ndf_c1 .. ndf_c15.
+fn coat_ndf_prepare(o: u32) {
+    ndf_build(&COAT_NDF_TABLE, coat_ndf_alpha_c(o), array<f32, 15>(
+        coat_ndf_ndf_c1(o),
+        coat_ndf_ndf_c2(o),
+        coat_ndf_ndf_c3(o),
+        coat_ndf_ndf_c4(o),
+        coat_ndf_ndf_c5(o),
+        coat_ndf_ndf_c6(o),
+        coat_ndf_ndf_c7(o),
+        coat_ndf_ndf_c8(o),
+        coat_ndf_ndf_c9(o),
+        coat_ndf_ndf_c10(o),
+        coat_ndf_ndf_c11(o),
+        coat_ndf_ndf_c12(o),
+        coat_ndf_ndf_c13(o),
+        coat_ndf_ndf_c14(o),
+        coat_ndf_ndf_c15(o),
+    ));
+}
+
+fn coat_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
+    if (!COAT_NDF_PREPARED) {
+        coat_ndf_prepare(o);
+    }
+    let kc = coat_ndf_kc(o);
+    if (wi.z <= 0.0 || wo.z <= 0.0) {
+        return (1.0 - kc) * inner;
+    }
+    return (1.0 - kc) * inner + kc * ndf_reflection(&COAT_NDF_TABLE, wi, wo, wi + wo);
 }
 
 // The `+ndf` node passes its inner model's value through.

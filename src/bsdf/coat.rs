@@ -59,6 +59,9 @@ impl Bsdf for Coat {
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::coat())
     }
+    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::ndf::coat())
+    }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("coat", include_str!("../../shaders/bsdf/coat.wgsl"))
     }

@@ -19,12 +19,15 @@ pub enum Effect {
     LongTail,
     Anisotropy,
     DiffuseFloor,
+    /// The highlight's microfacet distribution is not of an analytic family: a
+    /// data-driven NDF (`+ndf`).
+    HighlightShape,
 }
 
 impl Effect {
     /// Every effect, in the order `diagnose` tries them (the order of its candidate table
     /// and of `candidates.json`).
-    pub const ALL: [Effect; 10] = [
+    pub const ALL: [Effect; 11] = [
         Effect::Backscatter,
         Effect::SpecularLobe,
         Effect::LongTail,
@@ -35,6 +38,7 @@ impl Effect {
         Effect::RetroLobe,
         Effect::RetroFalloff,
         Effect::Anisotropy,
+        Effect::HighlightShape,
     ];
 
     /// Every effect, in the order of [`Effect::ALL`].
@@ -55,7 +59,16 @@ impl Effect {
             Effect::LongTail => "long_tail",
             Effect::Anisotropy => "anisotropy",
             Effect::DiffuseFloor => "diffuse_floor",
+            Effect::HighlightShape => "highlight_shape",
         }
+    }
+
+    /// Whether the effect is a data-driven factor (a tabulated function in place of an
+    /// analytic family's): `diagnose` offers it only once no analytic effect is
+    /// significant, and the battery, whose truths come from the catalogue, does not draw
+    /// it.
+    pub fn is_data_driven(self) -> bool {
+        matches!(self, Effect::HighlightShape)
     }
 
     pub fn from_name(name: &str) -> Option<Effect> {

@@ -1,5 +1,5 @@
-//! `M+ndf`: the highlight's microfacet distribution made data-driven. The GGX lobe of
-//! `ggx` or of `fa(B)` (its highlight) takes the distribution
+//! `M+ndf`: the highlight's microfacet distribution made data-driven. Each isotropic GGX
+//! lobe of M (`ggx`, the highlight of `fa(B)`, the lobe of `+coat`) takes the distribution
 //!
 //!   D(m) = D_GGX(m; α) · exp(s(θm)) / N(α, s),   N = ∫ D_GGX e^s cos θm dω_m,
 //!
@@ -17,7 +17,8 @@
 //! facing away from ω, which is 0 until the lobe reaches the plane normal to ω. C is
 //! computed once per parameter vector at 65 cosines μ_j = (j/64)² (dense toward grazing,
 //! where C changes fastest) and read between them linearly in √μ (the [`NdfTable`]), by
-//! quadrature over θm in each knot interval (8 Gauss–Legendre points in the variable
+//! quadrature over θm in each knot interval, cut into one piece per 4 units of change of s
+//! (at most 4), with 8 Gauss–Legendre points per piece in the variable
 //! t = α/√(α² + tan²θm), in which GGX's mass is uniform, so the peak is resolved at any
 //! α) with the azimuth integral in closed form. At s = 0 the model is GGX within 3e-4
 //! relative for θi, θo ≤ 86° at every α in bounds (tested): the table is part of the
@@ -30,6 +31,7 @@
 //!
 //! Twin: `shaders/bsdf/ndf.wgsl`.
 
+use super::effect::{Adds, Effect};
 use super::fa::aggregate_block;
 use super::ggx::{lobe_block, GgxLobe, ETA, KS};
 use super::kernel::{Kernel, LaneChildren, LaneDir};
@@ -52,6 +54,10 @@ const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl
 const NAMES: [&str; KNOTS - 1] = [
     "ndf1", "ndf2", "ndf3", "ndf4", "ndf5", "ndf6", "ndf7", "ndf8", "ndf9", "ndf10", "ndf11",
     "ndf12", "ndf13", "ndf14", "ndf15",
+];
+const COAT_NAMES: [&str; KNOTS - 1] = [
+    "ndf_c1", "ndf_c2", "ndf_c3", "ndf_c4", "ndf_c5", "ndf_c6", "ndf_c7", "ndf_c8",
+    "ndf_c9", "ndf_c10", "ndf_c11", "ndf_c12", "ndf_c13", "ndf_c14", "ndf_c15",
 ];
 const LOBE_NAMES: [&str; KNOTS - 1] = [
     "lobe.ndf1", "lobe.ndf2", "lobe.ndf3", "lobe.ndf4", "lobe.ndf5", "lobe.ndf6",
@@ -119,6 +125,22 @@ fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
     0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)))
 }
 
+/// The quadrature pieces of the knot interval between knots of values a and b: one per
+/// 4 units of |b − a|, 1 to 4. 8 Gauss points integrate e^(r u) over a piece (u ∈ [0, 1])
+/// to 2e-4 relative for r ≤ 4, the spline's overshoot aside; the cap keeps a candidate's
+/// table within a GPU invocation's loop budget (at most 15 · 4 · 8 nodes).
+#[inline]
+fn pieces(a: f64, b: f64) -> usize {
+    (((b - a).abs() / 4.0).ceil() as usize).clamp(1, 4)
+}
+
+/// The table's cosines a node at sin θm = `sm` faces away from: μ_j < sin θm, j below
+/// this (the rest of the sum is 0; the count keeps the GPU's loops short for sharp lobes).
+#[inline]
+fn facing_count(sm: f64) -> usize {
+    (((MU_POINTS - 1) as f64 * sm.sqrt()).ceil() as usize + 1).min(MU_POINTS)
+}
+
 /// 8-point Gauss–Legendre nodes (±) and weights on [−1, 1].
 const GAUSS_X: [f64; 4] = [
     0.183_434_642_495_649_8,
@@ -163,9 +185,12 @@ impl NdfTable {
     /// The table of (α, s) (`s[0]` = 0).
     pub fn new(alpha: f64, s: [f64; KNOTS]) -> NdfTable {
         let a2 = alpha * alpha;
-        // t of knot k: t = α cos θ / √(α² cos² θ + sin² θ) (1 at the normal, 0 at 90°).
-        let t_of = |k: usize| {
-            let (c, s2) = knot_angle(k);
+        // t at knot coordinate x: t = α cos θ / √(α² cos² θ + sin² θ) (1 at the normal, 0
+        // at 90°), with y = (x/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y).
+        let t_of = |x: f64| {
+            let r = x / (KNOTS - 1) as f64;
+            let y = r * r * r * r;
+            let (c, s2) = (1.0 - y, y * (2.0 - y));
             alpha * c / (a2 * c * c + s2).sqrt()
         };
         let mut norm = 0.0;
@@ -176,25 +201,32 @@ impl NdfTable {
         };
         let sw: [f64; MU_POINTS] = std::array::from_fn(|j| (1.0 - mu(j) * mu(j)).max(0.0).sqrt());
         for k in 0..KNOTS - 1 {
-            let (hi, lo) = (t_of(k), t_of(k + 1));
-            let (mid, half) = (0.5 * (hi + lo), 0.5 * (hi - lo));
-            for g in 0..8 {
-                let (xi, w) = (GAUSS_X[g / 2], GAUSS_W[g / 2]);
-                let t = if g % 2 == 0 { mid - half * xi } else { mid + half * xi };
-                let wt = half * w;
-                // The node's angle: cos θ = t/√q, sin² θ = α² (1 − t²)/q.
-                let q = t * t + a2 * (1.0 - t * t);
-                let rq = q.sqrt();
-                let (cm, sm2) = (t / rq, a2 * (1.0 - t * t) / q);
-                let sm = sm2.sqrt();
-                let x = knot_coordinate(sm2 / (1.0 + cm)).clamp(k as f64, (k + 1) as f64);
-                let e = deviation(&s, x).exp();
-                // GGX's D cos θ sin θ dθ dφ integrates to dt² = 2t dt over the azimuth.
-                norm += e * 2.0 * t * wt;
-                // D_GGX sin θ dθ = √q dt / π (per radian of azimuth, times 2π / 2π).
-                let weight = e * rq / PI * wt;
-                for j in 0..MU_POINTS {
-                    c[j] += weight * facing_away(mu(j), sw[j], cm, sm);
+            // Pieces of the interval, equal in x, so that s changes by about 1 or less
+            // within each: e^s then varies by a factor e at most over 8 Gauss points.
+            let pieces = pieces(s[k], s[k + 1]);
+            for piece in 0..pieces {
+                let x0 = k as f64 + piece as f64 / pieces as f64;
+                let x1 = k as f64 + (piece + 1) as f64 / pieces as f64;
+                let (hi, lo) = (t_of(x0), t_of(x1));
+                let (mid, half) = (0.5 * (hi + lo), 0.5 * (hi - lo));
+                for g in 0..8 {
+                    let (xi, w) = (GAUSS_X[g / 2], GAUSS_W[g / 2]);
+                    let t = if g % 2 == 0 { mid - half * xi } else { mid + half * xi };
+                    let wt = half * w;
+                    // The node's angle: cos θ = t/√q, sin² θ = α² (1 − t²)/q.
+                    let q = t * t + a2 * (1.0 - t * t);
+                    let rq = q.sqrt();
+                    let (cm, sm2) = (t / rq, a2 * (1.0 - t * t) / q);
+                    let sm = sm2.sqrt();
+                    let x = knot_coordinate(sm2 / (1.0 + cm)).clamp(x0, x1);
+                    let e = deviation(&s, x).exp();
+                    // GGX's D cos θ sin θ dθ dφ integrates to dt² = 2t dt over the azimuth.
+                    norm += e * 2.0 * t * wt;
+                    // D_GGX sin θ dθ = √q dt / π (per radian of azimuth, times 2π / 2π).
+                    let weight = e * rq / PI * wt;
+                    for j in 0..facing_count(sm) {
+                        c[j] += weight * facing_away(mu(j), sw[j], cm, sm);
+                    }
                 }
             }
         }
@@ -396,6 +428,56 @@ impl Bsdf for FaNdf {
     }
 }
 
+/// `M+coat` with a data-driven coat lobe: k_c, α_c, ndf_c1 … ndf_c15.
+#[derive(Debug, Clone, Copy)]
+pub struct CoatNdf;
+
+const COAT_ENTRY: Entry = Entry::suffix(
+    "coat",
+    Some(Kind::Brdf),
+    InCatalogue::No,
+    "a second GGX lobe with a data-driven NDF",
+    |inner| Ok(Node::with(CoatNdf, vec![inner])),
+);
+
+impl Kernel for CoatNdf {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
+        let tab = table(p.get(0, 1), |k| p.get(0, 2 + k));
+        let (zero, one) = (R::zero(), R::splat(1.0));
+        for (d, (wi, wo), out) in super::kernel::lanes(dirs, p.len(), out) {
+            let above = zero.lt(wi.z) & zero.lt(wo.z);
+            let kernel = R::select(above, tab.reflection(wi, wo, wi + wo), zero);
+            for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
+                let kc = R::splat(p.get(i, 0));
+                *o = (one - kc) * m + kc * kernel;
+            }
+        }
+    }
+}
+
+impl Bsdf for CoatNdf {
+    fn entry(&self) -> &'static Entry {
+        &COAT_ENTRY
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        [super::coat::KC, super::coat::ALPHA_C]
+            .into_iter()
+            .chain(knots(&COAT_NAMES))
+            .collect()
+    }
+    fn child_roles(&self) -> &'static [&'static str] {
+        &[""]
+    }
+    super::kernel::kernel_methods!();
+    fn wgsl(&self) -> WgslFn {
+        ndf_wgsl("coat_ndf_eval")
+    }
+    fn wgsl_prepare(&self) -> Option<&'static str> {
+        Some("coat_ndf_prepare")
+    }
+}
+
 fn ndf_wgsl(function: &str) -> WgslFn {
     WgslFn {
         sources: vec![MICROFACET_WGSL, NDF_WGSL],
@@ -408,10 +490,11 @@ pub const ENTRY: Entry = Entry::suffix(
     "ndf",
     Some(Kind::Brdf),
     InCatalogue::No,
-    "data-driven NDF of the GGX highlight (ggx, fa): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 16 knots, Smith masking from the same D",
+    "data-driven NDFs of the GGX lobes (ggx, fa, +coat): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 16 knots, Smith masking from the same D",
     build,
 )
-;
+// s = 0 is GGX: M embeds in M+ndf (diagnose's F test). Offered once no analytic effect is.
+.adding(&[Adds::appended(Effect::HighlightShape)]);
 
 /// The `+ndf` node: passes its inner model's value through (the distribution lives in
 /// the highlight [`build`] put in place of the GGX one).
@@ -436,8 +519,9 @@ impl Bsdf for Ndf {
     }
 }
 
-/// Replace the GGX highlight of `inner` (a `ggx` or `fa(B)` node, wherever it sits) by
-/// its data-driven form, and wrap the result in the pass-through `+ndf` node.
+/// Replace every isotropic GGX lobe of `inner` (`ggx`, the highlight of `fa(B)`, the lobe
+/// of `+coat`, wherever they sit) by its data-driven form, each with knots of its own,
+/// and wrap the result in the pass-through `+ndf` node.
 pub fn build(inner: Node) -> Result<Node, String> {
     fn swap(node: Node, count: &mut usize, twice: &mut bool) -> Node {
         *twice |= node.bsdf.name() == ENTRY.name;
@@ -471,7 +555,7 @@ pub fn build(inner: Node) -> Result<Node, String> {
     }
     if count == 0 {
         return Err(
-            "+ndf needs an isotropic GGX highlight: ggx or fa(B) (before any +aniso)".into(),
+            "+ndf needs an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)".into(),
         );
     }
     Ok(Node::with(Ndf, vec![swapped]))
@@ -483,6 +567,9 @@ pub fn ggx() -> std::sync::Arc<dyn Bsdf> {
 }
 pub fn fa() -> std::sync::Arc<dyn Bsdf> {
     std::sync::Arc::new(FaNdf)
+}
+pub fn coat() -> std::sync::Arc<dyn Bsdf> {
+    std::sync::Arc::new(CoatNdf)
 }
 
 
@@ -512,12 +599,16 @@ mod tests {
     #[test]
     fn at_zero_deviation_the_lobe_is_ggx() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        for spec in ["ggx", "fa(lambert)"] {
+        for spec in ["ggx", "fa(lambert)", "lambert+coat"] {
             let ggx = Model::parse(spec, 1).unwrap();
             let ndf = Model::parse(&format!("{spec}+ndf"), 1).unwrap();
             for alpha in [1e-3, 0.01, 0.1, 0.5, 1.0] {
                 let mut pg = ggx.defaults();
-                let a = ggx.params.iter().position(|p| p.name.ends_with("alpha")).unwrap();
+                let a = ggx
+                    .params
+                    .iter()
+                    .position(|p| p.name.ends_with("alpha") || p.name == "alpha_c")
+                    .unwrap();
                 pg[a] = alpha;
                 // The same values by name; the knots at their neutral 0.
                 let pn: Vec<f64> = ndf
@@ -616,7 +707,9 @@ mod tests {
     /// models without one.
     #[test]
     fn the_suffix_swaps_the_ggx_highlight() {
-        for (spec, knots) in [("ggx+ndf", "ndf1"), ("fa(eon)+ndf", "lobe.ndf1"), ("fa(lambert)+coat+ndf", "lobe.ndf15"), ("rmg(ggx)+ndf", "base.ndf3")] {
+        for (spec, knots) in [("ggx+ndf", "ndf1"), ("fa(eon)+ndf", "lobe.ndf1"), ("fa(lambert)+coat+ndf", "lobe.ndf15"),
+            ("fa(lambert)+coat+ndf", "ndf_c1"),
+            ("rmg(lambert)+coat+ndf", "ndf_c15"), ("rmg(ggx)+ndf", "base.ndf3")] {
             let m = Model::parse(spec, 3).unwrap_or_else(|e| panic!("{spec}: {e}"));
             assert!(m.params.iter().any(|p| p.name == knots), "{spec}: {:?}", m.params.iter().map(|p| &p.name).collect::<Vec<_>>());
         }

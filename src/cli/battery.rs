@@ -78,7 +78,7 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
         crate::output::check_writable_file(p, "--json/--markdown")?;
     }
     let effects: Vec<Effect> = match &a.effects {
-        None => Effect::all().collect(),
+        None => Effect::all().filter(|e| !e.is_data_driven()).collect(),
         Some(names) => effects_named(names)?,
     };
     let opts = BatteryOptions {

@@ -69,6 +69,12 @@ pub struct FitArgs {
     /// With --mc: random restarts per replica, besides starting from the best fit.
     #[arg(long, default_value_t = FitRequest::default().mc_restarts, value_name = "R")]
     pub mc_restarts: usize,
+    /// The smoothness prior of a data-driven NDF's knots (`+ndf`), a χ² term on their
+    /// second differences: `auto` chooses its σ from the data (the smallest χ² + 2·
+    /// effective parameters among 0.1, 0.3, 1, 3, 10, 30; reported), `off`, or a σ.
+    /// Needs the chi2 loss unless off; models without knots ignore it.
+    #[arg(long, default_value = "auto", value_name = "auto|off|SD")]
+    pub smoothness: String,
     #[command(flatten)]
     pub data_args: DataArgs,
 }
@@ -87,6 +93,10 @@ impl FitArgs {
             mc: self.mc,
             mc_scale: self.mc_scale,
             mc_restarts: self.mc_restarts,
+            smoothness: self
+                .smoothness
+                .parse()
+                .map_err(|e: String| crate::choice::field_error(format!("{{smoothness}}: {e}")))?,
         })
     }
 }

@@ -534,8 +534,12 @@ fn determinacy_warnings(
 ) -> Vec<String> {
     let p = names.len();
     let mut warnings = Vec::new();
+    // A tabulated function's knots (`+ndf`) trade with their neighbours and with the
+    // lobe's width by construction; they are reported as the function's values with
+    // bands (`crate::inference::knots`), not one by one.
+    let knot = |j: usize| decls[j].knot;
     let undetermined_names: Vec<&str> = (0..p)
-        .filter(|&j| undetermined[j])
+        .filter(|&j| undetermined[j] && !knot(j))
         .map(|j| names[j])
         .collect();
     if !undetermined_names.is_empty() {
@@ -544,7 +548,7 @@ fn determinacy_warnings(
             undetermined_names.join(", ")
         ));
     }
-    for j in 0..p {
+    for j in (0..p).filter(|&j| !knot(j)) {
         if let Some(s) = out.std[j] {
             let range = decls[j].hi - decls[j].lo;
             if s > range {
@@ -555,8 +559,8 @@ fn determinacy_warnings(
             }
         }
     }
-    for a in 0..p {
-        for b in a + 1..p {
+    for a in (0..p).filter(|&j| !knot(j)) {
+        for b in (a + 1..p).filter(|&j| !knot(j)) {
             if let Some(c) = out.correlation[a][b] {
                 if c.abs() > 0.99 {
                     warnings.push(format!(
@@ -567,19 +571,21 @@ fn determinacy_warnings(
             }
         }
     }
-    warnings.extend(multiple_correlation_warnings(out, names));
+    let plain: Vec<bool> = (0..p).map(|j| !knot(j)).collect();
+    warnings.extend(multiple_correlation_warnings(out, names, &plain));
     warnings
 }
 
 /// A trade-off among three or more parameters can hide behind moderate pairwise
 /// correlations: the multiple correlation R_j of each parameter with all the others,
 /// R_j² = 1 − 1/(C⁻¹)_jj, exposes it (e.g. α, η_t and S at normal incidence). A warning
-/// per parameter with R_j > 0.99 and no pairwise correlation above 0.99.
-fn multiple_correlation_warnings(out: &Covariance, names: &[&str]) -> Vec<String> {
+/// per parameter with R_j > 0.99 and no pairwise correlation above 0.99, among the
+/// parameters `judged` (knots are not: see [`determinacy_warnings`]).
+fn multiple_correlation_warnings(out: &Covariance, names: &[&str], judged: &[bool]) -> Vec<String> {
     let p = names.len();
     let mut warnings = Vec::new();
     let det: Vec<usize> = (0..p)
-        .filter(|&j| out.std[j].is_some_and(|s| s > 0.0))
+        .filter(|&j| judged[j] && out.std[j].is_some_and(|s| s > 0.0))
         .collect();
     if det.len() <= 2 {
         return warnings;

@@ -430,7 +430,7 @@ fn a_three_way_trade_off_warns_on_its_multiple_correlation() {
             .collect();
         out
     };
-    let w = multiple_correlation_warnings(&with(0.705, 0.0), &names);
+    let w = multiple_correlation_warnings(&with(0.705, 0.0), &names, &[true; 3]);
     assert_eq!(w.len(), 3, "{w:?}");
     assert!(
         w[2].starts_with("c is not separately determined from a, b"),
@@ -443,9 +443,9 @@ fn a_three_way_trade_off_warns_on_its_multiple_correlation() {
         .and_then(|s| s.parse().ok())
         .unwrap();
     assert!((r3 - (2.0f64 * 0.705 * 0.705).sqrt()).abs() < 1e-4, "{r3}");
-    assert!(multiple_correlation_warnings(&with(0.7, 0.0), &names).is_empty());
+    assert!(multiple_correlation_warnings(&with(0.7, 0.0), &names, &[true; 3]).is_empty());
     // A parameter with a pairwise |correlation| above 0.99 is left to that warning.
-    let w = multiple_correlation_warnings(&with(0.1, 0.995), &names);
+    let w = multiple_correlation_warnings(&with(0.1, 0.995), &names, &[true; 3]);
     assert!(w.is_empty(), "{w:?}");
     // A parameter with σ = 0 (no correlations) takes no part.
     let mut four = empty(4);
@@ -454,12 +454,12 @@ fn a_three_way_trade_off_warns_on_its_multiple_correlation() {
     for a in 0..3 {
         four.correlation[a][..3].copy_from_slice(&three.correlation[a]);
     }
-    let w = multiple_correlation_warnings(&four, &["a", "b", "c", "d"]);
+    let w = multiple_correlation_warnings(&four, &["a", "b", "c", "d"], &[true; 4]);
     assert_eq!(w.len(), 3, "{w:?}");
     // Fewer than three determined parameters: nothing to add.
     let mut two = with(0.705, 0.0);
     two.std[2] = None;
-    assert!(multiple_correlation_warnings(&two, &names).is_empty());
+    assert!(multiple_correlation_warnings(&two, &names, &[true; 3]).is_empty());
 }
 
 #[test]

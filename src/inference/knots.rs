@@ -10,7 +10,7 @@ use crate::inference::covariance::Covariance;
 
 /// One knot of a fitted data-driven NDF, for reports: the normalised D at the knot's
 /// angle with its standard uncertainty in ln D, and whether the data see the lobe there.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct KnotBand {
     /// θ_k in degrees.
     pub theta_deg: f64,
@@ -38,7 +38,8 @@ pub struct KnotBand {
 pub const MEASURED_SIGNAL: f64 = 3.0;
 
 /// The fitted D at the knots of each data-driven NDF of `model` fitted to `data` (one
-/// list per `+ndf` highlight, with its parameters' prefix: `lobe.` for `fa(B)+ndf`).
+/// list per lobe `+ndf` made data-driven, named by its knots' stem: `ndf` in `ggx+ndf`,
+/// `lobe.ndf` in `fa(B)+ndf`, `ndf_c` for a coat).
 pub fn bands(
     model: &Model,
     data: &Dataset,
@@ -47,24 +48,29 @@ pub fn bands(
 ) -> Vec<(String, Vec<KnotBand>)> {
     let find = |name: &str| model.params.iter().find(|p| p.name == name);
     let mut out = Vec::new();
-    for p in model
-        .params
-        .iter()
-        .filter(|p| p.decl.knot && p.name.ends_with("ndf1"))
-    {
-        let prefix = p.name.trim_end_matches("ndf1").to_string();
+    // The lobes' names: the knots' stem, the roughness and the amplitude (`ggx`, `fa`'s
+    // highlight under `lobe.`, and a coat's).
+    const LOBES: [(&str, &str, &str); 2] = [("ndf", "alpha", "ks"), ("ndf_c", "alpha_c", "kc")];
+    for p in model.params.iter().filter(|p| p.decl.knot) {
+        let Some((stem, alpha, ks, prefix)) = LOBES.iter().find_map(|&(stem, alpha, ks)| {
+            let prefix = p.name.strip_suffix(&format!("{stem}1"))?;
+            Some((stem, alpha, ks, prefix.to_string()))
+        }) else {
+            continue;
+        };
         let (Some(alpha), Some(ks)) = (
-            find(&format!("{prefix}alpha")),
-            find(&format!("{prefix}ks")),
+            find(&format!("{prefix}{alpha}")),
+            find(&format!("{prefix}{ks}")),
         ) else {
             continue;
         };
         let Some(knots) = (1..KNOTS)
-            .map(|k| find(&format!("{prefix}ndf{k}")).map(|q| q.index))
+            .map(|k| find(&format!("{prefix}{stem}{k}")).map(|q| q.index))
             .collect::<Option<Vec<usize>>>()
         else {
             continue;
         };
+        let name = format!("{prefix}{stem}");
         let params: Vec<usize> = std::iter::once(alpha.index)
             .chain(knots.iter().copied())
             .collect();
@@ -121,7 +127,7 @@ pub fn bands(
                 }
             })
             .collect();
-        out.push((prefix, rows));
+        out.push((name, rows));
     }
     out
 }

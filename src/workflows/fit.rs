@@ -10,6 +10,7 @@ use crate::engine::cpu::CpuBackend;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::engine::{device_fault, Backend};
 use crate::inference::constraints::{ConstraintSpec, Constraints};
+use crate::inference::fit::Smoothness;
 use crate::inference::fit::{fit, FitOptions, FitReport, Optimizer};
 use crate::inference::mc::{monte_carlo, McOptions};
 use anyhow::Result;
@@ -36,6 +37,8 @@ pub struct FitRequest {
     pub mc: usize,
     pub mc_scale: f64,
     pub mc_restarts: usize,
+    /// The smoothness prior of tabulated knots (`+ndf`): chosen from the data by default.
+    pub smoothness: Smoothness,
 }
 
 impl Default for FitRequest {
@@ -51,6 +54,7 @@ impl Default for FitRequest {
             mc: 0,
             mc_scale: 0.0,
             mc_restarts: 3,
+            smoothness: Smoothness::Auto,
         }
     }
 }
@@ -202,6 +206,7 @@ impl FitRequest {
             restarts: self.restarts,
             seed: self.seed,
             constraints: self.constraints.clone(),
+            smoothness: self.smoothness,
             ..Default::default()
         };
         Ok((model, loss, opts))

@@ -77,6 +77,22 @@ pub struct FitReport {
     pub bic: f64,
     #[serde(default = "not_a_number", deserialize_with = "nan_if_null")]
     pub aic: f64,
+    /// How the smoothness prior's σ_s was chosen, where the model has tabulated knots
+    /// (`+ndf`) and the loss is χ² (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smoothness: Option<super::SmoothnessChoice>,
+    /// Each data-driven NDF (`+ndf`) at its knots: D with σ(ln D), and whether the data
+    /// see the lobe there (absent without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ndf: Vec<NdfReport>,
+}
+
+/// One data-driven NDF of a fit ([`crate::inference::knots::bands`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct NdfReport {
+    /// Its knots' stem (`ndf` in `ggx+ndf`, `lobe.ndf` in `fa(B)+ndf`, `ndf_c` for a coat).
+    pub lobe: String,
+    pub knots: Vec<crate::inference::knots::KnotBand>,
 }
 
 /// Why the optimizer stopped (docs/output.md `stop`).
@@ -154,6 +170,27 @@ pub(super) fn make_report(
     };
     let params = group(&flat.iter().map(|&v| Some(v)).collect::<Vec<_>>());
     let param_std = group(&cov.std);
+    let ndf: Vec<NdfReport> = crate::inference::knots::bands(model, data, flat, &cov)
+        .into_iter()
+        .map(|(lobe, knots)| NdfReport { lobe, knots })
+        .collect();
+    let mut knot_warnings = Vec::new();
+    for n in &ndf {
+        let unseen: Vec<String> = n
+            .knots
+            .iter()
+            .filter(|k| !k.measured)
+            .map(|k| format!("{:.1}°", k.theta_deg))
+            .collect();
+        if !unseen.is_empty() {
+            knot_warnings.push(format!(
+                "{}: D at θm = {} is set by the smoothness prior, not measured (no half vectors there, or the lobe below {}σ of the data); its band there is the prior's",
+                n.lobe,
+                unseen.join(", "),
+                crate::inference::knots::MEASURED_SIGNAL
+            ));
+        }
+    }
     FitReport {
         model: model.spec.clone(),
         loss: loss.metric.to_string(),
@@ -189,6 +226,7 @@ pub(super) fn make_report(
             })
             .into_iter()
             .chain(cov.warnings)
+            .chain(knot_warnings)
             .collect(),
         dof: o.dof,
         n_params: o.constraints.dim(),
@@ -197,6 +235,8 @@ pub(super) fn make_report(
         stop: o.stop.into(),
         bic: crate::inference::stats::bic(o.chi2 + o.chi2_prior, o.constraints.dim(), data.len()),
         aic: crate::inference::stats::aic(o.chi2 + o.chi2_prior, o.constraints.dim()),
+        smoothness: o.smoothness,
+        ndf,
     }
 }
 
@@ -232,6 +272,14 @@ impl FitReport {
             let std = match self.flat_std[i] {
                 _ if fixed.is_some_and(|f| f.contains_key(name)) => "(fixed)".into(),
                 Some(s) => format!("± {s:.3e}"),
+                // A data-driven NDF's knot: judged as D with a band, in its table below.
+                None if self.ndf.iter().any(|n| {
+                    name.strip_prefix(&n.lobe)
+                        .is_some_and(|k| k.parse::<usize>().is_ok())
+                }) =>
+                {
+                    "(a knot: see its D table)".into()
+                }
                 None => "(not determined)".into(),
             };
             s += &format!("  {name:<14} = {:<12.6} {std}\n", self.flat_params[i]);
@@ -258,6 +306,30 @@ impl FitReport {
                 chi2_prior.unwrap_or(f64::NAN),
                 self.dof
             );
+        }
+        if let Some(c) = &self.smoothness {
+            s += &format!(
+                "  smoothness prior of the knots: σ_s = {} ({:.1} effective parameters), chosen among {} by the {}\n",
+                c.chosen.sd,
+                c.chosen.effective_params,
+                c.tried
+                    .iter()
+                    .map(|t| format!("{} (χ² {:.1}, edf {:.1})", t.sd, t.chi2, t.effective_params))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                c.criterion
+            );
+        }
+        for n in &self.ndf {
+            s += &format!(
+                "  {}: D(θm) at the knots (± in ln D; * set by the prior)\n",
+                n.lobe
+            );
+            for k in &n.knots {
+                let band = k.sigma_ln_d.map_or("".into(), |v| format!("± {v:.3}"));
+                let mark = if k.measured { "" } else { " *" };
+                s += &format!("    {:>5.2}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.d);
+            }
         }
         for w in &self.warnings {
             s += &format!("  warning: {w}\n");

@@ -49,7 +49,7 @@ impl std::str::FromStr for Smoothness {
 pub const GRID: [f64; 6] = [0.1, 0.3, 1.0, 3.0, 10.0, 30.0];
 
 /// One fit of the choice.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SmoothnessTrial {
     /// σ_s.
     pub sd: f64,
@@ -62,12 +62,12 @@ pub struct SmoothnessTrial {
 }
 
 /// What [`Smoothness::Auto`] chose, and from what.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SmoothnessChoice {
     pub chosen: SmoothnessTrial,
     pub tried: Vec<SmoothnessTrial>,
     /// How it was chosen, in words (for reports).
-    pub criterion: &'static str,
+    pub criterion: String,
 }
 
 pub const CRITERION: &str = "smallest chi2 + 2 edf (AIC with the effective number of parameters, edf = tr((B_data + B_prior)^-1 B_data))";
@@ -119,7 +119,7 @@ pub fn choose(
     c.smoothness = Some(SmoothnessChoice {
         chosen,
         tried,
-        criterion: CRITERION,
+        criterion: CRITERION.into(),
     });
     Ok(c)
 }

@@ -64,7 +64,7 @@ impl Default for BatteryOptions {
             nulls: 40,
             misspecified: 10,
             seed: 1,
-            effects: Effect::all().collect(),
+            effects: Effect::all().filter(|e| !e.is_data_driven()).collect(),
             signal: (1.0, 30.0),
             samples: (200, 20_000),
             diagnose: DiagnoseOptions::default(),
@@ -109,15 +109,24 @@ pub fn effects_named<S: AsRef<str>>(names: &[S]) -> Result<Vec<Effect>> {
         .iter()
         .map(|n| {
             let n = n.as_ref();
-            Effect::from_name(n.trim()).ok_or_else(|| {
-                crate::choice::field_error(format!(
+            let known = || {
+                Effect::all()
+                    .filter(|e| !e.is_data_driven())
+                    .map(|e| e.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            match Effect::from_name(n.trim()) {
+                Some(e) if e.is_data_driven() => Err(crate::choice::field_error(format!(
+                    "{{effects}}: '{n}' is a data-driven factor, not an effect the battery can hide in a catalogue truth (it draws: {})",
+                    known()
+                ))),
+                Some(e) => Ok(e),
+                None => Err(crate::choice::field_error(format!(
                     "{{effects}}: unknown effect '{n}' (known: {})",
-                    Effect::all()
-                        .map(|e| e.name())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ))
-            })
+                    known()
+                ))),
+            }
         })
         .collect()
 }
@@ -451,8 +460,13 @@ fn start_truth_pairs(kind: Kind, hidden: Option<Effect>, probe: &Dataset) -> Vec
         let Ok(m0) = Model::for_data(&s0, probe) else {
             continue;
         };
-        // A start model the data can determine: not an anisotropic lobe in one plane.
+        // A start model the data can determine: not an anisotropic lobe in one plane; and a
+        // truth of the catalogue's families, not a data-driven factor (random knots are no
+        // material).
         if one_plane && m0.params.iter().any(|p| p.decl.needs_planes) {
+            continue;
+        }
+        if m0.params.iter().any(|p| p.decl.knot) {
             continue;
         }
         match hidden {

@@ -89,6 +89,12 @@ pub const EFFECTS: &[EffectEntry] = &[
         lobe_around: None,
         max_half_width_deg: None,
     },
+    EffectEntry {
+        effect: Effect::HighlightShape,
+        signature: "misfit across the highlight that no analytic lobe width removes: a peak or tail of another shape",
+        lobe_around: None,
+        max_half_width_deg: None,
+    },
 ];
 
 /// One way of making an extension that adds an effect: a model's declaration.
@@ -176,6 +182,7 @@ mod tests {
                 "backscatter",
                 "diffuse_floor",
                 "grazing_decay",
+                "highlight_shape",
                 "long_tail",
                 "retro_falloff",
                 "retro_lobe",

@@ -269,7 +269,21 @@ fn extend_path(
         if let Some(consistent) = stop_before_round(&mut steps, &current, opts) {
             return Ok((steps, consistent));
         }
-        let cands = extensions(&current.model.spec, data)?;
+        let all = extensions(&current.model.spec, data)?;
+        // The data-driven factors are offered after the analytic effects: only in a round
+        // where no analytic candidate is adopted (or none exists).
+        let (driven, analytic): (Vec<Candidate>, Vec<Candidate>) =
+            all.into_iter().partition(|c| c.effect.is_data_driven());
+        let cands = if analytic.is_empty() {
+            driven.clone()
+        } else {
+            analytic
+        };
+        let mut driven = if cands.iter().any(|c| c.effect.is_data_driven()) {
+            vec![]
+        } else {
+            driven
+        };
         if cands.is_empty() {
             steps
                 .last_mut()
@@ -295,6 +309,51 @@ fn extend_path(
         }
         let best = match pick(&scored, data.len()) {
             Ok(best) => best,
+            Err(why) if !driven.is_empty() => {
+                // No analytic effect: try the data-driven factors on the same model.
+                log(format!(
+                    "  → no analytic effect ({why}); trying the data-driven factors"
+                ));
+                let (more, more_seconds) = score_round(
+                    data,
+                    backend,
+                    opts,
+                    log,
+                    cache,
+                    &current,
+                    std::mem::take(&mut driven),
+                );
+                log_round(log, &more);
+                let last = steps.last_mut().unwrap();
+                if let Some(s) = last.round_seconds.as_mut() {
+                    s.fits += more_seconds.fits;
+                    s.scoring += more_seconds.scoring;
+                    s.bootstraps += more_seconds.bootstraps;
+                }
+                let mut scored = scored;
+                scored.extend(more.iter().cloned());
+                match pick(&more, data.len()) {
+                    Ok(best) => {
+                        let (step, _) = adopt_step(data, &current, &best, &scored, opts);
+                        log(format!(
+                            "  → adopt {} [{}]",
+                            step.model, best.candidate.effect
+                        ));
+                        log_step(log, steps.len(), &step, data, opts);
+                        steps.last_mut().unwrap().candidates = scored;
+                        steps.push(step);
+                        continue;
+                    }
+                    Err(why_driven) => {
+                        let why = format!("{why}; no data-driven factor either ({why_driven})");
+                        log(format!("  → stop: {why}"));
+                        let last = steps.last_mut().unwrap();
+                        last.evidence.push_str(&format!(". Stopped: {why}"));
+                        last.candidates = scored;
+                        return Ok((steps, consistency(&current, opts.alpha).0));
+                    }
+                }
+            }
             Err(why) => {
                 log(format!("  → stop: {why}"));
                 let last = steps.last_mut().unwrap();
