@@ -73,7 +73,12 @@ pub struct FitArgs {
     /// second differences: `auto` chooses its σ from the data (the smallest χ² + 2·
     /// effective parameters among 0.1, 0.3, 1, 3, 10, 30; reported), `off`, or a σ.
     /// Needs the chi2 loss unless off; models without knots ignore it.
-    #[arg(long, default_value = "auto", value_name = "auto|off|SD")]
+    #[arg(
+        long,
+        default_value = "auto",
+        value_name = "auto|off|SD",
+        allow_hyphen_values = true
+    )]
     pub smoothness: String,
     #[command(flatten)]
     pub data_args: DataArgs,
