@@ -536,32 +536,9 @@ impl Bsdf for Aniso {
 /// Replace every lobe of `inner` that has an anisotropic form ([`Bsdf::anisotropic`]) by
 /// it, and wrap the result in the pass-through `+aniso` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    fn swap(node: Node, count: &mut usize, twice: &mut bool) -> Node {
-        *twice |= node.bsdf.name() == ENTRY.name || node.bsdf.name() == super::peraxis::ENTRY.name;
-        let children = node
-            .children
-            .into_iter()
-            .map(|c| swap(c, count, twice))
-            .collect();
-        let bsdf = match node.bsdf.anisotropic() {
-            Some(a) => {
-                *count += 1;
-                a
-            }
-            None => node.bsdf,
-        };
-        Node {
-            bsdf,
-            children,
-            offset: 0,
-            nparams: 0,
-            uniform: false,
-        }
-    }
     let kind = inner.bsdf.kind();
-    let (mut count, mut twice) = (0, false);
-    let swapped = swap(inner, &mut count, &mut twice);
-    if twice {
+    let (swapped, count, names) = inner.with_forms(&|b| b.anisotropic());
+    if names.contains(&ENTRY.name) || names.contains(&super::peraxis::ENTRY.name) {
         return Err(
             "+aniso given twice, or with +peraxis (one surface, or one roughness per plane: not both)"
                 .into(),

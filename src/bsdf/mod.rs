@@ -308,7 +308,45 @@ impl Node {
             c.visit(f);
         }
     }
+    /// The tree with every node that `form` gives another form of (`+aniso`'s anisotropic
+    /// lobes, `+ndf`'s data-driven ones) replaced by it, children first; with how many were
+    /// replaced and the names of every node met (a suffix checks it is not given twice).
+    pub fn with_forms(self, form: &FormOf) -> (Node, usize, Vec<&'static str>) {
+        fn swap(
+            node: Node,
+            form: &FormOf,
+            count: &mut usize,
+            names: &mut Vec<&'static str>,
+        ) -> Node {
+            names.push(node.bsdf.name());
+            let children = node
+                .children
+                .into_iter()
+                .map(|c| swap(c, form, count, names))
+                .collect();
+            let bsdf = match form(node.bsdf.as_ref()) {
+                Some(other) => {
+                    *count += 1;
+                    other
+                }
+                None => node.bsdf,
+            };
+            Node {
+                bsdf,
+                children,
+                offset: 0,
+                nparams: 0,
+                uniform: false,
+            }
+        }
+        let (mut count, mut names) = (0, Vec::new());
+        let node = swap(self, form, &mut count, &mut names);
+        (node, count, names)
+    }
 }
+
+/// Another form of a node, where it has one ([`Bsdf::anisotropic`], [`Bsdf::data_driven`]).
+pub type FormOf<'a> = dyn Fn(&dyn Bsdf) -> Option<Arc<dyn Bsdf>> + 'a;
 
 /// A parameter of a compiled model: its declaration, full name and place in the flat vector.
 #[derive(Clone, Debug)]

@@ -523,34 +523,11 @@ impl Bsdf for Ndf {
 /// of `+coat`, wherever they sit) by its data-driven form, each with knots of its own,
 /// and wrap the result in the pass-through `+ndf` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    fn swap(node: Node, count: &mut usize, twice: &mut bool) -> Node {
-        *twice |= node.bsdf.name() == ENTRY.name;
-        let children = node
-            .children
-            .into_iter()
-            .map(|c| swap(c, count, twice))
-            .collect();
-        let bsdf = match node.bsdf.data_driven() {
-            Some(d) => {
-                *count += 1;
-                d
-            }
-            None => node.bsdf,
-        };
-        Node {
-            bsdf,
-            children,
-            offset: 0,
-            nparams: 0,
-            uniform: false,
-        }
-    }
     if inner.bsdf.kind() != Kind::Brdf {
         return Err("+ndf applies to BRDF models".into());
     }
-    let (mut count, mut twice) = (0, false);
-    let swapped = swap(inner, &mut count, &mut twice);
-    if twice {
+    let (swapped, count, names) = inner.with_forms(&|b| b.data_driven());
+    if names.contains(&ENTRY.name) {
         return Err("+ndf given twice".into());
     }
     if count == 0 {

@@ -272,17 +272,12 @@ fn extend_path(
         let all = extensions(&current.model.spec, data)?;
         // The data-driven factors are offered after the analytic effects: only in a round
         // where no analytic candidate is adopted (or none exists).
-        let (driven, analytic): (Vec<Candidate>, Vec<Candidate>) =
+        let (mut driven, analytic): (Vec<Candidate>, Vec<Candidate>) =
             all.into_iter().partition(|c| c.effect.is_data_driven());
         let cands = if analytic.is_empty() {
-            driven.clone()
+            std::mem::take(&mut driven)
         } else {
             analytic
-        };
-        let mut driven = if cands.iter().any(|c| c.effect.is_data_driven()) {
-            vec![]
-        } else {
-            driven
         };
         if cands.is_empty() {
             steps
@@ -307,8 +302,8 @@ fn extend_path(
                 current.model.spec, seconds.fits, seconds.scoring, seconds.bootstraps
             );
         }
-        let best = match pick(&scored, data.len()) {
-            Ok(best) => best,
+        match pick(&scored, data.len()) {
+            Ok(best) => adopt(data, opts, log, &mut steps, &current, &best, scored),
             Err(why) if !driven.is_empty() => {
                 // No analytic effect: try the data-driven factors on the same model.
                 log(format!(
@@ -324,53 +319,61 @@ fn extend_path(
                     std::mem::take(&mut driven),
                 );
                 log_round(log, &more);
-                let last = steps.last_mut().unwrap();
-                if let Some(s) = last.round_seconds.as_mut() {
+                if let Some(s) = steps.last_mut().unwrap().round_seconds.as_mut() {
                     s.fits += more_seconds.fits;
                     s.scoring += more_seconds.scoring;
                     s.bootstraps += more_seconds.bootstraps;
                 }
+                let picked = pick(&more, data.len());
                 let mut scored = scored;
-                scored.extend(more.iter().cloned());
-                match pick(&more, data.len()) {
-                    Ok(best) => {
-                        let (step, _) = adopt_step(data, &current, &best, &scored, opts);
-                        log(format!(
-                            "  → adopt {} [{}]",
-                            step.model, best.candidate.effect
-                        ));
-                        log_step(log, steps.len(), &step, data, opts);
-                        steps.last_mut().unwrap().candidates = scored;
-                        steps.push(step);
-                        continue;
-                    }
+                scored.extend(more);
+                match picked {
+                    Ok(best) => adopt(data, opts, log, &mut steps, &current, &best, scored),
                     Err(why_driven) => {
                         let why = format!("{why}; no data-driven factor either ({why_driven})");
-                        log(format!("  → stop: {why}"));
-                        let last = steps.last_mut().unwrap();
-                        last.evidence.push_str(&format!(". Stopped: {why}"));
-                        last.candidates = scored;
-                        return Ok((steps, consistency(&current, opts.alpha).0));
+                        return Ok(stop(log, steps, &current, scored, &why, opts));
                     }
                 }
             }
-            Err(why) => {
-                log(format!("  → stop: {why}"));
-                let last = steps.last_mut().unwrap();
-                last.evidence.push_str(&format!(". Stopped: {why}"));
-                last.candidates = scored;
-                return Ok((steps, consistency(&current, opts.alpha).0));
-            }
-        };
-        let (step, _) = adopt_step(data, &current, &best, &scored, opts);
-        log(format!(
-            "  → adopt {} [{}]",
-            step.model, best.candidate.effect
-        ));
-        log_step(log, steps.len(), &step, data, opts);
-        steps.last_mut().unwrap().candidates = scored;
-        steps.push(step);
+            Err(why) => return Ok(stop(log, steps, &current, scored, &why, opts)),
+        }
     }
+}
+
+/// Adopt `best` of a round's `scored` candidates as the path's next step.
+fn adopt(
+    data: &Dataset,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    steps: &mut Vec<Step>,
+    current: &FitResult,
+    best: &Scored,
+    scored: Vec<Scored>,
+) {
+    let (step, _) = adopt_step(data, current, best, &scored, opts);
+    log(format!(
+        "  → adopt {} [{}]",
+        step.model, best.candidate.effect
+    ));
+    log_step(log, steps.len(), &step, data, opts);
+    steps.last_mut().unwrap().candidates = scored;
+    steps.push(step);
+}
+
+/// End the path at its last model, saying `why`; whether it ended consistent.
+fn stop(
+    log: &mut dyn FnMut(String),
+    mut steps: Vec<Step>,
+    current: &FitResult,
+    scored: Vec<Scored>,
+    why: &str,
+    opts: &DiagnoseOptions,
+) -> (Vec<Step>, bool) {
+    log(format!("  → stop: {why}"));
+    let last = steps.last_mut().unwrap();
+    last.evidence.push_str(&format!(". Stopped: {why}"));
+    last.candidates = scored;
+    (steps, consistency(current, opts.alpha).0)
 }
 
 /// Whether a path ends before another round of candidates, and if so whether it ended
