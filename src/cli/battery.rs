@@ -92,7 +92,7 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
         diagnose: DiagnoseOptions {
             restarts: a.restarts,
             seed: a.seed,
-            ..Default::default()
+            ..BatteryOptions::default().diagnose
         },
         only: a.case,
     };

@@ -234,6 +234,11 @@ impl FitRequest {
         let finite = report.best.chi2_red.is_finite() && report.best.loss.is_finite();
         let mut mc_error = None;
         if self.mc > 0 && finite {
+            // The replicas are fitted with the smoothness prior the fit chose.
+            let mut opts = opts.clone();
+            if let Some(choice) = &report.smoothness {
+                opts.smoothness = Smoothness::Sd(choice.chosen.sd);
+            }
             let mc = McOptions {
                 replicas: self.mc,
                 scale_rel: self.mc_scale,

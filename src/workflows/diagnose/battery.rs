@@ -67,7 +67,12 @@ impl Default for BatteryOptions {
             effects: Effect::all().filter(|e| !e.is_data_driven()).collect(),
             signal: (1.0, 30.0),
             samples: (200, 20_000),
-            diagnose: DiagnoseOptions::default(),
+            // The catalogue's effects: no data-driven round (its truths come from the
+            // catalogue; a misspecified one would spend most of its time there).
+            diagnose: DiagnoseOptions {
+                data_driven: false,
+                ..DiagnoseOptions::default()
+            },
             only: None,
         }
     }

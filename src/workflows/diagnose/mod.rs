@@ -105,6 +105,10 @@ pub struct DiagnoseOptions {
     /// subsample of this many, and the path found is confirmed on all of them
     /// (`explore`); 0: always on all data.
     pub explore: usize,
+    /// Whether a round where no analytic effect is significant tries the data-driven
+    /// factors (`highlight_shape`: `+ndf`). On for `diagnose`; the battery, which measures
+    /// the catalogue's effects, turns it off.
+    pub data_driven: bool,
 }
 
 impl Default for DiagnoseOptions {
@@ -124,6 +128,7 @@ impl Default for DiagnoseOptions {
             calibrate_all: false,
             constraints: Default::default(),
             explore: 8000,
+            data_driven: true,
         }
     }
 }

@@ -274,6 +274,9 @@ fn extend_path(
         // where no analytic candidate is adopted (or none exists).
         let (mut driven, analytic): (Vec<Candidate>, Vec<Candidate>) =
             all.into_iter().partition(|c| c.effect.is_data_driven());
+        if !opts.data_driven {
+            driven.clear();
+        }
         let cands = if analytic.is_empty() {
             std::mem::take(&mut driven)
         } else {
