@@ -317,6 +317,46 @@ fn unavailable_models_are_skipped_with_a_reason() {
     );
 }
 
+/// A constraint is checked against the whole plan's models once, before the shards
+/// split it: a shard whose own models lack the parameter (here `lambert`, without σ)
+/// still runs, and its fits are unconstrained; `on`'s are held at σ = 0.3.
+#[test]
+fn a_shard_without_the_constrained_parameter_still_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (brdf, _) = data(tmp.path());
+    let mut all = Vec::new();
+    for shard in ["1/2", "2/2"] {
+        let out = tmp.path().join(shard.replace('/', "-"));
+        bsdfit(&[
+            "sweep",
+            brdf.to_str().unwrap(),
+            "--models",
+            "lambert,on",
+            "--losses",
+            "rmse",
+            "--weights",
+            "uniform",
+            "--restarts",
+            "2",
+            "--backend",
+            "cpu",
+            "--no-pictures",
+            "--fix",
+            "sigma=0.3",
+            "--shard",
+            shard,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let r = rows(&out);
+        assert_eq!(r.len(), 1, "{shard}: one of the two cells");
+        all.extend(r);
+    }
+    let mut models: Vec<&str> = all.iter().map(|r| r.model.as_str()).collect();
+    models.sort_unstable();
+    assert_eq!(models, ["lambert", "on"]);
+}
+
 #[test]
 fn render_writes_baseline_model_and_error_images() {
     let tmp = tempfile::tempdir().unwrap();

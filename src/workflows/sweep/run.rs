@@ -592,10 +592,10 @@ impl FitRun<'_> {
                 &mut |w| obs.note(&w),
             )?;
         }
+        // The names were checked against the whole plan's models before the shards split
+        // it (`run`); a shard's own models may lack a parameter another shard's have.
         let constraints = &self.cfg.constraints;
         if !constraints.is_empty() {
-            let models: Vec<&Model> = runnable.iter().map(|(_, m)| m).collect();
-            constraints.check_names_against(&models)?;
             for (_, m) in runnable {
                 Constraints::resolve(m, constraints, true)
                     .with_context(|| format!("model {}", m.spec))?;
