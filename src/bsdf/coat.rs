@@ -12,26 +12,45 @@ use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
 use super::microfacet::{ggx_reflection, single_wgsl};
 use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
-use crate::math::lanes::Real;
+use crate::math::lanes::{Real, V3};
 
 #[derive(Debug, Clone, Copy)]
 pub struct Coat;
 
 impl Kernel for Coat {
-    /// The lobe without its scale k_c once per direction (0 below the surface, where the
-    /// lobe is 0; it takes the unnormalised half vector, not 0 above); per channel only
-    /// k_c and M's value differ.
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
         let alpha = R::splat(p.get(0, 1));
-        let (zero, one) = (R::zero(), R::splat(1.0));
-        for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
-            let above = zero.lt(wi.z) & zero.lt(wo.z);
-            let kernel = R::select(above, ggx_reflection(alpha, wi, wo, wi + wo), zero);
-            for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
-                let kc = R::splat(p.get(i, 0));
-                *o = (one - kc) * m + kc * kernel;
-            }
+        blend_block(
+            p,
+            dirs,
+            inner,
+            out,
+            #[inline(always)]
+            |wi, wo| ggx_reflection(alpha, wi, wo, wi + wo),
+        );
+    }
+}
+
+/// The coat's values when k_c (rgb) is the node's first parameter: the lobe's `kernel`
+/// D G1 G1 / (4 μi μo) without its scale k_c once per direction (0 below the surface,
+/// where the lobe is 0; it takes the unnormalised half vector, not 0 above); per channel
+/// only k_c and M's value differ (`+coat` and its `+ndf` form).
+#[inline(always)]
+pub fn blend_block<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    inner: LaneChildren<R>,
+    out: &mut [R],
+    kernel: impl Fn(V3<R>, V3<R>) -> R,
+) {
+    let (zero, one) = (R::zero(), R::splat(1.0));
+    for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
+        let above = zero.lt(wi.z) & zero.lt(wo.z);
+        let kernel = R::select(above, kernel(wi, wo), zero);
+        for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
+            let kc = R::splat(p.get(i, 0));
+            *o = (one - kc) * m + kc * kernel;
         }
     }
 }

@@ -31,6 +31,7 @@
 //!
 //! Twin: `shaders/bsdf/ndf.wgsl`.
 
+use super::coat::blend_block;
 use super::effect::{Adds, Effect};
 use super::fa::aggregate_block;
 use super::ggx::{lobe_block, GgxLobe, ETA, KS};
@@ -45,7 +46,7 @@ use std::rc::Rc;
 
 /// Knots of the deviation s, the first (the normal) fixed at 0.
 pub const KNOTS: usize = 16;
-/// Cosines of the masking table: μ_j = j / (MU_POINTS − 1).
+/// Cosines of the masking table: μ_j = (j / (MU_POINTS − 1))².
 pub const MU_POINTS: usize = 65;
 
 const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
@@ -87,11 +88,17 @@ fn knot_coordinate(y: f64) -> f64 {
     (KNOTS - 1) as f64 * y.max(0.0).sqrt().sqrt()
 }
 
-/// (cos θ_k, sin² θ_k) of knot k: y_k = (k/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y).
-pub fn knot_angle(k: usize) -> (f64, f64) {
-    let r = k as f64 / (KNOTS - 1) as f64;
+/// (cos θ, sin² θ) at knot coordinate x: y = (x/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y)
+/// (the inverse of [`knot_coordinate`]).
+fn angle_at(x: f64) -> (f64, f64) {
+    let r = x / (KNOTS - 1) as f64;
     let y = r * r * r * r;
     (1.0 - y, y * (2.0 - y))
+}
+
+/// (cos θ_k, sin² θ_k) of knot k.
+pub fn knot_angle(k: usize) -> (f64, f64) {
+    angle_at(k as f64)
 }
 
 /// The knots' angles in degrees (for reports and docs).
@@ -186,11 +193,9 @@ impl NdfTable {
     pub fn new(alpha: f64, s: [f64; KNOTS]) -> NdfTable {
         let a2 = alpha * alpha;
         // t at knot coordinate x: t = α cos θ / √(α² cos² θ + sin² θ) (1 at the normal, 0
-        // at 90°), with y = (x/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y).
+        // at 90°).
         let t_of = |x: f64| {
-            let r = x / (KNOTS - 1) as f64;
-            let y = r * r * r * r;
-            let (c, s2) = (1.0 - y, y * (2.0 - y));
+            let (c, s2) = angle_at(x);
             alpha * c / (a2 * c * c + s2).sqrt()
         };
         let mut norm = 0.0;
@@ -201,8 +206,8 @@ impl NdfTable {
         };
         let sw: [f64; MU_POINTS] = std::array::from_fn(|j| (1.0 - mu(j) * mu(j)).max(0.0).sqrt());
         for k in 0..KNOTS - 1 {
-            // Pieces of the interval, equal in x, so that s changes by about 1 or less
-            // within each: e^s then varies by a factor e at most over 8 Gauss points.
+            // Pieces of the interval, equal in x, so that s changes by about 4 or less
+            // within each ([`pieces`]).
             let pieces = pieces(s[k], s[k + 1]);
             for piece in 0..pieces {
                 let x0 = k as f64 + piece as f64 / pieces as f64;
@@ -249,11 +254,6 @@ impl NdfTable {
         let j = (x as usize).min(MU_POINTS - 2);
         let f = x - j as f64;
         self.c[j] + f * (self.c[j + 1] - self.c[j])
-    }
-
-    /// Smith Λ(μ) = C(μ)/μ.
-    pub fn lambda(&self, mu: f64) -> f64 {
-        self.facing_away(mu) / mu
     }
 
     /// D at the unit normal m.
@@ -444,15 +444,14 @@ impl Kernel for CoatNdf {
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
         let tab = table(p.get(0, 1), |k| p.get(0, 2 + k));
-        let (zero, one) = (R::zero(), R::splat(1.0));
-        for (d, (wi, wo), out) in super::kernel::lanes(dirs, p.len(), out) {
-            let above = zero.lt(wi.z) & zero.lt(wo.z);
-            let kernel = R::select(above, tab.reflection(wi, wo, wi + wo), zero);
-            for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
-                let kc = R::splat(p.get(i, 0));
-                *o = (one - kc) * m + kc * kernel;
-            }
-        }
+        blend_block(
+            p,
+            dirs,
+            inner,
+            out,
+            #[inline(always)]
+            |wi, wo| tab.reflection(wi, wo, wi + wo),
+        );
     }
 }
 

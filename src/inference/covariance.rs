@@ -46,11 +46,6 @@ pub struct Covariance {
     /// parameters in their own units). For the tabulated functions' bands
     /// ([`crate::inference::knots::bands`]).
     pub with_prior: Option<Vec<Vec<f64>>>,
-    /// With the smoothness prior on: the information the data alone hold on each flat
-    /// parameter, B_data,jj = Σ (∂r/∂θ_j)² (1/σ² of the parameter were it the only one
-    /// fitted; None where fixed). A knot with less than 1 (in ln D: the data alone would
-    /// not place it within a factor e) is set by the prior, not measured.
-    pub data_information: Vec<Option<f64>>,
 }
 
 /// One weakly determined direction ([`Covariance::ridges`]).
@@ -225,7 +220,6 @@ pub fn covariance(
         ridges: vec![],
         effective_params: None,
         with_prior: None,
-        data_information: vec![],
     };
     let slopes = unit_slopes(free, flat, decls);
     let (inv, singular) = match pseudo_inverse(&jtj, &slopes) {
@@ -283,26 +277,21 @@ pub fn covariance(
     let cov = &inv * &meat * &inv * birge;
     let with_prior = (space.smooth_sd.is_some()).then(|| {
         let scaled = jacobi_scaled_inverse(&jtj);
-        let full = &scaled * &meat * &scaled * birge;
-        let information = (0..p).map(|c| data_jtj[(c, c)]).collect::<Vec<_>>();
-        (full, information)
+        &scaled * &meat * &scaled * birge
     });
     out.ridges = ridges(&jtj, birge, free, &slopes);
     set_std_and_correlation(&mut out, &cov, &undetermined);
     let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
     let mut out = expand(out, free, model.dim);
-    if let Some((full, information)) = with_prior {
+    if let Some(full) = with_prior {
         let mut m = vec![vec![0.0; model.dim]; model.dim];
-        let mut shares = vec![None; model.dim];
         for (a, &ja) in free.iter().enumerate() {
-            shares[ja] = Some(information[a]);
             for (b, &jb) in free.iter().enumerate() {
                 m[ja][jb] = full[(a, b)];
             }
         }
         out.with_prior = Some(m);
-        out.data_information = shares;
     }
     out.warnings
         .extend(one_azimuth_warnings(model, data, flat, &out.std, free));
@@ -311,8 +300,8 @@ pub fn covariance(
 
 /// B⁻¹ through the Jacobi scaling S B S, S = diag(B)^(-1/2), whose singular values
 /// measure how collinear the parameters' information is rather than its units; the
-/// directions below [`RCOND`] there (none unless the information is collinear) are left
-/// out as in [`pseudo_inverse`].
+/// directions [`pseudo_inverse`] leaves out there (none unless the information is
+/// collinear) are left out here too, and a matrix that is not finite gives 0.
 fn jacobi_scaled_inverse(b: &DMatrix<f64>) -> DMatrix<f64> {
     let p = b.nrows();
     let scale: Vec<f64> = (0..p)
@@ -325,17 +314,9 @@ fn jacobi_scaled_inverse(b: &DMatrix<f64>) -> DMatrix<f64> {
         })
         .collect();
     let scaled = DMatrix::from_fn(p, p, |i, j| b[(i, j)] * scale[i] * scale[j]);
-    let svd = scaled.svd(true, true);
-    let (Some(u), Some(vt)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        return DMatrix::zeros(p, p);
-    };
-    let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
-    let mut inv = DMatrix::<f64>::zeros(p, p);
-    for (m, &s) in svd.singular_values.iter().enumerate() {
-        if s > RCOND * smax && s > 0.0 {
-            inv += (vt.row(m).transpose() * u.column(m).transpose()) / s;
-        }
-    }
+    let inv = pseudo_inverse(&scaled, &vec![1.0; p])
+        .map(|(inv, _)| inv)
+        .unwrap_or_else(|_| DMatrix::zeros(p, p));
     DMatrix::from_fn(p, p, |i, j| inv[(i, j)] * scale[i] * scale[j])
 }
 
@@ -673,7 +654,6 @@ fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
         ridges: free_cov.ridges,
         effective_params: free_cov.effective_params,
         with_prior: None,
-        data_information: vec![],
     };
     for (a, &ja) in free.iter().enumerate() {
         out.std[ja] = free_cov.std[a];

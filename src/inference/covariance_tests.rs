@@ -347,7 +347,6 @@ fn empty(p: usize) -> Covariance {
         ridges: vec![],
         effective_params: None,
         with_prior: None,
-        data_information: vec![],
     }
 }
 

@@ -74,14 +74,29 @@ pub fn bands(
         let params: Vec<usize> = std::iter::once(alpha.index)
             .chain(knots.iter().copied())
             .collect();
-        let ln_d = |v: &[f64], k: usize| {
+        // ln D at every knot from one table of (α, knots).
+        let ln_d = |v: &[f64]| -> [f64; KNOTS] {
             let s: [f64; KNOTS] = std::array::from_fn(|i| if i == 0 { 0.0 } else { v[i] });
-            // At 90° D is its limit from above (d is 0 at m.z = 0, below the surface).
-            let (c, s2) = knot_angle(k);
-            let m = glam::DVec3::new(s2.sqrt(), 0.0, c.max(1e-9));
-            NdfTable::new(v[0], s).d(m).ln()
+            let table = NdfTable::new(v[0], s);
+            std::array::from_fn(|k| {
+                // At 90° D is its limit from above (d is 0 at m.z = 0, below the surface).
+                let (c, s2) = knot_angle(k);
+                table.d(glam::DVec3::new(s2.sqrt(), 0.0, c.max(1e-9))).ln()
+            })
         };
         let values: Vec<f64> = params.iter().map(|&j| flat[j]).collect();
+        let at = ln_d(&values);
+        // ∂ ln D(θ_k) / ∂ parameter a, by central differences in α and the knots, through N.
+        let grad: Vec<[f64; KNOTS]> = (0..params.len())
+            .map(|a| {
+                let h = 1e-6 * values[a].abs().max(1e-3);
+                let (mut up, mut down) = (values.clone(), values.clone());
+                up[a] += h;
+                down[a] -= h;
+                let (up, down) = (ln_d(&up), ln_d(&down));
+                std::array::from_fn(|k| (up[k] - down[k]) / (2.0 * h))
+            })
+            .collect();
         let signal = lobe_signal(
             model,
             data,
@@ -92,20 +107,10 @@ pub fn bands(
         let rows = (0..KNOTS)
             .map(|k| {
                 let sigma = cov.with_prior.as_ref().map(|m| {
-                    // Central differences in α and the knots, through N.
-                    let grad: Vec<f64> = (0..params.len())
-                        .map(|a| {
-                            let h = 1e-6 * values[a].abs().max(1e-3);
-                            let (mut up, mut down) = (values.clone(), values.clone());
-                            up[a] += h;
-                            down[a] -= h;
-                            (ln_d(&up, k) - ln_d(&down, k)) / (2.0 * h)
-                        })
-                        .collect();
                     let mut var = 0.0;
                     for (a, &ja) in params.iter().enumerate() {
                         for (b, &jb) in params.iter().enumerate() {
-                            var += grad[a] * grad[b] * m[ja][jb];
+                            var += grad[a][k] * grad[b][k] * m[ja][jb];
                         }
                     }
                     var.max(0.0).sqrt()
@@ -120,7 +125,7 @@ pub fn bands(
                     .sum();
                 KnotBand {
                     theta_deg: degrees[k],
-                    d: ln_d(&values, k).exp(),
+                    d: at[k].exp(),
                     sigma_ln_d: sigma,
                     signal: s2.sqrt(),
                     measured: s2.sqrt() >= MEASURED_SIGNAL,
