@@ -65,10 +65,20 @@ fn lut(k: u32) -> f32 {
 // exact rounding error of that addition, (acc − s) + x or (x − s) + acc with the larger
 // operand first, is returned to be added to the running compensation. Without it an f32
 // cost that has absorbed one large term drops every later term below half its ulp
-// (tests/gpu_accuracy.rs). naga emits plain SPIR-V float ops and lavapipe does not
-// reassociate them, so the error term is not optimised away (the same test checks it).
+// (tests/gpu_accuracy.rs). A compiler that reassociates float additions sees that
+// (acc − (acc + x)) + x is 0 and drops the error: lavapipe does not, NVIDIA's driver
+// (580, H200) did in part (the test's cost came out 3.7e-5 low, its bound 3.4e-5; with
+// the barrier 1.1e-7). So the sum and the difference pass through `opaque`, which the
+// compiler cannot see through.
 fn two_sum_err(acc: f32, x: f32, s: f32) -> f32 {
-    return select((x - s) + acc, (acc - s) + x, abs(acc) >= abs(x));
+    let so = opaque(s);
+    return select(opaque(x - so) + acc, opaque(acc - so) + x, abs(acc) >= abs(x));
+}
+
+// v itself, behind a barrier to algebraic rewriting: its bits ORed with a uniform that
+// is 0 at run time, unknown at compile time (src/engine/gpu/bindings.rs, `OpaqueZero`).
+fn opaque(v: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(v) | dims.opaque_zero);
 }
 
 // The thread's sample slice; a constant 0 when SL = 1, so the record index is a plain

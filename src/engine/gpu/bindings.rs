@@ -117,10 +117,14 @@ pub enum Dim {
     /// Records per tile, and tiles per window (workgroups along z).
     Tile,
     NTiles,
+    /// Always 0, but not a constant the shader compiler can see: kernel.wgsl's `opaque`
+    /// ORs it into the intermediates of the compensated sums, so that no compiler can
+    /// reassociate their rounding errors away (NVIDIA's driver did: tests/gpu_accuracy.rs).
+    OpaqueZero,
 }
 
-/// The names of [`Dim`]'s fields in WGSL, in order.
-pub const DIM_NAMES: [&str; 12] = [
+/// The names of [`Dim`]'s fields in WGSL, in order, then the padding to 16 bytes.
+pub const DIM_NAMES: [&str; 16] = [
     "n_candidates",
     "n_problems",
     "dim",
@@ -133,12 +137,16 @@ pub const DIM_NAMES: [&str; 12] = [
     "win_end",
     "tile",
     "n_tiles",
+    "opaque_zero",
+    "pad_0",
+    "pad_1",
+    "pad_2",
 ];
 
 /// The uniform block's contents ([`Dim`] indexes it), padded to 16 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Dims(pub [u32; 12]);
+pub struct Dims(pub [u32; 16]);
 
 impl Dims {
     pub fn set(&mut self, d: Dim, v: u32) -> &mut Self {
@@ -267,7 +275,9 @@ mod tests {
             0,
             "a uniform block is 16-byte sized"
         );
-        assert_eq!(Dim::NTiles as usize, DIM_NAMES.len() - 1);
+        const DIM_COUNT: usize = Dim::OpaqueZero as usize + 1;
+        assert_eq!(DIM_NAMES[DIM_COUNT - 1], "opaque_zero");
+        assert!(DIM_NAMES[DIM_COUNT..].iter().all(|n| n.starts_with("pad_")));
         for (i, b) in all().enumerate() {
             assert_eq!(b.slot as usize, i, "slots are dense and in order");
         }

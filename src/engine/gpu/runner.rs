@@ -457,7 +457,8 @@ impl<'a> Runner<'a> {
             .set(Dim::WinFirst, window.start)
             .set(Dim::WinEnd, window.end)
             .set(Dim::Tile, self.tile)
-            .set(Dim::NTiles, n_tiles as u32);
+            .set(Dim::NTiles, n_tiles as u32)
+            .set(Dim::OpaqueZero, 0);
         (dims, (gx, gy), (nx, ny))
     }
 
