@@ -44,13 +44,36 @@ pub fn blend_block<R: Real>(
     out: &mut [R],
     kernel: impl Fn(V3<R>, V3<R>) -> R,
 ) {
+    blend_block_with(
+        p,
+        dirs,
+        inner,
+        out,
+        kernel,
+        #[inline(always)]
+        |_, _, _| R::splat(1.0),
+    );
+}
+
+/// [`blend_block`] with channel i's lobe weighted by `factor(i, ωi, ωo)` as well
+/// (`+fresnel` gives the coat an angular reflectance per channel; 1 leaves the values
+/// bit for bit).
+#[inline(always)]
+pub fn blend_block_with<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    inner: LaneChildren<R>,
+    out: &mut [R],
+    kernel: impl Fn(V3<R>, V3<R>) -> R,
+    factor: impl Fn(usize, V3<R>, V3<R>) -> R,
+) {
     let (zero, one) = (R::zero(), R::splat(1.0));
     for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
         let above = zero.lt(wi.z) & zero.lt(wo.z);
         let kernel = R::select(above, kernel(wi, wo), zero);
         for (i, (o, &m)) in out.iter_mut().zip(inner.at(0, d)).enumerate() {
             let kc = R::splat(p.get(i, 0));
-            *o = (one - kc) * m + kc * kernel;
+            *o = (one - kc) * m + kc * factor(i, wi, wo) * kernel;
         }
     }
 }
@@ -80,6 +103,9 @@ impl Bsdf for Coat {
     }
     fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::ndf::coat())
+    }
+    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::fresnel::coat())
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("coat", include_str!("../../shaders/bsdf/coat.wgsl"))

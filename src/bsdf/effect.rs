@@ -22,12 +22,15 @@ pub enum Effect {
     /// The highlight's microfacet distribution is not of an analytic family: a
     /// data-driven NDF (`+ndf`).
     HighlightShape,
+    /// The highlight's Fresnel curve is not the dielectric one: a data-driven factor per
+    /// channel in θd (`+fresnel`).
+    HighlightFresnel,
 }
 
 impl Effect {
     /// Every effect, in the order `diagnose` tries them (the order of its candidate table
     /// and of `candidates.json`).
-    pub const ALL: [Effect; 11] = [
+    pub const ALL: [Effect; 12] = [
         Effect::Backscatter,
         Effect::SpecularLobe,
         Effect::LongTail,
@@ -39,6 +42,7 @@ impl Effect {
         Effect::RetroFalloff,
         Effect::Anisotropy,
         Effect::HighlightShape,
+        Effect::HighlightFresnel,
     ];
 
     /// Every effect, in the order of [`Effect::ALL`].
@@ -60,6 +64,7 @@ impl Effect {
             Effect::Anisotropy => "anisotropy",
             Effect::DiffuseFloor => "diffuse_floor",
             Effect::HighlightShape => "highlight_shape",
+            Effect::HighlightFresnel => "highlight_fresnel",
         }
     }
 
@@ -68,7 +73,7 @@ impl Effect {
     /// significant, and the battery, whose truths come from the catalogue, does not draw
     /// it.
     pub fn is_data_driven(self) -> bool {
-        matches!(self, Effect::HighlightShape)
+        matches!(self, Effect::HighlightShape | Effect::HighlightFresnel)
     }
 
     pub fn from_name(name: &str) -> Option<Effect> {

@@ -43,6 +43,28 @@ pub fn aggregate_block<R: Real>(
     out: &mut [R],
     lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
 ) {
+    aggregate_block_with(
+        p,
+        dirs,
+        base,
+        out,
+        lobe,
+        #[inline(always)]
+        |lobe, i| lobe.scaled(R::splat(p.get(i, 2))),
+    );
+}
+
+/// [`aggregate_block`] with channel i's highlight taken by `channel` from the direction's
+/// lobe (`+fresnel` reshapes F per channel).
+#[inline(always)]
+pub fn aggregate_block_with<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    base: LaneChildren<R>,
+    out: &mut [R],
+    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
+    channel: impl Fn(&GgxLobe<R>, usize) -> R,
+) {
     let (eta, n) = (p.get(0, 1), p.len());
     let zero = R::zero();
     let (mut ti, mut to) = (Memo::default(), Memo::default());
@@ -59,7 +81,7 @@ pub fn aggregate_block<R: Real>(
             |mu| fresnel_transmittance_in(mu, R::splat(eta)),
         );
         for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
-            let v = lobe.scaled(R::splat(p.get(i, 2))) + transmit * b;
+            let v = channel(&lobe, i) + transmit * b;
             *o = R::select(below, zero, v);
         }
     }
@@ -85,6 +107,9 @@ impl Bsdf for FresnelAggregate {
     }
     fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::ndf::fa())
+    }
+    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::fresnel::fa())
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {

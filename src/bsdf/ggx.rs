@@ -24,6 +24,8 @@ pub struct GgxLobe<R: Real = f64> {
     /// F(ωi·h; η), and the microfacet kernel D G1 G1 / (4 μi μo); both 0 below the surface.
     fresnel: R,
     kernel: R,
+    /// cos θd = ωi·h, the angle F is taken at (`+fresnel` tabulates a factor in it).
+    cos_d: R,
     above: R::Mask,
 }
 
@@ -32,6 +34,7 @@ impl GgxLobe {
     pub const ZERO: GgxLobe = GgxLobe {
         fresnel: 0.0,
         kernel: 0.0,
+        cos_d: 1.0,
         above: false,
     };
 
@@ -69,6 +72,7 @@ impl<R: Real> GgxLobe<R> {
             return GgxLobe {
                 fresnel: zero,
                 kernel: zero,
+                cos_d: R::splat(1.0),
                 above,
             };
         }
@@ -81,6 +85,7 @@ impl<R: Real> GgxLobe<R> {
         GgxLobe {
             fresnel: fresnel_dielectric_in(cos_h, R::splat(eta)),
             kernel: kernel(m),
+            cos_d: cos_h,
             above,
         }
     }
@@ -88,6 +93,16 @@ impl<R: Real> GgxLobe<R> {
     #[inline(always)]
     pub fn scaled(&self, ks: R) -> R {
         R::select(self.above, ks * self.fresnel * self.kernel, R::zero())
+    }
+    /// k_s · F · factor · kernel: the lobe with its Fresnel factor reshaped (`+fresnel`).
+    #[inline(always)]
+    pub fn scaled_by(&self, ks: R, factor: R) -> R {
+        R::select(self.above, ks * self.fresnel * factor * self.kernel, R::zero())
+    }
+    /// cos θd = ωi·h (1 below the surface).
+    #[inline(always)]
+    pub fn cos_d(&self) -> R {
+        self.cos_d
     }
 }
 
@@ -128,10 +143,30 @@ pub fn lobe_block<R: Real>(
     out: &mut [R],
     lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
 ) {
+    lobe_block_with(
+        p,
+        dirs,
+        out,
+        lobe,
+        #[inline(always)]
+        |lobe, i| lobe.scaled(R::splat(p.get(i, 0))),
+    );
+}
+
+/// [`lobe_block`] with channel i's value taken by `channel` from the direction's lobe
+/// (`+fresnel` reshapes F per channel).
+#[inline(always)]
+pub fn lobe_block_with<R: Real>(
+    p: Channels,
+    dirs: &[LaneDir<R>],
+    out: &mut [R],
+    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
+    channel: impl Fn(&GgxLobe<R>, usize) -> R,
+) {
     for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
         let lobe = lobe(wi, wo);
         for (i, o) in out.iter_mut().enumerate() {
-            *o = lobe.scaled(R::splat(p.get(i, 0)));
+            *o = channel(&lobe, i);
         }
     }
 }
@@ -149,6 +184,9 @@ impl Bsdf for Ggx {
     }
     fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::ndf::ggx())
+    }
+    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
+        Some(super::fresnel::ggx())
     }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))

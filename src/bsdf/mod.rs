@@ -59,6 +59,7 @@ models! {
     peraxis => [ENTRY],
     aniso => [ENTRY],
     ndf => [ENTRY],
+    fresnel => [ENTRY],
 }
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]
@@ -159,6 +160,12 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     /// The node's form with a data-driven NDF ([`ndf`]: GGX times a tabulated factor),
     /// which `+ndf` puts in its place; `None` where it has no GGX highlight.
     fn data_driven(&self) -> Option<Arc<dyn Bsdf>> {
+        None
+    }
+    /// The node's form with its highlight's Fresnel factor reshaped per channel
+    /// ([`fresnel`]: F times a tabulated factor in θd), which `+fresnel` puts in its
+    /// place; `None` where it has no GGX highlight.
+    fn fresnel_curve(&self) -> Option<Arc<dyn Bsdf>> {
         None
     }
     /// An anisotropic lobe's (α_u, α_v, φ0): the positions of the two roughnesses and of

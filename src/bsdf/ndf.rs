@@ -126,7 +126,7 @@ fn deviation(s: &[f64; KNOTS], x: f64) -> f64 {
 
 /// The Catmull–Rom segment between p1 (t = 0) and p2 (t = 1).
 #[inline]
-fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
+pub(super) fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
     let a = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
     let b = -p0 + 3.0 * (p1 - p2) + p3;
     0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)))

@@ -278,6 +278,8 @@ pub struct Constraints {
 
 /// The second differences s_{k−1} − 2 s_k + s_{k+1} along each run of consecutive knot
 /// parameters (a chain anchored at s_0 = 0 before its first knot, which has no parameter).
+/// A per-channel knot (`+fresnel`) takes one flat entry per channel, side by side: its run
+/// holds one chain per channel, every `width`-th entry.
 fn smoothness_rows(decls: &[ParamDecl]) -> Vec<Vec<(usize, f64)>> {
     let mut rows = Vec::new();
     let mut j = 0;
@@ -290,13 +292,21 @@ fn smoothness_rows(decls: &[ParamDecl]) -> Vec<Vec<(usize, f64)>> {
         while j < decls.len() && decls[j].knot {
             j += 1;
         }
-        // Knots start..j are s_1 … s_n.
-        for k in start..j - 1 {
-            let mut row = vec![(k, -2.0), (k + 1, 1.0)];
-            if k > start {
-                row.insert(0, (k - 1, 1.0));
+        let width = decls[start..j]
+            .iter()
+            .take_while(|d| d.name == decls[start].name)
+            .count();
+        // Knots s_1 … s_n of channel c are at start + (k − 1)·width + c.
+        let n = (j - start) / width;
+        for c in 0..width {
+            let at = |k: usize| start + k * width + c;
+            for k in 0..n - 1 {
+                let mut row = vec![(at(k), -2.0), (at(k + 1), 1.0)];
+                if k > 0 {
+                    row.insert(0, (at(k - 1), 1.0));
+                }
+                rows.push(row);
             }
-            rows.push(row);
         }
     }
     rows
@@ -633,6 +643,35 @@ mod tests {
             err.contains("no parameter 'sigma'") && err.contains("lobe.alpha"),
             "{err}"
         );
+    }
+
+    /// One chain of second differences per tabulated function and, for per-channel knots,
+    /// per channel: each row's entries are knots of one chain, every knot in some row.
+    #[test]
+    fn smoothness_rows_follow_each_chain_and_channel() {
+        for (spec, channels, chains, knots) in [
+            ("ggx+ndf", 3, 1, 15),
+            ("ggx+fresnel", 3, 3, 8),
+            ("fa(lambert)+coat+ndf", 2, 2, 15),
+        ] {
+            let m = Model::parse(spec, channels).unwrap();
+            let rows = smoothness_rows(&m.flat_decls());
+            assert_eq!(rows.len(), chains * (knots - 1), "{spec}");
+            let names = m.flat_names();
+            let channel = |j: usize| names[j].split('[').nth(1).map(str::to_string);
+            for row in &rows {
+                let first = channel(row[0].0);
+                assert!(
+                    row.iter()
+                        .all(|&(j, _)| m.flat_decls()[j].knot && channel(j) == first),
+                    "{spec}: {row:?}"
+                );
+                assert_eq!(
+                    row.iter().map(|&(_, c)| c).sum::<f64>(),
+                    if row.len() == 3 { 0.0 } else { -1.0 }
+                );
+            }
+        }
     }
 
     #[test]

@@ -1,7 +1,9 @@
-//! The fitted data-driven NDF of a model with `+ndf` ([`crate::bsdf::ndf`]) at its knots,
-//! with bands: D at each knot's angle, the standard uncertainty of ln D propagated from
-//! the fit's covariance with the smoothness prior's information, and whether the data see
-//! the lobe there or the prior sets it.
+//! The fitted data-driven factors at their knots, with bands: the NDF of a model with
+//! `+ndf` ([`crate::bsdf::ndf`]: D at each knot's angle) and the highlight's Fresnel curve
+//! of one with `+fresnel` ([`crate::bsdf::fresnel`]: k_s F e^s per channel at each knot's
+//! θd), each with the standard uncertainty of its logarithm propagated from the fit's
+//! covariance with the smoothness prior's information, and whether the data see the lobe
+//! there or the prior sets it.
 
 use crate::bsdf::ndf::{knot_angle, knot_degrees, NdfTable, KNOTS};
 use crate::bsdf::Model;
@@ -97,12 +99,15 @@ pub fn bands(
                 std::array::from_fn(|k| (up[k] - down[k]) / (2.0 * h))
             })
             .collect();
-        let signal = lobe_signal(
+        let signal: Vec<(f64, f64)> = lobe_signal(
             model,
             data,
             flat,
             ks.index..ks.index + ks.width(model.channels),
-        );
+        )
+        .into_iter()
+        .map(|s| (s.theta_h_deg, s.z))
+        .collect();
         let degrees = knot_degrees();
         let rows = (0..KNOTS)
             .map(|k| {
@@ -137,15 +142,23 @@ pub fn bands(
     out
 }
 
-/// Per sample: the half vector's angle θh (degrees) and the highlight's part of the
+/// One sample's view of the highlight: the half vector's angle θh and the angle θd
+/// between ωi and it (degrees), the sample's channel, and the highlight's part of the
 /// fitted value in units of the sample's uncertainty, f − f(k_s = 0) (the lobe is k_s
 /// times a kernel; what remains at k_s = 0 is the rest of the model).
+struct LobeSample {
+    theta_h_deg: f64,
+    theta_d_deg: f64,
+    channel: usize,
+    z: f64,
+}
+
 fn lobe_signal(
     model: &Model,
     data: &Dataset,
     flat: &[f64],
     ks: std::ops::Range<usize>,
-) -> Vec<(f64, f64)> {
+) -> Vec<LobeSample> {
     let mut off = flat.to_vec();
     off[ks].fill(0.0);
     data.samples
@@ -155,8 +168,127 @@ fn lobe_signal(
             let g = model.group_of(s);
             let lobe = model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo);
             let h = wi + wo;
-            let deg = (h.x.hypot(h.y)).atan2(h.z).to_degrees();
-            (deg, lobe / s.uncertainty)
+            let cos_d = (wi.dot(h) / h.length().max(1e-300)).clamp(-1.0, 1.0);
+            LobeSample {
+                theta_h_deg: (h.x.hypot(h.y)).atan2(h.z).to_degrees(),
+                theta_d_deg: cos_d.acos().to_degrees(),
+                channel: s.channel,
+                z: lobe / s.uncertainty,
+            }
         })
         .collect()
+}
+
+/// One knot of a fitted data-driven Fresnel curve in one channel, for reports: the
+/// highlight's reflectance factor k_s F(θd; η) e^{s(θd)} at the knot's θd with its
+/// standard uncertainty in ln, and whether the data see the lobe there.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct FresnelBand {
+    /// θd of the knot, degrees.
+    pub theta_deg: f64,
+    /// k_s F(θd; η) e^{s(θd)}: the highlight's Fresnel factor with its scale.
+    pub f: f64,
+    /// Standard uncertainty of ln f, as [`KnotBand::sigma_ln_d`].
+    pub sigma_ln_f: Option<f64>,
+    /// The lobe's own signal in this channel near the knot: √Σ (f_lobe/u)² over the
+    /// channel's samples whose θd lies between the knot's neighbours.
+    pub signal: f64,
+    /// Whether that signal is at least [`MEASURED_SIGNAL`].
+    pub measured: bool,
+}
+
+/// The fitted Fresnel curve of each highlight `+fresnel` made data-driven, per channel:
+/// (the knots' stem, e.g. `lobe.fresnel`, the channel, its knots).
+pub fn fresnel_bands(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    cov: &Covariance,
+) -> Vec<(String, usize, Vec<FresnelBand>)> {
+    use crate::bsdf::fresnel::{knot_degrees, KNOTS};
+    let find = |name: &str| model.params.iter().find(|p| p.name == name);
+    let degrees = knot_degrees();
+    let mut out = Vec::new();
+    // The lobes: the knots' stem, the amplitude and the index of the reference curve
+    // (`ggx`, `fa`'s highlight under `lobe.`; a coat's reference is F ≡ 1).
+    const LOBES: [(&str, &str, Option<&str>); 2] =
+        [("fresnel", "ks", Some("eta")), ("fresnel_c", "kc", None)];
+    for p in model.params.iter().filter(|p| p.decl.knot) {
+        let Some((stem, ks, eta, prefix)) = LOBES.iter().find_map(|&(stem, ks, eta)| {
+            let prefix = p.name.strip_suffix(&format!("{stem}1"))?;
+            Some((stem, ks, eta, prefix.to_string()))
+        }) else {
+            continue;
+        };
+        let Some(ks) = find(&format!("{prefix}{ks}")) else {
+            continue;
+        };
+        let eta = eta.and_then(|e| find(&format!("{prefix}{e}")));
+        let Some(knots) = (1..KNOTS)
+            .map(|k| find(&format!("{prefix}{stem}{k}")))
+            .collect::<Option<Vec<_>>>()
+        else {
+            continue;
+        };
+        let signal = lobe_signal(
+            model,
+            data,
+            flat,
+            ks.index..ks.index + ks.width(model.channels),
+        );
+        let eta_v = eta.map(|e| flat[e.index]);
+        // ln F(cos θ; η) of the reference curve (0 for a coat's F ≡ 1).
+        let ln_fresnel = |c: f64, eta: Option<f64>| {
+            eta.map_or(0.0, |eta| crate::math::fresnel_dielectric(c, eta).ln())
+        };
+        for c in 0..model.channels {
+            let at = |q: &crate::bsdf::FlatParam| {
+                q.index + if q.width(model.channels) > 1 { c } else { 0 }
+            };
+            let rows = (0..KNOTS)
+                .map(|k| {
+                    let cos = 1.0 - k as f64 / (KNOTS - 1) as f64;
+                    let s_k = if k == 0 { 0.0 } else { flat[at(knots[k - 1])] };
+                    let ks_v = flat[at(ks)];
+                    let ln_f = ks_v.ln() + ln_fresnel(cos, eta_v) + s_k;
+                    // ∂ ln f: 1/k_s, ∂ ln F/∂η, and 1 for the knot's own value.
+                    let mut grad = vec![(at(ks), 1.0 / ks_v)];
+                    if let (Some(eta), Some(v)) = (eta, eta_v) {
+                        let h = 1e-6 * v;
+                        let slope = (ln_fresnel(cos, Some(v + h)) - ln_fresnel(cos, Some(v - h)))
+                            / (2.0 * h);
+                        grad.push((eta.index, slope));
+                    }
+                    if k > 0 {
+                        grad.push((at(knots[k - 1]), 1.0));
+                    }
+                    let sigma = cov.with_prior.as_ref().map(|m| {
+                        let mut var = 0.0;
+                        for &(a, ga) in &grad {
+                            for &(b, gb) in &grad {
+                                var += ga * gb * m[a][b];
+                            }
+                        }
+                        var.max(0.0).sqrt()
+                    });
+                    let lo = degrees[k.saturating_sub(1)];
+                    let hi = degrees[(k + 1).min(KNOTS - 1)];
+                    let s2: f64 = signal
+                        .iter()
+                        .filter(|s| s.channel == c && s.theta_d_deg >= lo && s.theta_d_deg <= hi)
+                        .map(|s| s.z * s.z)
+                        .sum();
+                    FresnelBand {
+                        theta_deg: degrees[k],
+                        f: ln_f.exp(),
+                        sigma_ln_f: sigma,
+                        signal: s2.sqrt(),
+                        measured: s2.sqrt() >= MEASURED_SIGNAL,
+                    }
+                })
+                .collect();
+            out.push((format!("{prefix}{stem}"), c, rows));
+        }
+    }
+    out
 }

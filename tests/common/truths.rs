@@ -31,6 +31,27 @@ pub fn beckmann(c: f64, a: f64) -> f64 {
 }
 
 /// Burley's GTR with exponent γ, normalised: ∫ D cos θm dω = 1.
+/// GGX (Trowbridge–Reitz): α² / (π cos⁴θ (α² + tan²θ)²).
+pub fn ggx(c: f64, a: f64) -> f64 {
+    let (a2, c2) = (a * a, c * c);
+    let t = a2 * c2 + (1.0 - c2);
+    a2 / (PI * t * t)
+}
+
+/// Unpolarised Fresnel reflectance of a conductor of complex index n + iκ (from the
+/// amplitude coefficients of s and p polarisation; e.g. Born & Wolf §14.2).
+pub fn conductor_fresnel(c: f64, n: f64, kappa: f64) -> f64 {
+    let (c2, s2) = (c * c, 1.0 - c * c);
+    let t0 = n * n - kappa * kappa - s2;
+    let a2b2 = (t0 * t0 + 4.0 * n * n * kappa * kappa).sqrt();
+    let a = (0.5 * (a2b2 + t0)).max(0.0).sqrt();
+    let (t1, t2) = (a2b2 + c2, 2.0 * a * c);
+    let rs = (t1 - t2) / (t1 + t2);
+    let (t3, t4) = (c2 * a2b2 + s2 * s2, t2 * s2);
+    let rp = rs * (t3 - t4) / (t3 + t4);
+    0.5 * (rs + rp)
+}
+
 pub fn gtr(c: f64, a: f64, g: f64) -> f64 {
     let a2 = a * a;
     let k = (g - 1.0) * (a2 - 1.0) / (PI * (1.0 - a2.powf(1.0 - g)));
@@ -89,8 +110,13 @@ impl Isotropic {
 
     /// The lobe F D G1 G1 / (4 μi μo) alone.
     pub fn specular(&self, wi: DVec3, wo: DVec3) -> f64 {
+        self.specular_with(fresnel, wi, wo)
+    }
+
+    /// The lobe with another Fresnel curve `f(cos θd)`.
+    pub fn specular_with(&self, f: impl Fn(f64) -> f64, wi: DVec3, wo: DVec3) -> f64 {
         let h = (wi + wo).normalize();
-        fresnel(wi.dot(h)) * (self.d)(h.z) * self.g1(wi.z) * self.g1(wo.z) / (4.0 * wi.z * wo.z)
+        f(wi.dot(h)) * (self.d)(h.z) * self.g1(wi.z) * self.g1(wo.z) / (4.0 * wi.z * wo.z)
     }
 
     /// The lobe over the body seen through the same interface (a Fresnel aggregate):
@@ -104,6 +130,16 @@ impl Isotropic {
 /// 20° about the plane of incidence, the source direction left out; values of `f` with
 /// 1 % noise and a floor of 3e-4 sr⁻¹, stated as the uncertainty.
 pub fn measure(phi_i: &[f64], f: &dyn Fn(DVec3, DVec3) -> f64, seed: u64) -> Dataset {
+    measure_channels(phi_i, &[550.0], &|_, wi, wo| f(wi, wo), seed)
+}
+
+/// [`measure`] at several wavelengths: `f(channel, ωi, ωo)`, channel c at `wavelengths[c]`.
+pub fn measure_channels(
+    phi_i: &[f64],
+    wavelengths: &[f64],
+    f: &dyn Fn(usize, DVec3, DVec3) -> f64,
+    seed: u64,
+) -> Dataset {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let normal = Normal::new(0.0, 1.0).unwrap();
     let mut raw = Vec::new();
@@ -116,18 +152,20 @@ pub fn measure(phi_i: &[f64], f: &dyn Fn(DVec3, DVec3) -> f64, seed: u64) -> Dat
                         continue;
                     }
                     let po = pi + 20.0 * j as f64;
-                    let v = f(dir(ti, pi), dir(to, po));
-                    let u = ((0.01 * v).powi(2) + 1e-7).sqrt();
-                    let row = RawRow {
-                        theta_i: ti,
-                        phi_i: pi,
-                        theta_o: to,
-                        phi_o: po,
-                        wavelength_nm: 550.0,
-                        value: v + u * normal.sample(&mut rng),
-                        uncertainty: u,
-                    };
-                    raw.push((raw.len() + 1, row));
+                    for (c, &nm) in wavelengths.iter().enumerate() {
+                        let v = f(c, dir(ti, pi), dir(to, po));
+                        let u = ((0.01 * v).powi(2) + 1e-7).sqrt();
+                        let row = RawRow {
+                            theta_i: ti,
+                            phi_i: pi,
+                            theta_o: to,
+                            phi_o: po,
+                            wavelength_nm: nm,
+                            value: v + u * normal.sample(&mut rng),
+                            uncertainty: u,
+                        };
+                        raw.push((raw.len() + 1, row));
+                    }
                 }
             }
         }

@@ -85,6 +85,20 @@ pub struct FitReport {
     /// see the lobe there (absent without one).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ndf: Vec<NdfReport>,
+    /// Each data-driven Fresnel curve (`+fresnel`) per channel at its knots: k_s F e^s
+    /// with σ(ln), and whether the data see the lobe there (absent without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fresnel: Vec<FresnelReport>,
+}
+
+/// One channel of a data-driven Fresnel curve ([`crate::inference::knots::fresnel_bands`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FresnelReport {
+    /// Its knots' stem (`fresnel` in `ggx+fresnel`, `lobe.fresnel` in `fa(B)+fresnel`).
+    pub lobe: String,
+    /// The channel (0-based, in the data's channel order).
+    pub channel: usize,
+    pub knots: Vec<crate::inference::knots::FresnelBand>,
 }
 
 /// One data-driven NDF of a fit ([`crate::inference::knots::bands`]).
@@ -174,6 +188,15 @@ pub(super) fn make_report(
         .into_iter()
         .map(|(lobe, knots)| NdfReport { lobe, knots })
         .collect();
+    let fresnel: Vec<FresnelReport> =
+        crate::inference::knots::fresnel_bands(model, data, flat, &cov)
+            .into_iter()
+            .map(|(lobe, channel, knots)| FresnelReport {
+                lobe,
+                channel,
+                knots,
+            })
+            .collect();
     let mut knot_warnings = Vec::new();
     for n in &ndf {
         let unseen: Vec<String> = n
@@ -237,6 +260,7 @@ pub(super) fn make_report(
         aic: crate::inference::stats::aic(o.chi2 + o.chi2_prior, o.constraints.dim()),
         smoothness: o.smoothness,
         ndf,
+        fresnel,
     }
 }
 
@@ -279,6 +303,14 @@ impl FitReport {
                 }) =>
                 {
                     "(a knot: see its D table)".into()
+                }
+                None if self.fresnel.iter().any(|n| {
+                    name.strip_prefix(&n.lobe)
+                        .and_then(|k| k.split('[').next())
+                        .is_some_and(|k| k.parse::<usize>().is_ok())
+                }) =>
+                {
+                    "(a knot: see its Fresnel table)".into()
                 }
                 None => "(not determined)".into(),
             };
@@ -329,6 +361,17 @@ impl FitReport {
                 let band = k.sigma_ln_d.map_or("".into(), |v| format!("± {v:.3}"));
                 let mark = if k.measured { "" } else { " *" };
                 s += &format!("    {:>5.2}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.d);
+            }
+        }
+        for n in &self.fresnel {
+            s += &format!(
+                "  {} channel {}: k_s F e^s at the knots' θd (± in ln; * set by the prior)\n",
+                n.lobe, n.channel
+            );
+            for k in &n.knots {
+                let band = k.sigma_ln_f.map_or("".into(), |v| format!("± {v:.3}"));
+                let mark = if k.measured { "" } else { " *" };
+                s += &format!("    {:>5.1}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.f);
             }
         }
         for w in &self.warnings {

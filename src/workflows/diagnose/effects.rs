@@ -95,6 +95,12 @@ pub const EFFECTS: &[EffectEntry] = &[
         lobe_around: None,
         max_half_width_deg: None,
     },
+    EffectEntry {
+        effect: Effect::HighlightFresnel,
+        signature: "the highlight's strength changes with the angle to the half vector (θd) unlike a dielectric's Fresnel curve, or differently per channel: a conductor's or a coating's reflectance",
+        lobe_around: None,
+        max_half_width_deg: None,
+    },
 ];
 
 /// One way of making an extension that adds an effect: a model's declaration.
@@ -182,6 +188,7 @@ mod tests {
                 "backscatter",
                 "diffuse_floor",
                 "grazing_decay",
+                "highlight_fresnel",
                 "highlight_shape",
                 "long_tail",
                 "retro_falloff",

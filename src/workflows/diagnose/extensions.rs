@@ -310,17 +310,19 @@ mod tests {
                 .into_iter()
                 .partition(|c| c.effect.is_data_driven());
             assert_eq!(specs(&analytic), want, "{spec}");
-            // The data-driven NDF, for a model with a GGX lobe (after the analytic ones).
-            let lobe = Model::for_data(spec, data)
-                .unwrap()
-                .nodes()
-                .iter()
-                .any(|n| n.bsdf.data_driven().is_some());
-            let want_driven = if lobe {
-                vec![(format!("{spec}+ndf"), HighlightShape)]
-            } else {
-                vec![]
+            // The data-driven NDF, for a model with a GGX lobe, and the Fresnel curve, for
+            // one with a GGX highlight (after the analytic ones).
+            let nodes = Model::for_data(spec, data).unwrap();
+            let has = |form: &dyn Fn(&dyn crate::bsdf::Bsdf) -> bool| {
+                nodes.nodes().iter().any(|n| form(n.bsdf.as_ref()))
             };
+            let mut want_driven = vec![];
+            if has(&|b| b.data_driven().is_some()) {
+                want_driven.push((format!("{spec}+ndf"), HighlightShape));
+            }
+            if has(&|b| b.fresnel_curve().is_some()) {
+                want_driven.push((format!("{spec}+fresnel"), HighlightFresnel));
+            }
             assert_eq!(specs(&driven), want_driven, "{spec}");
         }
         for c in extensions("btdf(gg)+absorb", &two)
