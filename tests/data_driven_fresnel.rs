@@ -118,3 +118,55 @@ fn a_conductors_fresnel_curve_comes_back() {
         assert!(measured >= 4, "channel {ch}: {measured} knots measured");
     }
 }
+
+/// The workflow names it: diagnose from `lambert` on the gold-highlight data adds the
+/// specular lobe, then, with no analytic effect left significant, the Fresnel curve (and
+/// not the highlight's shape: the truth's NDF is GGX), and ends within the noise.
+#[test]
+fn diagnose_names_the_fresnel_curve_of_a_conductor() {
+    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
+    let lobe = Isotropic::new(|c| ggx(c, 0.2));
+    let truth = |ch: usize, wi, wo| {
+        let (n, k) = GOLD[ch];
+        lobe.specular_with(|c| conductor_fresnel(c, n, k), wi, wo)
+            + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
+    };
+    let data = measure_channels(&[0.0], &WAVELENGTHS, &truth, 8);
+    let opts = DiagnoseOptions {
+        seed: 2,
+        restarts: 8,
+        ..Default::default()
+    };
+    let t0 = std::time::Instant::now();
+    let d = diagnose(&data, "lambert", &SimdBackend::new(), &opts, &mut |l| {
+        eprintln!("{l}")
+    })
+    .unwrap();
+    eprintln!(
+        "diagnose: {:.1} s, {} → {:?}",
+        t0.elapsed().as_secs_f64(),
+        d.final_model,
+        d.effects
+    );
+    assert_eq!(
+        d.effects.first(),
+        Some(&Effect::SpecularLobe),
+        "{:?}",
+        d.effects
+    );
+    assert!(
+        d.effects.contains(&Effect::HighlightFresnel),
+        "{:?}",
+        d.effects
+    );
+    assert!(
+        !d.effects.contains(&Effect::HighlightShape),
+        "{:?}",
+        d.effects
+    );
+    assert!(!d.effects.contains(&Effect::Anisotropy), "{:?}", d.effects);
+    // Within the noise: 1 ± 4√(2/ν), ν ≈ the samples.
+    let chi2_red = d.steps.last().unwrap().chi2_red;
+    let noise = 4.0 * (2.0 / data.len() as f64).sqrt();
+    assert!((chi2_red - 1.0).abs() < noise, "final χ²_red {chi2_red}");
+}

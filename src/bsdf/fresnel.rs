@@ -161,6 +161,9 @@ impl Kernel for GgxFresnel {
 }
 
 impl Bsdf for GgxFresnel {
+    fn bounded_albedo(&self) -> bool {
+        false // k_s F e^s has no bound of 1 (see the module doc)
+    }
     fn entry(&self) -> &'static Entry {
         &GGX_ENTRY
     }
@@ -204,6 +207,9 @@ impl Kernel for FaFresnel {
 }
 
 impl Bsdf for FaFresnel {
+    fn bounded_albedo(&self) -> bool {
+        false // k_s F e^s has no bound of 1 (see the module doc)
+    }
     fn entry(&self) -> &'static Entry {
         &FA_ENTRY
     }
@@ -259,6 +265,9 @@ impl Kernel for CoatFresnel {
 }
 
 impl Bsdf for CoatFresnel {
+    fn bounded_albedo(&self) -> bool {
+        false // k_s F e^s has no bound of 1 (see the module doc)
+    }
     fn entry(&self) -> &'static Entry {
         &COAT_ENTRY
     }

@@ -179,6 +179,12 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     fn reciprocal(&self) -> bool {
         true
     }
+    /// Whether the directional albedo stays at most 1 at every parameter value in bounds
+    /// (tests check it where claimed; a tabulated factor without a bound, `+fresnel`'s,
+    /// does not claim it).
+    fn bounded_albedo(&self) -> bool {
+        true
+    }
     fn wgsl(&self) -> WgslFn;
     /// A WGSL function `fn <name>(o: u32)`, in one of [`Self::wgsl`]'s sources, that
     /// computes once per candidate what depends on this node's shared (neither rgb nor

@@ -568,12 +568,28 @@ fn defer_undeciding(
     }
 }
 
-/// The candidate a backtrack tries at a round that adopted `adopted`: the adoptable one
-/// of another effect with the lowest ΔBIC, deferred tests calibrated now where they could
-/// be it (an index into `scored`).
+/// Which candidates of a round a backtrack may try instead of the one it adopted.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Instead {
+    /// Another effect.
+    OtherEffect,
+    /// Another model of the same effect (`fa(lambert)` for `lambert+coat`: the adopted
+    /// form of a specular lobe can be the wrong one — a conductor's highlight is first
+    /// taken by a coat, whose blend then leaves the body's Fresnel dimming to false
+    /// grazing and retro effects).
+    OtherForm,
+}
+
+/// The candidate a backtrack tries at a round that adopted `adopted` (`adopted_spec`):
+/// the adoptable one of another effect, or of the same effect in another model, with the
+/// lowest ΔBIC, deferred tests calibrated now where they could be it (an index into
+/// `scored`).
+#[allow(clippy::too_many_arguments)]
 fn backtrack_alternative(
     scored: &mut [Scored],
     adopted: Option<Effect>,
+    adopted_spec: &str,
+    instead: Instead,
     data: &Dataset,
     backend: &dyn Backend,
     opts: &DiagnoseOptions,
@@ -583,7 +599,13 @@ fn backtrack_alternative(
     let mut order: Vec<usize> = (0..scored.len())
         .filter(|&i| {
             let s = &scored[i];
-            Some(s.candidate.effect) != adopted && (s.adoptable() || s.is_deferred())
+            let wanted = match instead {
+                Instead::OtherEffect => Some(s.candidate.effect) != adopted,
+                Instead::OtherForm => {
+                    Some(s.candidate.effect) == adopted && s.candidate.spec != adopted_spec
+                }
+            };
+            wanted && (s.adoptable() || s.is_deferred())
         })
         .collect();
     order.sort_by(|&a, &b| scored[a].delta_bic.total_cmp(&scored[b].delta_bic));
@@ -735,12 +757,16 @@ fn diagnose_path(
     let (greedy, ok) = extend_path(data, backend, opts, log, &mut cache, vec![step0])?;
     let mut best_path = greedy.clone();
     if !ok && opts.backtrack {
-        for r in 0..greedy.len().saturating_sub(1) {
+        let rounds = (0..greedy.len().saturating_sub(1))
+            .flat_map(|r| [(r, Instead::OtherEffect), (r, Instead::OtherForm)]);
+        for (r, instead) in rounds {
             let adopted = greedy[r + 1].effect;
             let mut scored = greedy[r].candidates.clone();
             let Some(alt) = backtrack_alternative(
                 &mut scored,
                 adopted,
+                &greedy[r + 1].model,
+                instead,
                 data,
                 backend,
                 opts,

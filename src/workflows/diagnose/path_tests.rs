@@ -171,6 +171,8 @@ fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
     let picked = backtrack_alternative(
         &mut round,
         Some(Effect::SpecularLobe),
+        "fa(lambert)",
+        Instead::OtherEffect,
         &data,
         &backend,
         &opts,
@@ -185,16 +187,36 @@ fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
         round[0].p_nominal
     );
     assert_eq!(picked.is_some(), round[0].adoptable());
-    // The same candidate of the adopted effect is never an alternative.
+    // The adopted candidate itself is never an alternative: not as another effect, nor
+    // as another form of its own effect.
+    for instead in [Instead::OtherEffect, Instead::OtherForm] {
+        round[0].defer("test".into());
+        let same = backtrack_alternative(
+            &mut round,
+            Some(Effect::Backscatter),
+            "on",
+            instead,
+            &data,
+            &backend,
+            &opts,
+            &current,
+            &mut |_| {},
+        );
+        assert!(same.is_none() && round[0].is_deferred());
+    }
+    // Another model of the adopted effect is one, as another form.
     round[0].defer("test".into());
-    let same = backtrack_alternative(
+    let other_form = backtrack_alternative(
         &mut round,
         Some(Effect::Backscatter),
+        "eon",
+        Instead::OtherForm,
         &data,
         &backend,
         &opts,
         &current,
         &mut |_| {},
     );
-    assert!(same.is_none() && round[0].is_deferred());
+    assert!(!round[0].is_deferred());
+    assert_eq!(other_form.is_some(), round[0].adoptable());
 }
