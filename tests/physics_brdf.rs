@@ -218,13 +218,9 @@ fn check_albedo(spec: &str) {
             .params
             .iter()
             .flat_map(|p| {
-                let v = if p.decl.knot {
-                    p.decl.hi
-                } else if p.name.ends_with("ks") || p.name.ends_with("kc") {
-                    p.decl.hi
-                } else {
-                    p.decl.default
-                };
+                // The knots and the lobes' scales at their upper bounds.
+                let high = p.decl.knot || p.name.ends_with("ks") || p.name.ends_with("kc");
+                let v = if high { p.decl.hi } else { p.decl.default };
                 std::iter::repeat_n(v, p.width(model.channels))
             })
             .collect();
