@@ -11,30 +11,20 @@ mod common;
 use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
-use bsdfit::engine::loss::{Loss, Metric, Weights};
 use bsdfit::engine::simd::SimdBackend;
-use bsdfit::inference::fit::{fit_outcome, Conclusions, FitOptions};
+use bsdfit::inference::fit::Conclusions;
 use bsdfit::inference::knots::{fresnel_bands, MEASURED_SIGNAL};
 use bsdfit::math::fresnel_dielectric as dielectric;
 use bsdfit::workflows::diagnose::embed;
-use common::truths::{conductor_fresnel, fresnel, ggx, measure_channels, Isotropic, RHO};
+use common::truths::{
+    chi2_red, conductor_fresnel, fit_truth, fresnel, ggx, measure_channels, Isotropic, RHO,
+};
 use std::f64::consts::PI;
 
+/// From the dielectric optimum (η at its bound, k_s at 1) the conductor's is far: the
+/// start and 15 random restarts, as diagnose tries an extension.
 fn fit(model: &Model, data: &Dataset, start: Option<Vec<f64>>) -> Conclusions {
-    let opts = FitOptions {
-        // From the dielectric optimum (η at its bound, k_s at 1) the conductor's is far:
-        // the start and 15 random restarts, as diagnose tries an extension.
-        restarts: 16,
-        seed: 5,
-        initial_points: start.into_iter().collect(),
-        ..Default::default()
-    };
-    let loss = Loss::new(Metric::Chi2, Weights::Uniform);
-    fit_outcome(model, data, loss, &SimdBackend::new(), &opts, &mut |_| {}).unwrap()
-}
-
-fn chi2_red(c: &Conclusions) -> f64 {
-    c.chi2 / c.dof as f64
+    fit_truth(model, data, start, 16, 5)
 }
 
 /// Gold's complex index at 450, 550 and 650 nm (Johnson & Christy 1972, rounded): the
@@ -42,14 +32,18 @@ fn chi2_red(c: &Conclusions) -> f64 {
 const GOLD: [(f64, f64); 3] = [(1.47, 1.95), (0.43, 2.45), (0.17, 3.15)];
 const WAVELENGTHS: [f64; 3] = [450.0, 550.0, 650.0];
 
+/// The truth in channel `ch`: a GGX highlight with gold's Fresnel curve over a Lambertian
+/// body seen through a dielectric interface.
+fn gold(lobe: &Isotropic, ch: usize, wi: glam::DVec3, wo: glam::DVec3) -> f64 {
+    let (n, k) = GOLD[ch];
+    lobe.specular_with(|c| conductor_fresnel(c, n, k), wi, wo)
+        + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
+}
+
 #[test]
 fn a_conductors_fresnel_curve_comes_back() {
     let lobe = Isotropic::new(|c| ggx(c, 0.2));
-    let truth = |ch: usize, wi, wo| {
-        let (n, k) = GOLD[ch];
-        lobe.specular_with(|c| conductor_fresnel(c, n, k), wi, wo)
-            + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
-    };
+    let truth = |ch: usize, wi, wo| gold(&lobe, ch, wi, wo);
     let data = measure_channels(&[0.0], &WAVELENGTHS, &truth, 7);
     assert_eq!(
         data.channels, WAVELENGTHS,
@@ -126,11 +120,7 @@ fn a_conductors_fresnel_curve_comes_back() {
 fn diagnose_names_the_fresnel_curve_of_a_conductor() {
     use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
     let lobe = Isotropic::new(|c| ggx(c, 0.2));
-    let truth = |ch: usize, wi, wo| {
-        let (n, k) = GOLD[ch];
-        lobe.specular_with(|c| conductor_fresnel(c, n, k), wi, wo)
-            + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
-    };
+    let truth = |ch: usize, wi, wo| gold(&lobe, ch, wi, wo);
     let data = measure_channels(&[0.0], &WAVELENGTHS, &truth, 8);
     let opts = DiagnoseOptions {
         seed: 2,

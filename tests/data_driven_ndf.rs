@@ -10,27 +10,15 @@ mod common;
 
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
-use bsdfit::engine::loss::{Loss, Metric, Weights};
-use bsdfit::engine::simd::SimdBackend;
 use bsdfit::inference::fit::smoothness::GRID;
-use bsdfit::inference::fit::{fit_outcome, Conclusions, FitOptions};
+use bsdfit::inference::fit::Conclusions;
 use bsdfit::inference::knots::{bands, MEASURED_SIGNAL};
 use bsdfit::workflows::diagnose::embed;
-use common::truths::{beckmann, gtr, measure, Isotropic, Ndf};
+use common::truths::{beckmann, chi2_red, fit_truth, gtr, measure, Isotropic, Ndf};
 
 fn fit(model: &Model, data: &Dataset, start: Option<Vec<f64>>) -> Conclusions {
-    let opts = FitOptions {
-        restarts: if start.is_some() { 2 } else { 8 },
-        seed: 3,
-        initial_points: start.into_iter().collect(),
-        ..Default::default()
-    };
-    let loss = Loss::new(Metric::Chi2, Weights::Uniform);
-    fit_outcome(model, data, loss, &SimdBackend::new(), &opts, &mut |_| {}).unwrap()
-}
-
-fn chi2_red(c: &Conclusions) -> f64 {
-    c.chi2 / c.dof as f64
+    let restarts = if start.is_some() { 2 } else { 8 };
+    fit_truth(model, data, start, restarts, 3)
 }
 
 #[test]

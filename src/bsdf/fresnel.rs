@@ -332,19 +332,13 @@ impl Bsdf for FresnelCurve {
 /// `+coat`, wherever they sit) by its form with a data-driven Fresnel curve, each with
 /// knots of its own, and wrap the result in the pass-through `+fresnel` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    if inner.bsdf.kind() != Kind::Brdf {
-        return Err("+fresnel applies to BRDF models".into());
-    }
-    let (swapped, count, names) = inner.with_forms(&|b| b.fresnel_curve());
-    if names.contains(&ENTRY.name) {
-        return Err("+fresnel given twice".into());
-    }
-    if count == 0 {
-        return Err(
-            "+fresnel needs an isotropic GGX lobe with the analytic NDF: ggx, fa(B) or +coat (not after +aniso or +ndf)".into(),
-        );
-    }
-    Ok(Node::with(FresnelCurve, vec![swapped]))
+    super::brdf_form_suffix(
+        inner,
+        ENTRY.name,
+        &|b| b.fresnel_curve(),
+        FresnelCurve,
+        "an isotropic GGX lobe with the analytic NDF: ggx, fa(B) or +coat (not after +aniso or +ndf)",
+    )
 }
 
 /// The forms with a data-driven Fresnel curve, as [`Bsdf::fresnel_curve`] hands them out.

@@ -361,6 +361,30 @@ impl Node {
 /// Another form of a node, where it has one ([`Bsdf::anisotropic`], [`Bsdf::data_driven`]).
 pub type FormOf<'a> = dyn Fn(&dyn Bsdf) -> Option<Arc<dyn Bsdf>> + 'a;
 
+/// The build of a BRDF suffix that puts a form of each lobe in its place (`+ndf`,
+/// `+fresnel`): every node `form` gives one of is swapped ([`Node::with_forms`]) and the
+/// result wrapped in the suffix's pass-through node `wrap`; refused on BTDF models, when
+/// given twice, and where no node has that form (`needs` says which have one).
+pub fn brdf_form_suffix(
+    inner: Node,
+    suffix: &'static str,
+    form: &FormOf,
+    wrap: impl Bsdf + 'static,
+    needs: &str,
+) -> Result<Node, String> {
+    if inner.bsdf.kind() != Kind::Brdf {
+        return Err(format!("+{suffix} applies to BRDF models"));
+    }
+    let (swapped, count, names) = inner.with_forms(form);
+    if names.contains(&suffix) {
+        return Err(format!("+{suffix} given twice"));
+    }
+    if count == 0 {
+        return Err(format!("+{suffix} needs {needs}"));
+    }
+    Ok(Node::with(wrap, vec![swapped]))
+}
+
 /// A parameter of a compiled model: its declaration, full name and place in the flat vector.
 #[derive(Clone, Debug)]
 pub struct FlatParam {

@@ -522,19 +522,13 @@ impl Bsdf for Ndf {
 /// of `+coat`, wherever they sit) by its data-driven form, each with knots of its own,
 /// and wrap the result in the pass-through `+ndf` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    if inner.bsdf.kind() != Kind::Brdf {
-        return Err("+ndf applies to BRDF models".into());
-    }
-    let (swapped, count, names) = inner.with_forms(&|b| b.data_driven());
-    if names.contains(&ENTRY.name) {
-        return Err("+ndf given twice".into());
-    }
-    if count == 0 {
-        return Err(
-            "+ndf needs an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)".into(),
-        );
-    }
-    Ok(Node::with(Ndf, vec![swapped]))
+    super::brdf_form_suffix(
+        inner,
+        ENTRY.name,
+        &|b| b.data_driven(),
+        Ndf,
+        "an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)",
+    )
 }
 
 /// The data-driven forms, as [`Bsdf::data_driven`] hands them out.

@@ -172,3 +172,30 @@ pub fn measure_channels(
     }
     Dataset::from_rows(Kind::Brdf, "truth", &raw, "<test>", &ReadOptions::default()).unwrap()
 }
+
+/// A χ² fit of `model` to truth data on the SIMD engine, from `start` (an embedded
+/// optimum of a smaller model, as diagnose starts an extension) where given, with
+/// `restarts` restarts in all; the smoothness prior of any knots weighed from the data.
+pub fn fit_truth(
+    model: &bsdfit::bsdf::Model,
+    data: &Dataset,
+    start: Option<Vec<f64>>,
+    restarts: usize,
+    seed: u64,
+) -> bsdfit::inference::fit::Conclusions {
+    use bsdfit::engine::loss::{Loss, Metric, Weights};
+    let opts = bsdfit::inference::fit::FitOptions {
+        restarts,
+        seed,
+        initial_points: start.into_iter().collect(),
+        ..Default::default()
+    };
+    let loss = Loss::new(Metric::Chi2, Weights::Uniform);
+    let backend = bsdfit::engine::simd::SimdBackend::new();
+    bsdfit::inference::fit::fit_outcome(model, data, loss, &backend, &opts, &mut |_| {}).unwrap()
+}
+
+/// χ²/ν of a fit.
+pub fn chi2_red(c: &bsdfit::inference::fit::Conclusions) -> f64 {
+    c.chi2 / c.dof as f64
+}
