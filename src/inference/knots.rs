@@ -197,8 +197,9 @@ pub struct FresnelBand {
     pub measured: bool,
 }
 
-/// The fitted Fresnel curve of each highlight `+fresnel` made data-driven, per channel:
-/// (the knots' stem, e.g. `lobe.fresnel`, the channel, its knots).
+/// The fitted Fresnel curve of each lobe `+fresnel` made data-driven, per channel: (the
+/// knots' stem — `fresnel`, `lobe.fresnel`, or `fresnel_c` for a coat — the channel, its
+/// knots).
 pub fn fresnel_bands(
     model: &Model,
     data: &Dataset,

@@ -94,7 +94,8 @@ pub struct FitReport {
 /// One channel of a data-driven Fresnel curve ([`crate::inference::knots::fresnel_bands`]).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FresnelReport {
-    /// Its knots' stem (`fresnel` in `ggx+fresnel`, `lobe.fresnel` in `fa(B)+fresnel`).
+    /// Its knots' stem (`fresnel` in `ggx+fresnel`, `lobe.fresnel` in `fa(B)+fresnel`,
+    /// `fresnel_c` for a coat).
     pub lobe: String,
     /// The channel (0-based, in the data's channel order).
     pub channel: usize,
