@@ -111,15 +111,12 @@ pub fn bands(
         let degrees = knot_degrees();
         let rows = (0..KNOTS)
             .map(|k| {
-                let sigma = cov.with_prior.as_ref().map(|m| {
-                    let mut var = 0.0;
-                    for (a, &ja) in params.iter().enumerate() {
-                        for (b, &jb) in params.iter().enumerate() {
-                            var += grad[a][k] * grad[b][k] * m[ja][jb];
-                        }
-                    }
-                    var.max(0.0).sqrt()
-                });
+                let g: Vec<(usize, f64)> = params
+                    .iter()
+                    .enumerate()
+                    .map(|(a, &j)| (j, grad[a][k]))
+                    .collect();
+                let sigma = propagated_sd(cov, &g);
                 // Between the knot's neighbours (from the normal for the first).
                 let lo = degrees[k.saturating_sub(1)];
                 let hi = degrees[(k + 1).min(KNOTS - 1)];
@@ -140,6 +137,20 @@ pub fn bands(
         out.push((name, rows));
     }
     out
+}
+
+/// The standard uncertainty of a quantity whose gradient is `grad` ((flat index,
+/// derivative) pairs), from the covariance with the prior's information; None without it.
+fn propagated_sd(cov: &Covariance, grad: &[(usize, f64)]) -> Option<f64> {
+    cov.with_prior.as_ref().map(|m| {
+        let mut var = 0.0;
+        for &(a, ga) in grad {
+            for &(b, gb) in grad {
+                var += ga * gb * m[a][b];
+            }
+        }
+        var.max(0.0).sqrt()
+    })
 }
 
 /// One sample's view of the highlight: the half vector's angle θh and the angle θd
@@ -263,15 +274,7 @@ pub fn fresnel_bands(
                     if k > 0 {
                         grad.push((at(knots[k - 1]), 1.0));
                     }
-                    let sigma = cov.with_prior.as_ref().map(|m| {
-                        let mut var = 0.0;
-                        for &(a, ga) in &grad {
-                            for &(b, gb) in &grad {
-                                var += ga * gb * m[a][b];
-                            }
-                        }
-                        var.max(0.0).sqrt()
-                    });
+                    let sigma = propagated_sd(cov, &grad);
                     let lo = degrees[k.saturating_sub(1)];
                     let hi = degrees[(k + 1).min(KNOTS - 1)];
                     let s2: f64 = signal
