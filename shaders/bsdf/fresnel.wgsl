@@ -1,36 +1,14 @@
 // The highlight's Fresnel curve made data-driven (`+fresnel`): in channel c the GGX
 // highlight takes ks F(theta_d; eta) exp(s_c(theta_d)), s_c a Catmull-Rom spline through 9
 // knots at x = 8 (1 - cos theta_d) (s_c = 0 at normal incidence), continued linearly past
-// both ends. f32 twin of src/bsdf/fresnel.rs, which documents the curve and the knots.
-
-const FRESNEL_KNOTS: u32 = 9u;
-
-// exp(s(theta_d)) for the knots s (s[0] = 0) at cos theta_d.
-fn fresnel_factor(knots: array<f32, 9>, cos_d: f32) -> f32 {
-    var s = knots;
-    let x = clamp(8.0 * (1.0 - cos_d), 0.0, 8.0);
-    let k = min(u32(x), FRESNEL_KNOTS - 2u);
-    let t = x - f32(k);
-    var p0 = 2.0 * s[0] - s[1];
-    if (k > 0u) {
-        p0 = s[k - 1u];
-    }
-    let p1 = s[k];
-    let p2 = s[k + 1u];
-    var p3 = 2.0 * s[FRESNEL_KNOTS - 1u] - s[FRESNEL_KNOTS - 2u];
-    if (k + 2u < FRESNEL_KNOTS) {
-        p3 = s[k + 2u];
-    }
-    let a = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
-    let b = -p0 + 3.0 * (p1 - p2) + p3;
-    return exp(0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b))));
-}
+// both ends (knot_factor, knots.wgsl). f32 twin of src/bsdf/fresnel.rs, which documents the
+// curve and the knots.
 
 // The GGX highlight with its Fresnel factor reshaped: ks F(wi.h; eta) factor D G1 G1 / (4 mu_i mu_o).
 fn fresnel_highlight(ks: f32, alpha: f32, eta: f32, knots: array<f32, 9>, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
     let h = half_vector(wi, wo);
     let cos_d = dot(wi, h);
-    return ks * fresnel_dielectric(cos_d, eta) * fresnel_factor(knots, cos_d) * ggx_reflection(alpha, wi, wo, h);
+    return ks * fresnel_dielectric(cos_d, eta) * knot_factor(knots, cos_d) * ggx_reflection(alpha, wi, wo, h);
 }
 
 // `ggx` with a data-driven Fresnel curve. Parameters: ks, alpha, eta, fresnel1 .. fresnel8.
@@ -98,6 +76,6 @@ fn coat_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
         coat_fresnel_fresnel_c8(o),
     );
     let h = half_vector(wi, wo);
-    let lobe = fresnel_factor(knots, dot(wi, h)) * ggx_reflection(coat_fresnel_alpha_c(o), wi, wo, h);
+    let lobe = knot_factor(knots, dot(wi, h)) * ggx_reflection(coat_fresnel_alpha_c(o), wi, wo, h);
     return (1.0 - kc) * inner + kc * lobe;
 }

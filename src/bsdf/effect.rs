@@ -25,12 +25,15 @@ pub enum Effect {
     /// The highlight's Fresnel curve is not the dielectric one: a data-driven factor per
     /// channel in θd (`+fresnel`).
     HighlightFresnel,
+    /// The diffuse body's angular profile is not its base's: a data-driven factor
+    /// ρ(θi) ρ(θo) (`+body`).
+    BodyProfile,
 }
 
 impl Effect {
     /// Every effect, in the order `diagnose` tries them (the order of its candidate table
     /// and of `candidates.json`).
-    pub const ALL: [Effect; 12] = [
+    pub const ALL: [Effect; 13] = [
         Effect::Backscatter,
         Effect::SpecularLobe,
         Effect::LongTail,
@@ -43,6 +46,7 @@ impl Effect {
         Effect::Anisotropy,
         Effect::HighlightShape,
         Effect::HighlightFresnel,
+        Effect::BodyProfile,
     ];
 
     /// Every effect, in the order of [`Effect::ALL`].
@@ -65,6 +69,7 @@ impl Effect {
             Effect::DiffuseFloor => "diffuse_floor",
             Effect::HighlightShape => "highlight_shape",
             Effect::HighlightFresnel => "highlight_fresnel",
+            Effect::BodyProfile => "body_profile",
         }
     }
 
@@ -73,7 +78,10 @@ impl Effect {
     /// significant, and the battery, whose truths come from the catalogue, does not draw
     /// it.
     pub fn is_data_driven(self) -> bool {
-        matches!(self, Effect::HighlightShape | Effect::HighlightFresnel)
+        matches!(
+            self,
+            Effect::HighlightShape | Effect::HighlightFresnel | Effect::BodyProfile
+        )
     }
 
     pub fn from_name(name: &str) -> Option<Effect> {

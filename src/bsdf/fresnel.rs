@@ -44,6 +44,9 @@ use crate::math::lanes::Real;
 pub const KNOTS: usize = 9;
 
 const FRESNEL_WGSL: (&str, &str) = ("fresnel", include_str!("../../shaders/bsdf/fresnel.wgsl"));
+/// The knots' spline in WGSL (`knot_factor`), shared with `+body`: twin of
+/// [`log_factor`] and [`knot_coordinate`].
+pub(super) const KNOTS_WGSL: (&str, &str) = ("knots", include_str!("../../shaders/bsdf/knots.wgsl"));
 
 const NAMES: [&str; KNOTS - 1] = [
     "fresnel1", "fresnel2", "fresnel3", "fresnel4", "fresnel5", "fresnel6", "fresnel7",
@@ -126,10 +129,10 @@ fn channel_knots(p: Channels, i: usize, first: usize) -> [f64; KNOTS] {
     std::array::from_fn(|k| if k == 0 { 0.0 } else { p.get(i, first + k - 1) })
 }
 
-/// exp(s(θd)) per lane.
+/// exp(s) per lane at the cosines `c` (cos θd here, μ under `+body`).
 #[inline(always)]
-fn factor<R: Real>(s: &[f64; KNOTS], cos_d: R) -> R {
-    R::from_fn(|l| log_factor(s, knot_coordinate(cos_d.lane(l)))).exp()
+pub(super) fn factor<R: Real>(s: &[f64; KNOTS], c: R) -> R {
+    R::from_fn(|l| log_factor(s, knot_coordinate(c.lane(l)))).exp()
 }
 
 /// `ggx` with a data-driven Fresnel curve: ks, alpha, eta, fresnel1 … fresnel8.
@@ -288,7 +291,7 @@ impl Bsdf for CoatFresnel {
 
 fn fresnel_wgsl(function: &str) -> WgslFn {
     WgslFn {
-        sources: vec![MICROFACET_WGSL, FRESNEL_WGSL],
+        sources: vec![MICROFACET_WGSL, KNOTS_WGSL, FRESNEL_WGSL],
         function: function.into(),
     }
 }

@@ -60,6 +60,7 @@ models! {
     aniso => [ENTRY],
     ndf => [ENTRY],
     fresnel => [ENTRY],
+    body => [ENTRY],
 }
 /// WGSL side of a node: the source files it needs and the function to call.
 #[derive(Clone, Debug)]

@@ -288,8 +288,15 @@ fn smoothness_rows(decls: &[ParamDecl]) -> Vec<Vec<(usize, f64)>> {
             j += 1;
             continue;
         }
+        // One tabulated function's knots share a stem (`body3` → `body`): two functions
+        // side by side (`fa(B)+fresnel+body`: the highlight's, then the base's) are two runs.
+        let stem = |d: &ParamDecl| {
+            d.name
+                .trim_end_matches(|c: char| c.is_ascii_digit())
+                .to_string()
+        };
         let start = j;
-        while j < decls.len() && decls[j].knot {
+        while j < decls.len() && decls[j].knot && stem(&decls[j]) == stem(&decls[start]) {
             j += 1;
         }
         let width = decls[start..j]
@@ -653,17 +660,26 @@ mod tests {
             ("ggx+ndf", 3, 1, 15),
             ("ggx+fresnel", 3, 3, 8),
             ("fa(lambert)+coat+ndf", 2, 2, 15),
+            // The highlight's per-channel curve beside the base's shared profile.
+            ("fa(lambert)+fresnel+body", 2, 3, 8),
         ] {
             let m = Model::parse(spec, channels).unwrap();
             let rows = smoothness_rows(&m.flat_decls());
             assert_eq!(rows.len(), chains * (knots - 1), "{spec}");
             let names = m.flat_names();
             let channel = |j: usize| names[j].split('[').nth(1).map(str::to_string);
+            let stem = |j: usize| {
+                names[j]
+                    .split(|c: char| c.is_ascii_digit())
+                    .next()
+                    .map(str::to_string)
+            };
             for row in &rows {
-                let first = channel(row[0].0);
+                let (first, function) = (channel(row[0].0), stem(row[0].0));
                 assert!(
-                    row.iter()
-                        .all(|&(j, _)| m.flat_decls()[j].knot && channel(j) == first),
+                    row.iter().all(|&(j, _)| m.flat_decls()[j].knot
+                        && channel(j) == first
+                        && stem(j) == function),
                     "{spec}: {row:?}"
                 );
                 assert_eq!(

@@ -101,6 +101,12 @@ pub const EFFECTS: &[EffectEntry] = &[
         lobe_around: None,
         max_half_width_deg: None,
     },
+    EffectEntry {
+        effect: Effect::BodyProfile,
+        signature: "misfit that follows θi and θo over the whole hemisphere, not one lobe: the body brighter or darker toward grazing than its base's analytic shape (a particulate body's limb darkening, a sheen's grazing brightening)",
+        lobe_around: None,
+        max_half_width_deg: None,
+    },
 ];
 
 /// One way of making an extension that adds an effect: a model's declaration.
@@ -186,6 +192,7 @@ mod tests {
                 "absorption",
                 "anisotropy",
                 "backscatter",
+                "body_profile",
                 "diffuse_floor",
                 "grazing_decay",
                 "highlight_fresnel",

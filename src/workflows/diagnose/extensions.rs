@@ -323,6 +323,10 @@ mod tests {
             if has(&|b| b.fresnel_curve().is_some()) {
                 want_driven.push((format!("{spec}+fresnel"), HighlightFresnel));
             }
+            // The body's profile, for one with a diffuse base.
+            if has(&|b| b.entry().role == crate::bsdf::Role::DiffuseBase) {
+                want_driven.push((format!("{spec}+body"), BodyProfile));
+            }
             assert_eq!(specs(&driven), want_driven, "{spec}");
         }
         for c in extensions("btdf(gg)+absorb", &two)
