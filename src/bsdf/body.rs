@@ -206,8 +206,8 @@ mod tests {
         set(&mut p, "lobe.eta", &[1.0]);
         set(&mut p, "base.rho", &[0.4, 0.8]);
         let s: [f64; KNOTS] = std::array::from_fn(|k| -0.2 * (k as f64).powf(1.3));
-        for k in 1..KNOTS {
-            set(&mut p, &format!("base.body{k}"), &[s[k]]);
+        for (k, &v) in s.iter().enumerate().skip(1) {
+            set(&mut p, &format!("base.body{k}"), &[v]);
         }
         for (ti, to) in [(0.0, 0.3), (0.7, 1.2), (1.5, 1.55)] {
             let (wi, wo) = (dir(ti, 0.0), dir(to, 2.0));

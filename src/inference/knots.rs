@@ -1,9 +1,10 @@
 //! The fitted data-driven factors at their knots, with bands: the NDF of a model with
-//! `+ndf` ([`crate::bsdf::ndf`]: D at each knot's angle) and the highlight's Fresnel curve
+//! `+ndf` ([`crate::bsdf::ndf`]: D at each knot's angle), the highlight's Fresnel curve
 //! of one with `+fresnel` ([`crate::bsdf::fresnel`]: k_s F e^s per channel at each knot's
-//! θd), each with the standard uncertainty of its logarithm propagated from the fit's
-//! covariance with the smoothness prior's information, and whether the data see the lobe
-//! there or the prior sets it.
+//! θd) and the diffuse body's profile of one with `+body` ([`crate::bsdf::body`]: ρ(θ) at
+//! each knot's θ), each with the standard uncertainty of its logarithm propagated from the
+//! fit's covariance with the smoothness prior's information, and whether the data see the
+//! lobe (or the body) there or the prior sets it.
 
 use crate::bsdf::ndf::{knot_angle, knot_degrees, NdfTable, KNOTS};
 use crate::bsdf::Model;
@@ -123,8 +124,7 @@ pub fn bands(
                 let s2: f64 = signal
                     .iter()
                     .filter(|(deg, _)| *deg >= lo && *deg <= hi)
-                    .map(|(_, z)| z * z)
-                    .sum();
+                    .fold(0.0, |a, (_, z)| a + z * z);
                 KnotBand {
                     theta_deg: degrees[k],
                     d: at[k].exp(),
@@ -280,8 +280,7 @@ pub fn fresnel_bands(
                     let s2: f64 = signal
                         .iter()
                         .filter(|s| s.channel == c && s.theta_d_deg >= lo && s.theta_d_deg <= hi)
-                        .map(|s| s.z * s.z)
-                        .sum();
+                        .fold(0.0, |a, s| a + s.z * s.z);
                     FresnelBand {
                         theta_deg: degrees[k],
                         f: ln_f.exp(),
@@ -293,6 +292,98 @@ pub fn fresnel_bands(
                 .collect();
             out.push((format!("{prefix}{stem}"), c, rows));
         }
+    }
+    out
+}
+
+/// One knot of a fitted data-driven body profile (`+body`), for reports: ρ(θ) at the
+/// knot's θ (the body's value is f_B ρ(θi) ρ(θo), ρ(0) = 1) with its standard
+/// uncertainty in ln, and whether the data see the body there.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct BodyBand {
+    /// θ of the knot, degrees.
+    pub theta_deg: f64,
+    /// ρ(θ) = e^{s(θ)}.
+    pub rho: f64,
+    /// Standard uncertainty of ln ρ, as [`KnotBand::sigma_ln_d`] (0 at the normal, where
+    /// ρ = 1 by definition).
+    pub sigma_ln_rho: Option<f64>,
+    /// The body's own signal near the knot: √Σ (f_body/u)² over the samples whose θi or
+    /// θo lies between the knot's neighbours, f_body the diffuse base's part of the
+    /// fitted value (f − f at the base's albedo 0).
+    pub signal: f64,
+    /// Whether that signal is at least [`MEASURED_SIGNAL`].
+    pub measured: bool,
+}
+
+/// The fitted profile of each diffuse base `+body` reshaped: (the knots' stem — `body`,
+/// or `base.body` under a layer — its knots).
+pub fn body_bands(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    cov: &Covariance,
+) -> Vec<(String, Vec<BodyBand>)> {
+    use crate::bsdf::fresnel::{knot_degrees, KNOTS};
+    let find = |name: &str| model.params.iter().find(|p| p.name == name);
+    let degrees = knot_degrees();
+    let mut out = Vec::new();
+    for p in model.params.iter().filter(|p| p.decl.knot) {
+        let Some(prefix) = p.name.strip_suffix("body1") else {
+            continue;
+        };
+        let (Some(rho), Some(knots)) = (
+            find(&format!("{prefix}rho")),
+            (1..KNOTS)
+                .map(|k| find(&format!("{prefix}body{k}")).map(|q| q.index))
+                .collect::<Option<Vec<usize>>>(),
+        ) else {
+            continue;
+        };
+        // The body's part of each sample's value, in units of its uncertainty.
+        let mut off = flat.to_vec();
+        off[rho.index..rho.index + rho.width(model.channels)].fill(0.0);
+        let body: Vec<(f64, f64, f64)> = data
+            .samples
+            .iter()
+            .map(|s| {
+                let (wi, wo) = (s.wi(), s.wo());
+                let g = model.group_of(s);
+                let z = (model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo)) / s.uncertainty;
+                (
+                    s.theta_i.abs().to_degrees(),
+                    s.theta_o.abs().to_degrees(),
+                    z,
+                )
+            })
+            .collect();
+        let rows = (0..KNOTS)
+            .map(|k| {
+                let s_k = if k == 0 { 0.0 } else { flat[knots[k - 1]] };
+                let grad: Vec<(usize, f64)> = if k == 0 {
+                    vec![]
+                } else {
+                    vec![(knots[k - 1], 1.0)]
+                };
+                let (lo, hi) = (
+                    degrees[k.saturating_sub(1)],
+                    degrees[(k + 1).min(KNOTS - 1)],
+                );
+                let near = |t: f64| t >= lo && t <= hi;
+                let s2: f64 = body
+                    .iter()
+                    .filter(|(ti, to, _)| near(*ti) || near(*to))
+                    .fold(0.0, |a, (_, _, z)| a + z * z);
+                BodyBand {
+                    theta_deg: degrees[k],
+                    rho: s_k.exp(),
+                    sigma_ln_rho: propagated_sd(cov, &grad),
+                    signal: s2.sqrt(),
+                    measured: s2.sqrt() >= MEASURED_SIGNAL,
+                }
+            })
+            .collect();
+        out.push((format!("{prefix}body"), rows));
     }
     out
 }

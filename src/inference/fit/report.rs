@@ -89,6 +89,18 @@ pub struct FitReport {
     /// with σ(ln), and whether the data see the lobe there (absent without one).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub fresnel: Vec<FresnelReport>,
+    /// Each data-driven body profile (`+body`) at its knots: ρ(θ) with σ(ln ρ), and
+    /// whether the data see the body there (absent without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub body: Vec<BodyReport>,
+}
+
+/// One data-driven body profile ([`crate::inference::knots::body_bands`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BodyReport {
+    /// Its knots' stem (`body` on a bare base, `base.body` under a layer).
+    pub base: String,
+    pub knots: Vec<crate::inference::knots::BodyBand>,
 }
 
 /// One channel of a data-driven Fresnel curve ([`crate::inference::knots::fresnel_bands`]).
@@ -198,6 +210,10 @@ pub(super) fn make_report(
                 knots,
             })
             .collect();
+    let body: Vec<BodyReport> = crate::inference::knots::body_bands(model, data, flat, &cov)
+        .into_iter()
+        .map(|(base, knots)| BodyReport { base, knots })
+        .collect();
     let mut knot_warnings = Vec::new();
     for n in &ndf {
         let unseen: Vec<String> = n
@@ -262,6 +278,7 @@ pub(super) fn make_report(
         smoothness: o.smoothness,
         ndf,
         fresnel,
+        body,
     }
 }
 
@@ -312,6 +329,13 @@ impl FitReport {
                 }) =>
                 {
                     "(a knot: see its Fresnel table)".into()
+                }
+                None if self.body.iter().any(|n| {
+                    name.strip_prefix(&n.base)
+                        .is_some_and(|k| k.parse::<usize>().is_ok())
+                }) =>
+                {
+                    "(a knot: see its body table)".into()
                 }
                 None => "(not determined)".into(),
             };
@@ -373,6 +397,17 @@ impl FitReport {
                 let band = k.sigma_ln_f.map_or("".into(), |v| format!("± {v:.3}"));
                 let mark = if k.measured { "" } else { " *" };
                 s += &format!("    {:>5.1}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.f);
+            }
+        }
+        for n in &self.body {
+            s += &format!(
+                "  {}: the body's profile ρ(θ) at the knots, f = f_B ρ(θi) ρ(θo) (± in ln ρ; * set by the prior)\n",
+                n.base
+            );
+            for k in &n.knots {
+                let band = k.sigma_ln_rho.map_or("".into(), |v| format!("± {v:.3}"));
+                let mark = if k.measured { "" } else { " *" };
+                s += &format!("    {:>5.1}°  {:<11.4} {band}{mark}\n", k.theta_deg, k.rho);
             }
         }
         for w in &self.warnings {
