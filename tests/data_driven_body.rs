@@ -104,3 +104,74 @@ fn non_lambertian_bodies_come_back() {
         assert!(measured >= 6, "{name}: {measured} knots measured");
     }
 }
+
+/// The workflow names it: diagnose from `lambert` on data of a highlight over each body
+/// adds the specular lobe and, once no analytic effect is significant, the body's
+/// profile, and ends within the noise. The analytic effects adopted before it that only
+/// stood in for the profile (a retro lobe and its falloff for the darkening body,
+/// micrograins for the brightening one) are dropped by the backward elimination.
+#[test]
+fn diagnose_names_the_bodys_profile() {
+    use bsdfit::engine::simd::SimdBackend;
+    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
+    let lobe = Isotropic::new(|c| ggx(c, 0.2));
+    for (name, ln_rho, seed) in [
+        ("minnaert", minnaert as fn(f64) -> f64, 13),
+        ("sheen", sheen, 14),
+    ] {
+        let truth = |wi: glam::DVec3, wo: glam::DVec3| {
+            lobe.specular(wi, wo)
+                + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
+                    * (ln_rho(wi.z) + ln_rho(wo.z)).exp()
+        };
+        let data = measure(&[0.0], &truth, seed);
+        let opts = DiagnoseOptions {
+            seed: 2,
+            restarts: 8,
+            ..Default::default()
+        };
+        let t0 = std::time::Instant::now();
+        let d = diagnose(&data, "lambert", &SimdBackend::new(), &opts, &mut |l| {
+            eprintln!("{l}")
+        })
+        .unwrap();
+        eprintln!(
+            "{name}: diagnose {:.1} s, {} → {:?}",
+            t0.elapsed().as_secs_f64(),
+            d.final_model,
+            d.effects
+        );
+        assert!(
+            d.effects.contains(&Effect::SpecularLobe),
+            "{name}: {:?}",
+            d.effects
+        );
+        assert!(
+            d.effects.contains(&Effect::BodyProfile),
+            "{name}: {:?}",
+            d.effects
+        );
+        for false_effect in [
+            Effect::RetroLobe,
+            Effect::RetroFalloff,
+            Effect::GrazingDecay,
+            Effect::Anisotropy,
+        ] {
+            assert!(
+                !d.effects.contains(&false_effect),
+                "{name}: {:?}",
+                d.effects
+            );
+        }
+        if name == "minnaert" {
+            assert_eq!(d.final_model, "fa(lambert)+body", "{name}");
+        }
+        // Within the noise: 1 ± 4√(2/ν), ν ≈ the samples.
+        let chi2_red = d.steps.last().unwrap().chi2_red;
+        let noise = 4.0 * (2.0 / data.len() as f64).sqrt();
+        assert!(
+            (chi2_red - 1.0).abs() < noise,
+            "{name}: final χ²_red {chi2_red}"
+        );
+    }
+}

@@ -144,6 +144,7 @@ pub(super) fn confirm(
             fit: full,
             candidates: step.candidates,
             round_seconds: step.round_seconds,
+            removed: step.removed,
         });
     }
     Ok(Diagnosis::of_steps(

@@ -5,7 +5,7 @@ use serde_json::{json, Value};
 
 impl Diagnosis {
     /// docs/output.md: `{start_model, final_model, effects, steps: [{model, effect, chi2_red,
-    /// loss, evidence}]}`.
+    /// loss, evidence, removed}]}`.
     pub fn to_json(&self) -> Value {
         json!({
             "start_model": self.start_model,
@@ -17,6 +17,7 @@ impl Diagnosis {
                 "chi2_red": num(s.chi2_red),
                 "loss": num(s.loss),
                 "evidence": s.evidence,
+                "removed": s.removed.iter().map(|e| e.name()).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
         })
     }

@@ -46,6 +46,7 @@ mod fit;
 mod json;
 pub mod misspecified;
 mod path;
+mod prune;
 mod regions;
 mod report;
 mod score;
@@ -147,6 +148,9 @@ pub struct Step {
     pub candidates: Vec<Scored>,
     /// Where the time of that round of candidates went (None without a round).
     pub round_seconds: Option<RoundSeconds>,
+    /// Effects of earlier steps this step dropped (the backward elimination after a
+    /// data-driven factor, [`prune`]); the diagnosis does not name them.
+    pub removed: Vec<Effect>,
 }
 
 /// Wall-clock seconds of a round of candidates, by stage.
@@ -181,6 +185,7 @@ impl Diagnosis {
                 effects.push(e);
             }
         }
+        effects.retain(|e| !steps.iter().any(|s| s.removed.contains(e)));
         Diagnosis {
             start_model,
             final_model: steps.last().expect("a step").model.clone(),

@@ -235,6 +235,7 @@ fn adopt_step(
         fit,
         candidates: vec![],
         round_seconds: None,
+        removed: vec![],
     };
     (step, ok)
 }
@@ -751,6 +752,7 @@ fn diagnose_path(
         fit: first,
         candidates: vec![],
         round_seconds: None,
+        removed: vec![],
     };
     log_step(log, 0, &step0, data, opts);
     let mut cache = FitCache::new();
@@ -818,6 +820,7 @@ fn diagnose_path(
             best_path.last_mut().unwrap().evidence.push_str(&note);
         }
     }
+    let best_path = super::prune::prune(data, backend, opts, log, best_path)?;
     Ok(Diagnosis::of_steps(
         model.spec.clone(),
         best_path,
