@@ -185,7 +185,16 @@ impl Diagnosis {
                 effects.push(e);
             }
         }
-        effects.retain(|e| !steps.iter().any(|s| s.removed.contains(e)));
+        // An effect stays named while one of its steps stands: a path may add one twice (a
+        // specular lobe as `fa(B)`, then a second one as `+coat`) and drop one of them.
+        effects.retain(|e| {
+            let adopted = steps.iter().filter(|s| s.effect == Some(*e)).count();
+            let dropped: usize = steps
+                .iter()
+                .map(|s| s.removed.iter().filter(|r| *r == e).count())
+                .sum();
+            adopted > dropped
+        });
         Diagnosis {
             start_model,
             final_model: steps.last().expect("a step").model.clone(),
