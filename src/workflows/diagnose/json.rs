@@ -5,20 +5,27 @@ use serde_json::{json, Value};
 
 impl Diagnosis {
     /// docs/output.md: `{start_model, final_model, effects, steps: [{model, effect, chi2_red,
-    /// loss, evidence, removed}]}`.
+    /// loss, evidence}]}`, and `removed` on a step of the backward elimination.
     pub fn to_json(&self) -> Value {
         json!({
             "start_model": self.start_model,
             "final_model": self.final_model,
             "effects": self.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            "steps": self.steps.iter().map(|s| json!({
-                "model": s.model,
-                "effect": s.effect.map(|e| e.name()),
-                "chi2_red": num(s.chi2_red),
-                "loss": num(s.loss),
-                "evidence": s.evidence,
-                "removed": s.removed.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            })).collect::<Vec<_>>(),
+            "steps": self.steps.iter().map(|s| {
+                let mut step = json!({
+                    "model": s.model,
+                    "effect": s.effect.map(|e| e.name()),
+                    "chi2_red": num(s.chi2_red),
+                    "loss": num(s.loss),
+                    "evidence": s.evidence,
+                });
+                // Only the backward elimination's step has it: the contract's steps are
+                // unchanged.
+                if !s.removed.is_empty() {
+                    step["removed"] = json!(s.removed.iter().map(|e| e.name()).collect::<Vec<_>>());
+                }
+                step
+            }).collect::<Vec<_>>(),
         })
     }
 
