@@ -26,6 +26,13 @@ fn sheen(mu: f64) -> f64 {
     (1.0 + 0.8 * (1.0 - mu).powi(3)).ln()
 }
 
+/// The truth: the highlight over the body ρ(θi) ρ(θo) RHO/π seen through the interface.
+fn truth(lobe: &Isotropic, ln_rho: fn(f64) -> f64, wi: glam::DVec3, wo: glam::DVec3) -> f64 {
+    lobe.specular(wi, wo)
+        + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
+            * (ln_rho(wi.z) + ln_rho(wo.z)).exp()
+}
+
 #[test]
 fn non_lambertian_bodies_come_back() {
     let lobe = Isotropic::new(|c| ggx(c, 0.2));
@@ -33,11 +40,7 @@ fn non_lambertian_bodies_come_back() {
         ("minnaert", minnaert as fn(f64) -> f64, 11),
         ("sheen", sheen, 12),
     ] {
-        let truth = |wi: glam::DVec3, wo: glam::DVec3| {
-            lobe.specular(wi, wo)
-                + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
-                    * (ln_rho(wi.z) + ln_rho(wo.z)).exp()
-        };
+        let truth = |wi, wo| truth(&lobe, ln_rho, wi, wo);
         let data = measure(&[0.0], &truth, seed);
         let analytic_model = Model::for_data("fa(lambert)", &data).unwrap();
         let driven_model = Model::for_data("fa(lambert)+body", &data).unwrap();
@@ -119,11 +122,7 @@ fn diagnose_names_the_bodys_profile() {
         ("minnaert", minnaert as fn(f64) -> f64, 13),
         ("sheen", sheen, 14),
     ] {
-        let truth = |wi: glam::DVec3, wo: glam::DVec3| {
-            lobe.specular(wi, wo)
-                + (1.0 - fresnel(wi.z)) * (1.0 - fresnel(wo.z)) * RHO / PI
-                    * (ln_rho(wi.z) + ln_rho(wo.z)).exp()
-        };
+        let truth = |wi, wo| truth(&lobe, ln_rho, wi, wo);
         let data = measure(&[0.0], &truth, seed);
         let opts = DiagnoseOptions {
             seed: 2,

@@ -30,6 +30,8 @@ pub mod microfacet;
 pub mod micrograin;
 pub mod registry;
 pub mod spec;
+#[cfg(test)]
+pub(crate) mod test_support;
 
 /// Declares each model file as a module and lists the registry entries it declares.
 macro_rules! models {
