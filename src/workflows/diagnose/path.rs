@@ -702,6 +702,9 @@ fn path_bic(steps: &[Step], k: usize) -> f64 {
 /// any (an effect can mimic another at first, e.g. rough micrograins a coarsely sampled
 /// specular lobe).
 ///
+/// A path that adopted a data-driven factor then drops the analytic effects adopted before
+/// it that no longer improve the fit ([`super::prune`]).
+///
 /// Dense data (more than [`DiagnoseOptions::explore`] samples) are explored on a
 /// stratified subsample and the path is confirmed on all of them ([`super::explore`]).
 pub fn diagnose(
