@@ -779,6 +779,13 @@ def _constraint_list(name: str, given: Any) -> List[_ConstraintItem]:
 _FIT_DEFAULTS: Dict[str, Any] = _bsdfit.fit_defaults()
 
 
+def _smoothness(value: Any) -> str:
+    """``smoothness`` as the word the library reads: "auto", "off" or a number (a σ)."""
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise TypeError(f'smoothness: "auto", "off" or a positive number, got {_short(value)}')
+    return value if isinstance(value, str) else repr(float(value))
+
+
 def fit(
     dataset: Dataset,
     model: str,
@@ -795,6 +802,7 @@ def fit(
     mc: int = _FIT_DEFAULTS["mc"],
     mc_scale: float = _FIT_DEFAULTS["mc_scale"],
     mc_restarts: int = _FIT_DEFAULTS["mc_restarts"],
+    smoothness: Union[str, float] = _FIT_DEFAULTS["smoothness"],
     progress: ProgressArg = None,
 ) -> Fit:
     """Fit ``model`` (a spec such as ``"on"``, ``"fa(eon)"``, ``"btdf(gg)+scale"``) to the data.
@@ -804,8 +812,10 @@ def fit(
     invunc), ``restarts``, ``seed``, ``backend`` ("cpu", "gpu" or "auto"), ``optimizer``
     ("lm" or "compass"; default by loss), ``fix`` ({name: value}), ``bounds``
     ({name: (lo, hi)}), ``prior`` ({name: (mean, sd)}), and Monte Carlo replicas ``mc``
-    with ``mc_scale`` and ``mc_restarts``. The same data and seed give the same parameters
-    as the command line. ``progress``: True for a bar on stderr, or a callable given a
+    with ``mc_scale`` and ``mc_restarts``; ``smoothness``, the prior on a data-driven
+    factor's knots (``+ndf``, ``+fresnel``, ``+body``): "auto" (σ chosen from the data,
+    reported in ``Fit.report["smoothness"]``), "off", or a σ. The same data and seed give
+    the same parameters as the command line. ``progress``: True for a bar on stderr, or a callable given a
     :class:`ProgressEvent` as restarts converge.
 
     Arguments of the wrong type raise TypeError, bad values ValueError, each naming the
@@ -831,6 +841,7 @@ def fit(
             _int("mc", mc, 0),
             _real("mc_scale", mc_scale),
             _int("mc_restarts", mc_restarts, 0),
+            _smoothness(smoothness),
             reports.native,
         )
     result = Fit(json.loads(text), notes)

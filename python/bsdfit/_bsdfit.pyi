@@ -89,6 +89,7 @@ def fit_json(
     mc: int,
     mc_scale: float,
     mc_restarts: int,
+    smoothness: str,
     progress: Optional[ProgressCallback],
 ) -> Tuple[str, Optional[str], List[str], npt.NDArray[np.float64], str]:
     """Fit one model: the report as ``bsdfit fit --json`` writes it, the Monte Carlo

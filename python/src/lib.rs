@@ -457,7 +457,7 @@ fn loss_words(loss: &str, weighting: &str) -> anyhow::Result<(Metric, Weights)> 
 /// normalised residuals of the best fit (one per sample) and the text summary the command
 /// line prints. `progress` (a callable or None) hears of the restarts as they converge.
 #[pyfunction]
-#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts, progress))]
+#[pyo3(signature = (dataset, model, loss, weights, optimizer, restarts, seed, backend, fix, bounds, prior, mc, mc_scale, mc_restarts, smoothness, progress))]
 #[allow(clippy::type_complexity)]
 fn fit_json<'py>(
     py: Python<'py>,
@@ -475,6 +475,7 @@ fn fit_json<'py>(
     mc: usize,
     mc_scale: f64,
     mc_restarts: usize,
+    smoothness: String,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(
     String,
@@ -501,7 +502,9 @@ fn fit_json<'py>(
             mc,
             mc_scale,
             mc_restarts,
-            ..Default::default()
+            smoothness: smoothness
+                .parse()
+                .map_err(|e: String| anyhow::anyhow!("smoothness: {e}"))?,
         };
         // Every check runs before the backend starts, as on the command line.
         let (model, _, _) = request.prepare(&data)?;
@@ -692,6 +695,7 @@ fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     dict.set_item("mc", d.mc)?;
     dict.set_item("mc_scale", d.mc_scale)?;
     dict.set_item("mc_restarts", d.mc_restarts)?;
+    dict.set_item("smoothness", d.smoothness.to_string())?;
     Ok(dict)
 }
 

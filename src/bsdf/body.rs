@@ -113,7 +113,10 @@ pub const ENTRY: Entry = Entry::suffix(
     build,
 )
 // s = 0 is M: M embeds in M+body (diagnose's F test). Offered once no analytic effect is.
-.adding(&[Adds::appended(Effect::BodyProfile)]);
+.adding(&[Adds::appended(Effect::BodyProfile)])
+// One node whatever the base: the tests that run every spec see it bare, under each layer
+// and on each base once, not on all sixteen pairs.
+.covered_on(&["lambert", "fa(on)", "dmg(eon)", "rmg(vmf)"]);
 
 /// Wrap every diffuse base of `inner` (a node of role [`Role::DiffuseBase`], wherever it
 /// sits) in a profile node; refused on BTDF models, when given twice, and where M has no

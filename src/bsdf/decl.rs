@@ -285,6 +285,7 @@ impl Entry {
             variants: &[],
             adds: &[],
             mitsuba: None,
+            covered_on: &[],
         }
     }
     /// A term without argument (`lambert`), in the default catalogue.
@@ -338,6 +339,7 @@ impl Entry {
             variants: &[],
             adds: &[],
             mitsuba: None,
+            covered_on: &[],
         }
     }
     /// The term's argument names (`btdf(tr)`), each a catalogue model.
@@ -354,6 +356,10 @@ impl Entry {
     /// The effects the model adds to others, and how (`diagnose`'s extensions).
     pub const fn adding(self, adds: &'static [Adds]) -> Entry {
         Entry { adds, ..self }
+    }
+    /// [`Entry::covered_on`].
+    pub const fn covered_on(self, covered_on: &'static [&'static str]) -> Entry {
+        Entry { covered_on, ..self }
     }
 }
 
@@ -377,6 +383,10 @@ pub struct Entry {
     pub adds: &'static [Adds],
     /// A Mitsuba 3 BSDF that evaluates exactly as this model (a leaf), if there is one.
     pub mitsuba: Option<&'static MitsubaBsdf>,
+    /// For a suffix whose node is the same whatever the model under it: the core models
+    /// [`super::every_spec`] puts it on (one per place it can sit), instead of every core
+    /// it builds on. Empty: every core.
+    pub covered_on: &'static [&'static str],
 }
 
 /// A Mitsuba 3 `<bsdf>` equal to a leaf model: its plugin and its fields, each a fitted

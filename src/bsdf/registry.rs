@@ -252,6 +252,7 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
             Builder::Suffix(_) => {
                 let on_cores: Vec<String> = cores
                     .iter()
+                    .filter(|c| e.covered_on.is_empty() || e.covered_on.contains(&c.as_str()))
                     .map(|c| format!("{c}+{}", e.name))
                     .filter(|s| builds(s))
                     .collect();

@@ -26,6 +26,17 @@ pub enum Smoothness {
     Sd(f64),
 }
 
+/// The words [`Smoothness::from_str`] reads: `auto`, `off`, or the σ.
+impl std::fmt::Display for Smoothness {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Smoothness::Auto => f.write_str("auto"),
+            Smoothness::Off => f.write_str("off"),
+            Smoothness::Sd(v) => write!(f, "{v}"),
+        }
+    }
+}
+
 impl std::str::FromStr for Smoothness {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
