@@ -118,9 +118,7 @@ pub fn bands(
                     .map(|(a, &j)| (j, grad[a][k]))
                     .collect();
                 let sigma = propagated_sd(cov, &g);
-                // Between the knot's neighbours (from the normal for the first).
-                let lo = degrees[k.saturating_sub(1)];
-                let hi = degrees[(k + 1).min(KNOTS - 1)];
+                let (lo, hi) = neighbours(&degrees, k);
                 let s2: f64 = signal
                     .iter()
                     .filter(|(deg, _)| *deg >= lo && *deg <= hi)
@@ -137,6 +135,15 @@ pub fn bands(
         out.push((name, rows));
     }
     out
+}
+
+/// The angles of knot k's neighbours (from the normal for the first, to the last knot for
+/// the last): a sample between them counts toward the knot's signal.
+fn neighbours(degrees: &[f64], k: usize) -> (f64, f64) {
+    (
+        degrees[k.saturating_sub(1)],
+        degrees[(k + 1).min(degrees.len() - 1)],
+    )
 }
 
 /// The standard uncertainty of a quantity whose gradient is `grad` ((flat index,
@@ -275,8 +282,7 @@ pub fn fresnel_bands(
                         grad.push((at(knots[k - 1]), 1.0));
                     }
                     let sigma = propagated_sd(cov, &grad);
-                    let lo = degrees[k.saturating_sub(1)];
-                    let hi = degrees[(k + 1).min(KNOTS - 1)];
+                    let (lo, hi) = neighbours(&degrees, k);
                     let s2: f64 = signal
                         .iter()
                         .filter(|s| s.channel == c && s.theta_d_deg >= lo && s.theta_d_deg <= hi)
@@ -365,10 +371,7 @@ pub fn body_bands(
                 } else {
                     vec![(knots[k - 1], 1.0)]
                 };
-                let (lo, hi) = (
-                    degrees[k.saturating_sub(1)],
-                    degrees[(k + 1).min(KNOTS - 1)],
-                );
+                let (lo, hi) = neighbours(&degrees, k);
                 let near = |t: f64| t >= lo && t <= hi;
                 let s2: f64 = body
                     .iter()

@@ -315,26 +315,13 @@ impl FitReport {
                 _ if fixed.is_some_and(|f| f.contains_key(name)) => "(fixed)".into(),
                 Some(s) => format!("± {s:.3e}"),
                 // A data-driven NDF's knot: judged as D with a band, in its table below.
-                None if self.ndf.iter().any(|n| {
-                    name.strip_prefix(&n.lobe)
-                        .is_some_and(|k| k.parse::<usize>().is_ok())
-                }) =>
-                {
+                None if self.ndf.iter().any(|n| is_knot_of(name, &n.lobe)) => {
                     "(a knot: see its D table)".into()
                 }
-                None if self.fresnel.iter().any(|n| {
-                    name.strip_prefix(&n.lobe)
-                        .and_then(|k| k.split('[').next())
-                        .is_some_and(|k| k.parse::<usize>().is_ok())
-                }) =>
-                {
+                None if self.fresnel.iter().any(|n| is_knot_of(name, &n.lobe)) => {
                     "(a knot: see its Fresnel table)".into()
                 }
-                None if self.body.iter().any(|n| {
-                    name.strip_prefix(&n.base)
-                        .is_some_and(|k| k.parse::<usize>().is_ok())
-                }) =>
-                {
+                None if self.body.iter().any(|n| is_knot_of(name, &n.base)) => {
                     "(a knot: see its body table)".into()
                 }
                 None => "(not determined)".into(),
@@ -418,4 +405,12 @@ impl FitReport {
         }
         s
     }
+}
+
+/// Whether the flat name `name` is a knot of the tabulated function with stem `stem`: the
+/// stem, the knot's number, and a channel index for a per-channel knot (`lobe.fresnel3[1]`).
+fn is_knot_of(name: &str, stem: &str) -> bool {
+    name.strip_prefix(stem)
+        .and_then(|k| k.split('[').next())
+        .is_some_and(|k| k.parse::<usize>().is_ok())
 }
