@@ -88,6 +88,9 @@ pub const ALPHA_C: ParamDecl = ParamDecl::shared("alpha_c", 1e-3, 1.0, 0.05, "co
     .lobe_width();
 
 impl Bsdf for Coat {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Coat, super::Tabulated { ndf: false, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &ENTRY
     }
@@ -100,12 +103,6 @@ impl Bsdf for Coat {
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::coat())
-    }
-    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::ndf::coat())
-    }
-    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::fresnel::coat())
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("coat", include_str!("../../shaders/bsdf/coat.wgsl"))

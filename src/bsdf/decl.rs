@@ -8,6 +8,25 @@ use super::spec::Ast;
 use super::Node;
 use crate::data::Kind;
 
+/// The three nodes that hold an isotropic GGX lobe: `ggx`, the highlight of `fa(B)`, the
+/// lobe of `+coat`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GgxPlace {
+    Ggx,
+    Aggregate,
+    Coat,
+}
+
+/// Which factors of a GGX lobe are tabulated: its NDF (`+ndf`), its Fresnel curve
+/// (`+fresnel`), both or neither. A lobe's node declares it ([`super::Bsdf::ggx_lobe`]) and
+/// the suffixes swap it for the node of the same place with one factor more
+/// ([`super::registry::ggx_form`]), so no model file names another's forms.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tabulated {
+    pub ndf: bool,
+    pub fresnel: bool,
+}
+
 /// How a parameter is mapped to the optimizers' unit box.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scale {

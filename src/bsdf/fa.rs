@@ -88,6 +88,9 @@ pub fn aggregate_block_with<R: Real>(
 }
 
 impl Bsdf for FresnelAggregate {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Aggregate, super::Tabulated { ndf: false, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &ENTRY
     }
@@ -104,12 +107,6 @@ impl Bsdf for FresnelAggregate {
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::fa())
-    }
-    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::ndf::fa())
-    }
-    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::fresnel::fa())
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {

@@ -48,11 +48,11 @@ const FRESNEL_WGSL: (&str, &str) = ("fresnel", include_str!("../../shaders/bsdf/
 /// [`log_factor`] and [`knot_coordinate`].
 pub(super) const KNOTS_WGSL: (&str, &str) = ("knots", include_str!("../../shaders/bsdf/knots.wgsl"));
 
-const NAMES: [&str; KNOTS - 1] = [
+pub(super) const NAMES: [&str; KNOTS - 1] = [
     "fresnel1", "fresnel2", "fresnel3", "fresnel4", "fresnel5", "fresnel6", "fresnel7",
     "fresnel8",
 ];
-const COAT_NAMES: [&str; KNOTS - 1] = [
+pub(super) const COAT_NAMES: [&str; KNOTS - 1] = [
     "fresnel_c1",
     "fresnel_c2",
     "fresnel_c3",
@@ -62,7 +62,7 @@ const COAT_NAMES: [&str; KNOTS - 1] = [
     "fresnel_c7",
     "fresnel_c8",
 ];
-const LOBE_NAMES: [&str; KNOTS - 1] = [
+pub(super) const LOBE_NAMES: [&str; KNOTS - 1] = [
     "lobe.fresnel1",
     "lobe.fresnel2",
     "lobe.fresnel3",
@@ -93,9 +93,9 @@ const KNOT: ParamDecl = ParamDecl::rgb(
 /// reshapes, k_s F(0; η) the reflectance at normal incidence. A conductor's is up to 1
 /// where a dielectric's F(0; η) is 0.04 (η = 1.5): k_s ≈ 24, so the bound is wider than
 /// the analytic lobe's 1 (which it contains, so M still embeds).
-const KS_SCALE: ParamDecl = ParamDecl { hi: 50.0, ..KS };
+pub(super) const KS_SCALE: ParamDecl = ParamDecl { hi: 50.0, ..KS };
 
-fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
+pub(super) fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
     names.iter().map(|n| KNOT.renamed(n))
 }
 
@@ -125,7 +125,7 @@ pub fn log_factor(s: &[f64; KNOTS], x: f64) -> f64 {
 
 /// Channel i's knots (s_0 = 0, then the node's parameters from `first`).
 #[inline(always)]
-fn channel_knots(p: Channels, i: usize, first: usize) -> [f64; KNOTS] {
+pub(super) fn channel_knots(p: Channels, i: usize, first: usize) -> [f64; KNOTS] {
     std::array::from_fn(|k| if k == 0 { 0.0 } else { p.get(i, first + k - 1) })
 }
 
@@ -164,6 +164,9 @@ impl Kernel for GgxFresnel {
 }
 
 impl Bsdf for GgxFresnel {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Ggx, super::Tabulated { ndf: false, fresnel: true }))
+    }
     fn bounded_albedo(&self) -> bool {
         false // k_s F e^s has no bound of 1 (see the module doc)
     }
@@ -210,6 +213,9 @@ impl Kernel for FaFresnel {
 }
 
 impl Bsdf for FaFresnel {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Aggregate, super::Tabulated { ndf: false, fresnel: true }))
+    }
     fn bounded_albedo(&self) -> bool {
         false // k_s F e^s has no bound of 1 (see the module doc)
     }
@@ -268,6 +274,9 @@ impl Kernel for CoatFresnel {
 }
 
 impl Bsdf for CoatFresnel {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Coat, super::Tabulated { ndf: false, fresnel: true }))
+    }
     fn bounded_albedo(&self) -> bool {
         false // k_s F e^s has no bound of 1 (see the module doc)
     }
@@ -338,21 +347,10 @@ pub fn build(inner: Node) -> Result<Node, String> {
     super::brdf_form_suffix(
         inner,
         ENTRY.name,
-        &|b| b.fresnel_curve(),
+        |t| &mut t.fresnel,
         FresnelCurve,
-        "an isotropic GGX lobe with the analytic NDF: ggx, fa(B) or +coat (not after +aniso or +ndf)",
+        "an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)",
     )
-}
-
-/// The forms with a data-driven Fresnel curve, as [`Bsdf::fresnel_curve`] hands them out.
-pub fn ggx() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(GgxFresnel)
-}
-pub fn fa() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(FaFresnel)
-}
-pub fn coat() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(CoatFresnel)
 }
 
 #[cfg(test)]
@@ -425,11 +423,13 @@ mod tests {
             ("fa(lambert)+coat+fresnel", "fresnel_c8"),
             ("rmg(lambert)+coat+fresnel", "fresnel_c1"),
             ("rmg(ggx)+fresnel", "base.fresnel2"),
+            ("fa(lambert)+ndf+fresnel", "lobe.fresnel3"),
+            ("lambert+coat+ndf+fresnel", "fresnel_c8"),
         ] {
             let m = Model::parse(spec, 3).unwrap_or_else(|e| panic!("{spec}: {e}"));
             assert!(m.params.iter().any(|p| p.name == knot), "{spec}");
         }
-        for spec in ["lambert+fresnel", "ggx+fresnel+fresnel", "ggx+aniso+fresnel", "ggx+ndf+fresnel", "btdf(tr)+fresnel"] {
+        for spec in ["lambert+fresnel", "ggx+fresnel+fresnel", "ggx+aniso+fresnel", "ggx+ndf+fresnel+fresnel", "btdf(tr)+fresnel"] {
             assert!(Model::parse(spec, 1).is_err(), "{spec} parsed");
         }
     }

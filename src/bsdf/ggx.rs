@@ -172,6 +172,9 @@ pub fn lobe_block_with<R: Real>(
 }
 
 impl Bsdf for Ggx {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Ggx, super::Tabulated { ndf: false, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &ENTRY
     }
@@ -181,12 +184,6 @@ impl Bsdf for Ggx {
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
         Some(super::aniso::ggx())
-    }
-    fn data_driven(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::ndf::ggx())
-    }
-    fn fresnel_curve(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::fresnel::ggx())
     }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))

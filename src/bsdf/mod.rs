@@ -12,7 +12,8 @@ use crate::data::Kind;
 use crate::math::lanes::{F32x8, F64x4};
 pub use channels::{each_direction, Channels, Children, Dir, MAX_CHILDREN};
 pub use decl::{
-    Builder, Entry, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role, Scale,
+    Builder, Entry, GgxPlace, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role,
+    Scale, Tabulated,
 };
 use glam::DVec3;
 pub use registry::{
@@ -28,6 +29,8 @@ pub mod effect;
 pub mod kernel;
 pub mod microfacet;
 pub mod micrograin;
+/// The form `+ndf` and `+fresnel` together put in place of a GGX lobe (no entry of its own).
+pub mod ndf_fresnel;
 pub mod registry;
 pub mod spec;
 #[cfg(test)]
@@ -160,15 +163,9 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
     fn anisotropic(&self) -> Option<Arc<dyn Bsdf>> {
         None
     }
-    /// The node's form with a data-driven NDF ([`ndf`]: GGX times a tabulated factor),
-    /// which `+ndf` puts in its place; `None` where it has no GGX highlight.
-    fn data_driven(&self) -> Option<Arc<dyn Bsdf>> {
-        None
-    }
-    /// The node's form with its highlight's Fresnel factor reshaped per channel
-    /// ([`fresnel`]: F times a tabulated factor in θd), which `+fresnel` puts in its
-    /// place; `None` where it has no GGX highlight.
-    fn fresnel_curve(&self) -> Option<Arc<dyn Bsdf>> {
+    /// The isotropic GGX lobe this node holds, where, and which of its factors are
+    /// tabulated: what `+ndf` and `+fresnel` read to put another form in its place.
+    fn ggx_lobe(&self) -> Option<(GgxPlace, Tabulated)> {
         None
     }
     /// An anisotropic lobe's (α_u, α_v, φ0): the positions of the two roughnesses and of
@@ -361,24 +358,34 @@ impl Node {
     }
 }
 
-/// Another form of a node, where it has one ([`Bsdf::anisotropic`], [`Bsdf::data_driven`]).
+/// Another form of a node, where it has one ([`Bsdf::anisotropic`], [`Bsdf::ggx_lobe`]).
 pub type FormOf<'a> = dyn Fn(&dyn Bsdf) -> Option<Arc<dyn Bsdf>> + 'a;
 
-/// The build of a BRDF suffix that puts a form of each lobe in its place (`+ndf`,
-/// `+fresnel`): every node `form` gives one of is swapped ([`Node::with_forms`]) and the
-/// result wrapped in the suffix's pass-through node `wrap`; refused on BTDF models, when
-/// given twice, and where no node has that form (`needs` says which have one).
+/// The build of a BRDF suffix that tabulates one factor of each isotropic GGX lobe
+/// (`+ndf`, `+fresnel`): every lobe whose `factor` is not yet tabulated is swapped for the
+/// form that adds it ([`registry::ggx_form`]) and the result wrapped in the suffix's
+/// pass-through node `wrap`; refused on BTDF models, when given twice, and where no node
+/// holds such a lobe (`needs` says which do).
 pub fn brdf_form_suffix(
     inner: Node,
     suffix: &'static str,
-    form: &FormOf,
+    factor: fn(&mut Tabulated) -> &mut bool,
     wrap: impl Bsdf + 'static,
     needs: &str,
 ) -> Result<Node, String> {
     if inner.bsdf.kind() != Kind::Brdf {
         return Err(format!("+{suffix} applies to BRDF models"));
     }
-    let (swapped, count, names) = inner.with_forms(form);
+    let form = |b: &dyn Bsdf| {
+        let (place, mut tabulated) = b.ggx_lobe()?;
+        let f = factor(&mut tabulated);
+        if *f {
+            return None;
+        }
+        *f = true;
+        Some(registry::ggx_form(place, tabulated))
+    };
+    let (swapped, count, names) = inner.with_forms(&form);
     if names.contains(&suffix) {
         return Err(format!("+{suffix} given twice"));
     }

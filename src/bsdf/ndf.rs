@@ -49,18 +49,18 @@ pub const KNOTS: usize = 16;
 /// Cosines of the masking table: μ_j = (j / (MU_POINTS − 1))².
 pub const MU_POINTS: usize = 65;
 
-const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
+pub(super) const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
 
 /// The free knots' names, as `ggx+ndf` and the highlight of `fa(B)+ndf` declare them.
-const NAMES: [&str; KNOTS - 1] = [
+pub(super) const NAMES: [&str; KNOTS - 1] = [
     "ndf1", "ndf2", "ndf3", "ndf4", "ndf5", "ndf6", "ndf7", "ndf8", "ndf9", "ndf10", "ndf11",
     "ndf12", "ndf13", "ndf14", "ndf15",
 ];
-const COAT_NAMES: [&str; KNOTS - 1] = [
+pub(super) const COAT_NAMES: [&str; KNOTS - 1] = [
     "ndf_c1", "ndf_c2", "ndf_c3", "ndf_c4", "ndf_c5", "ndf_c6", "ndf_c7", "ndf_c8",
     "ndf_c9", "ndf_c10", "ndf_c11", "ndf_c12", "ndf_c13", "ndf_c14", "ndf_c15",
 ];
-const LOBE_NAMES: [&str; KNOTS - 1] = [
+pub(super) const LOBE_NAMES: [&str; KNOTS - 1] = [
     "lobe.ndf1", "lobe.ndf2", "lobe.ndf3", "lobe.ndf4", "lobe.ndf5", "lobe.ndf6",
     "lobe.ndf7", "lobe.ndf8", "lobe.ndf9", "lobe.ndf10", "lobe.ndf11", "lobe.ndf12",
     "lobe.ndf13", "lobe.ndf14", "lobe.ndf15",
@@ -78,7 +78,7 @@ const KNOT: ParamDecl = ParamDecl::shared(
 .neutral_at(0.0)
 .knot();
 
-fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
+pub(super) fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
     names.iter().map(|n| KNOT.renamed(n))
 }
 
@@ -359,6 +359,9 @@ impl Kernel for GgxNdf {
 }
 
 impl Bsdf for GgxNdf {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Ggx, super::Tabulated { ndf: true, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &GGX_ENTRY
     }
@@ -403,6 +406,9 @@ impl Kernel for FaNdf {
 }
 
 impl Bsdf for FaNdf {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Aggregate, super::Tabulated { ndf: true, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &FA_ENTRY
     }
@@ -456,6 +462,9 @@ impl Kernel for CoatNdf {
 }
 
 impl Bsdf for CoatNdf {
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        Some((super::GgxPlace::Coat, super::Tabulated { ndf: true, fresnel: false }))
+    }
     fn entry(&self) -> &'static Entry {
         &COAT_ENTRY
     }
@@ -525,23 +534,11 @@ pub fn build(inner: Node) -> Result<Node, String> {
     super::brdf_form_suffix(
         inner,
         ENTRY.name,
-        &|b| b.data_driven(),
+        |t| &mut t.ndf,
         Ndf,
         "an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)",
     )
 }
-
-/// The data-driven forms, as [`Bsdf::data_driven`] hands them out.
-pub fn ggx() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(GgxNdf)
-}
-pub fn fa() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(FaNdf)
-}
-pub fn coat() -> std::sync::Arc<dyn Bsdf> {
-    std::sync::Arc::new(CoatNdf)
-}
-
 
 #[cfg(test)]
 mod tests {

@@ -3,11 +3,34 @@
 //! the models' declarations ([`Entry`], [`ParamDecl`](super::ParamDecl)): the default
 //! catalogue, the bases a layer accepts, the kind of a spec, and `bsdfit models`.
 
-use super::decl::{Builder, Entry, InCatalogue, Role};
+use super::decl::{Builder, Entry, GgxPlace, InCatalogue, Role, Tabulated};
 use super::spec::Ast;
+use super::{coat, fa, fresnel, ggx, ndf, ndf_fresnel, Bsdf};
 use super::{Node, SpecError, REGISTRY};
 use crate::data::Kind;
+use std::sync::Arc;
 use std::sync::RwLock;
+
+/// The node holding the GGX lobe of `place` with the factors `tabulated`: the one table
+/// of the twelve lobe forms, from which `+ndf` and `+fresnel` swap a lobe for the form
+/// with one factor more (see [`super::brdf_form_suffix`]).
+pub fn ggx_form(place: GgxPlace, tabulated: Tabulated) -> Arc<dyn Bsdf> {
+    use GgxPlace::{Aggregate, Coat, Ggx};
+    match (place, tabulated.ndf, tabulated.fresnel) {
+        (Ggx, false, false) => Arc::new(ggx::Ggx),
+        (Ggx, true, false) => Arc::new(ndf::GgxNdf),
+        (Ggx, false, true) => Arc::new(fresnel::GgxFresnel),
+        (Ggx, true, true) => Arc::new(ndf_fresnel::GgxNdfFresnel),
+        (Aggregate, false, false) => Arc::new(fa::FresnelAggregate),
+        (Aggregate, true, false) => Arc::new(ndf::FaNdf),
+        (Aggregate, false, true) => Arc::new(fresnel::FaFresnel),
+        (Aggregate, true, true) => Arc::new(ndf_fresnel::FaNdfFresnel),
+        (Coat, false, false) => Arc::new(coat::Coat),
+        (Coat, true, false) => Arc::new(ndf::CoatNdf),
+        (Coat, false, true) => Arc::new(fresnel::CoatFresnel),
+        (Coat, true, true) => Arc::new(ndf_fresnel::CoatNdfFresnel),
+    }
+}
 
 fn is_suffix(e: &Entry) -> bool {
     matches!(e.build, Builder::Suffix(_))
@@ -303,6 +326,28 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
                 continue;
             };
             let s = format!("{c}+{}+{}", t.name, e.name);
+            let new: Vec<String> = functions(&s)
+                .into_iter()
+                .filter(|f| !covered.contains(f))
+                .collect();
+            if !new.is_empty() && !out.contains(&s) {
+                covered.extend(new);
+                out.push(s);
+            }
+        }
+    }
+    // Forms only a chain of suffixes makes (`+ndf` then `+fresnel` on `fa`'s highlight or a
+    // coat's lobe): each spec so far extended by each suffix, while that makes node
+    // functions no spec has.
+    let mut i = 0;
+    while i < out.len() {
+        let base = out[i].clone();
+        i += 1;
+        for e in extra
+            .iter()
+            .filter(|e| matches!(e.build, Builder::Suffix(_)))
+        {
+            let s = format!("{base}+{}", e.name);
             let new: Vec<String> = functions(&s)
                 .into_iter()
                 .filter(|f| !covered.contains(f))

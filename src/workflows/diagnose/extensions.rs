@@ -317,10 +317,10 @@ mod tests {
                 nodes.nodes().iter().any(|n| form(n.bsdf.as_ref()))
             };
             let mut want_driven = vec![];
-            if has(&|b| b.data_driven().is_some()) {
+            if has(&|b| b.ggx_lobe().is_some()) {
                 want_driven.push((format!("{spec}+ndf"), HighlightShape));
             }
-            if has(&|b| b.fresnel_curve().is_some()) {
+            if has(&|b| b.ggx_lobe().is_some()) {
                 want_driven.push((format!("{spec}+fresnel"), HighlightFresnel));
             }
             // The body's profile, for one with a diffuse base.

@@ -1,0 +1,153 @@
+// A GGX lobe whose NDF and Fresnel curve are both data-driven (`M+ndf+fresnel`): in
+// channel c, ks F(theta_d; eta) exp(s_c(theta_d)) D G1 G1 / (4 mu_i mu_o) with D, G1 the
+// tabulated NDF of ndf.wgsl (its table built by the prepare functions) and exp(s_c) the
+// Fresnel curve of knots.wgsl. f32 twin of src/bsdf/ndf_fresnel.rs.
+
+// F(wi.h; eta) times the curve's factor times the kernel, the half vector as `ndf_lobe`
+// takes it.
+fn ndf_fresnel_lobe(tab: ptr<private, NdfTable>, eta: f32, knots: array<f32, 9>, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    let sum = wi + wo;
+    let len = length(sum);
+    var m = sum;
+    var cos_h = 0.5 * len;
+    if (len < 1e-12) {
+        m = vec3<f32>(0.0, 0.0, 1.0);
+        cos_h = wi.z;
+    }
+    return fresnel_dielectric(cos_h, eta) * knot_factor(knots, cos_h) * ndf_reflection(tab, wi, wo, m);
+}
+
+// `ggx` with a data-driven NDF and Fresnel curve. Parameters: ks, alpha, eta, ndf1 ..
+// ndf15, fresnel1 .. fresnel8.
+fn ggx_ndf_fresnel_prepare(o: u32) {
+    ndf_build(&NDF_TABLE, ggx_ndf_fresnel_alpha(o), array<f32, 15>(
+        ggx_ndf_fresnel_ndf1(o),
+        ggx_ndf_fresnel_ndf2(o),
+        ggx_ndf_fresnel_ndf3(o),
+        ggx_ndf_fresnel_ndf4(o),
+        ggx_ndf_fresnel_ndf5(o),
+        ggx_ndf_fresnel_ndf6(o),
+        ggx_ndf_fresnel_ndf7(o),
+        ggx_ndf_fresnel_ndf8(o),
+        ggx_ndf_fresnel_ndf9(o),
+        ggx_ndf_fresnel_ndf10(o),
+        ggx_ndf_fresnel_ndf11(o),
+        ggx_ndf_fresnel_ndf12(o),
+        ggx_ndf_fresnel_ndf13(o),
+        ggx_ndf_fresnel_ndf14(o),
+        ggx_ndf_fresnel_ndf15(o),
+    ));
+}
+
+fn ggx_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    if (!GGX_NDF_FRESNEL_PREPARED) {
+        ggx_ndf_fresnel_prepare(o);
+    }
+    if (wi.z <= 0.0 || wo.z <= 0.0) {
+        return 0.0;
+    }
+    let knots = array<f32, 9>(
+        0.0,
+        ggx_ndf_fresnel_fresnel1(o),
+        ggx_ndf_fresnel_fresnel2(o),
+        ggx_ndf_fresnel_fresnel3(o),
+        ggx_ndf_fresnel_fresnel4(o),
+        ggx_ndf_fresnel_fresnel5(o),
+        ggx_ndf_fresnel_fresnel6(o),
+        ggx_ndf_fresnel_fresnel7(o),
+        ggx_ndf_fresnel_fresnel8(o),
+    );
+    return ggx_ndf_fresnel_ks(o) * ndf_fresnel_lobe(&NDF_TABLE, ggx_ndf_fresnel_eta(o), knots, wi, wo);
+}
+
+// `fa(B)` whose highlight has a data-driven NDF and Fresnel curve. Parameters:
+// lobe.alpha, lobe.eta, lobe.ks, lobe.ndf1 .. 15, lobe.fresnel1 .. 8; the base's
+// transmittance stays dielectric.
+fn fa_ndf_fresnel_prepare(o: u32) {
+    ndf_build(&NDF_TABLE, fa_ndf_fresnel_lobe_alpha(o), array<f32, 15>(
+        fa_ndf_fresnel_lobe_ndf1(o),
+        fa_ndf_fresnel_lobe_ndf2(o),
+        fa_ndf_fresnel_lobe_ndf3(o),
+        fa_ndf_fresnel_lobe_ndf4(o),
+        fa_ndf_fresnel_lobe_ndf5(o),
+        fa_ndf_fresnel_lobe_ndf6(o),
+        fa_ndf_fresnel_lobe_ndf7(o),
+        fa_ndf_fresnel_lobe_ndf8(o),
+        fa_ndf_fresnel_lobe_ndf9(o),
+        fa_ndf_fresnel_lobe_ndf10(o),
+        fa_ndf_fresnel_lobe_ndf11(o),
+        fa_ndf_fresnel_lobe_ndf12(o),
+        fa_ndf_fresnel_lobe_ndf13(o),
+        fa_ndf_fresnel_lobe_ndf14(o),
+        fa_ndf_fresnel_lobe_ndf15(o),
+    ));
+}
+
+fn fa_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
+    if (!FA_NDF_FRESNEL_PREPARED) {
+        fa_ndf_fresnel_prepare(o);
+    }
+    if (wi.z <= 0.0 || wo.z <= 0.0) {
+        return 0.0;
+    }
+    let knots = array<f32, 9>(
+        0.0,
+        fa_ndf_fresnel_lobe_fresnel1(o),
+        fa_ndf_fresnel_lobe_fresnel2(o),
+        fa_ndf_fresnel_lobe_fresnel3(o),
+        fa_ndf_fresnel_lobe_fresnel4(o),
+        fa_ndf_fresnel_lobe_fresnel5(o),
+        fa_ndf_fresnel_lobe_fresnel6(o),
+        fa_ndf_fresnel_lobe_fresnel7(o),
+        fa_ndf_fresnel_lobe_fresnel8(o),
+    );
+    let eta = fa_ndf_fresnel_lobe_eta(o);
+    let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
+    return fa_ndf_fresnel_lobe_ks(o) * ndf_fresnel_lobe(&NDF_TABLE, eta, knots, wi, wo) + transmit * base;
+}
+
+// `M+coat` whose coat lobe has a data-driven NDF and angular reflectance (no Fresnel
+// factor of its own). Parameters: kc, alpha_c, ndf_c1 .. 15, fresnel_c1 .. 8.
+fn coat_ndf_fresnel_prepare(o: u32) {
+    ndf_build(&COAT_NDF_TABLE, coat_ndf_fresnel_alpha_c(o), array<f32, 15>(
+        coat_ndf_fresnel_ndf_c1(o),
+        coat_ndf_fresnel_ndf_c2(o),
+        coat_ndf_fresnel_ndf_c3(o),
+        coat_ndf_fresnel_ndf_c4(o),
+        coat_ndf_fresnel_ndf_c5(o),
+        coat_ndf_fresnel_ndf_c6(o),
+        coat_ndf_fresnel_ndf_c7(o),
+        coat_ndf_fresnel_ndf_c8(o),
+        coat_ndf_fresnel_ndf_c9(o),
+        coat_ndf_fresnel_ndf_c10(o),
+        coat_ndf_fresnel_ndf_c11(o),
+        coat_ndf_fresnel_ndf_c12(o),
+        coat_ndf_fresnel_ndf_c13(o),
+        coat_ndf_fresnel_ndf_c14(o),
+        coat_ndf_fresnel_ndf_c15(o),
+    ));
+}
+
+fn coat_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
+    if (!COAT_NDF_FRESNEL_PREPARED) {
+        coat_ndf_fresnel_prepare(o);
+    }
+    let kc = coat_ndf_fresnel_kc(o);
+    if (wi.z <= 0.0 || wo.z <= 0.0) {
+        return (1.0 - kc) * inner;
+    }
+    let knots = array<f32, 9>(
+        0.0,
+        coat_ndf_fresnel_fresnel_c1(o),
+        coat_ndf_fresnel_fresnel_c2(o),
+        coat_ndf_fresnel_fresnel_c3(o),
+        coat_ndf_fresnel_fresnel_c4(o),
+        coat_ndf_fresnel_fresnel_c5(o),
+        coat_ndf_fresnel_fresnel_c6(o),
+        coat_ndf_fresnel_fresnel_c7(o),
+        coat_ndf_fresnel_fresnel_c8(o),
+    );
+    let sum = wi + wo;
+    let lobe = knot_factor(knots, 0.5 * length(sum)) * ndf_reflection(&COAT_NDF_TABLE, wi, wo, sum);
+    return (1.0 - kc) * inner + kc * lobe;
+}
