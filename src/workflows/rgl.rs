@@ -24,10 +24,14 @@
 //! incidence nodes). What bsdfit writes: a uniform VNDF, so the warp is the identity and
 //! the value table is simply f·cos θo on a grid of u_m (dense near the half vector's
 //! pole, where highlights live); `jacobian` = 0, so `ndf` and `sigma` are not used by
-//! the evaluation (uniform tables are written); and a `luminance` map proportional to
+//! the evaluation, and they hold the fit's own microfacet distribution where it has an
+//! isotropic GGX lobe ([`distribution`]: the tabulated D of `+ndf`, or GGX's, and its
+//! projected area), uniform tables otherwise; and a `luminance` map proportional to
 //! f·cos θo times the solid angle of each cell, which is what the readers sample
 //! directions from: importance sampling by the tabulated BRDF itself.
 
+use crate::bsdf::ndf::NdfTable;
+use crate::bsdf::{GgxPlace, LobePart};
 use crate::data::Kind;
 use crate::inference::saved::SavedFit;
 use anyhow::Result;
@@ -81,6 +85,72 @@ fn check_representable(fit: &SavedFit) -> Result<()> {
         m.axes
     );
     Ok(())
+}
+
+/// The fit's microfacet distribution, for the file's `ndf` and `sigma` fields: that of its
+/// highlight (`ggx`, `fa`'s lobe) or else of its coat's lobe; the tabulated D where the
+/// lobe has one (`+ndf`), GGX's otherwise (the table at zero deviation, which is GGX
+/// within its quadrature's 3e-4). None for a model without an isotropic GGX lobe.
+pub fn distribution(fit: &SavedFit) -> Option<NdfTable> {
+    let view = fit.model.scalars(&fit.flat, 0);
+    let node = fit
+        .model
+        .nodes()
+        .into_iter()
+        .filter_map(|n| n.bsdf.ggx_lobe().map(|(place, _)| (n, place)))
+        .min_by_key(|&(_, place)| place == GgxPlace::Coat)?
+        .0;
+    let params = node.bsdf.params();
+    let alpha = params.iter().position(|p| p.lobe == LobePart::Width)?;
+    // The NDF's knots (`ndf1`, `lobe.ndf1`, `ndf_c1` …), shared by the channels.
+    let first = params.iter().position(|p| {
+        p.knot
+            && p.name
+                .rsplit('.')
+                .next()
+                .is_some_and(|n| n.starts_with("ndf"))
+    });
+    let s = std::array::from_fn(|k| match first {
+        Some(f) if k > 0 => view[node.offset + f + k - 1],
+        _ => 0.0,
+    });
+    Some(NdfTable::new(view[node.offset + alpha], s))
+}
+
+/// The `ndf` field (D over u_m = (√(2θm/π), φm / 2π), `n` × `n`) and the `sigma` field
+/// (the projected area σ(ωi) = ∫ (ωi·m)⁺ D dω_m = μi + C(μi) over u_i) of `table`; 2 × 2
+/// tables of ones without one.
+fn distribution_fields(table: Option<&NdfTable>, n: usize) -> [Field; 2] {
+    let (ndf, sigma) = match table {
+        Some(t) => {
+            let theta = |x: usize| u_to_theta(x as f64 / (n - 1) as f64);
+            let d: Vec<f32> = (0..n)
+                .map(|x| t.d(DVec3::new(theta(x).sin(), 0.0, theta(x).cos())) as f32)
+                .collect();
+            let a: Vec<f32> = (0..n)
+                .map(|x| {
+                    let mu = theta(x).cos().max(0.0);
+                    (mu + t.facing_away(mu)) as f32
+                })
+                .collect();
+            // Isotropic: the same row at every azimuth (rows are u_φ, columns u_θ).
+            let rows = |v: Vec<f32>| (vec![n as u64, n as u64], v.repeat(n));
+            (rows(d), rows(a))
+        }
+        None => ((vec![2, 2], vec![1.0; 4]), (vec![2, 2], vec![1.0; 4])),
+    };
+    [
+        Field {
+            name: "ndf",
+            shape: ndf.0,
+            data: FieldData::F32(ndf.1),
+        },
+        Field {
+            name: "sigma",
+            shape: sigma.0,
+            data: FieldData::F32(sigma.1),
+        },
+    ]
 }
 
 /// A tensor file's field.
@@ -231,6 +301,7 @@ pub fn rgl_file(fit: &SavedFit, channels: Channels, description: &str) -> Result
         values,
         luminance,
         wavelengths,
+        distribution: distribution(fit),
     };
     Ok(tensor_file(&material_fields(description, tables)))
 }
@@ -306,6 +377,8 @@ struct Tables<'a> {
     luminance: Vec<f32>,
     /// The channels' wavelengths for a spectral file; None for RGB.
     wavelengths: Option<Vec<f64>>,
+    /// The fit's microfacet distribution ([`distribution`]).
+    distribution: Option<NdfTable>,
 }
 
 /// The fields of an isotropic material file (see the module's documentation).
@@ -313,6 +386,9 @@ fn material_fields(description: &str, t: Tables) -> Vec<Field> {
     let n = t.thetas.len() as u64;
     let np = t.phis.len() as u64;
     let (hw, wu) = (t.nodes as u64, t.nodes as u64);
+    // Not used by the evaluation when `jacobian` is 0: the fit's distribution, for readers
+    // and tools that take the NDF from the file.
+    let [ndf, sigma] = distribution_fields(t.distribution.as_ref(), t.nodes);
     let mut fields = vec![
         Field {
             name: "description",
@@ -334,17 +410,8 @@ fn material_fields(description: &str, t: Tables) -> Vec<Field> {
             shape: vec![np],
             data: FieldData::F32(t.phis.iter().map(|d| d.to_radians() as f32).collect()),
         },
-        // Not used by the evaluation when `jacobian` is 0.
-        Field {
-            name: "ndf",
-            shape: vec![2, 2],
-            data: FieldData::F32(vec![1.0; 4]),
-        },
-        Field {
-            name: "sigma",
-            shape: vec![2, 2],
-            data: FieldData::F32(vec![1.0; 4]),
-        },
+        ndf,
+        sigma,
         // Uniform: the warp from the value table's square to u_m is the identity (a
         // 2 × 2 table is enough; readers do not require the value table's size).
         Field {
@@ -379,4 +446,117 @@ fn material_fields(description: &str, t: Tables) -> Vec<Field> {
         }
     }
     fields
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::Model;
+
+    fn saved(spec: &str, set: &[(&str, f64)]) -> SavedFit {
+        let model = Model::parse(spec, 1).unwrap();
+        let mut flat = model.defaults();
+        for (name, v) in set {
+            flat[model.params.iter().find(|p| p.name == *name).unwrap().index] = *v;
+        }
+        SavedFit {
+            std: vec![None; model.dim],
+            correlation: vec![],
+            channels: vec![550.0],
+            material: String::new(),
+            data: String::new(),
+            warnings: vec![],
+            model,
+            flat,
+        }
+    }
+
+    fn row(field: &Field, n: usize) -> Vec<f64> {
+        let FieldData::F32(v) = &field.data else {
+            panic!("{} is not f32", field.name)
+        };
+        assert_eq!(field.shape, vec![n as u64, n as u64], "{}", field.name);
+        // Isotropic: every row (u_φ) the same.
+        assert!(v.chunks(n).all(|r| r == &v[..n]), "{}", field.name);
+        v[..n].iter().map(|&x| x as f64).collect()
+    }
+
+    /// The `ndf` and `sigma` fields hold the fit's distribution: GGX's D and projected
+    /// area μ (1 + Λ(μ)) for an analytic lobe (formulas written here; within the table's
+    /// 3e-4 and f32), a `+ndf` lobe's knots as ratios to GGX, ∫ D cos θm dω = 1 in both,
+    /// the highlight's rather than a coat's, and 2 × 2 ones without a GGX lobe.
+    #[test]
+    fn the_distribution_fields_hold_the_fits_ndf() {
+        let n = THETA_M_NODES;
+        let theta = |x: usize| u_to_theta(x as f64 / (n - 1) as f64);
+        let alpha = 0.3;
+        let ggx = |t: f64| {
+            let (c2, t2) = (t.cos().powi(2), t.tan().powi(2));
+            alpha * alpha / (PI * c2 * c2 * (alpha * alpha + t2).powi(2))
+        };
+        // ∫ D cos θ dω = 2π ∫ D(θ) cos θ sin θ dθ, trapezoids on the field's nodes.
+        let norm = |d: &[f64]| {
+            (1..n)
+                .map(|x| {
+                    let g = |x: usize| d[x] * theta(x).cos() * theta(x).sin();
+                    0.5 * (g(x) + g(x - 1)) * (theta(x) - theta(x - 1))
+                })
+                .sum::<f64>()
+                * 2.0
+                * PI
+        };
+        let fit = saved(
+            "fa(lambert)+coat",
+            &[("lobe.alpha", alpha), ("alpha_c", 0.05)],
+        );
+        let [ndf, sigma] = distribution_fields(distribution(&fit).as_ref(), n);
+        let (d, a) = (row(&ndf, n), row(&sigma, n));
+        for x in (0..n - 1).step_by(9) {
+            let t = theta(x);
+            let lambda = 0.5 * ((1.0 + (alpha * t.tan()).powi(2)).sqrt() - 1.0);
+            let (want_d, want_a) = (ggx(t), t.cos() * (1.0 + lambda));
+            assert!(
+                (d[x] / want_d - 1.0).abs() < 4e-4,
+                "D at {t}: {} vs {want_d}",
+                d[x]
+            );
+            assert!(
+                (a[x] / want_a - 1.0).abs() < 4e-4,
+                "σ at {t}: {} vs {want_a}",
+                a[x]
+            );
+        }
+        assert!((norm(&d) - 1.0).abs() < 2e-3, "∫ D cos = {}", norm(&d));
+
+        let knots = [("lobe.ndf5", 1.0), ("lobe.ndf9", -0.7), ("lobe.ndf12", 0.4)];
+        let fit = saved(
+            "fa(lambert)+ndf",
+            &[&[("lobe.alpha", alpha)][..], &knots].concat(),
+        );
+        let [ndf, _] = distribution_fields(distribution(&fit).as_ref(), n);
+        let d = row(&ndf, n);
+        // At a knot's angle ln(D / D_GGX) is the knot's value plus one constant (−ln N):
+        // compare two knots through the node nearest each (the field is on its own grid).
+        let at = |k: usize| {
+            let (c, _) = crate::bsdf::ndf::knot_angle(k);
+            let t = c.acos();
+            let x = (0..n)
+                .min_by(|&a, &b| (theta(a) - t).abs().total_cmp(&(theta(b) - t).abs()))
+                .unwrap();
+            (d[x] / ggx(theta(x))).ln()
+        };
+        let (k5, k9) = (at(5), at(9));
+        assert!(
+            ((k5 - k9) - (1.0 - -0.7)).abs() < 0.05,
+            "ln D/D_GGX at knots 5 and 9: {k5} {k9}"
+        );
+        assert!((norm(&d) - 1.0).abs() < 2e-3, "∫ D cos = {}", norm(&d));
+
+        let fit = saved("lambert", &[]);
+        assert!(distribution(&fit).is_none());
+        let [ndf, sigma] = distribution_fields(None, n);
+        for f in [ndf, sigma] {
+            assert_eq!(f.shape, vec![2, 2]);
+        }
+    }
 }
