@@ -176,6 +176,7 @@ pub fn measure_channels(
 /// A χ² fit of `model` to truth data on the SIMD engine, from `start` (an embedded
 /// optimum of a smaller model, as diagnose starts an extension) where given, with
 /// `restarts` restarts in all; the smoothness prior of any knots weighed from the data.
+/// Compass search, the library's default optimizer.
 pub fn fit_truth(
     model: &bsdfit::bsdf::Model,
     data: &Dataset,
@@ -183,10 +184,24 @@ pub fn fit_truth(
     restarts: usize,
     seed: u64,
 ) -> bsdfit::inference::fit::Conclusions {
+    let compass = bsdfit::inference::fit::FitOptions::default().optimizer;
+    fit_truth_with(model, data, start, restarts, seed, compass)
+}
+
+/// [`fit_truth`] with the optimizer given.
+pub fn fit_truth_with(
+    model: &bsdfit::bsdf::Model,
+    data: &Dataset,
+    start: Option<Vec<f64>>,
+    restarts: usize,
+    seed: u64,
+    optimizer: bsdfit::inference::fit::Optimizer,
+) -> bsdfit::inference::fit::Conclusions {
     use bsdfit::engine::loss::{Loss, Metric, Weights};
     let opts = bsdfit::inference::fit::FitOptions {
         restarts,
         seed,
+        optimizer,
         initial_points: start.into_iter().collect(),
         ..Default::default()
     };
