@@ -314,6 +314,17 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
         v
     };
     let mut covered: Vec<String> = out.iter().flat_map(|s| functions(s)).collect();
+    // `s` joins the specs when it builds node functions none of them has.
+    let add_if_new = |s: String, out: &mut Vec<String>, covered: &mut Vec<String>| {
+        let new: Vec<String> = functions(&s)
+            .into_iter()
+            .filter(|f| !covered.contains(f))
+            .collect();
+        if !new.is_empty() && !out.contains(&s) {
+            covered.extend(new);
+            out.push(s);
+        }
+    };
     for e in extra
         .iter()
         .filter(|e| matches!(e.build, Builder::Suffix(_)))
@@ -325,15 +336,7 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
             let Some(c) = cores.iter().find(|c| builds(&format!("{c}+{}", t.name))) else {
                 continue;
             };
-            let s = format!("{c}+{}+{}", t.name, e.name);
-            let new: Vec<String> = functions(&s)
-                .into_iter()
-                .filter(|f| !covered.contains(f))
-                .collect();
-            if !new.is_empty() && !out.contains(&s) {
-                covered.extend(new);
-                out.push(s);
-            }
+            add_if_new(format!("{c}+{}+{}", t.name, e.name), &mut out, &mut covered);
         }
     }
     // Forms only a chain of suffixes makes (`+ndf` then `+fresnel` on `fa`'s highlight or a
@@ -347,15 +350,7 @@ pub fn every_spec(kind: Kind) -> Vec<String> {
             .iter()
             .filter(|e| matches!(e.build, Builder::Suffix(_)))
         {
-            let s = format!("{base}+{}", e.name);
-            let new: Vec<String> = functions(&s)
-                .into_iter()
-                .filter(|f| !covered.contains(f))
-                .collect();
-            if !new.is_empty() && !out.contains(&s) {
-                covered.extend(new);
-                out.push(s);
-            }
+            add_if_new(format!("{base}+{}", e.name), &mut out, &mut covered);
         }
     }
     out.dedup();
