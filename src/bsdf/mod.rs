@@ -358,7 +358,8 @@ impl Node {
     }
 }
 
-/// Another form of a node, where it has one ([`Bsdf::anisotropic`], [`Bsdf::ggx_lobe`]).
+/// Another form of a node, where it has one ([`Bsdf::anisotropic`]; the GGX lobes' forms
+/// of [`registry::ggx_form`]).
 pub type FormOf<'a> = dyn Fn(&dyn Bsdf) -> Option<Arc<dyn Bsdf>> + 'a;
 
 /// The build of a BRDF suffix that tabulates one factor of each isotropic GGX lobe
