@@ -158,17 +158,21 @@ fn ndf_reflection(tab: ptr<private, NdfTable>, wi: vec3<f32>, wo: vec3<f32>, m: 
     return ggx * e / (4.0 * (wi.z + ndf_c(tab, wi.z)) * (wo.z + ndf_c(tab, wo.z)));
 }
 
-// F(wi.h; eta) times the kernel, as the GGX lobe takes them (h from the unnormalised sum).
-fn ndf_lobe(tab: ptr<private, NdfTable>, eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+// The half vector as the GGX lobe takes it: m the unnormalised sum wi + wo (the normal
+// where it vanishes) in xyz, cos theta_d = wi.h in w.
+fn ndf_half(wi: vec3<f32>, wo: vec3<f32>) -> vec4<f32> {
     let sum = wi + wo;
     let len = length(sum);
-    var m = sum;
-    var cos_h = 0.5 * len;
     if (len < 1e-12) {
-        m = vec3<f32>(0.0, 0.0, 1.0);
-        cos_h = wi.z;
+        return vec4<f32>(0.0, 0.0, 1.0, wi.z);
     }
-    return fresnel_dielectric(cos_h, eta) * ndf_reflection(tab, wi, wo, m);
+    return vec4<f32>(sum, 0.5 * len);
+}
+
+// F(wi.h; eta) times the kernel, as the GGX lobe takes them.
+fn ndf_lobe(tab: ptr<private, NdfTable>, eta: f32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    let h = ndf_half(wi, wo);
+    return fresnel_dielectric(h.w, eta) * ndf_reflection(tab, wi, wo, h.xyz);
 }
 
 // `ggx` with the data-driven NDF. Parameters: ks, alpha, eta, ndf1 .. ndf15.

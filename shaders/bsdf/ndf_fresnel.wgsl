@@ -4,17 +4,10 @@
 // Fresnel curve of knots.wgsl. f32 twin of src/bsdf/ndf_fresnel.rs.
 
 // F(wi.h; eta) times the curve's factor times the kernel, the half vector as `ndf_lobe`
-// takes it.
+// takes it (`ndf_half`).
 fn ndf_fresnel_lobe(tab: ptr<private, NdfTable>, eta: f32, knots: array<f32, 9>, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let sum = wi + wo;
-    let len = length(sum);
-    var m = sum;
-    var cos_h = 0.5 * len;
-    if (len < 1e-12) {
-        m = vec3<f32>(0.0, 0.0, 1.0);
-        cos_h = wi.z;
-    }
-    return fresnel_dielectric(cos_h, eta) * knot_factor(knots, cos_h) * ndf_reflection(tab, wi, wo, m);
+    let h = ndf_half(wi, wo);
+    return fresnel_dielectric(h.w, eta) * knot_factor(knots, h.w) * ndf_reflection(tab, wi, wo, h.xyz);
 }
 
 // `ggx` with a data-driven NDF and Fresnel curve. Parameters: ks, alpha, eta, ndf1 ..

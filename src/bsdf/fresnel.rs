@@ -38,7 +38,7 @@ use super::kernel::{Kernel, LaneChildren, LaneDir};
 use super::microfacet::{ggx_reflection, MICROFACET_WGSL};
 use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, Role, WgslFn};
 use crate::data::Kind;
-use crate::math::lanes::Real;
+use crate::math::lanes::{Real, V3};
 
 /// Knots of the log-factor, the first (normal incidence) fixed at 0.
 pub const KNOTS: usize = 9;
@@ -125,8 +125,23 @@ pub fn log_factor(s: &[f64; KNOTS], x: f64) -> f64 {
 
 /// Channel i's knots (s_0 = 0, then the node's parameters from `first`).
 #[inline(always)]
-pub(super) fn channel_knots(p: Channels, i: usize, first: usize) -> [f64; KNOTS] {
+fn channel_knots(p: Channels, i: usize, first: usize) -> [f64; KNOTS] {
     std::array::from_fn(|k| if k == 0 { 0.0 } else { p.get(i, first + k - 1) })
+}
+
+/// A highlight's value in channel i with its curve: k_s,c (parameter `ks`) times the lobe
+/// times e^{s_c(θd)}, the channel's knots from parameter `first` (`+fresnel`'s and
+/// `+ndf+fresnel`'s `ggx` and `fa` forms).
+#[inline(always)]
+pub(super) fn curved<R: Real>(lobe: &GgxLobe<R>, p: Channels, i: usize, ks: usize, first: usize) -> R {
+    lobe.scaled_by(R::splat(p.get(i, ks)), factor(&channel_knots(p, i, first), lobe.cos_d()))
+}
+
+/// A coat lobe's curve e^{s_c(θd)} in channel i, the knots from parameter `first`; cos θd =
+/// ωi·h = |ωi + ωo| / 2 for unit directions (as the GGX lobe takes it).
+#[inline(always)]
+pub(super) fn coat_curve<R: Real>(p: Channels, i: usize, first: usize, wi: V3<R>, wo: V3<R>) -> R {
+    factor(&channel_knots(p, i, first), R::splat(0.5) * (wi + wo).length())
 }
 
 /// exp(s) per lane at the cosines `c` (cos θd here, μ under `+body`).
@@ -158,7 +173,7 @@ impl Kernel for GgxFresnel {
             #[inline(always)]
             |wi, wo| GgxLobe::at_in(alpha, eta, wi, wo),
             #[inline(always)]
-            |lobe, i| lobe.scaled_by(R::splat(p.get(i, 0)), factor(&channel_knots(p, i, 3), lobe.cos_d())),
+            |lobe, i| curved(lobe, p, i, 0, 3),
         );
     }
 }
@@ -207,7 +222,7 @@ impl Kernel for FaFresnel {
             #[inline(always)]
             |wi, wo| GgxLobe::at_in(alpha, eta, wi, wo),
             #[inline(always)]
-            |lobe, i| lobe.scaled_by(R::splat(p.get(i, 2)), factor(&channel_knots(p, i, 3), lobe.cos_d())),
+            |lobe, i| curved(lobe, p, i, 2, 3),
         );
     }
 }
@@ -266,9 +281,8 @@ impl Kernel for CoatFresnel {
             out,
             #[inline(always)]
             |wi, wo| ggx_reflection(alpha, wi, wo, wi + wo),
-            // cos θd = ωi·h = |ωi + ωo| / 2 for unit directions (as the GGX lobe takes it).
             #[inline(always)]
-            |i, wi, wo| factor(&channel_knots(p, i, 2), R::splat(0.5) * (wi + wo).length()),
+            |i, wi, wo| coat_curve(p, i, 2, wi, wo),
         );
     }
 }

@@ -19,7 +19,7 @@
 
 use super::coat::blend_block_with;
 use super::fa::aggregate_block_with;
-use super::fresnel::{channel_knots, factor, KS_SCALE};
+use super::fresnel::{coat_curve, curved, KS_SCALE};
 use super::ggx::{lobe_block_with, GgxLobe, ALPHA, ETA};
 use super::kernel::{Kernel, LaneChildren, LaneDir};
 use super::microfacet::MICROFACET_WGSL;
@@ -59,10 +59,7 @@ impl Kernel for GgxNdfFresnel {
             #[inline(always)]
             |wi, wo| GgxLobe::at_with(eta, wi, wo, |m| tab.reflection(wi, wo, m)),
             #[inline(always)]
-            |lobe, i| {
-                let curve = channel_knots(p, i, 3 + NDF_FREE);
-                lobe.scaled_by(R::splat(p.get(i, 0)), factor(&curve, lobe.cos_d()))
-            },
+            |lobe, i| curved(lobe, p, i, 0, 3 + NDF_FREE),
         );
     }
 }
@@ -131,10 +128,7 @@ impl Kernel for FaNdfFresnel {
             #[inline(always)]
             |wi, wo| GgxLobe::at_with(eta, wi, wo, |m| tab.reflection(wi, wo, m)),
             #[inline(always)]
-            |lobe, i| {
-                let curve = channel_knots(p, i, 3 + NDF_FREE);
-                lobe.scaled_by(R::splat(p.get(i, 2)), factor(&curve, lobe.cos_d()))
-            },
+            |lobe, i| curved(lobe, p, i, 2, 3 + NDF_FREE),
         );
     }
 }
@@ -208,12 +202,8 @@ impl Kernel for CoatNdfFresnel {
             out,
             #[inline(always)]
             |wi, wo| tab.reflection(wi, wo, wi + wo),
-            // cos θd = ωi·h = |ωi + ωo| / 2 for unit directions (as `+fresnel`'s coat takes it).
             #[inline(always)]
-            |i, wi, wo| {
-                let curve = channel_knots(p, i, 2 + NDF_FREE);
-                factor(&curve, R::splat(0.5) * (wi + wo).length())
-            },
+            |i, wi, wo| coat_curve(p, i, 2 + NDF_FREE, wi, wo),
         );
     }
 }
@@ -270,6 +260,25 @@ mod tests {
     use super::super::test_support::{assert_suffix_embeds, dir};
     use super::super::Model;
     use rand::{Rng, SeedableRng};
+
+    /// The table the suffixes swap lobes through and what each node declares agree: the
+    /// form handed out for a place and a set of tabulated factors declares that place
+    /// and those factors (a node declaring another would be swapped for the wrong form).
+    #[test]
+    fn every_lobe_form_declares_what_the_table_hands_it_out_for() {
+        use super::super::{registry::ggx_form, GgxPlace, Tabulated};
+        for place in [GgxPlace::Ggx, GgxPlace::Aggregate, GgxPlace::Coat] {
+            for (ndf, fresnel) in [(false, false), (true, false), (false, true), (true, true)] {
+                let tabulated = Tabulated { ndf, fresnel };
+                let form = ggx_form(place, tabulated);
+                assert_eq!(
+                    form.ggx_lobe(),
+                    Some((place, tabulated)),
+                    "{place:?} {tabulated:?}: {form:?}"
+                );
+            }
+        }
+    }
 
     /// At s = 0 the form is `M+ndf` value for value (`M+ndf+fresnel` embeds `M+ndf`, and so
     /// M within `+ndf`'s own table error), and `M+fresnel+ndf` is the same model as
