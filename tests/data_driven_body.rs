@@ -165,6 +165,7 @@ fn diagnose_names_the_bodys_profile() {
         if name == "minnaert" {
             assert_eq!(d.final_model, "fa(lambert)+body", "{name}");
         }
+        report_pictures_the_profile(&data, &d);
         // Within the noise: 1 ± 4√(2/ν), ν ≈ the samples.
         let chi2_red = d.steps.last().unwrap().chi2_red;
         let noise = 4.0 * (2.0 / data.len() as f64).sqrt();
@@ -172,5 +173,53 @@ fn diagnose_names_the_bodys_profile() {
             (chi2_red - 1.0).abs() < noise,
             "{name}: final χ²_red {chi2_red}"
         );
+    }
+}
+
+/// The diagnosis's report pictures the fitted profile of each step with `+body`
+/// (`factors_<step>.svg`, with the smoothness prior's weight stated beside it) and of no
+/// other step; the body's panel holds the knots the data see, their band, and the
+/// analytic reference ρ ≡ 1 of the base.
+fn report_pictures_the_profile(
+    data: &bsdfit::data::Dataset,
+    d: &bsdfit::workflows::diagnose::Diagnosis,
+) {
+    use bsdfit::workflows::diagnose::{factor_panels, write_report};
+    let dir = tempfile::tempdir().unwrap();
+    write_report(dir.path(), data, d).unwrap();
+    let html = std::fs::read_to_string(dir.path().join("index.html")).unwrap();
+    for (i, s) in d.steps.iter().enumerate() {
+        let picture = dir.path().join(format!("factors_{i}.svg"));
+        let has_body = s.model.contains("+body");
+        assert_eq!(picture.exists(), has_body, "step {i}: {}", s.model);
+        if !has_body {
+            continue;
+        }
+        let svg = std::fs::read_to_string(&picture).unwrap();
+        assert!(svg.contains("profile"), "step {i}: the panel's title");
+        assert!(html.contains(&format!("factors_{i}.svg")));
+        assert!(html.contains("σ_s = "), "the prior's weight is stated");
+        let panels = factor_panels(data, &s.fit, None);
+        let bodies: Vec<_> = panels
+            .iter()
+            .filter(|p| p.title.ends_with("the body's profile"))
+            .collect();
+        assert_eq!(bodies.len(), 1, "one body, one panel, in {}", s.model);
+        let series = &bodies[0].series;
+        let measured = &series[0].points;
+        assert!(measured.len() >= 6, "{} knots measured", measured.len());
+        // The +2σ band over the measured knots, above them.
+        let upper = &series[2].curve;
+        assert_eq!(
+            upper.len(),
+            measured.len(),
+            "a band over the measured knots"
+        );
+        assert!(upper
+            .iter()
+            .zip(measured)
+            .all(|(b, m)| b.1 >= m.1 && b.1.is_finite()));
+        let reference = &series.last().unwrap().curve;
+        assert!(!reference.is_empty() && reference.iter().all(|p| p.1 == 1.0));
     }
 }

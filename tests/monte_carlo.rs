@@ -90,7 +90,8 @@ fn coverage(case: &Case, sets: u64, replicas: usize) -> (Vec<Check>, Vec<McSumma
             &mc,
             &mut |_| {},
         )
-        .unwrap();
+        .unwrap()
+        .0;
         assert_eq!(
             s.converged, replicas,
             "{}: every replica refitted",

@@ -4,12 +4,292 @@
 //! θd) and the diffuse body's profile of one with `+body` ([`crate::bsdf::body`]: ρ(θ) at
 //! each knot's θ), each with the standard uncertainty of its logarithm propagated from the
 //! fit's covariance with the smoothness prior's information, and whether the data see the
-//! lobe (or the body) there or the prior sets it.
+//! lobe (or the body) there or the prior sets it. With Monte Carlo replicas (`fit --mc`),
+//! each knot also gets the replicas' spread ([`KnotMc`], [`mc_bands`]).
 
-use crate::bsdf::ndf::{knot_angle, knot_degrees, NdfTable, KNOTS};
+use crate::bsdf::ndf::{knot_angle, NdfTable, KNOTS};
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::inference::covariance::Covariance;
+use crate::inference::mc_summary::{shortest_interval, COVERAGE};
+use std::ops::Range;
+
+/// Which tabulated factor a [`Factor`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FactorKind {
+    Ndf,
+    Fresnel,
+    Body,
+}
+
+/// One tabulated factor of a model, located in its flat parameter vector: its knots'
+/// stem (`ndf`, `lobe.ndf`, `ndf_c`; `fresnel`, `lobe.fresnel`, `fresnel_c`; `body`,
+/// `base.body`), the channel for a per-channel Fresnel curve, and the flat indices its
+/// value at the knots depends on.
+#[derive(Clone, Debug)]
+pub struct Factor {
+    pub kind: FactorKind,
+    pub name: String,
+    pub channel: Option<usize>,
+    /// The amplitude whose part of the fitted value is the factor's signal (k_s, k_c or
+    /// the body's albedo ρ, all channels).
+    amplitude: Range<usize>,
+    inputs: Inputs,
+}
+
+/// The flat indices a factor's value at its knots is computed from.
+#[derive(Clone, Debug)]
+enum Inputs {
+    /// α, then the knots 1..K (knot 0 is 0 by the table's normalisation).
+    Ndf { alpha: usize, knots: Vec<usize> },
+    /// The amplitude k_s (this channel), η of the reference curve (a coat's is F ≡ 1),
+    /// then the knots 1..K.
+    Fresnel {
+        ks: usize,
+        eta: Option<usize>,
+        knots: Vec<usize>,
+    },
+    /// The knots 1..K (ρ(0) = 1).
+    Body { knots: Vec<usize> },
+}
+
+impl Factor {
+    /// Every tabulated factor of `model`: its NDFs, then its Fresnel curves (channel by
+    /// channel), then its body profiles, each in the order of the model's parameters.
+    pub fn all(model: &Model) -> Vec<Factor> {
+        let find = |name: &str| model.params.iter().find(|p| p.name == name);
+        let knots_of = |stem: &str, count: usize| {
+            (1..count)
+                .map(|k| find(&format!("{stem}{k}")))
+                .collect::<Option<Vec<_>>>()
+        };
+        let range = |p: &crate::bsdf::FlatParam| p.index..p.index + p.width(model.channels);
+        let knotted = || model.params.iter().filter(|p| p.decl.knot);
+        let mut out = Vec::new();
+        // The lobes: the knots' stem, the roughness and the amplitude (`ggx`, `fa`'s
+        // highlight under `lobe.`, and a coat's).
+        const NDF_LOBES: [(&str, &str, &str); 2] =
+            [("ndf", "alpha", "ks"), ("ndf_c", "alpha_c", "kc")];
+        for p in knotted() {
+            let Some((stem, alpha, ks, prefix)) = NDF_LOBES
+                .iter()
+                .find_map(|&(s, a, k)| Some((s, a, k, p.name.strip_suffix(&format!("{s}1"))?)))
+            else {
+                continue;
+            };
+            let name = format!("{prefix}{stem}");
+            if let (Some(alpha), Some(ks), Some(knots)) = (
+                find(&format!("{prefix}{alpha}")),
+                find(&format!("{prefix}{ks}")),
+                knots_of(&name, KNOTS),
+            ) {
+                out.push(Factor {
+                    kind: FactorKind::Ndf,
+                    name,
+                    channel: None,
+                    amplitude: range(ks),
+                    inputs: Inputs::Ndf {
+                        alpha: alpha.index,
+                        knots: knots.iter().map(|q| q.index).collect(),
+                    },
+                });
+            }
+        }
+        // The lobes: the knots' stem, the amplitude and the reference curve's η (`ggx`,
+        // `fa`'s highlight under `lobe.`; a coat's reference is F ≡ 1).
+        const FRESNEL_LOBES: [(&str, &str, Option<&str>); 2] =
+            [("fresnel", "ks", Some("eta")), ("fresnel_c", "kc", None)];
+        let fresnel_knots = crate::bsdf::fresnel::KNOTS;
+        for p in knotted() {
+            let Some((stem, ks, eta, prefix)) = FRESNEL_LOBES
+                .iter()
+                .find_map(|&(s, k, e)| Some((s, k, e, p.name.strip_suffix(&format!("{s}1"))?)))
+            else {
+                continue;
+            };
+            let name = format!("{prefix}{stem}");
+            let (Some(ks), Some(knots)) = (
+                find(&format!("{prefix}{ks}")),
+                knots_of(&name, fresnel_knots),
+            ) else {
+                continue;
+            };
+            let eta = eta.and_then(|e| find(&format!("{prefix}{e}")));
+            for c in 0..model.channels {
+                // A per-channel parameter's value in channel c.
+                let at = |q: &crate::bsdf::FlatParam| {
+                    q.index + if q.width(model.channels) > 1 { c } else { 0 }
+                };
+                out.push(Factor {
+                    kind: FactorKind::Fresnel,
+                    name: name.clone(),
+                    channel: Some(c),
+                    amplitude: range(ks),
+                    inputs: Inputs::Fresnel {
+                        ks: at(ks),
+                        eta: eta.map(|e| e.index),
+                        knots: knots.iter().map(|q| at(q)).collect(),
+                    },
+                });
+            }
+        }
+        for p in knotted() {
+            let Some(prefix) = p.name.strip_suffix("body1") else {
+                continue;
+            };
+            let name = format!("{prefix}body");
+            if let (Some(rho), Some(knots)) = (
+                find(&format!("{prefix}rho")),
+                knots_of(&name, crate::bsdf::fresnel::KNOTS),
+            ) {
+                out.push(Factor {
+                    kind: FactorKind::Body,
+                    name,
+                    channel: None,
+                    amplitude: range(rho),
+                    inputs: Inputs::Body {
+                        knots: knots.iter().map(|q| q.index).collect(),
+                    },
+                });
+            }
+        }
+        out
+    }
+
+    /// The flat indices of the analytic parameters the factor's value depends on besides
+    /// its knots (α; k_s and η; none for a body).
+    pub fn analytic_inputs(&self) -> Vec<usize> {
+        match &self.inputs {
+            Inputs::Ndf { alpha, .. } => vec![*alpha],
+            Inputs::Fresnel { ks, eta, .. } => std::iter::once(*ks).chain(*eta).collect(),
+            Inputs::Body { .. } => vec![],
+        }
+    }
+
+    /// The flat indices the factor's value depends on.
+    fn input_indices(&self) -> Vec<usize> {
+        match &self.inputs {
+            Inputs::Ndf { alpha, knots } => std::iter::once(*alpha).chain(knots.clone()).collect(),
+            Inputs::Fresnel { ks, eta, knots } => std::iter::once(*ks)
+                .chain(*eta)
+                .chain(knots.clone())
+                .collect(),
+            Inputs::Body { knots } => knots.clone(),
+        }
+    }
+
+    /// The logarithm of the factor at each knot, for the flat parameters `flat`: ln D
+    /// (normalised), ln k_s F(θd; η) e^{s(θd)}, or ln ρ(θ) = s(θ).
+    pub fn ln_values(&self, flat: &[f64]) -> Vec<f64> {
+        // A knot's value, knot 0 being 0 by the tables' normalisation.
+        let knot = |knots: &[usize], k: usize| if k == 0 { 0.0 } else { flat[knots[k - 1]] };
+        match &self.inputs {
+            Inputs::Ndf { alpha, knots } => {
+                let s: [f64; KNOTS] = std::array::from_fn(|k| knot(knots, k));
+                let table = NdfTable::new(flat[*alpha], s);
+                (0..KNOTS)
+                    .map(|k| {
+                        // At 90° D is its limit from above (d is 0 at m.z = 0, below the
+                        // surface).
+                        let (c, s2) = knot_angle(k);
+                        table.d(glam::DVec3::new(s2.sqrt(), 0.0, c.max(1e-9))).ln()
+                    })
+                    .collect()
+            }
+            Inputs::Fresnel { ks, eta, knots } => {
+                let count = knots.len() + 1;
+                (0..count)
+                    .map(|k| {
+                        let cos = 1.0 - k as f64 / (count - 1) as f64;
+                        // ln F(cos θd; η) of the reference curve (0 for a coat's F ≡ 1).
+                        let ln_f =
+                            eta.map_or(0.0, |e| crate::math::fresnel_dielectric(cos, flat[e]).ln());
+                        flat[*ks].ln() + ln_f + knot(knots, k)
+                    })
+                    .collect()
+            }
+            Inputs::Body { knots } => (0..=knots.len()).map(|k| knot(knots, k)).collect(),
+        }
+    }
+
+    /// The knots' angles in degrees (θm, θd or θ).
+    pub fn degrees(&self) -> Vec<f64> {
+        match self.kind {
+            FactorKind::Ndf => crate::bsdf::ndf::knot_degrees().to_vec(),
+            FactorKind::Fresnel | FactorKind::Body => crate::bsdf::fresnel::knot_degrees().to_vec(),
+        }
+    }
+
+    /// The values at the knots (`ln_values` exponentiated) with the standard uncertainty
+    /// of each one's logarithm propagated from the covariance with the prior's
+    /// information (central differences in the factor's inputs).
+    fn values_and_sd(&self, flat: &[f64], cov: &Covariance) -> Vec<(f64, Option<f64>)> {
+        let at = self.ln_values(flat);
+        let grads: Vec<(usize, Vec<f64>)> = self
+            .input_indices()
+            .into_iter()
+            .map(|j| {
+                let h = 1e-6 * flat[j].abs().max(1e-3);
+                let (mut up, mut down) = (flat.to_vec(), flat.to_vec());
+                up[j] += h;
+                down[j] -= h;
+                let (up, down) = (self.ln_values(&up), self.ln_values(&down));
+                (
+                    j,
+                    up.iter()
+                        .zip(&down)
+                        .map(|(u, d)| (u - d) / (2.0 * h))
+                        .collect(),
+                )
+            })
+            .collect();
+        at.iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let g: Vec<(usize, f64)> = grads.iter().map(|(j, d)| (*j, d[k])).collect();
+                (v.exp(), propagated_sd(cov, &g))
+            })
+            .collect()
+    }
+}
+
+/// The spread of a knot's value over Monte Carlo replicas (`fit --mc N`): the standard
+/// deviation of its logarithm and the 95 % shortest interval of the value.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct KnotMc {
+    /// Standard deviation of the logarithm over the replicas.
+    pub sd_ln: f64,
+    /// 95 % shortest coverage interval of the value [lo, hi].
+    pub interval: [f64; 2],
+}
+
+/// Each factor's knots' spread over the refitted replicas `replicas` (flat vectors of
+/// `model`), in the order of [`Factor::all`].
+pub fn mc_bands(model: &Model, replicas: &[Vec<f64>]) -> Vec<(Factor, Vec<KnotMc>)> {
+    Factor::all(model)
+        .into_iter()
+        .map(|f| {
+            let lns: Vec<Vec<f64>> = replicas.iter().map(|r| f.ln_values(r)).collect();
+            let knots = (0..lns.first().map_or(0, Vec::len))
+                .map(|k| {
+                    let mut col: Vec<f64> =
+                        lns.iter().map(|v| v[k]).filter(|v| v.is_finite()).collect();
+                    let n = col.len() as f64;
+                    let mean = col.iter().sum::<f64>() / n;
+                    let sd =
+                        (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+                    col.sort_by(f64::total_cmp);
+                    let [lo, hi] = shortest_interval(&col, COVERAGE);
+                    KnotMc {
+                        sd_ln: sd,
+                        interval: [lo.exp(), hi.exp()],
+                    }
+                })
+                .collect();
+            (f, knots)
+        })
+        .collect()
+}
 
 /// One knot of a fitted data-driven NDF, for reports: the normalised D at the knot's
 /// angle with its standard uncertainty in ln D, and whether the data see the lobe there.
@@ -32,6 +312,9 @@ pub struct KnotBand {
     /// knot. Else the smoothness prior sets it (no half vectors there, or a lobe too faint
     /// against the uncertainties), and D there is not measured.
     pub measured: bool,
+    /// The spread of D(θ_k) over Monte Carlo replicas (`fit --mc N`; absent without).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mc: Option<KnotMc>,
 }
 
 /// The lobe's signal near a knot from which D there counts as measured: a 3σ detection.
@@ -39,6 +322,29 @@ pub struct KnotBand {
 /// lobe shows a signal of about 1 to 3, the square root of the few degrees of freedom it
 /// took.)
 pub const MEASURED_SIGNAL: f64 = 3.0;
+
+/// The signal near each knot: √Σ z² over the samples whose angle (`angles` picks the
+/// sample's one or two angles, degrees) lies between the knot's neighbours.
+fn signal_at_knots(
+    degrees: &[f64],
+    samples: &[FactorSample],
+    angles: impl Fn(&FactorSample) -> [f64; 2],
+) -> Vec<f64> {
+    (0..degrees.len())
+        .map(|k| {
+            // From the normal for the first knot, to the last knot for the last.
+            let (lo, hi) = (
+                degrees[k.saturating_sub(1)],
+                degrees[(k + 1).min(degrees.len() - 1)],
+            );
+            samples
+                .iter()
+                .filter(|s| angles(s).iter().any(|a| (lo..=hi).contains(a)))
+                .fold(0.0, |a, s| a + s.z * s.z)
+                .sqrt()
+        })
+        .collect()
+}
 
 /// The fitted D at the knots of each data-driven NDF of `model` fitted to `data` (one
 /// list per lobe `+ndf` made data-driven, named by its knots' stem: `ndf` in `ggx+ndf`,
@@ -49,101 +355,29 @@ pub fn bands(
     flat: &[f64],
     cov: &Covariance,
 ) -> Vec<(String, Vec<KnotBand>)> {
-    let find = |name: &str| model.params.iter().find(|p| p.name == name);
-    let mut out = Vec::new();
-    // The lobes' names: the knots' stem, the roughness and the amplitude (`ggx`, `fa`'s
-    // highlight under `lobe.`, and a coat's).
-    const LOBES: [(&str, &str, &str); 2] = [("ndf", "alpha", "ks"), ("ndf_c", "alpha_c", "kc")];
-    for p in model.params.iter().filter(|p| p.decl.knot) {
-        let Some((stem, alpha, ks, prefix)) = LOBES.iter().find_map(|&(stem, alpha, ks)| {
-            let prefix = p.name.strip_suffix(&format!("{stem}1"))?;
-            Some((stem, alpha, ks, prefix.to_string()))
-        }) else {
-            continue;
-        };
-        let (Some(alpha), Some(ks)) = (
-            find(&format!("{prefix}{alpha}")),
-            find(&format!("{prefix}{ks}")),
-        ) else {
-            continue;
-        };
-        let Some(knots) = (1..KNOTS)
-            .map(|k| find(&format!("{prefix}{stem}{k}")).map(|q| q.index))
-            .collect::<Option<Vec<usize>>>()
-        else {
-            continue;
-        };
-        let name = format!("{prefix}{stem}");
-        let params: Vec<usize> = std::iter::once(alpha.index)
-            .chain(knots.iter().copied())
-            .collect();
-        // ln D at every knot from one table of (α, knots).
-        let ln_d = |v: &[f64]| -> [f64; KNOTS] {
-            let s: [f64; KNOTS] = std::array::from_fn(|i| if i == 0 { 0.0 } else { v[i] });
-            let table = NdfTable::new(v[0], s);
-            std::array::from_fn(|k| {
-                // At 90° D is its limit from above (d is 0 at m.z = 0, below the surface).
-                let (c, s2) = knot_angle(k);
-                table.d(glam::DVec3::new(s2.sqrt(), 0.0, c.max(1e-9))).ln()
-            })
-        };
-        let values: Vec<f64> = params.iter().map(|&j| flat[j]).collect();
-        let at = ln_d(&values);
-        // ∂ ln D(θ_k) / ∂ parameter a, by central differences in α and the knots, through N.
-        let grad: Vec<[f64; KNOTS]> = (0..params.len())
-            .map(|a| {
-                let h = 1e-6 * values[a].abs().max(1e-3);
-                let (mut up, mut down) = (values.clone(), values.clone());
-                up[a] += h;
-                down[a] -= h;
-                let (up, down) = (ln_d(&up), ln_d(&down));
-                std::array::from_fn(|k| (up[k] - down[k]) / (2.0 * h))
-            })
-            .collect();
-        let signal: Vec<(f64, f64)> = lobe_signal(
-            model,
-            data,
-            flat,
-            ks.index..ks.index + ks.width(model.channels),
-        )
+    Factor::all(model)
         .into_iter()
-        .map(|s| (s.theta_h_deg, s.z))
-        .collect();
-        let degrees = knot_degrees();
-        let rows = (0..KNOTS)
-            .map(|k| {
-                let g: Vec<(usize, f64)> = params
-                    .iter()
-                    .enumerate()
-                    .map(|(a, &j)| (j, grad[a][k]))
-                    .collect();
-                let sigma = propagated_sd(cov, &g);
-                let (lo, hi) = neighbours(&degrees, k);
-                let s2: f64 = signal
-                    .iter()
-                    .filter(|(deg, _)| *deg >= lo && *deg <= hi)
-                    .fold(0.0, |a, (_, z)| a + z * z);
-                KnotBand {
-                    theta_deg: degrees[k],
-                    d: at[k].exp(),
+        .filter(|f| f.kind == FactorKind::Ndf)
+        .map(|f| {
+            let samples = factor_samples(model, data, flat, f.amplitude.clone());
+            let signal = signal_at_knots(&f.degrees(), &samples, |s| [s.theta_h_deg; 2]);
+            let rows = f
+                .values_and_sd(flat, cov)
+                .into_iter()
+                .zip(f.degrees())
+                .zip(signal)
+                .map(|(((d, sigma), theta_deg), signal)| KnotBand {
+                    theta_deg,
+                    d,
                     sigma_ln_d: sigma,
-                    signal: s2.sqrt(),
-                    measured: s2.sqrt() >= MEASURED_SIGNAL,
-                }
-            })
-            .collect();
-        out.push((name, rows));
-    }
-    out
-}
-
-/// The angles of knot k's neighbours (from the normal for the first, to the last knot for
-/// the last): a sample between them counts toward the knot's signal.
-fn neighbours(degrees: &[f64], k: usize) -> (f64, f64) {
-    (
-        degrees[k.saturating_sub(1)],
-        degrees[(k + 1).min(degrees.len() - 1)],
-    )
+                    signal,
+                    measured: signal >= MEASURED_SIGNAL,
+                    mc: None,
+                })
+                .collect();
+            (f.name, rows)
+        })
+        .collect()
 }
 
 /// The standard uncertainty of a quantity whose gradient is `grad` ((flat index,
@@ -160,38 +394,43 @@ fn propagated_sd(cov: &Covariance, grad: &[(usize, f64)]) -> Option<f64> {
     })
 }
 
-/// One sample's view of the highlight: the half vector's angle θh and the angle θd
-/// between ωi and it (degrees), the sample's channel, and the highlight's part of the
-/// fitted value in units of the sample's uncertainty, f − f(k_s = 0) (the lobe is k_s
-/// times a kernel; what remains at k_s = 0 is the rest of the model).
-struct LobeSample {
+/// One sample's view of a factor: the half vector's angle θh, the angle θd between ωi and
+/// it, |θi| and |θo| (degrees), the sample's channel, and the factor's part of the fitted
+/// value in units of the sample's uncertainty, f − f(amplitude = 0) (the lobe is k_s times
+/// a kernel, the body ρ times one; what remains at 0 is the rest of the model).
+#[derive(Clone, Copy)]
+struct FactorSample {
     theta_h_deg: f64,
     theta_d_deg: f64,
+    theta_i_deg: f64,
+    theta_o_deg: f64,
     channel: usize,
     z: f64,
 }
 
-fn lobe_signal(
+fn factor_samples(
     model: &Model,
     data: &Dataset,
     flat: &[f64],
-    ks: std::ops::Range<usize>,
-) -> Vec<LobeSample> {
+    amplitude: Range<usize>,
+) -> Vec<FactorSample> {
     let mut off = flat.to_vec();
-    off[ks].fill(0.0);
+    off[amplitude].fill(0.0);
     data.samples
         .iter()
         .map(|s| {
             let (wi, wo) = (s.wi(), s.wo());
             let g = model.group_of(s);
-            let lobe = model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo);
+            let part = model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo);
             let h = wi + wo;
             let cos_d = (wi.dot(h) / h.length().max(1e-300)).clamp(-1.0, 1.0);
-            LobeSample {
+            FactorSample {
                 theta_h_deg: (h.x.hypot(h.y)).atan2(h.z).to_degrees(),
                 theta_d_deg: cos_d.acos().to_degrees(),
+                theta_i_deg: s.theta_i.abs().to_degrees(),
+                theta_o_deg: s.theta_o.abs().to_degrees(),
                 channel: s.channel,
-                z: lobe / s.uncertainty,
+                z: part / s.uncertainty,
             }
         })
         .collect()
@@ -213,6 +452,9 @@ pub struct FresnelBand {
     pub signal: f64,
     /// Whether that signal is at least [`MEASURED_SIGNAL`].
     pub measured: bool,
+    /// The spread of f over Monte Carlo replicas, as [`KnotBand::mc`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mc: Option<KnotMc>,
 }
 
 /// The fitted Fresnel curve of each lobe `+fresnel` made data-driven, per channel: (the
@@ -224,82 +466,42 @@ pub fn fresnel_bands(
     flat: &[f64],
     cov: &Covariance,
 ) -> Vec<(String, usize, Vec<FresnelBand>)> {
-    use crate::bsdf::fresnel::{knot_degrees, KNOTS};
-    let find = |name: &str| model.params.iter().find(|p| p.name == name);
-    let degrees = knot_degrees();
-    let mut out = Vec::new();
-    // The lobes: the knots' stem, the amplitude and the index of the reference curve
-    // (`ggx`, `fa`'s highlight under `lobe.`; a coat's reference is F ≡ 1).
-    const LOBES: [(&str, &str, Option<&str>); 2] =
-        [("fresnel", "ks", Some("eta")), ("fresnel_c", "kc", None)];
-    for p in model.params.iter().filter(|p| p.decl.knot) {
-        let Some((stem, ks, eta, prefix)) = LOBES.iter().find_map(|&(stem, ks, eta)| {
-            let prefix = p.name.strip_suffix(&format!("{stem}1"))?;
-            Some((stem, ks, eta, prefix.to_string()))
-        }) else {
-            continue;
-        };
-        let Some(ks) = find(&format!("{prefix}{ks}")) else {
-            continue;
-        };
-        let eta = eta.and_then(|e| find(&format!("{prefix}{e}")));
-        let Some(knots) = (1..KNOTS)
-            .map(|k| find(&format!("{prefix}{stem}{k}")))
-            .collect::<Option<Vec<_>>>()
-        else {
-            continue;
-        };
-        let signal = lobe_signal(
-            model,
-            data,
-            flat,
-            ks.index..ks.index + ks.width(model.channels),
-        );
-        let eta_v = eta.map(|e| flat[e.index]);
-        // ln F(cos θ; η) of the reference curve (0 for a coat's F ≡ 1).
-        let ln_fresnel = |c: f64, eta: Option<f64>| {
-            eta.map_or(0.0, |eta| crate::math::fresnel_dielectric(c, eta).ln())
-        };
-        for c in 0..model.channels {
-            let at = |q: &crate::bsdf::FlatParam| {
-                q.index + if q.width(model.channels) > 1 { c } else { 0 }
-            };
-            let rows = (0..KNOTS)
-                .map(|k| {
-                    let cos = 1.0 - k as f64 / (KNOTS - 1) as f64;
-                    let s_k = if k == 0 { 0.0 } else { flat[at(knots[k - 1])] };
-                    let ks_v = flat[at(ks)];
-                    let ln_f = ks_v.ln() + ln_fresnel(cos, eta_v) + s_k;
-                    // ∂ ln f: 1/k_s, ∂ ln F/∂η, and 1 for the knot's own value.
-                    let mut grad = vec![(at(ks), 1.0 / ks_v)];
-                    if let (Some(eta), Some(v)) = (eta, eta_v) {
-                        let h = 1e-6 * v;
-                        let slope = (ln_fresnel(cos, Some(v + h)) - ln_fresnel(cos, Some(v - h)))
-                            / (2.0 * h);
-                        grad.push((eta.index, slope));
-                    }
-                    if k > 0 {
-                        grad.push((at(knots[k - 1]), 1.0));
-                    }
-                    let sigma = propagated_sd(cov, &grad);
-                    let (lo, hi) = neighbours(&degrees, k);
-                    let s2: f64 = signal
-                        .iter()
-                        .filter(|s| s.channel == c && s.theta_d_deg >= lo && s.theta_d_deg <= hi)
-                        .fold(0.0, |a, s| a + s.z * s.z);
-                    FresnelBand {
-                        theta_deg: degrees[k],
-                        f: ln_f.exp(),
-                        sigma_ln_f: sigma,
-                        signal: s2.sqrt(),
-                        measured: s2.sqrt() >= MEASURED_SIGNAL,
-                    }
+    let factors: Vec<Factor> = Factor::all(model)
+        .into_iter()
+        .filter(|f| f.kind == FactorKind::Fresnel)
+        .collect();
+    // One evaluation of the lobe's part per lobe, shared by its channels.
+    let mut samples: Option<(String, Vec<FactorSample>)> = None;
+    factors
+        .into_iter()
+        .map(|f| {
+            let c = f.channel.unwrap_or(0);
+            if samples.as_ref().is_none_or(|(n, _)| *n != f.name) {
+                let s = factor_samples(model, data, flat, f.amplitude.clone());
+                samples = Some((f.name.clone(), s));
+            }
+            let own: Vec<FactorSample> = samples
+                .as_ref()
+                .map(|(_, s)| s.iter().filter(|s| s.channel == c).copied().collect())
+                .unwrap_or_default();
+            let signal = signal_at_knots(&f.degrees(), &own, |s| [s.theta_d_deg; 2]);
+            let rows = f
+                .values_and_sd(flat, cov)
+                .into_iter()
+                .zip(f.degrees())
+                .zip(signal)
+                .map(|(((v, sigma), theta_deg), signal)| FresnelBand {
+                    theta_deg,
+                    f: v,
+                    sigma_ln_f: sigma,
+                    signal,
+                    measured: signal >= MEASURED_SIGNAL,
+                    mc: None,
                 })
                 .collect();
-            out.push((format!("{prefix}{stem}"), c, rows));
-        }
-    }
-    out
+            (f.name, c, rows)
+        })
+        .collect()
 }
 
 /// One knot of a fitted data-driven body profile (`+body`), for reports: ρ(θ) at the
@@ -320,6 +522,9 @@ pub struct BodyBand {
     pub signal: f64,
     /// Whether that signal is at least [`MEASURED_SIGNAL`].
     pub measured: bool,
+    /// The spread of ρ over Monte Carlo replicas, as [`KnotBand::mc`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mc: Option<KnotMc>,
 }
 
 /// The fitted profile of each diffuse base `+body` reshaped: (the knots' stem — `body`,
@@ -330,63 +535,95 @@ pub fn body_bands(
     flat: &[f64],
     cov: &Covariance,
 ) -> Vec<(String, Vec<BodyBand>)> {
-    use crate::bsdf::fresnel::{knot_degrees, KNOTS};
-    let find = |name: &str| model.params.iter().find(|p| p.name == name);
-    let degrees = knot_degrees();
-    let mut out = Vec::new();
-    for p in model.params.iter().filter(|p| p.decl.knot) {
-        let Some(prefix) = p.name.strip_suffix("body1") else {
-            continue;
-        };
-        let (Some(rho), Some(knots)) = (
-            find(&format!("{prefix}rho")),
-            (1..KNOTS)
-                .map(|k| find(&format!("{prefix}body{k}")).map(|q| q.index))
-                .collect::<Option<Vec<usize>>>(),
-        ) else {
-            continue;
-        };
-        // The body's part of each sample's value, in units of its uncertainty.
-        let mut off = flat.to_vec();
-        off[rho.index..rho.index + rho.width(model.channels)].fill(0.0);
-        let body: Vec<(f64, f64, f64)> = data
-            .samples
-            .iter()
-            .map(|s| {
-                let (wi, wo) = (s.wi(), s.wo());
-                let g = model.group_of(s);
-                let z = (model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo)) / s.uncertainty;
-                (
-                    s.theta_i.abs().to_degrees(),
-                    s.theta_o.abs().to_degrees(),
-                    z,
-                )
-            })
-            .collect();
-        let rows = (0..KNOTS)
-            .map(|k| {
-                let s_k = if k == 0 { 0.0 } else { flat[knots[k - 1]] };
-                let grad: Vec<(usize, f64)> = if k == 0 {
-                    vec![]
-                } else {
-                    vec![(knots[k - 1], 1.0)]
-                };
-                let (lo, hi) = neighbours(&degrees, k);
-                let near = |t: f64| t >= lo && t <= hi;
-                let s2: f64 = body
-                    .iter()
-                    .filter(|(ti, to, _)| near(*ti) || near(*to))
-                    .fold(0.0, |a, (_, _, z)| a + z * z);
-                BodyBand {
-                    theta_deg: degrees[k],
-                    rho: s_k.exp(),
-                    sigma_ln_rho: propagated_sd(cov, &grad),
-                    signal: s2.sqrt(),
-                    measured: s2.sqrt() >= MEASURED_SIGNAL,
+    Factor::all(model)
+        .into_iter()
+        .filter(|f| f.kind == FactorKind::Body)
+        .map(|f| {
+            let samples = factor_samples(model, data, flat, f.amplitude.clone());
+            let signal =
+                signal_at_knots(&f.degrees(), &samples, |s| [s.theta_i_deg, s.theta_o_deg]);
+            let rows = f
+                .values_and_sd(flat, cov)
+                .into_iter()
+                .zip(f.degrees())
+                .zip(signal)
+                .map(|(((rho, sigma), theta_deg), signal)| BodyBand {
+                    theta_deg,
+                    rho,
+                    sigma_ln_rho: sigma,
+                    signal,
+                    measured: signal >= MEASURED_SIGNAL,
+                    mc: None,
+                })
+                .collect();
+            (f.name, rows)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Replicas whose knots alternate ± δ about the fit give each knot's logarithm the
+    /// spread δ √(n/(n − 1)): the NDF's through its table, each Fresnel channel's its own
+    /// (channel 1 twice channel 0's), the body's, and 0 where the tables fix the value
+    /// (the body's ρ(0) = 1).
+    #[test]
+    fn monte_carlo_spread_of_each_factor_follows_its_knots() {
+        let model = Model::parse("fa(lambert)+fresnel+body", 2).unwrap();
+        let mut best = vec![0.0; model.dim];
+        for p in &model.params {
+            let w = p.width(model.channels);
+            let v = if p.decl.knot {
+                0.0
+            } else {
+                0.5 * (p.decl.lo + p.decl.hi)
+            };
+            best[p.index..p.index + w].fill(v);
+        }
+        let n = 40;
+        let delta = 0.1;
+        let replicas: Vec<Vec<f64>> = (0..n)
+            .map(|r| {
+                let sign = if r % 2 == 0 { 1.0 } else { -1.0 };
+                let mut flat = best.clone();
+                for p in model.params.iter().filter(|p| p.decl.knot) {
+                    for c in 0..p.width(model.channels) {
+                        flat[p.index + c] = sign * delta * (1 + c) as f64;
+                    }
                 }
+                flat
             })
             .collect();
-        out.push((format!("{prefix}body"), rows));
+        let bands = mc_bands(&model, &replicas);
+        let kinds: Vec<(FactorKind, &str, Option<usize>)> = bands
+            .iter()
+            .map(|(f, _)| (f.kind, f.name.as_str(), f.channel))
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                (FactorKind::Fresnel, "lobe.fresnel", Some(0)),
+                (FactorKind::Fresnel, "lobe.fresnel", Some(1)),
+                (FactorKind::Body, "base.body", None),
+            ]
+        );
+        let expected = delta * (n as f64 / (n as f64 - 1.0)).sqrt();
+        for (f, knots) in &bands {
+            let scale = (1 + f.channel.unwrap_or(0)) as f64;
+            for (k, m) in knots.iter().enumerate() {
+                let want = if k == 0 { 0.0 } else { expected * scale };
+                assert!(
+                    (m.sd_ln - want).abs() < 1e-9,
+                    "{} {:?} knot {k}: {} against {want}",
+                    f.name,
+                    f.channel,
+                    m.sd_ln
+                );
+                let centre = f.ln_values(&best)[k];
+                assert!(m.interval[0] <= centre.exp() && centre.exp() <= m.interval[1]);
+            }
+        }
     }
-    out
 }

@@ -21,7 +21,7 @@ use crate::data::Dataset;
 use crate::engine::loss::{Loss, Term};
 use crate::engine::Backend;
 use crate::inference::fit::{fit_many, FitOptions, ManyStats};
-pub use crate::inference::mc_summary::{McParam, McSummary};
+pub use crate::inference::mc_summary::{shortest_interval, McParam, McSummary, COVERAGE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -30,8 +30,6 @@ use std::time::Instant;
 /// Monte Carlo and linearized standard deviations that differ by more than this factor
 /// (either way) get a warning.
 pub const DISAGREEMENT: f64 = 1.5;
-/// Coverage probability of the reported intervals.
-pub const COVERAGE: f64 = 0.95;
 
 #[derive(Clone, Debug)]
 pub struct McOptions {
@@ -85,25 +83,11 @@ impl<'a> ReplicaSource<'a> {
     }
 }
 
-/// Shortest interval holding `p` of the sorted values (JCGM 101 §7.7.2).
-pub fn shortest_interval(sorted: &[f64], p: f64) -> [f64; 2] {
-    let n = sorted.len();
-    if n == 0 {
-        return [f64::NAN, f64::NAN];
-    }
-    let q = ((p * n as f64).round() as usize).clamp(1, n);
-    let mut best = [sorted[0], sorted[q - 1]];
-    for i in 0..=n - q {
-        if sorted[i + q - 1] - sorted[i] < best[1] - best[0] {
-            best = [sorted[i], sorted[i + q - 1]];
-        }
-    }
-    best
-}
-
 /// Refit N replicas of `data` and summarise the distribution of the free parameters.
 /// `best` is the fit of the measured data and `linear_std` its linearized standard
-/// uncertainties (flat, None where undetermined).
+/// uncertainties (flat, None where undetermined). Also returns the replicas' fitted flat
+/// vectors (those that converged), for quantities derived from several parameters (the
+/// tabulated factors' knots, [`crate::inference::knots::mc_bands`]).
 #[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     model: &Model,
@@ -115,7 +99,7 @@ pub fn monte_carlo(
     linear_std: &[Option<f64>],
     mc: &McOptions,
     progress: &mut dyn FnMut(usize),
-) -> anyhow::Result<McSummary> {
+) -> anyhow::Result<(McSummary, Vec<Vec<f64>>)> {
     if mc.replicas < 2 {
         return Err(field_error("{mc} needs at least 2 replicas"));
     }
@@ -199,7 +183,8 @@ pub fn monte_carlo(
         .iter()
         .map(|a| columns.iter().map(|b| correlation(a, b)).collect())
         .collect();
-    Ok(McSummary {
+    let fitted = good.iter().map(|f| f.to_vec()).collect();
+    let summary = McSummary {
         replicas: mc.replicas,
         converged: good.len(),
         scale_rel: mc.scale_rel,
@@ -212,7 +197,8 @@ pub fn monte_carlo(
         seconds: t0.elapsed().as_secs_f64(),
         evaluations: stats.evaluations,
         batches: stats.batches,
-    })
+    };
+    Ok((summary, fitted))
 }
 
 /// Where the linearized standard uncertainty is not a coverage interval (module doc).
@@ -377,6 +363,7 @@ mod tests {
             &mut |_| {},
         )
         .unwrap()
+        .0
     }
 
     /// Each replica of a Lambert χ² fit has its optimum in closed form: the summary's

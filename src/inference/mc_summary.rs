@@ -21,6 +21,25 @@ fn interval_nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 2], D::
     Ok([lo.unwrap_or(f64::NAN), hi.unwrap_or(f64::NAN)])
 }
 
+/// Coverage probability of the reported intervals.
+pub const COVERAGE: f64 = 0.95;
+
+/// Shortest interval holding `p` of the sorted values (JCGM 101 §7.7.2).
+pub fn shortest_interval(sorted: &[f64], p: f64) -> [f64; 2] {
+    let n = sorted.len();
+    if n == 0 {
+        return [f64::NAN, f64::NAN];
+    }
+    let q = ((p * n as f64).round() as usize).clamp(1, n);
+    let mut best = [sorted[0], sorted[q - 1]];
+    for i in 0..=n - q {
+        if sorted[i + q - 1] - sorted[i] < best[1] - best[0] {
+            best = [sorted[i], sorted[i + q - 1]];
+        }
+    }
+    best
+}
+
 /// One flat parameter's Monte Carlo summary.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct McParam {

@@ -263,7 +263,8 @@ impl FitRequest {
                 },
             );
             match outcome {
-                Ok((summary, line)) => {
+                Ok(((summary, replicas), line)) => {
+                    report.attach_knot_mc(&model, &replicas);
                     report.monte_carlo = Some(summary);
                     fallback = fallback.or(line);
                 }

@@ -292,6 +292,44 @@ fn json_num(v: Option<f64>) -> Value {
 }
 
 impl FitReport {
+    /// Give each tabulated factor's knots their spread over the Monte Carlo replicas
+    /// `replicas` (the refitted flat vectors of `model`).
+    pub fn attach_knot_mc(&mut self, model: &Model, replicas: &[Vec<f64>]) {
+        use crate::inference::knots::{mc_bands, FactorKind};
+        for (factor, spread) in mc_bands(model, replicas) {
+            let name = factor.name.as_str();
+            match factor.kind {
+                FactorKind::Ndf => {
+                    for r in self.ndf.iter_mut().filter(|r| r.lobe == name) {
+                        r.knots
+                            .iter_mut()
+                            .zip(&spread)
+                            .for_each(|(k, s)| k.mc = Some(s.clone()));
+                    }
+                }
+                FactorKind::Fresnel => {
+                    let own = |r: &&mut FresnelReport| {
+                        r.lobe == name && Some(r.channel) == factor.channel
+                    };
+                    for r in self.fresnel.iter_mut().filter(own) {
+                        r.knots
+                            .iter_mut()
+                            .zip(&spread)
+                            .for_each(|(k, s)| k.mc = Some(s.clone()));
+                    }
+                }
+                FactorKind::Body => {
+                    for r in self.body.iter_mut().filter(|r| r.base == name) {
+                        r.knots
+                            .iter_mut()
+                            .zip(&spread)
+                            .for_each(|(k, s)| k.mc = Some(s.clone()));
+                    }
+                }
+            }
+        }
+    }
+
     /// A compact human-readable summary.
     pub fn summary(&self) -> String {
         let mut s = format!(
@@ -370,7 +408,7 @@ impl FitReport {
                 n.lobe
             );
             for k in &n.knots {
-                let band = k.sigma_ln_d.map_or("".into(), |v| format!("± {v:.3}"));
+                let band = knot_band(k.sigma_ln_d, k.mc.as_ref());
                 let mark = if k.measured { "" } else { " *" };
                 s += &format!("    {:>5.2}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.d);
             }
@@ -381,7 +419,7 @@ impl FitReport {
                 n.lobe, n.channel
             );
             for k in &n.knots {
-                let band = k.sigma_ln_f.map_or("".into(), |v| format!("± {v:.3}"));
+                let band = knot_band(k.sigma_ln_f, k.mc.as_ref());
                 let mark = if k.measured { "" } else { " *" };
                 s += &format!("    {:>5.1}°  {:<11.4e} {band}{mark}\n", k.theta_deg, k.f);
             }
@@ -392,7 +430,7 @@ impl FitReport {
                 n.base
             );
             for k in &n.knots {
-                let band = k.sigma_ln_rho.map_or("".into(), |v| format!("± {v:.3}"));
+                let band = knot_band(k.sigma_ln_rho, k.mc.as_ref());
                 let mark = if k.measured { "" } else { " *" };
                 s += &format!("    {:>5.1}°  {:<11.4} {band}{mark}\n", k.theta_deg, k.rho);
             }
@@ -405,6 +443,16 @@ impl FitReport {
         }
         s
     }
+}
+
+/// A knot's band for the summary: ± σ of the logarithm (linearised), and the Monte Carlo
+/// one beside it where there is one.
+fn knot_band(linear: Option<f64>, mc: Option<&crate::inference::knots::KnotMc>) -> String {
+    let mut s = linear.map_or(String::new(), |v| format!("± {v:.3}"));
+    if let Some(mc) = mc {
+        s += &format!(" (MC ± {:.3})", mc.sd_ln);
+    }
+    s
 }
 
 /// Whether the flat name `name` is a knot of the tabulated function with stem `stem`: the

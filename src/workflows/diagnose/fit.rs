@@ -36,6 +36,9 @@ pub struct FitResult {
     pub seconds: f64,
     /// What the fit had to do to get here, where it was refitted ([`fit_all`]).
     pub note: Option<String>,
+    /// How the smoothness prior of tabulated knots was weighed (models with `+ndf`,
+    /// `+fresnel` or `+body` fitted by χ²; None otherwise).
+    pub smoothness: Option<crate::inference::fit::SmoothnessChoice>,
 }
 
 impl FitResult {
@@ -93,6 +96,7 @@ pub fn fit_model(
         cov: o.cov,
         seconds: o.seconds,
         note: None,
+        smoothness: o.smoothness,
     })
 }
 

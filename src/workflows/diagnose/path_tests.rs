@@ -24,6 +24,7 @@ fn scored(spec: &str, effect: Effect, pending: bool, dbic: f64, removal: f64, ch
         cov: Default::default(),
         seconds: 0.0,
         note: None,
+        smoothness: None,
     };
     Scored {
         candidate: Candidate {
