@@ -422,3 +422,91 @@ fn diagnose_names_no_anisotropy_on_the_real_cornell_file() {
         "anisotropy named: {effects:?}"
     );
 }
+
+/// The Zemax file tabulates one half of a plane-symmetric BRDF at one incidence azimuth:
+/// its off-plane samples all lie on one side of the plane of incidence, where a frame
+/// turned off the plane only reshapes the lobe and nothing mirrors it. The F test of
+/// such a frame against the frame held on the plane is hugely significant (p ≈ 1e-84
+/// before the mirror sides were counted), and diagnose adopted anisotropy on it; now the
+/// frame test says the symmetry cannot be tested there, and `fit` of `+aniso` warns.
+#[test]
+fn one_sided_data_get_no_anisotropy() {
+    let file = real("zemax_planesymmetric_brdf.bsdf");
+    let data = Dataset::read(
+        &file,
+        &ReadOptions {
+            assume_uncertainty: Some((0.05, 0.001)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let sides = data.mirror_sides();
+    assert!(!sides.testable(), "{sides:?}");
+    assert!(sides.left.min(sides.right) < sides.left.max(sides.right) / 50);
+
+    let backend = common::gpu_backend_flag();
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report");
+    let out = bsdfit(&[
+        "diagnose",
+        p(&file),
+        "--model",
+        "fa(lambert)",
+        "--assume-uncertainty",
+        "0.05,0.001",
+        "--backend",
+        backend,
+        "--bootstrap",
+        "0",
+        "--max-steps",
+        "1",
+        "--no-backtrack",
+        "--report",
+        p(&report),
+    ]);
+    assert_ok(&out, "diagnose");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
+    };
+    let steps = read("candidates.json");
+    let aniso: Vec<&serde_json::Value> = steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|s| s["candidates"].as_array().unwrap())
+        .filter(|c| c["effect"] == "anisotropy")
+        .collect();
+    assert!(!aniso.is_empty(), "no anisotropic candidate was tried");
+    for c in &aniso {
+        let test = &c["frame_test"];
+        assert_eq!(test["mirror_sides"]["testable"], false, "{c}");
+        assert_eq!(test["shows_anisotropy"], false, "{c}");
+        assert_eq!(c["adoptable"], false, "{c}");
+    }
+    let diagnosis = read("diagnosis.json");
+    let effects = diagnosis["effects"].as_array().unwrap();
+    assert!(
+        !effects.iter().any(|e| e == "anisotropy"),
+        "anisotropy named: {effects:?}"
+    );
+    assert!(text(&out.stdout).contains("nothing mirrors it"));
+
+    let out = bsdfit(&[
+        "fit",
+        p(&file),
+        "--model",
+        "fa(lambert)+aniso",
+        "--assume-uncertainty",
+        "0.05,0.001",
+        "--restarts",
+        "4",
+        "--backend",
+        backend,
+    ]);
+    assert_ok(&out, "fit");
+    let all = text(&out.stdout) + &text(&out.stderr);
+    assert!(
+        all.contains("cannot tell from anisotropy"),
+        "no warning about the geometry:\n{all}"
+    );
+}

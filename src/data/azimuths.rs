@@ -87,6 +87,34 @@ impl Sector {
     }
 }
 
+/// Off-plane samples on each side of the plane of incidence ([`Dataset::mirror_sides`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MirrorSides {
+    pub left: usize,
+    pub right: usize,
+}
+
+impl MirrorSides {
+    /// The least share of the off-plane samples the less measured side must hold for a
+    /// break of the mirror symmetry to be tested: with fewer, a frame turned off the plane
+    /// only reshapes the lobe on the measured side, where nothing mirrors it.
+    pub const MIN_SHARE: f64 = 0.2;
+
+    /// Whether both sides are measured well enough to test the mirror symmetry.
+    pub fn testable(&self) -> bool {
+        let total = self.left + self.right;
+        total > 0 && (self.left.min(self.right) as f64) >= Self::MIN_SHARE * total as f64
+    }
+
+    /// In words, for messages.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} and {} samples on the two sides of the plane of incidence",
+            self.left, self.right
+        )
+    }
+}
+
 impl Dataset {
     /// The data turned, sample by sample, about the normal so that each sample's plane of
     /// incidence lies at φ = 0 (a sample at normal incidence: its outgoing plane). An
@@ -105,6 +133,24 @@ impl Dataset {
             s.phi_o -= turn;
         }
         d
+    }
+
+    /// The samples off the plane of incidence on each side of it (outgoing azimuth
+    /// φo − φi in (0°, 180°), then in (180°, 360°)): at one incidence azimuth a mirror
+    /// symmetry about that plane can only be tested where both sides are measured
+    /// ([`MirrorSides::testable`]). A file that tabulates one half of a plane-symmetric
+    /// BSDF (Zemax `PlaneSymmetrical`) holds one side only.
+    pub fn mirror_sides(&self) -> MirrorSides {
+        let (mut left, mut right) = (0, 0);
+        for s in &self.samples {
+            let side = (s.phi_o - s.phi_i).sin() * s.theta_o.sin();
+            if side > 1e-6 {
+                left += 1;
+            } else if side < -1e-6 {
+                right += 1;
+            }
+        }
+        MirrorSides { left, right }
     }
 
     /// Whether the data's incidence azimuths can show anisotropy ([`AzimuthCoverage`]).
@@ -255,5 +301,33 @@ mod tests {
         // In plane: not at all.
         let rows: Vec<[f64; 4]> = (0..20).map(|k| [30.0, 0.0, 4.0 * k as f64, 0.0]).collect();
         assert_eq!(data(&rows).azimuth_coverage(), AzimuthCoverage::InPlane);
+    }
+
+    /// The sides of the plane of incidence: in-plane samples (φo − φi = 0° or 180°) and
+    /// samples along the normal count on neither; a full hemisphere is balanced, a half
+    /// one (φo − φi in [0°, 180°], as a plane-symmetric table holds) is not testable, and
+    /// a fifth of the off-plane samples on the less measured side is the least that is.
+    #[test]
+    fn mirror_sides_count_the_off_plane_samples() {
+        let full = data(&hemisphere(&[40.0], &[20.0, 50.0]));
+        let sides = full.mirror_sides();
+        // 12 azimuths every 30°: 0° and 180° in the plane, 5 on each side.
+        assert_eq!((sides.left, sides.right), (40, 40));
+        assert!(sides.testable());
+        let half: Vec<[f64; 4]> = hemisphere(&[40.0], &[20.0, 50.0])
+            .into_iter()
+            .filter(|r| r[3] - r[1] <= 180.0)
+            .chain([[20.0, 40.0, 0.0, 100.0]])
+            .collect();
+        let sides = data(&half).mirror_sides();
+        assert_eq!((sides.left, sides.right), (40, 0));
+        assert!(!sides.testable());
+        for (left, right, testable) in [(80, 20, true), (81, 19, false), (0, 0, false)] {
+            assert_eq!(
+                MirrorSides { left, right }.testable(),
+                testable,
+                "{left} {right}"
+            );
+        }
     }
 }

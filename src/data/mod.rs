@@ -7,7 +7,7 @@ mod channels;
 mod dataset;
 pub mod geometries;
 pub mod readers;
-pub use azimuths::AzimuthCoverage;
+pub use azimuths::{AzimuthCoverage, MirrorSides};
 pub(crate) use builder::{Builder, Cells};
 pub use dataset::*;
 

@@ -348,6 +348,7 @@ fn one_azimuth_warnings(
         return vec![];
     };
     let names = model.flat_names();
+    let sides = data.mirror_sides();
     frames
         .iter()
         .map(|&[u, v, phi]| {
@@ -363,6 +364,13 @@ fn one_azimuth_warnings(
                 format!(
                     "measured at one incidence azimuth (φi = {plane:.0}°), the frame {frame} lies on the plane of incidence or across it: so aligned, an anisotropic lobe is mirror-symmetric about that plane like any isotropic lobe, and {} and {} measure a lobe shape across the plane against along it that this geometry cannot tell from anisotropy (`diagnose` does not name anisotropy here); measure at a second incidence azimuth to tell",
                     names[u], names[v]
+                )
+            } else if !sides.testable() {
+                format!(
+                    "measured at one incidence azimuth (φi = {plane:.0}°) with {}, the frame {frame} is turned {off:.1}° off the plane of incidence, but where one side is barely measured a turned frame only reshapes the lobe on the measured side: {} and {} and the frame measure a lobe shape that this geometry cannot tell from anisotropy (`diagnose` does not name anisotropy here); measure both sides of the plane, or at a second incidence azimuth",
+                    sides.describe(),
+                    names[u],
+                    names[v]
                 )
             } else {
                 format!(

@@ -36,7 +36,7 @@
 
 use super::score::SWAP_BIC;
 use super::{fit_model, DiagnoseOptions, FitResult};
-use crate::data::{AzimuthCoverage, Dataset};
+use crate::data::{AzimuthCoverage, Dataset, MirrorSides};
 use crate::engine::Backend;
 use crate::inference::constraints::{Constraint, ConstraintKind, Constraints};
 use crate::inference::stats::{f_test, format_p};
@@ -61,6 +61,10 @@ pub struct FrameTest {
     pub p: Option<f64>,
     pub level: f64,
     pub dof: usize,
+    /// At one incidence azimuth: the off-plane samples on each side of the plane. Where
+    /// one side is barely measured ([`MirrorSides::testable`]) no break of the mirror
+    /// symmetry can be shown, whatever the F test says.
+    pub sides: Option<MirrorSides>,
 }
 
 impl FrameTest {
@@ -70,7 +74,14 @@ impl FrameTest {
             Some(p) => self.delta_chi2 > 0.0 && p < self.level,
             None => self.delta_chi2 / self.scale > SWAP_BIC,
         };
-        significant && self.delta_chi2 >= MIN_SHARE * self.twin_excess
+        significant
+            && self.delta_chi2 >= MIN_SHARE * self.twin_excess
+            && self.sides.is_none_or(|s| s.testable())
+    }
+
+    /// At one incidence azimuth, data measured on one side of the plane only.
+    fn one_sided(&self) -> Option<MirrorSides> {
+        self.sides.filter(|s| !s.testable())
     }
 
     /// The share of the twin's excess misfit the surface-fixed frame removes.
@@ -122,6 +133,14 @@ impl FrameTest {
 
     /// Why the candidate is not adopted when the test does not show anisotropy.
     pub fn confounded_words(&self) -> String {
+        if let (Some(plane), Some(sides)) = (self.one_azimuth, self.one_sided()) {
+            return format!(
+                "at one incidence azimuth (φi = {plane:.0}°) with {} (the less measured side needs ≥ {:.0} % of them), a frame turned off the plane only reshapes the lobe on the measured side, where nothing mirrors it, so no break of the mirror symmetry can be tested ({}). Measure both sides of the plane, or at a second incidence azimuth, to tell anisotropy from a lobe shape the catalogue lacks",
+                sides.describe(),
+                100.0 * MirrorSides::MIN_SHARE,
+                self.describe()
+            );
+        }
         match self.one_azimuth {
             Some(plane) => format!(
                 "at one incidence azimuth (φi = {plane:.0}°) its gain is a lobe shape across the plane of incidence against along it, which this geometry cannot tell from anisotropy: the frame does not break the mirror symmetry about the plane ({}). Measure at a second incidence azimuth to tell them apart",
@@ -159,6 +178,7 @@ impl FrameTest {
             "F": self.f,
             "p": self.p,
             "level": self.level,
+            "mirror_sides": self.sides.map(|s| serde_json::json!({"left": s.left, "right": s.right, "testable": s.testable()})),
             "shows_anisotropy": self.shows_anisotropy(),
         })
     }
@@ -275,6 +295,7 @@ pub(super) fn frame_test(
         p,
         level,
         dof: fit.dof,
+        sides: one_azimuth.map(|_| turned.mirror_sides()),
     };
     Ok(Some((test, twin)))
 }
