@@ -367,60 +367,64 @@ fn the_relabelled_btdf_file_reads_the_same_values_on_the_transmitted_side() {
 // ---------------------------------------------------------------------------------------
 // The diagnosis on a real isotropic file
 
-/// The Cornell acrylic is an isotropic surface measured at one incidence azimuth (φi =
-/// 0°): an aligned anisotropic lobe fits it significantly better than the isotropic one
-/// (a lobe shape across the plane of incidence that the catalogue lacks), and diagnose
-/// must not call that anisotropy: the frame test refuses it, and it is never adopted.
-#[test]
-fn diagnose_names_no_anisotropy_on_the_real_cornell_file() {
+/// One diagnosis step from `fa(lambert)` on a real file (`extra`: how to read it), with
+/// no bootstrap: its stdout, the anisotropic candidates it tried (each asserted refused:
+/// not shown by the frame test, not adoptable), after asserting that anisotropy is not
+/// named.
+fn refused_anisotropy(file: &Path, extra: &[&str]) -> (String, Vec<serde_json::Value>) {
     let backend = common::gpu_backend_flag();
     let dir = tempfile::tempdir().unwrap();
     let report = dir.path().join("report");
-    let out = bsdfit(&[
-        "diagnose",
-        p(&real("cornell_acryl_blue.astm")),
-        "--model",
-        "fa(lambert)",
-        "--assume-uncertainty",
-        "0.05,0.001",
-        "--wavelengths",
-        "450,550,650",
-        "--backend",
-        backend,
-        "--bootstrap",
-        "0",
-        "--max-steps",
-        "1",
-        "--report",
-        p(&report),
-    ]);
+    let mut args = vec!["diagnose", p(file), "--model", "fa(lambert)"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--backend", backend, "--bootstrap", "0", "--max-steps", "1"]);
+    args.extend_from_slice(&["--no-backtrack", "--report", p(&report)]);
+    let out = bsdfit(&args);
     assert_ok(&out, "diagnose");
     let read = |f: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
     };
     let steps = read("candidates.json");
-    let aniso: Vec<&serde_json::Value> = steps
+    let aniso: Vec<serde_json::Value> = steps
         .as_array()
         .unwrap()
         .iter()
         .flat_map(|s| s["candidates"].as_array().unwrap())
         .filter(|c| c["effect"] == "anisotropy")
+        .cloned()
         .collect();
     assert!(!aniso.is_empty(), "no anisotropic candidate was tried");
     for c in &aniso {
-        let test = &c["frame_test"];
-        assert_eq!(test["one_incidence_azimuth_deg"], 0.0, "{c}");
-        assert_eq!(test["shows_anisotropy"], false, "{c}");
+        assert_eq!(c["frame_test"]["shows_anisotropy"], false, "{c}");
         assert_eq!(c["adoptable"], false, "{c}");
     }
-    // The refusal is not for want of a gain: the F test alone would have adopted it.
-    assert!(aniso.iter().any(|c| c["significant"] == true), "{aniso:?}");
     let diagnosis = read("diagnosis.json");
     let effects = diagnosis["effects"].as_array().unwrap();
     assert!(
         !effects.iter().any(|e| e == "anisotropy"),
         "anisotropy named: {effects:?}"
     );
+    (text(&out.stdout), aniso)
+}
+
+/// The Cornell acrylic is an isotropic surface measured at one incidence azimuth (φi =
+/// 0°): an aligned anisotropic lobe fits it significantly better than the isotropic one
+/// (a lobe shape across the plane of incidence that the catalogue lacks), and diagnose
+/// must not call that anisotropy: the frame test refuses it, and it is never adopted.
+#[test]
+fn diagnose_names_no_anisotropy_on_the_real_cornell_file() {
+    let extra = [
+        "--assume-uncertainty",
+        "0.05,0.001",
+        "--wavelengths",
+        "450,550,650",
+    ];
+    let (_, aniso) = refused_anisotropy(&real("cornell_acryl_blue.astm"), &extra);
+    for c in &aniso {
+        assert_eq!(c["frame_test"]["one_incidence_azimuth_deg"], 0.0, "{c}");
+    }
+    // The refusal is not for want of a gain: the F test alone would have adopted it.
+    assert!(aniso.iter().any(|c| c["significant"] == true), "{aniso:?}");
 }
 
 /// The Zemax file tabulates one half of a plane-symmetric BRDF at one incidence azimuth:
@@ -444,52 +448,11 @@ fn one_sided_data_get_no_anisotropy() {
     assert!(!sides.testable(), "{sides:?}");
     assert!(sides.left.min(sides.right) < sides.left.max(sides.right) / 50);
 
-    let backend = common::gpu_backend_flag();
-    let dir = tempfile::tempdir().unwrap();
-    let report = dir.path().join("report");
-    let out = bsdfit(&[
-        "diagnose",
-        p(&file),
-        "--model",
-        "fa(lambert)",
-        "--assume-uncertainty",
-        "0.05,0.001",
-        "--backend",
-        backend,
-        "--bootstrap",
-        "0",
-        "--max-steps",
-        "1",
-        "--no-backtrack",
-        "--report",
-        p(&report),
-    ]);
-    assert_ok(&out, "diagnose");
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
-    };
-    let steps = read("candidates.json");
-    let aniso: Vec<&serde_json::Value> = steps
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|s| s["candidates"].as_array().unwrap())
-        .filter(|c| c["effect"] == "anisotropy")
-        .collect();
-    assert!(!aniso.is_empty(), "no anisotropic candidate was tried");
+    let (stdout, aniso) = refused_anisotropy(&file, &["--assume-uncertainty", "0.05,0.001"]);
     for c in &aniso {
-        let test = &c["frame_test"];
-        assert_eq!(test["mirror_sides"]["testable"], false, "{c}");
-        assert_eq!(test["shows_anisotropy"], false, "{c}");
-        assert_eq!(c["adoptable"], false, "{c}");
+        assert_eq!(c["frame_test"]["mirror_sides"]["testable"], false, "{c}");
     }
-    let diagnosis = read("diagnosis.json");
-    let effects = diagnosis["effects"].as_array().unwrap();
-    assert!(
-        !effects.iter().any(|e| e == "anisotropy"),
-        "anisotropy named: {effects:?}"
-    );
-    assert!(text(&out.stdout).contains("nothing mirrors it"));
+    assert!(stdout.contains("nothing mirrors it"));
 
     let out = bsdfit(&[
         "fit",
@@ -501,7 +464,7 @@ fn one_sided_data_get_no_anisotropy() {
         "--restarts",
         "4",
         "--backend",
-        backend,
+        common::gpu_backend_flag(),
     ]);
     assert_ok(&out, "fit");
     let all = text(&out.stdout) + &text(&out.stderr);

@@ -64,19 +64,25 @@ impl Factor {
                 .collect::<Option<Vec<_>>>()
         };
         let range = |p: &crate::bsdf::FlatParam| p.index..p.index + p.width(model.channels);
-        let knotted = || model.params.iter().filter(|p| p.decl.knot);
+        // Each tabulated function whose stem is among `stems`, found by its first knot
+        // `{prefix}{stem}1`: (the stem's index in `stems`, the role prefix).
+        let found = |stems: &[&str]| -> Vec<(usize, String)> {
+            let knotted = model.params.iter().filter(|p| p.decl.knot);
+            knotted
+                .filter_map(|p| {
+                    stems.iter().enumerate().find_map(|(i, s)| {
+                        Some((i, p.name.strip_suffix(&format!("{s}1"))?.to_string()))
+                    })
+                })
+                .collect()
+        };
         let mut out = Vec::new();
         // The lobes: the knots' stem, the roughness and the amplitude (`ggx`, `fa`'s
         // highlight under `lobe.`, and a coat's).
         const NDF_LOBES: [(&str, &str, &str); 2] =
             [("ndf", "alpha", "ks"), ("ndf_c", "alpha_c", "kc")];
-        for p in knotted() {
-            let Some((stem, alpha, ks, prefix)) = NDF_LOBES
-                .iter()
-                .find_map(|&(s, a, k)| Some((s, a, k, p.name.strip_suffix(&format!("{s}1"))?)))
-            else {
-                continue;
-            };
+        for (i, prefix) in found(&NDF_LOBES.map(|l| l.0)) {
+            let (stem, alpha, ks) = NDF_LOBES[i];
             let name = format!("{prefix}{stem}");
             if let (Some(alpha), Some(ks), Some(knots)) = (
                 find(&format!("{prefix}{alpha}")),
@@ -100,13 +106,8 @@ impl Factor {
         const FRESNEL_LOBES: [(&str, &str, Option<&str>); 2] =
             [("fresnel", "ks", Some("eta")), ("fresnel_c", "kc", None)];
         let fresnel_knots = crate::bsdf::fresnel::KNOTS;
-        for p in knotted() {
-            let Some((stem, ks, eta, prefix)) = FRESNEL_LOBES
-                .iter()
-                .find_map(|&(s, k, e)| Some((s, k, e, p.name.strip_suffix(&format!("{s}1"))?)))
-            else {
-                continue;
-            };
+        for (i, prefix) in found(&FRESNEL_LOBES.map(|l| l.0)) {
+            let (stem, ks, eta) = FRESNEL_LOBES[i];
             let name = format!("{prefix}{stem}");
             let (Some(ks), Some(knots)) = (
                 find(&format!("{prefix}{ks}")),
@@ -133,10 +134,7 @@ impl Factor {
                 });
             }
         }
-        for p in knotted() {
-            let Some(prefix) = p.name.strip_suffix("body1") else {
-                continue;
-            };
+        for (_, prefix) in found(&["body"]) {
             let name = format!("{prefix}body");
             if let (Some(rho), Some(knots)) = (
                 find(&format!("{prefix}rho")),

@@ -295,37 +295,31 @@ impl FitReport {
     /// Give each tabulated factor's knots their spread over the Monte Carlo replicas
     /// `replicas` (the refitted flat vectors of `model`).
     pub fn attach_knot_mc(&mut self, model: &Model, replicas: &[Vec<f64>]) {
-        use crate::inference::knots::{mc_bands, FactorKind};
+        use crate::inference::knots::{mc_bands, FactorKind, KnotMc};
+        // Each knot of a report takes its replicas' spread, in order.
+        fn set<K>(knots: &mut [K], spread: &[KnotMc], mc: fn(&mut K) -> &mut Option<KnotMc>) {
+            for (k, s) in knots.iter_mut().zip(spread) {
+                *mc(k) = Some(s.clone());
+            }
+        }
         for (factor, spread) in mc_bands(model, replicas) {
             let name = factor.name.as_str();
             match factor.kind {
-                FactorKind::Ndf => {
-                    for r in self.ndf.iter_mut().filter(|r| r.lobe == name) {
-                        r.knots
-                            .iter_mut()
-                            .zip(&spread)
-                            .for_each(|(k, s)| k.mc = Some(s.clone()));
-                    }
-                }
-                FactorKind::Fresnel => {
-                    let own = |r: &&mut FresnelReport| {
-                        r.lobe == name && Some(r.channel) == factor.channel
-                    };
-                    for r in self.fresnel.iter_mut().filter(own) {
-                        r.knots
-                            .iter_mut()
-                            .zip(&spread)
-                            .for_each(|(k, s)| k.mc = Some(s.clone()));
-                    }
-                }
-                FactorKind::Body => {
-                    for r in self.body.iter_mut().filter(|r| r.base == name) {
-                        r.knots
-                            .iter_mut()
-                            .zip(&spread)
-                            .for_each(|(k, s)| k.mc = Some(s.clone()));
-                    }
-                }
+                FactorKind::Ndf => self
+                    .ndf
+                    .iter_mut()
+                    .filter(|r| r.lobe == name)
+                    .for_each(|r| set(&mut r.knots, &spread, |k| &mut k.mc)),
+                FactorKind::Fresnel => self
+                    .fresnel
+                    .iter_mut()
+                    .filter(|r| r.lobe == name && Some(r.channel) == factor.channel)
+                    .for_each(|r| set(&mut r.knots, &spread, |k| &mut k.mc)),
+                FactorKind::Body => self
+                    .body
+                    .iter_mut()
+                    .filter(|r| r.base == name)
+                    .for_each(|r| set(&mut r.knots, &spread, |k| &mut k.mc)),
             }
         }
     }

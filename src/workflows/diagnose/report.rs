@@ -149,12 +149,9 @@ pub fn factor_panels(
     use crate::inference::knots::{Factor, FactorKind};
     use crate::output::plot::{lighten, Dash, Panel, Series, PALETTE};
     let (model, flat, cov) = (&fit.model, &fit.flat, &fit.cov);
-    // The analytic model's parameters in this model's layout; the fit's own with its
-    // knots at 0 where it has none of them.
-    let reference: Vec<f64> = match analytic {
-        Some(a) => super::embed(&a.model, &a.flat, model),
-        None => flat.clone(),
-    };
+    // The analytic step's parameters in this model's layout, and the fit's own with its
+    // knots at 0 (its analytic reference).
+    let reference: Option<Vec<f64>> = analytic.map(|a| super::embed(&a.model, &a.flat, model));
     let own_reference = {
         let mut r = flat.clone();
         for p in model.params.iter().filter(|p| p.decl.knot) {
@@ -162,35 +159,34 @@ pub fn factor_panels(
         }
         r
     };
-    let knots_of = |f: &Factor| -> Vec<(f64, f64, Option<f64>, bool)> {
-        use crate::inference::knots::{bands, body_bands, fresnel_bands};
-        match f.kind {
-            FactorKind::Ndf => bands(model, data, flat, cov)
-                .into_iter()
-                .find(|(n, _)| *n == f.name)
-                .map(|(_, k)| {
-                    k.iter()
-                        .map(|k| (k.theta_deg, k.d, k.sigma_ln_d, k.measured))
-                        .collect()
-                }),
-            FactorKind::Fresnel => fresnel_bands(model, data, flat, cov)
-                .into_iter()
-                .find(|(n, c, _)| *n == f.name && Some(*c) == f.channel)
-                .map(|(_, _, k)| {
-                    k.iter()
-                        .map(|k| (k.theta_deg, k.f, k.sigma_ln_f, k.measured))
-                        .collect()
-                }),
-            FactorKind::Body => body_bands(model, data, flat, cov)
-                .into_iter()
-                .find(|(n, _)| *n == f.name)
-                .map(|(_, k)| {
-                    k.iter()
-                        .map(|k| (k.theta_deg, k.rho, k.sigma_ln_rho, k.measured))
-                        .collect()
-                }),
-        }
-        .unwrap_or_default()
+    // Every factor's knots as (θ, value, σ of its log, measured), the bands computed once.
+    type Knots = Vec<(f64, f64, Option<f64>, bool)>;
+    let mut knots: Vec<(FactorKind, String, Option<usize>, Knots)> = Vec::new();
+    use crate::inference::knots::{bands, body_bands, fresnel_bands};
+    for (name, k) in bands(model, data, flat, cov) {
+        let rows = k
+            .iter()
+            .map(|k| (k.theta_deg, k.d, k.sigma_ln_d, k.measured));
+        knots.push((FactorKind::Ndf, name, None, rows.collect()));
+    }
+    for (name, c, k) in fresnel_bands(model, data, flat, cov) {
+        let rows = k
+            .iter()
+            .map(|k| (k.theta_deg, k.f, k.sigma_ln_f, k.measured));
+        knots.push((FactorKind::Fresnel, name, Some(c), rows.collect()));
+    }
+    for (name, k) in body_bands(model, data, flat, cov) {
+        let rows = k
+            .iter()
+            .map(|k| (k.theta_deg, k.rho, k.sigma_ln_rho, k.measured));
+        knots.push((FactorKind::Body, name, None, rows.collect()));
+    }
+    let knots_of = |f: &Factor| -> Knots {
+        knots
+            .iter()
+            .find(|(kind, name, c, _)| *kind == f.kind && *name == f.name && *c == f.channel)
+            .map(|k| k.3.clone())
+            .unwrap_or_default()
     };
     let mut panels: Vec<Panel> = Vec::new();
     for f in Factor::all(model) {
@@ -230,11 +226,10 @@ pub fn factor_panels(
                 .iter()
                 .all(|&j| name_of(j).is_some_and(|n| a.model.params.iter().any(|q| q.name == n)))
         });
-        let analytic_values = f.ln_values(if from_analytic {
-            &reference
-        } else {
-            &own_reference
-        });
+        let analytic_values = match (&reference, from_analytic) {
+            (Some(r), true) => f.ln_values(r),
+            _ => f.ln_values(&own_reference),
+        };
         let mut series = vec![
             Series {
                 label: format!("fitted, measured{suffix}"),
