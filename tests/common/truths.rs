@@ -176,7 +176,9 @@ pub fn measure_channels(
 /// A χ² fit of `model` to truth data on the SIMD engine, from `start` (an embedded
 /// optimum of a smaller model, as diagnose starts an extension) where given, with
 /// `restarts` restarts in all; the smoothness prior of any knots weighed from the data.
-/// Compass search, the library's default optimizer.
+/// Levenberg–Marquardt, what `bsdfit fit` and `diagnose` use for χ² (compass search, the
+/// library's default, stops the joint fits of many knots short of their optimum:
+/// docs/models.md).
 pub fn fit_truth(
     model: &bsdfit::bsdf::Model,
     data: &Dataset,
@@ -184,8 +186,8 @@ pub fn fit_truth(
     restarts: usize,
     seed: u64,
 ) -> bsdfit::inference::fit::Conclusions {
-    let compass = bsdfit::inference::fit::FitOptions::default().optimizer;
-    fit_truth_with(model, data, start, restarts, seed, compass)
+    let lm = bsdfit::inference::fit::Optimizer::Lm;
+    fit_truth_with(model, data, start, restarts, seed, lm)
 }
 
 /// [`fit_truth`] with the optimizer given.
