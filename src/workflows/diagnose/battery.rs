@@ -618,7 +618,20 @@ pub fn run_case(
     let t0 = std::time::Instant::now();
     let verbose = opts.only.is_some();
     let mut log = Vec::new();
-    let d = diagnose(data, &case.start, backend, &opts.diagnose, &mut |l| {
+    // A misspecified truth lies outside the catalogue by construction: its diagnosis may
+    // end with the data-driven factors (the effect such a truth hides), which the
+    // catalogue's own truths do not need.
+    let with_factors;
+    let diagnose_opts = if case.misspecified.is_some() {
+        with_factors = DiagnoseOptions {
+            data_driven: true,
+            ..opts.diagnose.clone()
+        };
+        &with_factors
+    } else {
+        &opts.diagnose
+    };
+    let d = diagnose(data, &case.start, backend, diagnose_opts, &mut |l| {
         if verbose {
             log.push(l);
         }
@@ -632,10 +645,15 @@ pub fn run_case(
             let consistent = last.fit.p_consistent() >= opts.diagnose.alpha;
             let (detected, false_effect) = match &case.hidden {
                 // An isotropic truth without backscatter, retroreflection or decay: only
-                // a second specular lobe (a reshaped highlight) is not a false effect.
+                // a second specular lobe or a data-driven factor (a reshaped highlight, its
+                // Fresnel curve, or the body's profile: the truth's body is a plain
+                // Lambertian one, where `fa`'s is Fresnel-transmitted) is not a false
+                // effect.
                 None if case.misspecified.is_some() => (
                     false,
-                    named.iter().any(|n| n != Effect::SpecularLobe.name()),
+                    d.effects
+                        .iter()
+                        .any(|e| *e != Effect::SpecularLobe && !e.is_data_driven()),
                 ),
                 None => (false, !named.is_empty()),
                 Some(h) => (
