@@ -451,7 +451,7 @@ mod tests {
         let references: Vec<&Vec<(f64, f64)>> = panels[0]
             .series
             .iter()
-            .filter(|s| s.label.starts_with("fa(lambert) "))
+            .filter(|s| s.label.starts_with(&format!("{} (", analytic.spec())))
             .map(|s| &s.curve)
             .collect();
         assert_eq!(references.len(), 2);
