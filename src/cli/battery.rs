@@ -21,10 +21,8 @@ pub struct BatteryArgs {
     pub nulls: usize,
     /// Misspecified null cases: isotropic truths whose highlight lies outside the
     /// catalogue (Beckmann, GTR with γ ≠ 2 and two-scale NDFs, V-cavity shadowing, Schlick
-    /// Fresnel), at one incidence azimuth and at several, diagnosed from fa(lambert) with
-    /// the data-driven factors on offer (the other cases' truths come from the catalogue
-    /// and are diagnosed without them); the table says which effects were named on them
-    /// and whether the factor the truth lacks in the catalogue was.
+    /// Fresnel), at one incidence azimuth and at several, diagnosed from fa(lambert); the
+    /// table says which effects were named on them.
     #[arg(long, default_value_t = BatteryOptions::default().misspecified)]
     pub misspecified: usize,
     /// Seed of the cases (a non-negative integer): the same seed draws the same battery.

@@ -618,20 +618,7 @@ pub fn run_case(
     let t0 = std::time::Instant::now();
     let verbose = opts.only.is_some();
     let mut log = Vec::new();
-    // A misspecified truth lies outside the catalogue by construction: its diagnosis may
-    // end with the data-driven factors (the effect such a truth hides), which the
-    // catalogue's own truths do not need.
-    let with_factors;
-    let diagnose_opts = if case.misspecified.is_some() {
-        with_factors = DiagnoseOptions {
-            data_driven: true,
-            ..opts.diagnose.clone()
-        };
-        &with_factors
-    } else {
-        &opts.diagnose
-    };
-    let d = diagnose(data, &case.start, backend, diagnose_opts, &mut |l| {
+    let d = diagnose(data, &case.start, backend, &opts.diagnose, &mut |l| {
         if verbose {
             log.push(l);
         }
