@@ -196,6 +196,27 @@ fn bad_params_name_the_flag() {
     assert_clear_error(&out, &["error: --params: 'sigma' is not name=value"]);
 }
 
+/// A battery case id past the plan would run nothing and print an empty table: it is
+/// refused, naming the flag and the plan's range.
+#[test]
+fn battery_case_past_the_plan_is_refused() {
+    let out = bsdfit(&[
+        "battery",
+        "--cases",
+        "0",
+        "--nulls",
+        "2",
+        "--misspecified",
+        "3",
+        "--case",
+        "5",
+    ]);
+    assert_clear_error(
+        &out,
+        &["error: --case 5: this battery has cases 0–4 (0 per effect × "],
+    );
+}
+
 /// Refusals that have an obvious next step name it: a geometry of the other kind, a MERL
 /// table of the wrong data, a JSON that holds no fit to render.
 #[test]

@@ -1096,6 +1096,7 @@ def battery(
     restarts: int = _BATTERY_DEFAULTS["restarts"],
     backend: str = "auto",
     case: Optional[int] = None,
+    data_driven: bool = False,
     progress: ProgressArg = True,
 ) -> Battery:
     """Run the diagnosis's randomized battery (``bsdfit battery``): ``cases`` cases per
@@ -1104,7 +1105,8 @@ def battery(
     isotropic truths lie outside the catalogue (diagnosed from ``fa(lambert)``), the effect's pre-fit ``signal`` and the
     sample counts drawn log-uniformly from their ``(lo, hi)`` ranges, each diagnosed with
     ``restarts`` restarts per fit. The same ``seed`` draws the same battery; ``case=ID``
-    runs that case only. ``progress``: True (the default) for a bar on stderr, False or
+    runs that case only. ``data_driven=True`` offers the data-driven factors in each
+    diagnosis's last round (off by default: it can cost minutes a case). ``progress``: True (the default) for a bar on stderr, False or
     None for silence, or a callable given a :class:`ProgressEvent` as each case ends."""
     listed = None
     if effects is not None:
@@ -1121,6 +1123,7 @@ def battery(
             _int("restarts", restarts, 1),
             _text("backend", backend),
             None if case is None else _int("case", case, 0),
+            bool(data_driven),
             reports.native,
         )
     return Battery(json.loads(text), table)

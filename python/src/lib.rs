@@ -932,6 +932,7 @@ fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     dict.set_item("signal", d.signal)?;
     dict.set_item("samples", d.samples)?;
     dict.set_item("restarts", d.diagnose.restarts)?;
+    dict.set_item("data_driven", d.diagnose.data_driven)?;
     Ok(dict)
 }
 
@@ -940,7 +941,7 @@ fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// the command line prints. `progress` (a callable or None) hears of each case as it
 /// ends (stage `battery`).
 #[pyfunction]
-#[pyo3(signature = (cases, nulls, misspecified, seed, effects, signal, samples, restarts, backend, case, progress))]
+#[pyo3(signature = (cases, nulls, misspecified, seed, effects, signal, samples, restarts, backend, case, data_driven, progress))]
 fn battery(
     py: Python<'_>,
     cases: usize,
@@ -953,6 +954,7 @@ fn battery(
     restarts: usize,
     backend: String,
     case: Option<usize>,
+    data_driven: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, String)> {
     use bsdfit::workflows::diagnose::battery::{
@@ -975,6 +977,7 @@ fn battery(
             diagnose: diagnose::DiagnoseOptions {
                 restarts,
                 seed,
+                data_driven,
                 ..defaults.diagnose.clone()
             },
             only: case,

@@ -877,6 +877,9 @@ def test_battery_is_the_command_lines_battery(tmp_path):
         bsdfit.battery(signal=(0, 30), backend="cpu", progress=False)
     with pytest.raises(TypeError, match="samples: expected \\(lo, hi\\)"):
         bsdfit.battery(samples=200, backend="cpu", progress=False)
+    # A case id past the plan runs nothing: refused, naming the plan's range.
+    with pytest.raises(ValueError, match="case=3: this battery has cases 0–2"):
+        bsdfit.battery(case=3, backend="cpu", progress=False, **options)
 
 
 def test_diagnose_defaults_are_the_library_and_cli_defaults():

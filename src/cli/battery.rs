@@ -54,6 +54,12 @@ pub struct BatteryArgs {
     /// its truth and its diagnosis's log.
     #[arg(long, value_name = "ID")]
     pub case: Option<usize>,
+    /// Offer the data-driven factors (highlight_shape, highlight_fresnel, body_profile)
+    /// in each diagnosis's last round, as `diagnose` does by default. Off by default:
+    /// the catalogue's truths need none, and on a misspecified case the round can cost
+    /// minutes (its factors' bootstrap). A data-driven factor is never a false effect.
+    #[arg(long)]
+    pub data_driven: bool,
 }
 
 /// `LO,HI` as the option writes it.
@@ -92,6 +98,7 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
         diagnose: DiagnoseOptions {
             restarts: a.restarts,
             seed: a.seed,
+            data_driven: a.data_driven,
             ..BatteryOptions::default().diagnose
         },
         only: a.case,

@@ -94,7 +94,19 @@ impl BatteryOptions {
                 "{{samples={lo},{hi}}}: 20 ≤ LO ≤ HI"
             )));
         }
-        Ok(())
+        let planned = self.planned();
+        match self.only {
+            // An id past the plan would run nothing and print an empty table.
+            Some(id) if id >= planned => Err(crate::choice::field_error(format!(
+                "{{case={id}}}: this battery has cases 0–{} ({} per effect × {} effects, {} null, {} misspecified)",
+                planned.saturating_sub(1),
+                self.cases,
+                self.effects.len(),
+                self.nulls,
+                self.misspecified
+            ))),
+            _ => Ok(()),
+        }
     }
 
     /// The cases the battery runs: one, or every case of the plan.
@@ -102,8 +114,13 @@ impl BatteryOptions {
         if self.only.is_some() {
             1
         } else {
-            self.effects.len() * self.cases + self.nulls + self.misspecified
+            self.planned()
         }
+    }
+
+    /// The cases of the whole plan, whether or not `only` picks one.
+    fn planned(&self) -> usize {
+        self.effects.len() * self.cases + self.nulls + self.misspecified
     }
 }
 
