@@ -786,12 +786,27 @@ def _smoothness(value: Any) -> str:
     return value if isinstance(value, str) else repr(float(value))
 
 
+def _old_weighting(call: str, weights: Any, weighting: Any, default: Any) -> Any:
+    """The weights of a call that may use the deprecated keyword ``weighting``: it warns,
+    and giving both (weights other than its default) is an error."""
+    if weighting is None:
+        return weights
+    _warnings.warn(
+        f"{call}(weighting=...) is deprecated: use weights=... (the command line's --weights)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    if weights != default:
+        raise TypeError(f"{call}: give weights or its deprecated spelling weighting, not both")
+    return weighting
+
+
 def fit(
     dataset: Dataset,
     model: str,
     *,
     loss: str = _FIT_DEFAULTS["loss"],
-    weighting: str = _FIT_DEFAULTS["weighting"],
+    weights: str = _FIT_DEFAULTS["weights"],
     restarts: int = _FIT_DEFAULTS["restarts"],
     seed: int = _FIT_DEFAULTS["seed"],
     backend: str = "auto",
@@ -804,12 +819,14 @@ def fit(
     mc_restarts: int = _FIT_DEFAULTS["mc_restarts"],
     smoothness: Union[str, float] = _FIT_DEFAULTS["smoothness"],
     progress: ProgressArg = None,
+    weighting: Optional[str] = None,
 ) -> Fit:
     """Fit ``model`` (a spec such as ``"on"``, ``"fa(eon)"``, ``"btdf(gg)+scale"``) to the data.
 
     The keywords are ``bsdfit fit``'s options with its defaults: ``loss`` (chi2, or the
-    paper's smape rmse ngan low / f cosf logf logcosf), ``weighting`` (uniform, relunc,
-    invunc), ``restarts``, ``seed``, ``backend`` ("cpu", "gpu" or "auto"), ``optimizer``
+    benchmark losses smape rmse ngan low / f cosf logf logcosf), ``weights`` (uniform,
+    relunc, invunc; ``weighting`` is its deprecated spelling and warns), ``restarts``,
+    ``seed``, ``backend`` ("cpu", "gpu" or "auto"), ``optimizer``
     ("lm" or "compass"; default by loss), ``fix`` ({name: value}), ``bounds``
     ({name: (lo, hi)}), ``prior`` ({name: (mean, sd)}), and Monte Carlo replicas ``mc``
     with ``mc_scale`` and ``mc_restarts``; ``smoothness``, the prior on a data-driven
@@ -825,12 +842,13 @@ def fit(
     """
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
+    weights = _old_weighting("fit", weights, weighting, _FIT_DEFAULTS["weights"])
     with _Progress(progress) as reports:
         text, mc_error, notes, residual, summary = _bsdfit.fit_json(
             dataset._native,
             _text("model", model),
             _text("loss", loss),
-            _text("weighting", weighting),
+            _text("weights", weights),
             None if optimizer is None else _text("optimizer", optimizer),
             _int("restarts", restarts, 1),
             _int("seed", seed, 0),
@@ -910,7 +928,7 @@ def diagnose(
     model: str,
     *,
     loss: str = _DIAGNOSE_DEFAULTS["loss"],
-    weighting: str = _DIAGNOSE_DEFAULTS["weighting"],
+    weights: str = _DIAGNOSE_DEFAULTS["weights"],
     optimizer: str = _DIAGNOSE_DEFAULTS["optimizer"],
     restarts: int = _DIAGNOSE_DEFAULTS["restarts"],
     seed: int = _DIAGNOSE_DEFAULTS["seed"],
@@ -927,6 +945,7 @@ def diagnose(
     backtrack: bool = _DIAGNOSE_DEFAULTS["backtrack"],
     explore: int = _DIAGNOSE_DEFAULTS["explore"],
     progress: ProgressArg = None,
+    weighting: Optional[str] = None,
 ) -> Diagnosis:
     """Find where ``model`` and the data disagree beyond the uncertainties, name the missing
     effect, add it and repeat while the improvement is significant (``bsdfit diagnose``).
@@ -934,13 +953,15 @@ def diagnose(
     a :class:`ProgressEvent` per line. ``bootstrap`` replicates are planned for each
     calibrated test: it stops earlier once its verdict is settled and draws more, up to
     ``bootstrap_max``, where they cannot decide; ``calibrate_all`` runs the tests that
-    cannot change a round's choice too (they are deferred by default)."""
+    cannot change a round's choice too (they are deferred by default). ``weights``: as
+    ``fit``'s (``weighting`` is its deprecated spelling)."""
     if not isinstance(dataset, Dataset):
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
+    weights = _old_weighting("diagnose", weights, weighting, _DIAGNOSE_DEFAULTS["weights"])
     with _Progress(progress) as reports:
         options = {
             "loss": _text("loss", loss),
-            "weighting": _text("weighting", weighting),
+            "weights": _text("weights", weights),
             "optimizer": _text("optimizer", optimizer),
             "restarts": _int("restarts", restarts, 1),
             "seed": _int("seed", seed, 0),
@@ -973,7 +994,7 @@ def sweep(
     *,
     models: Optional[Sequence[str]] = None,
     losses: Optional[Sequence[str]] = None,
-    weighting: Optional[Union[str, Sequence[str]]] = None,
+    weights: Optional[Union[str, Sequence[str]]] = None,
     restarts: int = _SWEEP_DEFAULTS["restarts"],
     seed: int = _SWEEP_DEFAULTS["seed"],
     backend: str = _SWEEP_DEFAULTS["backend"],
@@ -984,31 +1005,23 @@ def sweep(
     emit_slurm: Optional[int] = None,
     slurm_cpus: int = 1,
     slurm_binary: Optional[PathLike] = None,
-    weights: Optional[Union[str, Sequence[str]]] = None,
+    weighting: Optional[Union[str, Sequence[str]]] = None,
 ) -> str:
     """Run ``bsdfit sweep`` over data files or folders into ``out`` (the same folder the
     command line writes: results.csv, results.json, pictures, report.html; resumable).
     Returns the path of ``out``.
 
-    ``weighting``: the weightings to sweep (as ``fit``'s keyword; ``weights`` is its
-    deprecated spelling). ``progress``: True (the default) for a bar on stderr with the
-    command line's notes above it, False or None for silence, or a callable given a
-    :class:`ProgressEvent` as each fit ends.
+    ``weights``: the weightings to sweep (as ``fit``'s keyword and ``--weights``;
+    ``weighting`` is its deprecated spelling and warns). ``progress``: True (the default)
+    for a bar on stderr with the command line's notes above it, False or None for
+    silence, or a callable given a :class:`ProgressEvent` as each fit ends.
 
     ``emit_slurm=N``: run nothing; write the job scripts ``bsdfit sweep --emit-slurm N``
     writes into ``out/slurm/`` (an array of N tasks with ``slurm_cpus`` CPUs each, a merge
     job, submit.sh, and the sweep they run saved as sweep.json; docs/cluster.md). The
     tasks run the ``bsdfit`` command line: ``slurm_binary``, by default the one on the
     PATH."""
-    if weights is not None:
-        _warnings.warn(
-            "sweep(weights=...) is deprecated: use weighting=... (the keyword of fit and diagnose)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        if weighting is not None:
-            raise TypeError("sweep: give weighting or its deprecated spelling weights, not both")
-        weighting = weights
+    weights = _old_weighting("sweep", weights, weighting, None)
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
 
@@ -1036,7 +1049,7 @@ def sweep(
             out_path,
             listed("models", models),
             listed("losses", losses),
-            listed("weighting", weighting),
+            listed("weights", weights),
             _int("restarts", restarts, 1),
             _int("seed", seed, 0),
             _text("backend", backend),

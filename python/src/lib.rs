@@ -441,14 +441,14 @@ fn backend_choice(s: &str) -> anyhow::Result<BackendChoice> {
     parse_choice("backend", s)
 }
 
-/// The loss and weighting words of a call as values; an error names the keyword.
-fn loss_words(loss: &str, weighting: &str) -> anyhow::Result<(Metric, Weights)> {
+/// The loss and weights words of a call as values; an error names the keyword.
+fn loss_words(loss: &str, weights: &str) -> anyhow::Result<(Metric, Weights)> {
     let metric = loss
         .parse()
         .map_err(|e: String| anyhow::anyhow!("loss: {e}"))?;
-    let weights = weighting
+    let weights = weights
         .parse()
-        .map_err(|e: String| anyhow::anyhow!("weighting: {e}"))?;
+        .map_err(|e: String| anyhow::anyhow!("weights: {e}"))?;
     Ok((metric, weights))
 }
 
@@ -688,7 +688,7 @@ fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let d = fit::FitRequest::default();
     let dict = PyDict::new(py);
     dict.set_item("loss", d.loss.to_string())?;
-    dict.set_item("weighting", d.weights.to_string())?;
+    dict.set_item("weights", d.weights.to_string())?;
     dict.set_item("optimizer", d.optimizer.map(|o| o.to_string()))?;
     dict.set_item("restarts", d.restarts)?;
     dict.set_item("seed", d.seed)?;
@@ -720,7 +720,7 @@ fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     let d = diagnose::DiagnoseOptions::default();
     let dict = PyDict::new(py);
     dict.set_item("loss", d.loss.metric.to_string())?;
-    dict.set_item("weighting", d.loss.weights.to_string())?;
+    dict.set_item("weights", d.loss.weights.to_string())?;
     dict.set_item("optimizer", d.optimizer.to_string())?;
     dict.set_item("restarts", d.restarts)?;
     dict.set_item("seed", d.seed)?;
@@ -762,7 +762,7 @@ impl DiagnoseRequest {
             let key: String = key.extract()?;
             match key.as_str() {
                 "loss" => loss = value.extract()?,
-                "weighting" => weights = value.extract()?,
+                "weights" => weights = value.extract()?,
                 "optimizer" => optimizer = value.extract()?,
                 "backend" => backend = value.extract()?,
                 "restarts" => o.restarts = value.extract()?,

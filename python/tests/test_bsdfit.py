@@ -344,7 +344,7 @@ BAD_ARGUMENTS = [
     ("fit", dict(optimizer="newton"), ValueError, "optimizer: 'newton' is not one of 'compass', 'lm'"),
     ("fit", dict(loss=2), TypeError, "loss: expected a string"),
     ("fit", dict(loss="l3"), ValueError, "loss: unknown loss 'l3'"),
-    ("fit", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
+    ("fit", dict(weights="heavy"), ValueError, "weights: unknown weights 'heavy'"),
     ("fit", dict(mc=-1), ValueError, "mc must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_restarts=-1), ValueError, "mc_restarts must be ≥ 0, got -1"),
     ("fit", dict(mc=2, mc_scale="0.1"), TypeError, "mc_scale: expected a number, got str"),
@@ -365,7 +365,7 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),
     ("diagnose", dict(alpha=2.0), ValueError, r"^alpha must be in \(0, 1\), got 2$"),
-    ("diagnose", dict(weighting="heavy"), ValueError, "weighting: unknown weights 'heavy'"),
+    ("diagnose", dict(weights="heavy"), ValueError, "weights: unknown weights 'heavy'"),
     ("diagnose", dict(backend="cuda"), ValueError, "backend: 'cuda' is not one of"),
     ("diagnose", dict(bounds={"sigma": (0.5, 0.1)}), ValueError, "bounds sigma=0.5:0.1: LO must be below HI"),
     ("read", dict(max_samples=-1), ValueError, "max_samples must be ≥ 0, got -1"),
@@ -777,15 +777,29 @@ def test_progress_reports_to_a_callable_and_draws_a_bar(capfd):
         bsdfit.fit(data, "on", progress="yes")
 
 
-def test_sweep_takes_fits_keyword_and_warns_on_the_old_one(tmp_path):
+def test_weights_is_the_keyword_everywhere_and_the_old_one_warns(tmp_path):
+    """One name for the weighting: ``weights`` (the command line's --weights) in fit,
+    diagnose and sweep; ``weighting`` still works, warns, and may not be given beside it."""
     events = []
     bsdfit.sweep([DATA / "red-brick.csv"], tmp_path / "a", models=["lambert"], losses=["rmse"],
-                 weighting=["relunc"], restarts=2, backend="cpu", pictures=False,
+                 weights=["relunc"], restarts=2, backend="cpu", pictures=False,
                  progress=events.append)
     assert [e.done for e in events if e.stage == "sweep"][-1] == 1
-    with pytest.warns(DeprecationWarning, match="weighting"):
+    with pytest.warns(DeprecationWarning, match=r"sweep\(weighting=...\) is deprecated: use weights="):
         bsdfit.sweep([DATA / "red-brick.csv"], tmp_path / "b", models=["lambert"], losses=["rmse"],
-                     weights=["relunc"], restarts=2, backend="cpu", pictures=False, progress=False)
+                     weighting=["relunc"], restarts=2, backend="cpu", pictures=False, progress=False)
+    data = bsdfit.Dataset.read(DATA / "red-brick.csv")
+    new = bsdfit.fit(data, "lambert", loss="rmse", weights="relunc", restarts=2, backend="cpu")
+    with pytest.warns(DeprecationWarning, match=r"fit\(weighting=...\) is deprecated"):
+        old = bsdfit.fit(data, "lambert", loss="rmse", weighting="relunc", restarts=2, backend="cpu")
+    assert old.report["weights"] == new.report["weights"] == "relunc"
+    assert np.array_equal(old.x, new.x)
+    with pytest.warns(DeprecationWarning), pytest.raises(
+            TypeError, match="fit: give weights or its deprecated spelling weighting, not both"):
+        bsdfit.fit(data, "lambert", loss="rmse", weights="relunc", weighting="uniform")
+    with pytest.warns(DeprecationWarning, match=r"diagnose\(weighting=...\) is deprecated"):
+        with pytest.raises(ValueError, match="weights: unknown weights 'heavy'"):
+            bsdfit.diagnose(data, "lambert", weighting="heavy")
     for run in ("a", "b"):
         with open(tmp_path / run / "results.csv", encoding="utf-8") as f:
             rows = [r for r in csv.DictReader(l for l in f if not l.startswith("#"))]
@@ -832,7 +846,7 @@ def test_fit_sweep_and_battery_defaults_are_the_library_and_cli_defaults(command
     for name, value in native.items():
         assert signature[name].default == value, name
     help_text = run_cli(command, "--help").stdout
-    flags = {"weighting": "weights"}
+    flags = {}
     for name, value in native.items():
         if value is None or isinstance(value, bool):
             continue  # no default shown: chosen by the loss (optimizer), or a flag (--no-pictures)
@@ -893,7 +907,7 @@ def test_diagnose_defaults_are_the_library_and_cli_defaults():
     for name, value in native.items():
         assert signature[name].default == value, name
     help_text = run_cli("diagnose", "--help").stdout
-    flags = {"weighting": "weights"}
+    flags = {}
     for name, value in native.items():
         if isinstance(value, bool):
             continue  # flags (--calibrate-all, --no-backtrack) show no default

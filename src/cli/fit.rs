@@ -21,12 +21,13 @@ pub struct FitArgs {
     pub model: String,
     /// Loss. Default chi2 = Σ((y′−y)/u)², which fits BRDF and BTDF data alike: every v1
     /// data file carries a standard uncertainty per value, so χ² weighs each sample by
-    /// what it is worth. The paper's losses remain: smape rmse ngan low (BRDF), f cosf
-    /// logf logcosf (BTDF).
+    /// what it is worth. The benchmark's losses remain: smape rmse ngan low (BRDF), f cosf
+    /// logf logcosf (BTDF); docs/losses.md defines each.
     #[arg(long, default_value_t = FitRequest::default().loss.to_string())]
     pub loss: String,
-    /// Weights: uniform, relunc (BRDF, paper §2.2), invunc (BTDF, paper §2.3.2). chi2
-    /// already weighs by 1/u².
+    /// Weighting of that loss: uniform; relunc, 1/(u/|y| + ε), the inverse relative
+    /// uncertainty (the BRDF losses' uncertainty weighting); invunc, 1/u (the BTDF
+    /// losses'). chi2 already weighs by 1/u² whatever is given.
     #[arg(long, default_value_t = FitRequest::default().weights.to_string())]
     pub weights: String,
     /// Optimizer. Default: lm (Levenberg–Marquardt) for sum-of-squares losses — chi2 and
@@ -45,8 +46,8 @@ pub struct FitArgs {
     /// the write fails afterwards, the JSON is printed to stdout instead).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Fit each measured φ plane separately (anisotropic samples, paper §2.3.2); the JSON
-    /// is then {"per_axis": [{"phi": …, "fit": report}, …]}.
+    /// Fit each measured φ plane separately (for anisotropic samples: one isotropic fit per
+    /// plane); the JSON is then {"per_axis": [{"phi": …, "fit": report}, …]}.
     #[arg(long)]
     pub per_axis: bool,
     #[command(flatten)]

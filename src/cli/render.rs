@@ -35,7 +35,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub optimizer: Option<String>,
     /// Another data set of the same material for the baseline (e.g. one with off-plane and
-    /// near-specular samples, as the paper's Fig. 1).
+    /// near-specular samples, so that the baseline covers the whole hemisphere).
     #[arg(long)]
     pub baseline: Option<std::path::PathBuf>,
     /// Image width and height in pixels (8–4096).

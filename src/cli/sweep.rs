@@ -22,9 +22,9 @@ pub struct SweepArgs {
     /// a spec is used on the data sets of its kind).
     #[arg(long, value_delimiter = ',')]
     pub models: Option<Vec<String>>,
-    /// Losses, comma-separated (default: rmse,chi2 for BRDF, f,chi2 for BTDF — the paper's
-    /// RMSE / g₁ comparison plus the χ² fit; each loss is used on the data sets it is
-    /// defined for).
+    /// Losses, comma-separated (default: rmse,chi2 for BRDF, f,chi2 for BTDF — the
+    /// benchmark's RMSE / g₁ comparison plus the χ² fit; each loss is used on the data sets
+    /// it is defined for).
     #[arg(long, value_delimiter = ',')]
     pub losses: Option<Vec<String>>,
     /// Weightings, comma-separated: uniform, relunc, invunc, or unc (the kind's
