@@ -183,35 +183,95 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
 ];
 
-/// The top-level modules `path` (under `src/`, or the Python crate's source) names as
-/// `{root}::MODULE` in its code: comment lines and `#[cfg(test)]` code (the tail of a file,
-/// and `*_tests.rs` files) left out. Each with its line.
-fn modules_used(text: &str, root: &str) -> Vec<(usize, String)> {
-    let code = text.split("#[cfg(test)]").next().unwrap_or("");
+/// The top-level modules `path` (under `src/`, or the Python crate's source) names in its
+/// code: as `{root}::MODULE`, in a grouped import `{root}::{MODULE, OTHER::x}` (over
+/// several lines too), and, for a file `depth` modules below the crate root, as
+/// `super::…::MODULE` with as many `super`s (which names the crate root's MODULE).
+/// Comment lines and `#[cfg(test)]` code (the tail of a file, and `*_tests.rs` files) are
+/// left out. Each with its line.
+fn modules_used(text: &str, root: &str, depth: Option<usize>) -> Vec<(usize, String)> {
+    let code: String = text
+        .split("#[cfg(test)]")
+        .next()
+        .unwrap_or("")
+        .lines()
+        .map(|l| {
+            if l.trim_start().starts_with("//") {
+                ""
+            } else {
+                l
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let line_of = |at: usize| code[..at].matches('\n').count() + 1;
+    let ident = |s: &str| -> String {
+        s.chars()
+            .take_while(|c| c.is_ascii_lowercase() || *c == '_')
+            .collect()
+    };
     let mut out = Vec::new();
-    let prefix = format!("{root}::");
-    for (i, line) in code.lines().enumerate() {
-        if line.trim_start().starts_with("//") {
-            continue;
-        }
-        let mut rest = line;
-        while let Some(at) = rest.find(&prefix) {
-            // `bsdfit::` inside a longer name (`_bsdfit::`) is not the crate.
-            let before = rest[..at].chars().next_back();
-            rest = &rest[at + prefix.len()..];
-            if before.is_some_and(|c| c.is_alphanumeric() || c == '_') {
+    let mut prefixes = vec![format!("{root}::")];
+    if let Some(d) = depth.filter(|&d| d > 0) {
+        prefixes.push("super::".repeat(d));
+    }
+    for prefix in &prefixes {
+        let mut from = 0;
+        while let Some(found) = code[from..].find(prefix.as_str()) {
+            let at = from + found;
+            from = at + prefix.len();
+            // `bsdfit::` inside a longer name (`_bsdfit::`), or a longer `super::` chain
+            // than this one, is not the crate root.
+            let before = code[..at].chars().next_back();
+            if before.is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':') {
                 continue;
             }
-            let name: String = rest
-                .chars()
-                .take_while(|c| c.is_ascii_lowercase() || *c == '_')
-                .collect();
-            if !name.is_empty() {
-                out.push((i + 1, name));
+            let rest = &code[from..];
+            if rest.starts_with("super::") {
+                continue;
+            }
+            if let Some(group) = rest.strip_prefix('{') {
+                // The names at the group's first level: each item's first segment.
+                let mut level = 0;
+                let mut item_start = true;
+                for (k, c) in group.char_indices() {
+                    match c {
+                        '{' => level += 1,
+                        '}' if level == 0 => break,
+                        '}' => level -= 1,
+                        ',' if level == 0 => item_start = true,
+                        c if item_start && !c.is_whitespace() => {
+                            item_start = false;
+                            let name = ident(&group[k..]);
+                            if !name.is_empty() && name != "self" {
+                                out.push((line_of(from + 1 + k), name));
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            } else {
+                let name = ident(rest);
+                if !name.is_empty() {
+                    out.push((line_of(at), name));
+                }
             }
         }
     }
+    out.sort();
     out
+}
+
+/// How many modules below the crate root a file of `src/` is (`src/a/b.rs` and
+/// `src/a/b/mod.rs`: 2), or None for the crate root itself.
+fn src_depth(path: &Path) -> Option<usize> {
+    let rel = path
+        .strip_prefix(Path::new(env!("CARGO_MANIFEST_DIR")).join("src"))
+        .ok()?;
+    let parts = rel.components().count();
+    let is_mod = rel.file_name().is_some_and(|f| f == "mod.rs");
+    let depth = if is_mod { parts - 1 } else { parts };
+    (src_module(path).is_some()).then_some(depth)
 }
 
 /// The uses of `files` that `allowed(module of the file, module used)` refuses.
@@ -230,7 +290,12 @@ fn layering_violations(
             continue;
         };
         let text = std::fs::read_to_string(path).unwrap();
-        for (line, to) in modules_used(&text, root) {
+        let depth = if root == "crate" {
+            src_depth(path)
+        } else {
+            None
+        };
+        for (line, to) in modules_used(&text, root, depth) {
             if to != from && !allowed(&from, &to) {
                 bad.push(format!("{}:{line}: {from} uses {to}", path.display()));
             }
@@ -302,14 +367,66 @@ fn the_python_module_does_not_use_the_command_line() {
 fn the_layering_check_sees_an_upward_use() {
     let planted = "use crate::data::Dataset;\nfn f() { crate::workflows::synth::geometry(\"hemi\"); }\n// crate::cli::main in a comment\n";
     assert_eq!(
-        modules_used(planted, "crate"),
+        modules_used(planted, "crate", Some(1)),
         vec![(1, "data".to_string()), (2, "workflows".to_string())]
+    );
+    // Grouped imports, over lines and nested; `super` chains that reach the crate root
+    // from a file two modules down (and not the shorter or longer ones).
+    let grouped = "use crate::{\n    bsdf::Model,\n    engine::{loss::Loss, Backend},\n    self,\n};\nuse super::super::cli::Args;\nuse super::fit;\nuse super::super::super::x;\n";
+    assert_eq!(
+        modules_used(grouped, "crate", Some(2)),
+        vec![
+            (2, "bsdf".to_string()),
+            (3, "engine".to_string()),
+            (6, "cli".to_string())
+        ]
+    );
+    assert_eq!(
+        modules_used("pub use crate::{data, math::erf};", "crate", Some(1)),
+        vec![(1, "data".to_string()), (1, "math".to_string())]
     );
     assert!(allowed_in_src("bsdf", "data"));
     assert!(!allowed_in_src("data", "workflows"));
     assert!(!allowed_in_src("workflows", "cli"));
     assert_eq!(
-        modules_used("use bsdfit::cli::checks;\nlet x = _bsdfit::y;", "bsdfit"),
+        modules_used(
+            "use bsdfit::cli::checks;\nlet x = _bsdfit::y;",
+            "bsdfit",
+            None
+        ),
         vec![(1, "cli".to_string())]
+    );
+}
+
+/// The lines of code (not comments) of `text` that use clap.
+fn clap_uses(text: &str) -> Vec<usize> {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim_start().starts_with("//") && l.contains("clap"))
+        .map(|(i, _)| i + 1)
+        .collect()
+}
+
+/// What docs/architecture.md says: clap appears only in `src/cli/` (the library and the
+/// Python module take options as values, not as parsed flags).
+#[test]
+fn clap_appears_only_in_the_command_line() {
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/cli");
+    let mut files = src("src");
+    files.extend(src("python/src"));
+    let bad: Vec<String> = files
+        .iter()
+        .filter(|p| !p.starts_with(&cli))
+        .flat_map(|p| {
+            let text = std::fs::read_to_string(p).unwrap();
+            clap_uses(&text)
+                .into_iter()
+                .map(move |line| format!("{}:{line}", p.display()))
+        })
+        .collect();
+    assert!(bad.is_empty(), "clap outside src/cli/: {bad:?}");
+    assert_eq!(
+        clap_uses("use clap::Args;\n// clap in a comment\n#[derive(clap::Parser)]"),
+        vec![1, 3]
     );
 }

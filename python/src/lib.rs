@@ -21,7 +21,7 @@ use bsdfit::engine::{self, BackendChoice};
 use bsdfit::inference::constraints::{Constraint, ConstraintKind, ConstraintSpec};
 use bsdfit::inference::fit::{FitReport, Optimizer};
 use bsdfit::inference::saved::FitFile;
-use bsdfit::workflows::{checks, diagnose, export, fit};
+use bsdfit::workflows::{diagnose, export, fit};
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{
     PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
@@ -507,15 +507,8 @@ fn fit_json<'py>(
                 .map_err(|e: String| anyhow::anyhow!("smoothness: {e}"))?,
         };
         // Every check runs before the backend starts, as on the command line.
-        let (model, _, _) = request.prepare(&data)?;
         let mut notes = Vec::new();
-        checks::check_batch_memory(
-            restarts,
-            model.dim,
-            data.len(),
-            &format!("{} on {}", model.spec, data.source.display()),
-            &mut |w| notes.push(w),
-        )?;
+        request.preflight(&data, &mut |w| notes.push(w))?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let mc_total = request.mc_total() as u64;
         let outcome = request.run(&data, backend.as_ref(), &mut |stage, active| {
@@ -530,22 +523,9 @@ fn fit_json<'py>(
         if mc > 0 {
             reporter.send("mc", mc_total, Some(mc_total), "");
         }
-        let report = &outcome.report;
-        anyhow::ensure!(
-            report.best.chi2_red.is_finite() && report.best.loss.is_finite(),
-            "{}",
-            checks::nonfinite_message(
-                &outcome.model,
-                &data,
-                outcome.loss,
-                &report.flat_params,
-                report.best.chi2_red,
-                report.best.loss,
-                backend.as_ref(),
-            )
-        );
+        outcome.check_finite(&data, backend.as_ref())?;
         let residuals = outcome.residuals(&data)?;
-        let summary = report.summary();
+        let summary = outcome.report.summary();
         let mc_error = outcome.mc_error.map(|e| format!("{e:#}"));
         let text = serde_json::to_string(&outcome.report)?;
         Ok((text, mc_error, notes, residuals, summary, reporter))
@@ -735,23 +715,17 @@ fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(dict)
 }
 
-/// A diagnosis as `bsdfit.diagnose` asks for it: its keyword arguments, read once. The
-/// loss and weighting are values from here on; the other words (optimizer, backend) are
-/// checked where the command line checks them, so that errors come in the same order.
-struct DiagnoseRequest {
-    /// Every option but the loss and the optimizer, which are set from the fields below.
-    options: diagnose::DiagnoseOptions,
-    /// The loss and weighting, checked against the data's kind with the start model.
-    loss: Metric,
-    weights: Weights,
-    optimizer: String,
+/// A diagnosis as `bsdfit.diagnose` asks for it: the library's request (what the command
+/// line builds from its flags) and the backend, read once from the keyword arguments.
+struct PyDiagnoseRequest {
+    request: diagnose::DiagnoseRequest,
     backend: String,
 }
 
-impl DiagnoseRequest {
+impl PyDiagnoseRequest {
     /// The request of a dict keyed by `bsdfit.diagnose`'s keywords (values already of
-    /// their types); a keyword left out takes the library's default.
-    fn of_dict(dict: &Bound<'_, PyDict>) -> PyResult<DiagnoseRequest> {
+    /// their types) for the start `model`; a keyword left out takes the library's default.
+    fn of_dict(model: String, dict: &Bound<'_, PyDict>) -> PyResult<PyDiagnoseRequest> {
         let mut o = diagnose::DiagnoseOptions::default();
         let mut loss = o.loss.metric.to_string();
         let mut weights = o.loss.weights.to_string();
@@ -787,12 +761,15 @@ impl DiagnoseRequest {
         }
         o.bootstrap.seed = o.seed;
         o.constraints = constraint_spec(fix, bounds, prior, true).map_err(to_py)?;
+        o.optimizer = parse_choice("optimizer", &optimizer).map_err(to_py)?;
         let (loss, weights) = loss_words(&loss, &weights).map_err(to_py)?;
-        Ok(DiagnoseRequest {
-            options: o,
-            loss,
-            weights,
-            optimizer,
+        Ok(PyDiagnoseRequest {
+            request: diagnose::DiagnoseRequest {
+                model,
+                loss,
+                weights,
+                options: o,
+            },
             backend,
         })
     }
@@ -800,7 +777,7 @@ impl DiagnoseRequest {
 
 /// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
 /// and the warnings the command line prints on stderr. `options`: `bsdfit.diagnose`'s
-/// keyword arguments (see [`DiagnoseRequest::of_dict`]). `progress` (a callable or None)
+/// keyword arguments (see [`PyDiagnoseRequest::of_dict`]). `progress` (a callable or None)
 /// hears each line the command line prints as the path is searched.
 #[pyfunction]
 #[pyo3(signature = (dataset, model, options, progress))]
@@ -812,45 +789,24 @@ fn diagnose_json(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Vec<String>)> {
     let data = dataset.data.clone();
-    let request = DiagnoseRequest::of_dict(options)?;
+    let PyDiagnoseRequest { request, backend } = PyDiagnoseRequest::of_dict(model, options)?;
     let mut reporter = Reporter::new(progress);
     let (text, notes, reporter) = compute(py, move || {
-        let DiagnoseRequest {
-            mut options,
-            loss,
-            weights,
-            optimizer,
-            backend,
-        } = request;
-        let (loss, start) = diagnose::check_start(
-            &data,
-            &model,
-            loss,
-            weights,
-            options.alpha,
-            &options.constraints,
-        )?;
-        // As `bsdfit diagnose`: extensions add a few parameters; estimate with three more.
         let mut notes = Vec::new();
-        checks::check_batch_memory(
-            options.restarts.saturating_add(1),
-            start.dim + 3,
-            data.len(),
-            &format!(
-                "{} and its extensions on {}",
-                start.spec,
-                data.source.display()
-            ),
-            &mut |w| notes.push(w),
-        )?;
+        let prepared = request.prepare(&data, &mut |w| notes.push(w))?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
-        options.loss = loss;
-        options.optimizer = parse_choice("optimizer", &optimizer)?;
         let mut lines = 0;
-        let d = diagnose::diagnose(&data, &model, backend.as_ref(), &options, &mut |line| {
-            lines += 1;
-            reporter.send("diagnose", lines, None, &line);
-        })?;
+        let model = &request.model;
+        let d = diagnose::diagnose(
+            &data,
+            model,
+            backend.as_ref(),
+            &prepared.options,
+            &mut |line| {
+                lines += 1;
+                reporter.send("diagnose", lines, None, &line);
+            },
+        )?;
         Ok((serde_json::to_string(&d.to_json())?, notes, reporter))
     })?;
     reporter.finish((text, notes))

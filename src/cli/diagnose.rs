@@ -1,15 +1,15 @@
 //! `bsdfit diagnose`.
 
-use super::checks::check_batch_memory;
 use super::progress::Progress;
 use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::engine;
-use crate::engine::loss::Loss;
 use crate::inference::bootstrap::BootstrapOptions;
 use crate::inference::constraints::ConstraintSpec;
 use crate::inference::fit::Optimizer;
 use crate::text::plural;
-use crate::workflows::diagnose::{check_start, diagnose, write_report, DiagnoseOptions};
+use crate::workflows::diagnose::{
+    diagnose, write_report, DiagnoseOptions, DiagnoseRequest, Prepared,
+};
 use crate::workflows::fit::{parse_metric, parse_weights};
 use anyhow::Result;
 use clap::Args;
@@ -99,11 +99,21 @@ pub struct DiagnoseArgs {
 }
 
 impl DiagnoseArgs {
-    /// The diagnosis options these arguments ask for, given the loss and constraints
-    /// already checked against the data.
-    fn options(&self, loss: Loss, constraints: ConstraintSpec) -> DiagnoseOptions {
+    /// The diagnosis these arguments ask for (the loss and weighting words read, the
+    /// constraints given).
+    fn request(&self, constraints: ConstraintSpec) -> Result<DiagnoseRequest> {
+        Ok(DiagnoseRequest {
+            model: self.model.clone(),
+            loss: parse_metric(&self.loss)?,
+            weights: parse_weights(&self.weights)?,
+            options: self.options(constraints),
+        })
+    }
+
+    /// The diagnosis options these arguments ask for but the loss, which the request's
+    /// preparation sets once it is checked against the data.
+    fn options(&self, constraints: ConstraintSpec) -> DiagnoseOptions {
         DiagnoseOptions {
-            loss,
             optimizer: self.optimizer,
             restarts: self.restarts,
             seed: self.seed,
@@ -133,19 +143,9 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         crate::output::check_writable_dir(dir, "--report")?;
     }
     let data = a.data_args.read(&a.data)?;
-    let constraints = a.constraints.spec(true)?;
-    let (metric, weights) = (parse_metric(&a.loss)?, parse_weights(&a.weights)?);
-    let (loss, start) = check_start(&data, &a.model, metric, weights, a.alpha, &constraints)?;
-    // Extensions add a few parameters to the start model: estimate with three more.
-    check_batch_memory(
-        a.restarts + 1,
-        start.dim + 3,
-        data.len(),
-        &format!("{} and its extensions on {}", start.spec, a.data.display()),
-        &mut |w| eprintln!("{w}"),
-    )?;
+    let request = a.request(a.constraints.spec(true)?)?;
+    let Prepared { options: opts, .. } = request.prepare(&data, &mut |w| eprintln!("{w}"))?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
-    let opts = a.options(loss, constraints);
     println!(
         "diagnose {} ({}, {}, {}) from {}",
         data.material,
@@ -212,12 +212,13 @@ mod tests {
         let super::super::Command::Diagnose(a) = cli.command else {
             panic!("not diagnose");
         };
-        let loss = Loss::new(
-            a.loss.parse().expect("loss"),
-            a.weights.parse().expect("weights"),
-        );
-        let library = DiagnoseOptions::default();
-        let cli = a.options(loss, library.constraints.clone());
+        let library = DiagnoseRequest {
+            model: "on".into(),
+            ..DiagnoseRequest::default()
+        };
+        let cli = a
+            .request(library.options.constraints.clone())
+            .expect("parses");
         assert_eq!(format!("{cli:?}"), format!("{library:?}"));
     }
 }

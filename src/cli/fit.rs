@@ -1,6 +1,5 @@
 //! `bsdfit fit`.
 
-use super::checks::{check_batch_memory, nonfinite_message};
 use super::progress::Progress;
 use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::data::Dataset;
@@ -119,14 +118,7 @@ pub fn run(a: FitArgs) -> Result<()> {
     );
     let data = a.data_args.read(&a.data)?;
     // A misspelt model, loss or parameter name fails before any work.
-    let (model, _, _) = request.prepare(&data)?;
-    check_batch_memory(
-        a.restarts,
-        model.dim,
-        data.len(),
-        &format!("{} on {}", model.spec, a.data.display()),
-        &mut |w| eprintln!("{w}"),
-    )?;
+    let model = request.preflight(&data, &mut |w| eprintln!("{w}"))?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
     let mut mc_error = None;
     let mut run = |data: &Dataset| -> Result<FitReport> {
@@ -150,31 +142,19 @@ pub fn run(a: FitArgs) -> Result<()> {
         if let Some(mut bar) = mc_progress {
             bar.finish();
         }
-        let FitResponse {
-            model,
-            loss,
-            report,
-            mc_error: failed,
-            fallback,
-        } = outcome;
-        if let Some(line) = fallback {
+        if let Some(line) = &outcome.fallback {
             // Also among the summary's warnings; said here too, beside the other notices.
             eprintln!("{line}");
         }
+        print!("{}", outcome.report.summary());
+        outcome.check_finite(data, backend.as_ref())?;
+        let FitResponse {
+            report,
+            mc_error: failed,
+            ..
+        } = outcome;
         if failed.is_some() {
             mc_error = failed;
-        }
-        print!("{}", report.summary());
-        if !(report.best.chi2_red.is_finite() && report.best.loss.is_finite()) {
-            anyhow::bail!(nonfinite_message(
-                &model,
-                data,
-                loss,
-                &report.flat_params,
-                report.best.chi2_red,
-                report.best.loss,
-                backend.as_ref(),
-            ));
         }
         Ok(report)
     };

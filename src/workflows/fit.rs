@@ -124,6 +124,26 @@ pub struct FitResponse {
 }
 
 impl FitResponse {
+    /// An error saying why and what to try, where the best fit's χ²_red or loss is not
+    /// finite (`data`, `backend`: what it was fitted to, and on).
+    pub fn check_finite(&self, data: &Dataset, backend: &dyn Backend) -> Result<()> {
+        let best = &self.report.best;
+        anyhow::ensure!(
+            best.chi2_red.is_finite() && best.loss.is_finite(),
+            "{}",
+            crate::workflows::checks::nonfinite_message(
+                &self.model,
+                data,
+                self.loss,
+                &self.report.flat_params,
+                best.chi2_red,
+                best.loss,
+                backend,
+            )
+        );
+        Ok(())
+    }
+
     /// The normalised residuals z = (y′ − y)/u of the best fit, one per sample of `data`
     /// (the data it was fitted to), computed in f64 on the CPU reference.
     pub fn residuals(&self, data: &Dataset) -> Result<Vec<f64>> {
@@ -210,6 +230,21 @@ impl FitRequest {
             ..Default::default()
         };
         Ok((model, loss, opts))
+    }
+
+    /// Every check before the backend starts, for every front end: [`Self::prepare`]'s,
+    /// then the memory of one batch of restarts (`warn` hears what the command line
+    /// prints as a warning). Returns the model.
+    pub fn preflight(&self, data: &Dataset, warn: &mut dyn FnMut(String)) -> Result<Model> {
+        let (model, _, _) = self.prepare(data)?;
+        crate::workflows::checks::check_batch_memory(
+            self.restarts,
+            model.dim,
+            data.len(),
+            &format!("{} on {}", model.spec, data.source.display()),
+            warn,
+        )?;
+        Ok(model)
     }
 
     /// Fit `data` on `backend`, then (with `mc`) refit its replicas. `progress` gets the

@@ -36,7 +36,8 @@
 //! and the embedding of the current optimum), `fit` (the fits), `regions` (residual
 //! statistics over angular regions and their sentences), `score` (F test, BIC,
 //! identifiability, consistency), `path` (adoption, greedy path, backtracking: the
-//! [`diagnose`] driver), `json` (docs/output.md output), `report` (SVG panels and HTML).
+//! [`diagnose`] driver), `json` (docs/output.md output), `report` (SVG panels and HTML),
+//! `request` (a diagnosis as its callers ask for it, checked before any fit).
 
 pub mod battery;
 mod effects;
@@ -49,6 +50,7 @@ mod path;
 mod prune;
 mod regions;
 mod report;
+mod request;
 mod score;
 mod symmetry;
 #[cfg(test)]
@@ -61,6 +63,7 @@ pub use fit::{bootstrap_p, fit_model, FitResult};
 pub use path::diagnose;
 pub use regions::{describe_regions, region_stats, RegionStat};
 pub use report::{factor_panels, residual_panel, staircase_panel, write_report};
+pub use request::{DiagnoseRequest, Prepared};
 pub use score::{irregular_null, PTest, Scored};
 pub use symmetry::FrameTest;
 
