@@ -30,6 +30,9 @@ pub struct DiagnoseArgs {
     /// weighting); χ² weights by 1/u² whatever is given.
     #[arg(long, default_value_t = DiagnoseOptions::default().loss.weights.to_string())]
     pub weights: String,
+    /// Optimizer of every fit: lm (Levenberg–Marquardt, for sum-of-squares losses: χ² and
+    /// every loss but smape) or compass (compass search; what smape is fitted with
+    /// whatever is given).
     #[arg(long, value_parser = super::choice::<Optimizer>(), default_value_t = DiagnoseOptions::default().optimizer)]
     pub optimizer: Optimizer,
     /// Random restarts per fit (plus the current optimum as one more start); the same

@@ -275,3 +275,31 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Export(a) => export::run(&a),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every option and argument of every command says what it is (`--help` shows no
+    /// bare flag), and every command has an about line.
+    #[test]
+    fn every_option_has_help() {
+        let root = super::Cli::command();
+        let mut bare = Vec::new();
+        for cmd in root.get_subcommands() {
+            if cmd.get_about().is_none() {
+                bare.push(format!("{} (the command)", cmd.get_name()));
+            }
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                if arg.get_help().is_none() && arg.get_long_help().is_none() {
+                    bare.push(format!("{} --{}", cmd.get_name(), id.replace('_', "-")));
+                }
+            }
+        }
+        assert!(bare.is_empty(), "options without help: {bare:?}");
+    }
+}

@@ -49,6 +49,8 @@ pub struct RenderArgs {
     /// nearest sample's) or idw (an inverse-distance blend of the 4 nearest).
     #[arg(long, value_parser = super::choice::<Lookup>(), default_value = "idw")]
     pub lookup: Lookup,
+    /// The per-pixel error the error image shows between the model's render and the
+    /// tabulated baseline's.
     #[arg(long, value_parser = super::choice::<ErrorMetric>(), default_value = "smape")]
     pub error: ErrorMetric,
     /// Error at the top of the colour scale (default 0.5 for SMAPE, 0.1 for RMSE).
