@@ -63,7 +63,7 @@ use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::engine::Backend;
-use crate::inference::fit::{fit_many, FitOptions, ManyStats, Optimizer, PhaseSeconds};
+use crate::inference::fit::{fit_many, FitOptions, ManyStats, Optimizer, PhaseSeconds, Smoothness};
 use crate::inference::mc::ReplicaSource;
 use crate::math::chi2_sf;
 use serde::Serialize;
@@ -308,6 +308,8 @@ pub struct NullRefits {
     pub seconds: f64,
     pub evaluations: u64,
     pub phases: PhaseSeconds,
+    /// The smoothness prior of the null's knots in its refits ([`Self::with_smoothness`]).
+    smoothness: Smoothness,
 }
 
 impl NullRefits {
@@ -324,7 +326,16 @@ impl NullRefits {
             seconds: 0.0,
             evaluations: 0,
             phases: PhaseSeconds::default(),
+            smoothness: Smoothness::Auto,
         }
+    }
+
+    /// Refit the null's knots (a data-driven factor) under this prior: the σ_s its fit
+    /// chose on the measured data, so that the refits are of the model the test is about
+    /// (by default the options' smoothness, which in a lockstep refit means no prior).
+    pub fn with_smoothness(mut self, smoothness: Smoothness) -> Self {
+        self.smoothness = smoothness;
+        self
     }
 
     /// Replicates refitted so far (the measured data not counted).
@@ -360,6 +371,10 @@ impl NullRefits {
         let opts = FitOptions {
             initial_points: vec![self.start.clone()],
             problem_points: vec![],
+            smoothness: match self.smoothness {
+                Smoothness::Auto => base.smoothness,
+                own => own,
+            },
             ..replicate_options(base, boot)
         };
         for chunk in chunks(from, count) {

@@ -94,6 +94,22 @@ fn trial(sd: f64, o: &Conclusions) -> SmoothnessTrial {
     }
 }
 
+impl SmoothnessChoice {
+    /// A fit concluded under the σ_s that `from` chose for the same knots on another model
+    /// (`spec`), held rather than chosen again: its own χ² and effective parameters,
+    /// `from`'s trials, and a criterion that says where σ_s comes from.
+    pub fn held(from: &SmoothnessChoice, spec: &str, o: &Conclusions) -> SmoothnessChoice {
+        SmoothnessChoice {
+            chosen: trial(from.chosen.sd, o),
+            tried: from.tried.clone(),
+            criterion: format!(
+                "{}, held from {spec}, where the data-driven factor was adopted",
+                from.criterion
+            ),
+        }
+    }
+}
+
 /// Fit at every σ_s of [`GRID`] (`fit` makes one fit under the
 /// options it is given), and keep the smallest AIC. The first fit uses `opts`' restarts;
 /// each later one starts from the previous optimum and the given points, with one random

@@ -10,7 +10,7 @@ use crate::engine::loss::normalised_residuals;
 use crate::engine::Backend;
 use crate::inference::bootstrap::{self, BootstrapOptions};
 use crate::inference::covariance::Covariance;
-use crate::inference::fit::{fit_outcome, FitOptions, Optimizer};
+use crate::inference::fit::{fit_outcome, FitOptions, Optimizer, Smoothness, SmoothnessChoice};
 use crate::inference::stats::consistency_p;
 use anyhow::{Context, Result};
 
@@ -77,11 +77,30 @@ pub fn fit_model(
     opts: &DiagnoseOptions,
     seeds: &[Vec<f64>],
 ) -> Result<FitResult> {
+    fit_model_holding(model, data, backend, opts, seeds, None)
+}
+
+/// [`fit_model`], the smoothness prior of the knots held at the σ_s that `held`'s fit
+/// chose for them (an analytic effect added to a model with a data-driven factor: the
+/// same knots, so no new choice; it would cost six fits of every candidate).
+fn fit_model_holding(
+    model: &Model,
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    seeds: &[Vec<f64>],
+    held: Option<&FitResult>,
+) -> Result<FitResult> {
+    let choice = held.and_then(|h| h.smoothness.as_ref().map(|c| (h, c)));
     let fit_opts = FitOptions {
         initial_points: seeds.to_vec(),
+        smoothness: choice.map_or(Smoothness::Auto, |(_, c)| Smoothness::Sd(c.chosen.sd)),
         ..fit_options(opts)
     };
-    let o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
+    let mut o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
+    if let Some((h, c)) = choice {
+        o.smoothness = Some(SmoothnessChoice::held(c, h.spec(), &o));
+    }
     let chi2 = o.chi2 + o.chi2_prior;
     Ok(FitResult {
         model: model.clone(),
@@ -122,7 +141,9 @@ pub(super) fn fit_all(
         let lobe = !evidence.is_empty();
         let mut seeds = vec![embedded.clone()];
         seeds.extend(evidence);
-        let fit = fit_model(&model, data, backend, opts, &seeds)
+        // An analytic effect keeps the current model's knots and their prior's weight.
+        let held = (!c.effect.is_data_driven()).then_some(current);
+        let fit = fit_model_holding(&model, data, backend, opts, &seeds, held)
             .with_context(|| format!("fitting {}", c.spec))?;
         // Only a new lobe is retried: a parameter whose null value is its optimum (σ = 0
         // of a Lambertian sample) rightly stays at the current model.
@@ -134,7 +155,7 @@ pub(super) fn fit_all(
             seed: opts.seed ^ 0x9e37_79b9_7f4a_7c15,
             ..opts.clone()
         };
-        let mut retry = fit_model(&model, data, backend, &again, &seeds)
+        let mut retry = fit_model_holding(&model, data, backend, &again, &seeds, held)
             .with_context(|| format!("fitting {} again", c.spec))?;
         retry.note = Some(if retry.chi2 < fit.chi2 {
             format!(
@@ -262,6 +283,17 @@ fn null_refits(
         data,
         boot.seed,
     )
+    .with_smoothness(chosen_smoothness(current))
+}
+
+/// The smoothness prior a fit's knots were concluded under, held fixed in the bootstrap's
+/// refits: the test is then of the model adopted, and each refit is one well-posed LM
+/// run instead of knots without data drifting unpenalised (what made a data-driven
+/// round's bootstrap take minutes). A model without knots keeps the options' setting.
+fn chosen_smoothness(fit: &FitResult) -> Smoothness {
+    fit.smoothness
+        .as_ref()
+        .map_or(Smoothness::Auto, |c| Smoothness::Sd(c.chosen.sd))
 }
 
 /// One candidate's calibrated p-value at `level` against the current model's refits.
@@ -282,7 +314,10 @@ fn calibrate_one(
         ext.dof,
         level,
         backend,
-        &fit_options(opts),
+        &FitOptions {
+            smoothness: chosen_smoothness(ext),
+            ..fit_options(opts)
+        },
         boot,
     )
 }
