@@ -166,6 +166,7 @@ def battery(
     restarts: int,
     backend: str,
     case: Optional[int],
+    data_driven: bool,
     progress: Optional[ProgressCallback],
 ) -> Tuple[str, str]:
     """Run the diagnosis's randomized battery (``bsdfit battery``): every case and its
