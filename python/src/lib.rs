@@ -793,20 +793,14 @@ fn diagnose_json(
     let mut reporter = Reporter::new(progress);
     let (text, notes, reporter) = compute(py, move || {
         let mut notes = Vec::new();
-        let prepared = request.prepare(&data, &mut |w| notes.push(w))?;
+        let options = request.prepare(&data, &mut |w| notes.push(w))?;
         let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
         let mut lines = 0;
         let model = &request.model;
-        let d = diagnose::diagnose(
-            &data,
-            model,
-            backend.as_ref(),
-            &prepared.options,
-            &mut |line| {
-                lines += 1;
-                reporter.send("diagnose", lines, None, &line);
-            },
-        )?;
+        let d = diagnose::diagnose(&data, model, backend.as_ref(), &options, &mut |line| {
+            lines += 1;
+            reporter.send("diagnose", lines, None, &line);
+        })?;
         Ok((serde_json::to_string(&d.to_json())?, notes, reporter))
     })?;
     reporter.finish((text, notes))

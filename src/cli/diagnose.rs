@@ -7,9 +7,7 @@ use crate::inference::bootstrap::BootstrapOptions;
 use crate::inference::constraints::ConstraintSpec;
 use crate::inference::fit::Optimizer;
 use crate::text::plural;
-use crate::workflows::diagnose::{
-    diagnose, write_report, DiagnoseOptions, DiagnoseRequest, Prepared,
-};
+use crate::workflows::diagnose::{diagnose, write_report, DiagnoseOptions, DiagnoseRequest};
 use crate::workflows::fit::{parse_metric, parse_weights};
 use anyhow::Result;
 use clap::Args;
@@ -147,7 +145,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     }
     let data = a.data_args.read(&a.data)?;
     let request = a.request(a.constraints.spec(true)?)?;
-    let Prepared { options: opts, .. } = request.prepare(&data, &mut |w| eprintln!("{w}"))?;
+    let opts = request.prepare(&data, &mut |w| eprintln!("{w}"))?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
     println!(
         "diagnose {} ({}, {}, {}) from {}",

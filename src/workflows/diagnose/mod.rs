@@ -63,7 +63,7 @@ pub use fit::{bootstrap_p, fit_model, FitResult};
 pub use path::diagnose;
 pub use regions::{describe_regions, region_stats, RegionStat};
 pub use report::{factor_panels, residual_panel, staircase_panel, write_report};
-pub use request::{DiagnoseRequest, Prepared};
+pub use request::DiagnoseRequest;
 pub use score::{irregular_null, PTest, Scored};
 pub use symmetry::FrameTest;
 

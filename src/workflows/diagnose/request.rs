@@ -5,7 +5,6 @@
 //! `FitRequest` is for a fit.
 
 use super::{check_start, diagnose, DiagnoseOptions, Diagnosis};
-use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::loss::{Metric, Weights};
 use crate::engine::Backend;
@@ -37,17 +36,11 @@ impl Default for DiagnoseRequest {
     }
 }
 
-/// A request checked against its data: the start model and the options to run.
-#[derive(Clone, Debug)]
-pub struct Prepared {
-    pub start: Model,
-    pub options: DiagnoseOptions,
-}
-
 impl DiagnoseRequest {
     /// The checks before any fit, on `data`: errors name the option at fault; `warn` hears
-    /// what the command line prints as a warning (a large batch).
-    pub fn prepare(&self, data: &Dataset, warn: &mut dyn FnMut(String)) -> Result<Prepared> {
+    /// what the command line prints as a warning (a large batch). Returns the options to
+    /// run, the loss set for the data's kind.
+    pub fn prepare(&self, data: &Dataset, warn: &mut dyn FnMut(String)) -> Result<DiagnoseOptions> {
         let o = &self.options;
         let (loss, start) = check_start(
             data,
@@ -69,10 +62,7 @@ impl DiagnoseRequest {
             ),
             warn,
         )?;
-        Ok(Prepared {
-            start,
-            options: DiagnoseOptions { loss, ..o.clone() },
-        })
+        Ok(DiagnoseOptions { loss, ..o.clone() })
     }
 
     /// Prepare and run the diagnosis on `backend`; `log` hears each line of the path as
@@ -84,7 +74,7 @@ impl DiagnoseRequest {
         warn: &mut dyn FnMut(String),
         log: &mut dyn FnMut(String),
     ) -> Result<Diagnosis> {
-        let prepared = self.prepare(data, warn)?;
-        diagnose(data, &self.model, backend, &prepared.options, log)
+        let options = self.prepare(data, warn)?;
+        diagnose(data, &self.model, backend, &options, log)
     }
 }
