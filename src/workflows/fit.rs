@@ -271,9 +271,7 @@ impl FitRequest {
         if self.mc > 0 && finite {
             // The replicas are fitted with the smoothness prior the fit chose.
             let mut opts = opts.clone();
-            if let Some(choice) = &report.smoothness {
-                opts.smoothness = Smoothness::Sd(choice.chosen.sd);
-            }
+            opts.smoothness = Smoothness::held_from(report.smoothness.as_ref(), opts.smoothness);
             let mc = McOptions {
                 replicas: self.mc,
                 scale_rel: self.mc_scale,

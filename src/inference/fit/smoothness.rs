@@ -26,6 +26,15 @@ pub enum Smoothness {
     Sd(f64),
 }
 
+impl Smoothness {
+    /// The σ_s a fit chose, to hold in fits that conclude about the same knots (Monte
+    /// Carlo replicas, a bootstrap's refits, a candidate that adds no knots); `otherwise`
+    /// when the fit made no choice (a model without knots, or the prior off).
+    pub fn held_from(choice: Option<&SmoothnessChoice>, otherwise: Smoothness) -> Smoothness {
+        choice.map_or(otherwise, |c| Smoothness::Sd(c.chosen.sd))
+    }
+}
+
 /// The words [`Smoothness::from_str`] reads: `auto`, `off`, or the σ.
 impl std::fmt::Display for Smoothness {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

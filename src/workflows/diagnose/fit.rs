@@ -94,7 +94,7 @@ fn fit_model_holding(
     let choice = held.and_then(|h| h.smoothness.as_ref().map(|c| (h, c)));
     let fit_opts = FitOptions {
         initial_points: seeds.to_vec(),
-        smoothness: choice.map_or(Smoothness::Auto, |(_, c)| Smoothness::Sd(c.chosen.sd)),
+        smoothness: Smoothness::held_from(choice.map(|(_, c)| c), Smoothness::Auto),
         ..fit_options(opts)
     };
     let mut o = fit_outcome(model, data, opts.loss, backend, &fit_opts, &mut |_| {})?;
@@ -291,9 +291,7 @@ fn null_refits(
 /// run instead of knots without data drifting unpenalised (what made a data-driven
 /// round's bootstrap take minutes). A model without knots keeps the options' setting.
 fn chosen_smoothness(fit: &FitResult) -> Smoothness {
-    fit.smoothness
-        .as_ref()
-        .map_or(Smoothness::Auto, |c| Smoothness::Sd(c.chosen.sd))
+    Smoothness::held_from(fit.smoothness.as_ref(), Smoothness::Auto)
 }
 
 /// One candidate's calibrated p-value at `level` against the current model's refits.
