@@ -1,26 +1,34 @@
 //! `bsdfit diagnose`.
 
-use super::progress::Progress;
+use super::progress::{ConsoleObserver, Progress};
 use super::{BackendArgs, ConstraintArgs, DataArgs};
 use crate::engine;
 use crate::inference::bootstrap::BootstrapOptions;
 use crate::inference::constraints::ConstraintSpec;
 use crate::inference::fit::Optimizer;
 use crate::text::plural;
+use crate::workflows::collection::{self, CellStatus, CollectionConfig};
 use crate::workflows::diagnose::{diagnose, write_report, DiagnoseOptions, DiagnoseRequest};
 use crate::workflows::fit::{parse_metric, parse_weights};
+use crate::workflows::sweep::Shard;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 
-/// `bsdfit diagnose DATA --model START [--json OUT] [--report DIR]`.
+/// `bsdfit diagnose DATA --model START [--json OUT] [--report DIR]`, or a collection:
+/// `bsdfit diagnose FILE|DIR… --model START --out DIR`.
 #[derive(Args, Clone, Debug)]
 pub struct DiagnoseArgs {
-    #[arg(help = super::DATA_FILE_HELP)]
-    pub data: PathBuf,
+    /// Data files, in any format read (recognised by content): bsdfit v1 CSV, ALTA text,
+    /// MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392; or folders, whose files of those
+    /// formats are taken (the others are named and left). One file without --out: its
+    /// diagnosis is printed (and --json, --report written); several, a folder, or --out:
+    /// a collection, one resumable cell per data set in --out.
+    #[arg(required_unless_present = "config")]
+    pub data: Vec<PathBuf>,
     /// Start model spec, e.g. lambert, on, btdf(beckmann).
-    #[arg(long)]
-    pub model: String,
+    #[arg(long, required_unless_present = "config")]
+    pub model: Option<String>,
     /// Loss that drives each fit (the statistics always use χ²).
     #[arg(long, default_value_t = DiagnoseOptions::default().loss.metric.to_string())]
     pub loss: String,
@@ -97,6 +105,35 @@ pub struct DiagnoseArgs {
     /// all the data.
     #[arg(long, value_name = "N", default_value_t = DiagnoseOptions::default().explore)]
     pub explore: usize,
+    /// Diagnose the data sets as a collection into DIR: DIR/cells/NAME.json per data set
+    /// (written as each ends; a rerun skips the data sets done for the same bytes),
+    /// DIR/diagnoses/NAME/ (residual maps, staircase, candidates), and DIR/diagnoses.csv,
+    /// diagnoses.json and report.html for the whole collection. A data set that fails is
+    /// listed with its error and the others go on. Locked while it runs (DIR/.bsdfit.lock).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// With a collection: run only shard I of N (1-based) of its data sets, e.g. 2/4, into
+    /// --out (one process at a time per folder: give each concurrent shard its own, then
+    /// `bsdfit merge A B --out DIR`). `auto`: the shard of this Slurm job-array task,
+    /// written into DIR/shards/I-of-N/; gather them with `bsdfit merge --shards --out DIR`.
+    #[arg(long, value_name = "I/N|auto")]
+    pub shard: Option<String>,
+    /// With a collection: write Slurm job scripts into DIR/slurm/ instead of running it
+    /// (an array of TASKS tasks with `--shard auto`, a merge job that runs when every task
+    /// has ended, and submit.sh that submits both).
+    #[arg(long, value_name = "TASKS")]
+    pub emit_slurm: Option<usize>,
+    /// With --emit-slurm: CPUs per array task (`--cpus-per-task`).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub slurm_cpus: usize,
+    /// With a collection: skip each data set's residual maps and the report's pictures
+    /// (the tables and report.html are still written).
+    #[arg(long)]
+    pub no_pictures: bool,
+    /// Run the collection saved in FILE (DIR/slurm/collection.json, written by
+    /// --emit-slurm for its array tasks); with it only --shard may be given.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["data", "model", "out", "json", "report", "emit_slurm"])]
+    pub config: Option<PathBuf>,
 }
 
 impl DiagnoseArgs {
@@ -104,7 +141,7 @@ impl DiagnoseArgs {
     /// constraints given).
     fn request(&self, constraints: ConstraintSpec) -> Result<DiagnoseRequest> {
         Ok(DiagnoseRequest {
-            model: self.model.clone(),
+            model: self.model.clone().unwrap_or_default(),
             loss: parse_metric(&self.loss)?,
             weights: parse_weights(&self.weights)?,
             options: self.options(constraints),
@@ -136,14 +173,103 @@ impl DiagnoseArgs {
     }
 }
 
+impl DiagnoseArgs {
+    /// Whether these arguments ask for a collection (several data sets, a folder, --out or
+    /// the options only a collection has).
+    fn is_collection(&self) -> bool {
+        self.data.len() > 1
+            || self.data.iter().any(|d| d.is_dir())
+            || self.out.is_some()
+            || self.config.is_some()
+            || self.shard.is_some()
+            || self.emit_slurm.is_some()
+    }
+
+    /// The collection these arguments ask for.
+    fn collection(&self) -> Result<CollectionConfig> {
+        let shard = self.shard.as_deref().map(Shard::parse).transpose()?;
+        if let Some(path) = &self.config {
+            return Ok(CollectionConfig {
+                shard,
+                ..CollectionConfig::load(path)?
+            });
+        }
+        for (given, option) in [
+            (self.json.is_some(), "--json"),
+            (self.report.is_some(), "--report"),
+        ] {
+            anyhow::ensure!(
+                !given,
+                "{option} writes one data set's diagnosis; a collection writes DIR/diagnoses.json and DIR/diagnoses/NAME/ (give --out DIR)"
+            );
+        }
+        let out = self.out.clone().ok_or_else(|| {
+            anyhow::anyhow!(
+                "diagnosing several data sets (or a folder) needs --out DIR, the collection's folder"
+            )
+        })?;
+        Ok(CollectionConfig {
+            data: self.data.clone(),
+            read: self.data_args.read_options()?,
+            request: self.request(self.constraints.spec(true)?)?,
+            backend: self.backend.backend,
+            out,
+            pictures: !self.no_pictures,
+            shard,
+        })
+    }
+}
+
+/// `bsdfit diagnose` over a collection: run it, or write its Slurm job scripts. Fails at
+/// the end (after writing every table) when a data set failed.
+fn run_collection(a: &DiagnoseArgs) -> Result<()> {
+    let cfg = a.collection()?;
+    let mut console = ConsoleObserver::counting("diagnose", "data sets");
+    if let Some(tasks) = a.emit_slurm {
+        return collection::emit_slurm(&cfg, tasks, a.slurm_cpus, None, &mut console);
+    }
+    let stats = collection::run(&cfg, &mut console)?;
+    for r in collection::record::sorted(&stats.cells) {
+        match r.status {
+            CellStatus::Done => println!(
+                "{}\t{}\t{} → {}\t{}",
+                r.data,
+                r.final_model.as_deref().unwrap_or(""),
+                r.start_chi2_red.map_or("–".into(), |c| format!("{c:.3}")),
+                r.final_chi2_red.map_or("–".into(), |c| format!("{c:.3}")),
+                if r.effects.is_empty() {
+                    "none".into()
+                } else {
+                    r.effects.join(", ")
+                }
+            ),
+            CellStatus::Failed => {
+                println!("{}\tfailed: {}", r.data, r.error.as_deref().unwrap_or(""))
+            }
+        }
+    }
+    anyhow::ensure!(
+        stats.failed.is_empty(),
+        "{} of this run failed: {} (their errors are in {})",
+        plural(stats.failed.len(), "data set"),
+        stats.failed.join(", "),
+        stats.out.join(collection::record::DIAGNOSES_CSV).display()
+    );
+    Ok(())
+}
+
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
+    if a.is_collection() {
+        return run_collection(a);
+    }
+    let path = &a.data[0];
     if let Some(path) = &a.json {
         crate::output::check_writable_file(path, "--json")?;
     }
     if let Some(dir) = &a.report {
         crate::output::check_writable_dir(dir, "--report")?;
     }
-    let data = a.data_args.read(&a.data)?;
+    let data = a.data_args.read(path)?;
     let request = a.request(a.constraints.spec(true)?)?;
     let opts = request.prepare(&data, &mut |w| eprintln!("{w}"))?;
     let backend = engine::select(a.backend.backend, &mut |m| eprintln!("{m}"))?;
@@ -153,17 +279,23 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         plural(data.len(), "sample"),
         plural(data.channel_count(), "channel"),
         plural(data.axes.len(), "plane"),
-        a.model
+        request.model
     );
     let mut progress = Progress::new("diagnose", 0, "");
-    progress.set_message(format!("fitting {}", a.model));
-    let d = diagnose(&data, &a.model, backend.as_ref(), &opts, &mut |line| {
-        // The latest step or candidate line is what the periodic progress line repeats.
-        if let Some(head) = line.split(" — ").next().filter(|h| !h.trim().is_empty()) {
-            progress.set_message(head.trim().chars().take(60).collect::<String>());
-        }
-        progress.suspend(|| println!("{line}"))
-    })?;
+    progress.set_message(format!("fitting {}", request.model));
+    let d = diagnose(
+        &data,
+        &request.model,
+        backend.as_ref(),
+        &opts,
+        &mut |line| {
+            // The latest step or candidate line is what the periodic progress line repeats.
+            if let Some(head) = line.split(" — ").next().filter(|h| !h.trim().is_empty()) {
+                progress.set_message(head.trim().chars().take(60).collect::<String>());
+            }
+            progress.suspend(|| println!("{line}"))
+        },
+    )?;
     progress.finish();
     println!(
         "effects: {}\nfinal model: {}",

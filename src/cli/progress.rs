@@ -207,14 +207,22 @@ impl Drop for Progress {
 /// (above which a fit's warnings print).
 pub struct ConsoleObserver {
     label: String,
+    /// What the progress counts.
+    unit: &'static str,
     progress: Option<Progress>,
 }
 
 impl ConsoleObserver {
     /// An observer whose progress reads `LABEL: 120/603 fits…`.
     pub fn new(label: &str) -> ConsoleObserver {
+        ConsoleObserver::counting(label, "fits")
+    }
+
+    /// An observer whose progress counts `unit` (`LABEL: 3/12 data sets…`).
+    pub fn counting(label: &str, unit: &'static str) -> ConsoleObserver {
         ConsoleObserver {
             label: label.to_string(),
+            unit,
             progress: None,
         }
     }
@@ -228,7 +236,7 @@ impl crate::workflows::sweep::SweepObserver for ConsoleObserver {
         }
     }
     fn begin(&mut self, total: u64, done: u64) {
-        let p = Progress::new(&self.label, total, "fits");
+        let p = Progress::new(&self.label, total, self.unit);
         p.inc(done);
         self.progress = Some(p);
     }

@@ -186,6 +186,21 @@ pub fn run_sweep(args: &SweepArgs) -> Result<SweepStats> {
 
 /// The `merge` command: union the rows of shard directories into `--out`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
+    use crate::workflows::collection;
+    if (args.shards && collection::merge::is_collection(&args.out))
+        || args
+            .inputs
+            .iter()
+            .any(|i| collection::merge::is_collection(i))
+    {
+        return collection::merge(
+            &args.out,
+            &args.inputs,
+            args.shards,
+            !args.no_pictures,
+            &mut ConsoleObserver::new("merge"),
+        );
+    }
     let cfg = MergeConfig {
         inputs: args.inputs.clone(),
         shards: args.shards,

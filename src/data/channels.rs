@@ -29,7 +29,21 @@ pub(super) fn select_channels(
         msg,
     };
     let present = present_wavelengths(samples);
-    let Some(wanted) = &opts.wavelengths else {
+    let wanted = match &opts.wavelengths {
+        Some(w)
+            if opts.wavelengths_at_most && opts.band_nm.is_none() && w.len() >= present.len() =>
+        {
+            notices.push(Notice::from(format!(
+                "--wavelengths names {} ({} nm); the file has {}: all kept",
+                count(w.len(), "channel", "channels"),
+                list(w),
+                count(present.len(), "wavelength", "wavelengths"),
+            )));
+            None
+        }
+        w => w.as_ref(),
+    };
+    let Some(wanted) = wanted else {
         if opts.band_nm.is_some() {
             return Err(ferr(
                 "--band needs --wavelengths: the centres of the bands to average".into(),

@@ -275,6 +275,11 @@ pub struct ReadOptions {
     pub allow_zero_uncertainty: bool,
     /// Keep only the channels nearest to these wavelengths (nm), in this order.
     pub wavelengths: Option<Vec<f64>>,
+    /// With `wavelengths` (and no `band_nm`): a file with no more channels than it names
+    /// keeps all of its own, with a notice, instead of being refused. A collection's files
+    /// differ (a spectral scan beside a one-wavelength Zemax file), and one selection must
+    /// serve them all.
+    pub wavelengths_at_most: bool,
     /// With `wavelengths`: each selected channel averages, per geometry, every wavelength
     /// of the file within ± this many nm of it: value = mean, u = sqrt(Σu²)/n (the
     /// standard uncertainty of a mean of n independent values).
@@ -355,6 +360,7 @@ impl ReadOptions {
         Ok(ReadOptions {
             allow_zero_uncertainty: request.allow_zero_uncertainty,
             wavelengths: request.wavelengths,
+            wavelengths_at_most: false,
             band_nm: request.band_nm,
             assume_uncertainty,
             max_samples: Some(

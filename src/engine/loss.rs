@@ -61,7 +61,7 @@ pub enum Finish {
     Sum,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct Loss {
     pub metric: Metric,
     pub weights: Weights,

@@ -84,7 +84,8 @@ const FIRST_BATCH: usize = 24;
 const CHUNK: usize = 128;
 
 /// How the bootstrap runs.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct BootstrapOptions {
     /// Planned replicates B (0: no bootstrap): the test stops before them where the
     /// verdict is settled early, and goes beyond them only where they cannot decide.

@@ -230,6 +230,7 @@ impl DataFile {
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
         let data = crate::data::readers::parse_bytes(&bytes, &path.display().to_string(), opts)?;
+        let hash = DataFile::hash_of(&bytes, opts);
         let name = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -237,19 +238,24 @@ impl DataFile {
         Ok(DataFile {
             name,
             path: path.to_path_buf(),
-            // A channel selection makes other data from the same bytes: key it apart.
-            hash: if opts.wavelengths.is_none()
-                && !opts.allow_zero_uncertainty
-                && opts.assume_uncertainty.is_none()
-                && opts.band_nm.is_none()
-                && opts.alta_values.is_none()
-            {
-                content_hash(&bytes)
-            } else {
-                content_hash(&[bytes.as_slice(), format!("{opts:?}").as_bytes()].concat())
-            },
+            hash,
             data,
         })
+    }
+
+    /// The key of the data set `bytes` read with `opts`: a channel selection makes other
+    /// data from the same bytes, so it is keyed apart.
+    pub fn hash_of(bytes: &[u8], opts: &ReadOptions) -> String {
+        if opts.wavelengths.is_none()
+            && !opts.allow_zero_uncertainty
+            && opts.assume_uncertainty.is_none()
+            && opts.band_nm.is_none()
+            && opts.alta_values.is_none()
+        {
+            content_hash(bytes)
+        } else {
+            content_hash(&[bytes, format!("{opts:?}").as_bytes()].concat())
+        }
     }
 }
 

@@ -2,6 +2,7 @@
 //! synthetic data, and a fit used elsewhere (eval, export).
 pub mod bench;
 pub mod checks;
+pub mod collection;
 pub mod diagnose;
 pub mod export;
 pub mod fit;

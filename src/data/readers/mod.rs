@@ -142,6 +142,19 @@ fn by_extension(path: &Path, head: &[u8]) -> Format {
 
 /// The format of a file, by content ([`sniff`]), else by extension.
 pub fn detect(path: &Path) -> Result<Format, DataError> {
+    let (head, len) = file_head(path)?;
+    Ok(sniff(&head, len).unwrap_or_else(|| by_extension(path, &head)))
+}
+
+/// The format of a file recognised by its content alone ([`sniff`]; None: no format's),
+/// how a folder's files are told from the other files it holds.
+pub fn recognise(path: &Path) -> Result<Option<Format>, DataError> {
+    let (head, len) = file_head(path)?;
+    Ok(sniff(&head, len))
+}
+
+/// The first 64 KiB of a file and its length.
+fn file_head(path: &Path) -> Result<(Vec<u8>, u64), DataError> {
     let file = path.display().to_string();
     let f = std::fs::File::open(path).map_err(|e| cannot_read(&file, e))?;
     let len = f.metadata().map(|m| m.len()).unwrap_or(0);
@@ -149,7 +162,7 @@ pub fn detect(path: &Path) -> Result<Format, DataError> {
     f.take(1 << 16)
         .read_to_end(&mut head)
         .map_err(|e| cannot_read(&file, e))?;
-    Ok(sniff(&head, len).unwrap_or_else(|| by_extension(path, &head)))
+    Ok((head, len))
 }
 
 fn cannot_read(file: &str, e: std::io::Error) -> DataError {

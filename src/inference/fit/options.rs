@@ -4,9 +4,9 @@
 use super::smoothness::Smoothness;
 use crate::inference::constraints::ConstraintSpec;
 use crate::optim::{compass, lm};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Optimizer {
     /// Compass search (Kolda, Lewis, Torczon 2003), BBM's optimizer; any loss.

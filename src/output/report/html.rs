@@ -179,6 +179,12 @@ figure.render img{width:192px;height:auto;image-rendering:pixelated}figure.rende
 figure.wide img{width:1180px}figure.plot img{width:760px}code{font-size:12px}nav a{margin-right:10px}.note{color:#8a4b00}\
 .row{display:flex;flex-wrap:wrap;align-items:flex-start}\n</style></head><body>\n";
 
+/// The head of a page in the report's style, titled `title` (escaped here), opening the
+/// body.
+pub fn page_head(title: &str) -> String {
+    HEAD.replace("bsdfit benchmark report", &super::esc(title)) + STYLE
+}
+
 /// What the page is written from: everything [`super::publish`] gathered.
 pub(super) struct Page<'a> {
     /// Every row of results.csv.

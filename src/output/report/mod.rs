@@ -22,6 +22,7 @@ use crate::output::files::write_atomic;
 use crate::output::results::{self, current_rows, rankings, Row, Skipped};
 use anyhow::Result;
 use featured::{featured, sampling_sets, Featured};
+pub use html::page_head;
 use inputs::{baselines, dataset, load_data};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -48,14 +49,16 @@ pub fn slug(r: &Row) -> String {
     )
 }
 
-fn esc(s: &str) -> String {
+/// Text escaped for HTML (element content and quoted attributes).
+pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
 }
 
-fn safe_name(s: &str) -> String {
+/// A file-name-safe word: every character but ASCII letters, digits, `.`, `-`, `_` as `_`.
+pub fn safe_name(s: &str) -> String {
     s.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '.' || c == '-' || c == '_' {

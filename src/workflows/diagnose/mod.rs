@@ -70,8 +70,9 @@ pub use symmetry::FrameTest;
 use crate::engine::loss::{Loss, Metric, Weights};
 use crate::inference::fit::Optimizer;
 
-/// Options of a diagnosis.
-#[derive(Clone, Debug)]
+/// Options of a diagnosis (saved as JSON with a collection's diagnosis).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct DiagnoseOptions {
     /// The loss that drives each fit (χ² unless told otherwise); the tests always use χ².
     pub loss: Loss,

@@ -384,11 +384,7 @@ pub fn write_report(dir: &Path, data: &Dataset, d: &Diagnosis) -> Result<()> {
     Ok(())
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
+use crate::output::report::esc;
 
 #[cfg(test)]
 mod tests {

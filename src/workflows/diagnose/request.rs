@@ -12,7 +12,8 @@ use crate::workflows::checks::check_batch_memory;
 use anyhow::Result;
 
 /// What one diagnosis is asked to do.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct DiagnoseRequest {
     /// The start model's spec, e.g. `lambert`.
     pub model: String,

@@ -216,15 +216,18 @@ pub fn shell_quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', r"'\''"))
 }
 
-/// What `sweep --emit-slurm` needs to write the job scripts.
+/// What `sweep --emit-slurm` (and `diagnose --emit-slurm`) needs to write the job scripts.
 pub struct JobScripts<'a> {
+    /// The command each array task runs with `--config CONFIG --shard auto`: `sweep` or
+    /// `diagnose`.
+    pub command: &'static str,
     /// The bsdfit binary (absolute).
     pub binary: &'a Path,
     /// The folder the jobs run in (relative paths in the arguments are relative to it).
     pub workdir: &'a Path,
     /// The sweep's folder (absolute).
     pub out: &'a Path,
-    /// The saved sweep configuration the tasks run ([`SWEEP_JSON`] in OUT/slurm/).
+    /// The saved configuration the tasks run ([`SWEEP_JSON`] in OUT/slurm/ for a sweep).
     pub config: &'a Path,
     pub tasks: usize,
     pub cpus_per_task: usize,
@@ -245,19 +248,20 @@ impl JobScripts<'_> {
         };
         let array = format!(
             "#!/bin/bash
-# bsdfit sweep as a Slurm job array: task I of {n} fits shard I/{n} into
-# {out}/shards/I-of-{n}/ (written by `bsdfit sweep --emit-slurm`; edit the #SBATCH lines
+# bsdfit {cmd} as a Slurm job array: task I of {n} runs shard I/{n} into
+# {out}/shards/I-of-{n}/ (written by `bsdfit {cmd} --emit-slurm`; edit the #SBATCH lines
 # freely, keep the array a range). Re-submitting resumes: only missing cells run.
-#SBATCH --job-name=bsdfit-sweep
+#SBATCH --job-name=bsdfit-{cmd}
 #SBATCH --array=1-{n}
 #SBATCH --cpus-per-task={cpus}
 {gres}#SBATCH --chdir={wd}
-#SBATCH --output={logs}/sweep-%A_%a.out
+#SBATCH --output={logs}/{cmd}-%A_%a.out
 set -euo pipefail
 # The CPU reference uses the CPUs Slurm gave the task.
 export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-1}}\"
-exec {bin} sweep --config {config} --shard auto
+exec {bin} {cmd} --config {config} --shard auto
 ",
+            cmd = self.command,
             n = self.tasks,
             out = self.out.display(),
             cpus = self.cpus_per_task,
@@ -286,7 +290,7 @@ exec {bin} merge --shards --out {outq}{pictures}
         );
         let submit = format!(
             "#!/bin/sh
-# Submit the sweep's job array, then the merge, which waits for every task to end
+# Submit the {cmd}'s job array, then the merge, which waits for every task to end
 # (afterany: a failed task leaves cells missing, and the merge says which).
 set -eu
 dir=$(dirname \"$0\")
@@ -296,6 +300,7 @@ merge=$(sbatch --parsable --dependency=afterany:\"$array\" \"$dir/merge.sbatch\"
 merge=${{merge%%;*}}
 echo \"submitted array job $array ({n} tasks) and merge job $merge; results in {out}\"
 ",
+            cmd = self.command,
             n = self.tasks,
             out = self.out.display(),
         );
@@ -322,21 +327,7 @@ pub fn emit(
     binary: Option<&Path>,
     obs: &mut dyn SweepObserver,
 ) -> Result<()> {
-    if tasks < 1 {
-        return Err(field_error(format!(
-            "{{emit_slurm={tasks}}}: the array needs at least one task"
-        )));
-    }
-    if cpus_per_task < 1 {
-        return Err(field_error(format!(
-            "{{slurm_cpus={cpus_per_task}}}: at least one CPU per task"
-        )));
-    }
-    if cfg.shard.is_some() {
-        return Err(field_error(
-            "{emit_slurm} writes an array whose tasks use {shard=auto}; leave {shard} out",
-        ));
-    }
+    check_array(tasks, cpus_per_task, cfg.shard.is_some())?;
     let (_, all) = read_cells(cfg)?;
     let workdir = std::env::current_dir().context("cannot read the current folder")?;
     let out = workdir.join(&cfg.out);
@@ -354,6 +345,7 @@ pub fn emit(
         None => bsdfit_binary()?,
     };
     let scripts = JobScripts {
+        command: "sweep",
         binary: &binary,
         workdir: &workdir,
         out: &out,
@@ -363,18 +355,7 @@ pub fn emit(
         gpu: cfg.backend == BackendChoice::Gpu,
         pictures: cfg.pictures,
     };
-    for (name, text, executable) in scripts.files() {
-        let path = dir.join(name);
-        crate::output::files::write_result(&path, &text, false)?;
-        #[cfg(unix)]
-        if executable {
-            use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
-                .with_context(|| format!("cannot make {} executable", path.display()))?;
-        }
-        #[cfg(not(unix))]
-        let _ = executable;
-    }
+    scripts.write(&dir)?;
     obs.note(&format!(
         "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch, {0}/submit.sh and the sweep they run, {0}/{SWEEP_JSON}; submit with: sh {0}/submit.sh",
         dir.display(),
@@ -390,9 +371,48 @@ pub fn emit(
     Ok(())
 }
 
+/// The checks of `--emit-slurm TASKS --slurm-cpus N` (`sharded`: a `--shard` was given).
+pub fn check_array(tasks: usize, cpus_per_task: usize, sharded: bool) -> Result<()> {
+    if tasks < 1 {
+        return Err(field_error(format!(
+            "{{emit_slurm={tasks}}}: the array needs at least one task"
+        )));
+    }
+    if cpus_per_task < 1 {
+        return Err(field_error(format!(
+            "{{slurm_cpus={cpus_per_task}}}: at least one CPU per task"
+        )));
+    }
+    if sharded {
+        return Err(field_error(
+            "{emit_slurm} writes an array whose tasks use {shard=auto}; leave {shard} out",
+        ));
+    }
+    Ok(())
+}
+
+impl JobScripts<'_> {
+    /// Write the scripts into `dir` (submit.sh executable).
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        for (name, text, executable) in self.files() {
+            let path = dir.join(name);
+            crate::output::files::write_result(&path, &text, false)?;
+            #[cfg(unix)]
+            if executable {
+                use std::os::unix::fs::PermissionsExt;
+                std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))
+                    .with_context(|| format!("cannot make {} executable", path.display()))?;
+            }
+            #[cfg(not(unix))]
+            let _ = executable;
+        }
+        Ok(())
+    }
+}
+
 /// The bsdfit binary the job scripts run: this process's, or `bsdfit` on the PATH when
 /// this process is not bsdfit (the Python module runs inside Python).
-fn bsdfit_binary() -> Result<PathBuf> {
+pub fn bsdfit_binary() -> Result<PathBuf> {
     let binary = std::env::current_exe()
         .context("cannot find the bsdfit binary")?
         .canonicalize()
