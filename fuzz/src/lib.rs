@@ -11,7 +11,7 @@ pub const FILE: &str = "fuzz-input.dat";
 /// assumed uncertainties (ALTA without `#VS`, MERL, RGL), and lenient (zero
 /// uncertainties floored, a channel selection with bands, `--alta-values`, a small
 /// MERL subsample). RGL materials are sampled on small geometries to keep inputs fast.
-pub fn option_sets() -> [ReadOptions; 3] {
+pub fn option_sets() -> [ReadOptions; 4] {
     [
         ReadOptions {
             max_samples: Some(0),
@@ -33,6 +33,15 @@ pub fn option_sets() -> [ReadOptions; 3] {
             max_samples: Some(5),
             alta_values: Some(AltaValues::Brdf),
             sample_geometry: Some("csic".into()),
+            wavelengths_at_most: false,
+        },
+        // A collection's selection: three channels where a file has more, all of its own
+        // where it has no more.
+        ReadOptions {
+            wavelengths: Some(vec![450.0, 550.0, 650.0]),
+            wavelengths_at_most: true,
+            assume_uncertainty: Some((0.05, 0.001)),
+            ..Default::default()
         },
     ]
 }
