@@ -158,3 +158,31 @@ same_as_reference "$WORK/runs/s2"
 SHARD_ROWS=$(count_rows "$WORK"/runs/s2/shards/*/results.csv)
 [ "$SHARD_ROWS" = "$CELLS" ] || { echo "$SHARD_ROWS rows in the shard folders for $CELLS cells"; exit 1; }
 echo "== Slurm sweep test passed: $CELLS cells, merged results equal the single-process sweep =="
+
+echo "== 3. a collection diagnosed by a 2-task array, merged =="
+mkdir -p "$WORK/coll"
+"$BIN" synth --model lambert --geometry inplane10 --seed 3 --out "$WORK/coll/a.csv" >/dev/null
+"$BIN" synth --model on --params rho=0.5,sigma=0.6 --geometry inplane10 --seed 4 --out "$WORK/coll/b.csv" >/dev/null
+"$BIN" synth --model on --params rho=0.3,sigma=0.3 --geometry inplane10 --seed 5 --out "$WORK/coll/c.binary" >/dev/null
+DIAG=(diagnose "$WORK/coll" --model lambert --max-steps 1 --bootstrap 0 --restarts 2 --backend cpu
+      --assume-uncertainty 0.02,0.001 --no-pictures)
+RAYON_NUM_THREADS=1 "$BIN" "${DIAG[@]}" --out "$WORK/runs/diag-ref" >/dev/null
+"$BIN" "${DIAG[@]}" --out "$WORK/runs/diag" --emit-slurm 2 2>/dev/null
+read -r ARRAY MERGE < <(sh "$WORK/runs/diag/slurm/submit.sh" | sed -n 's/submitted array job \([0-9]*\) (.*merge job \([0-9]*\);.*/\1 \2/p')
+wait_for_jobs "$ARRAY,$MERGE"
+cat "$WORK"/runs/diag/slurm/logs/merge-*.out
+python3 - "$WORK/runs/diag-ref/diagnoses.json" "$WORK/runs/diag/diagnoses.json" <<'PY'
+import json, sys
+def table(path):
+    rows = json.load(open(path))
+    for r in rows:
+        r.pop("seconds")
+        for s in r["rounds"]:
+            s.pop("seconds")
+    return rows
+ref, merged = table(sys.argv[1]), table(sys.argv[2])
+assert len(ref) == 3 and all(r["status"] == "done" for r in ref), ref
+assert merged == ref, "the merged table differs from one process's"
+print(f"merged table equals one process's: {len(ref)} data sets")
+PY
+echo "== Slurm collection test passed =="

@@ -128,9 +128,28 @@ def diagnose_json(
     model: str,
     options: Dict[str, Any],
     progress: Optional[ProgressCallback],
+) -> Tuple[str, List[str], str]:
+    """The diagnosis as ``bsdfit diagnose --json`` writes it, the warnings the command
+    line prints on stderr, and the diagnosis as a collection's cell records it (JSON)."""
+
+def diagnose_many(
+    paths: List[str],
+    out: str,
+    model: str,
+    options: Dict[str, Any],
+    wavelengths: Optional[List[float]],
+    assume_uncertainty: Optional[Union[str, Tuple[float, float]]],
+    max_samples: Optional[int],
+    shard: Optional[str],
+    pictures: bool,
+    progress: Optional[ProgressCallback],
+    emit_slurm: Optional[int],
+    slurm_cpus: int,
+    slurm_binary: Optional[str],
 ) -> Tuple[str, List[str]]:
-    """The diagnosis as ``bsdfit diagnose --json`` writes it, and the warnings the command
-    line prints on stderr."""
+    """A collection diagnosed into ``out`` (``bsdfit diagnose FILE|DIR… --out DIR``): its
+    table (every cell's record, worst final χ²_red first, JSON) and this run's failed
+    cells."""
 
 def sweep(
     paths: List[str],

@@ -13,6 +13,9 @@
 // Each function takes the keyword arguments of its Python call, one Rust argument each.
 #![allow(clippy::too_many_arguments)]
 
+mod diagnosis;
+mod sweeps;
+
 use bsdfit::choice::{Choice, ChoiceError};
 use bsdfit::data::readers::{self, alta::AltaValues};
 use bsdfit::data::{AssumeArg, Dataset, Kind, RawRow, ReadOptions, ReadRequest};
@@ -695,267 +698,6 @@ fn sweep_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// The keywords of `bsdfit.diagnose` and their defaults, the library's
 /// (`DiagnoseOptions::default()`): the Python signature shows these, so that no default is
 /// written twice.
-#[pyfunction]
-fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let d = diagnose::DiagnoseOptions::default();
-    let dict = PyDict::new(py);
-    dict.set_item("loss", d.loss.metric.to_string())?;
-    dict.set_item("weights", d.loss.weights.to_string())?;
-    dict.set_item("optimizer", d.optimizer.to_string())?;
-    dict.set_item("restarts", d.restarts)?;
-    dict.set_item("seed", d.seed)?;
-    dict.set_item("alpha", d.alpha)?;
-    dict.set_item("max_steps", d.max_steps)?;
-    dict.set_item("bootstrap", d.bootstrap.replicates)?;
-    dict.set_item("bootstrap_max", d.bootstrap.max_replicates)?;
-    dict.set_item("bootstrap_restarts", d.bootstrap.restarts)?;
-    dict.set_item("calibrate_all", d.calibrate_all)?;
-    dict.set_item("backtrack", d.backtrack)?;
-    dict.set_item("explore", d.explore)?;
-    Ok(dict)
-}
-
-/// A diagnosis as `bsdfit.diagnose` asks for it: the library's request (what the command
-/// line builds from its flags) and the backend, read once from the keyword arguments.
-struct PyDiagnoseRequest {
-    request: diagnose::DiagnoseRequest,
-    backend: String,
-}
-
-impl PyDiagnoseRequest {
-    /// The request of a dict keyed by `bsdfit.diagnose`'s keywords (values already of
-    /// their types) for the start `model`; a keyword left out takes the library's default.
-    fn of_dict(model: String, dict: &Bound<'_, PyDict>) -> PyResult<PyDiagnoseRequest> {
-        let mut o = diagnose::DiagnoseOptions::default();
-        let mut loss = o.loss.metric.to_string();
-        let mut weights = o.loss.weights.to_string();
-        let mut optimizer = o.optimizer.to_string();
-        let mut backend = BackendChoice::Auto.to_string();
-        let (mut fix, mut bounds, mut prior) = (Vec::new(), Vec::new(), Vec::new());
-        for (key, value) in dict.iter() {
-            let key: String = key.extract()?;
-            match key.as_str() {
-                "loss" => loss = value.extract()?,
-                "weights" => weights = value.extract()?,
-                "optimizer" => optimizer = value.extract()?,
-                "backend" => backend = value.extract()?,
-                "restarts" => o.restarts = value.extract()?,
-                "seed" => o.seed = value.extract()?,
-                "alpha" => o.alpha = value.extract()?,
-                "max_steps" => o.max_steps = value.extract()?,
-                "bootstrap" => o.bootstrap.replicates = value.extract()?,
-                "bootstrap_max" => o.bootstrap.max_replicates = value.extract()?,
-                "bootstrap_restarts" => o.bootstrap.restarts = value.extract()?,
-                "calibrate_all" => o.calibrate_all = value.extract()?,
-                "backtrack" => o.backtrack = value.extract()?,
-                "explore" => o.explore = value.extract()?,
-                "fix" => fix = value.extract()?,
-                "bounds" => bounds = value.extract()?,
-                "prior" => prior = value.extract()?,
-                _ => {
-                    return Err(PyValueError::new_err(format!(
-                        "diagnose: no option '{key}'"
-                    )))
-                }
-            }
-        }
-        o.bootstrap.seed = o.seed;
-        o.constraints = constraint_spec(fix, bounds, prior, true).map_err(to_py)?;
-        o.optimizer = parse_choice("optimizer", &optimizer).map_err(to_py)?;
-        let (loss, weights) = loss_words(&loss, &weights).map_err(to_py)?;
-        Ok(PyDiagnoseRequest {
-            request: diagnose::DiagnoseRequest {
-                model,
-                loss,
-                weights,
-                options: o,
-            },
-            backend,
-        })
-    }
-}
-
-/// Diagnose a dataset from a start model: the JSON text `bsdfit diagnose --json` writes,
-/// and the warnings the command line prints on stderr. `options`: `bsdfit.diagnose`'s
-/// keyword arguments (see [`PyDiagnoseRequest::of_dict`]). `progress` (a callable or None)
-/// hears each line the command line prints as the path is searched.
-#[pyfunction]
-#[pyo3(signature = (dataset, model, options, progress))]
-fn diagnose_json(
-    py: Python<'_>,
-    dataset: &NativeDataset,
-    model: String,
-    options: &Bound<'_, PyDict>,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<(String, Vec<String>)> {
-    let data = dataset.data.clone();
-    let PyDiagnoseRequest { request, backend } = PyDiagnoseRequest::of_dict(model, options)?;
-    let mut reporter = Reporter::new(progress);
-    let (text, notes, reporter) = compute(py, move || {
-        let mut notes = Vec::new();
-        let options = request.prepare(&data, &mut |w| notes.push(w))?;
-        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
-        let mut lines = 0;
-        let model = &request.model;
-        let d = diagnose::diagnose(&data, model, backend.as_ref(), &options, &mut |line| {
-            lines += 1;
-            reporter.send("diagnose", lines, None, &line);
-        })?;
-        Ok((serde_json::to_string(&d.to_json())?, notes, reporter))
-    })?;
-    reporter.finish((text, notes))
-}
-
-/// Run a sweep over data files or folders into `out` (what `bsdfit sweep` does); the
-/// number of fits it added. `progress` (a callable or None) hears of each fit as it ends,
-/// and of the lines the command line prints. With `emit_slurm`, write the sweep's Slurm
-/// job scripts instead (`sweep --emit-slurm`), which run `slurm_binary`.
-#[pyfunction]
-#[pyo3(signature = (paths, out, models, losses, weights, restarts, seed, backend, pictures, shard, assume_uncertainty, progress, emit_slurm, slurm_cpus, slurm_binary))]
-#[allow(clippy::too_many_arguments)]
-fn sweep(
-    py: Python<'_>,
-    paths: Vec<PathBuf>,
-    out: PathBuf,
-    models: Option<Vec<String>>,
-    losses: Option<Vec<String>>,
-    weights: Option<Vec<String>>,
-    restarts: usize,
-    seed: u64,
-    backend: String,
-    pictures: bool,
-    shard: Option<String>,
-    assume_uncertainty: Option<AssumeUncertainty>,
-    progress: Option<Py<PyAny>>,
-    emit_slurm: Option<usize>,
-    slurm_cpus: usize,
-    slurm_binary: Option<PathBuf>,
-) -> PyResult<usize> {
-    use bsdfit::workflows::sweep::{self, Selection, Shard, SweepConfig};
-    let (added, observer) = compute(py, move || {
-        let defaults = SweepConfig::default();
-        let cfg = SweepConfig {
-            data: paths,
-            read: read_options(None, None, None, assume_uncertainty, false, None, None)?,
-            selection: Selection {
-                models,
-                losses,
-                weights,
-                ..defaults.selection.clone()
-            },
-            restarts,
-            seed,
-            backend: backend_choice(&backend)?,
-            out,
-            shard: shard.as_deref().map(Shard::parse).transpose()?,
-            pictures,
-            ..defaults
-        };
-        let mut observer = SweepReporter {
-            reporter: Reporter::new(progress),
-            done: 0,
-            total: 0,
-        };
-        let added = match emit_slurm {
-            Some(tasks) => {
-                let binary = slurm_binary.as_deref();
-                sweep::slurm::emit(&cfg, tasks, slurm_cpus, binary, &mut observer)?;
-                0
-            }
-            None => sweep::run(&cfg, &mut observer)?.new_fits,
-        };
-        Ok((added, observer))
-    })?;
-    observer.reporter.finish(added)
-}
-
-/// The keywords of `bsdfit.battery` and their defaults, the library's
-/// (`BatteryOptions::default()`), for its signature.
-#[pyfunction]
-fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let d = bsdfit::workflows::diagnose::battery::BatteryOptions::default();
-    let dict = PyDict::new(py);
-    dict.set_item("cases", d.cases)?;
-    dict.set_item("nulls", d.nulls)?;
-    dict.set_item("misspecified", d.misspecified)?;
-    dict.set_item("seed", d.seed)?;
-    dict.set_item("signal", d.signal)?;
-    dict.set_item("samples", d.samples)?;
-    dict.set_item("restarts", d.diagnose.restarts)?;
-    dict.set_item("data_driven", d.diagnose.data_driven)?;
-    Ok(dict)
-}
-
-/// Run the diagnosis's randomized battery (what `bsdfit battery` does): every case and
-/// its outcome as the JSON text `battery --json` writes, and the rates table (markdown)
-/// the command line prints. `progress` (a callable or None) hears of each case as it
-/// ends (stage `battery`).
-#[pyfunction]
-#[pyo3(signature = (cases, nulls, misspecified, seed, effects, signal, samples, restarts, backend, case, data_driven, progress))]
-fn battery(
-    py: Python<'_>,
-    cases: usize,
-    nulls: usize,
-    misspecified: usize,
-    seed: u64,
-    effects: Option<Vec<String>>,
-    signal: (f64, f64),
-    samples: (usize, usize),
-    restarts: usize,
-    backend: String,
-    case: Option<usize>,
-    data_driven: bool,
-    progress: Option<Py<PyAny>>,
-) -> PyResult<(String, String)> {
-    use bsdfit::workflows::diagnose::battery::{
-        effects_named, rates_table, run_battery, BatteryOptions,
-    };
-    let mut reporter = Reporter::new(progress);
-    let (text, table, reporter) = compute(py, move || {
-        let defaults = BatteryOptions::default();
-        let opts = BatteryOptions {
-            cases,
-            nulls,
-            misspecified,
-            seed,
-            effects: match effects {
-                None => defaults.effects.clone(),
-                Some(names) => effects_named(&names)?,
-            },
-            signal,
-            samples,
-            diagnose: diagnose::DiagnoseOptions {
-                restarts,
-                seed,
-                data_driven,
-                ..defaults.diagnose.clone()
-            },
-            only: case,
-        };
-        opts.check()?;
-        let backend = engine::select(backend_choice(&backend)?, &mut |_| {})?;
-        let total = opts.total() as u64;
-        let mut done = 0;
-        reporter.send("battery", 0, Some(total), "");
-        let outcomes = run_battery(&opts, backend.as_ref(), &mut |o| {
-            done += 1;
-            let what = format!(
-                "case {} {} → {}",
-                o.case.id,
-                o.case.hidden.as_deref().unwrap_or("none"),
-                o.final_model
-            );
-            reporter.send("battery", done, Some(total), &what);
-        });
-        Ok((
-            serde_json::to_string(&outcomes)?,
-            rates_table(&outcomes),
-            reporter,
-        ))
-    })?;
-    reporter.finish((text, table))
-}
-
 /// The catalogue: `[(spec, kind, [(parameter, rgb, lo, hi), …]), …]`.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
@@ -992,11 +734,12 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
     m.add_function(wrap_pyfunction!(fit_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_defaults, m)?)?;
-    m.add_function(wrap_pyfunction!(diagnose_defaults, m)?)?;
-    m.add_function(wrap_pyfunction!(diagnose_json, m)?)?;
-    m.add_function(wrap_pyfunction!(sweep, m)?)?;
-    m.add_function(wrap_pyfunction!(battery_defaults, m)?)?;
-    m.add_function(wrap_pyfunction!(battery, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnosis::diagnose_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnosis::diagnose_json, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnosis::diagnose_many, m)?)?;
+    m.add_function(wrap_pyfunction!(sweeps::sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(sweeps::battery_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(sweeps::battery, m)?)?;
     m.add_function(wrap_pyfunction!(catalogue, m)?)?;
     m.add_function(wrap_pyfunction!(gpu_adapter, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

@@ -896,6 +896,59 @@ def test_battery_is_the_command_lines_battery(tmp_path):
         bsdfit.battery(case=3, backend="cpu", progress=False, **options)
 
 
+def test_diagnose_many_gives_the_cli_table_as_diagnoses(tmp_path):
+    """A folder of three data sets (two written here: a Lambertian and an Oren–Nayar
+    surface, independent of bsdfit's models; one unreadable) diagnosed by
+    ``diagnose_many``: the Oren–Nayar one gets its backscatter, the unreadable one is a
+    failed Diagnosis with its error, the table equals the command line's on the same
+    folder, and the final Fit and summary are there."""
+    rng = np.random.default_rng(5)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    ti, pi, to, po = random_geometry(rng, 400)
+    for name, f in (("flat", np.full(400, 0.4 / np.pi)),
+                    ("rough", oren_nayar(0.5, 0.6, ti, pi, to, po))):
+        u = 0.01 * f + 1e-4
+        data = bsdfit.Dataset.from_arrays("brdf", ti, pi, to, po, 550.0, f + rng.normal(0, 1, 400) * u, u)
+        data.write_csv(folder / f"{name}.csv")
+    (folder / "broken.csv").write_text("# bsdfit dataset v1\ntheta_i\n1\n")
+    options = dict(backend="cpu", bootstrap=0, seed=1, restarts=2, max_steps=1)
+    table = bsdfit.diagnose_many(folder, "lambert", out=tmp_path / "py", progress=False, **options)
+    by = {d.data: d for d in table}
+    assert set(by) == {"flat.csv", "rough.csv", "broken.csv"}, table
+    assert not by["broken.csv"].ok and "broken.csv" in (by["broken.csv"].error or "")
+    assert by["rough.csv"].effects == ["backscatter"], by["rough.csv"]
+    assert by["flat.csv"].effects == [], by["flat.csv"]
+    rough = by["rough.csv"]
+    assert rough.chi2_red_steps.shape == (2,) and rough.chi2_red_steps[0] > 10 * rough.chi2_red_steps[1]
+    assert np.isnan(rough.p_values[0]) and rough.p_values[1] < 1e-6
+    assert abs(rough.params["sigma"] - 0.6) < 5 * rough.std["sigma"] + 0.02, rough.summary()
+    assert "backscatter" in rough.summary() and "sigma" in rough.summary()
+    # The final Fit: the final model refitted with the diagnosis's options.
+    assert rough.fit.model == rough.final_model
+    assert abs(rough.fit.params["sigma"] - rough.params["sigma"]) <= 1e-3
+    with pytest.raises(ValueError, match="no final model"):
+        by["broken.csv"].fit
+    # The command line on the same folder writes the same table (its exit status says one
+    # data set failed).
+    out = subprocess.run(cli_command() + ["diagnose", str(folder), "--model", "lambert", "--out",
+                                          str(tmp_path / "cli"), "--backend", "cpu", "--bootstrap", "0",
+                                          "--seed", "1", "--restarts", "2", "--max-steps", "1"],
+                         capture_output=True, text=True)
+    assert out.returncode == 1 and "broken.csv" in out.stderr, out.stderr
+
+    def table_of(path):
+        rows = json.loads((path / "diagnoses.json").read_text())
+        for r in rows:
+            r.pop("seconds")
+            for step in r["rounds"]:
+                step.pop("seconds")
+        return rows
+
+    assert table_of(tmp_path / "cli") == table_of(tmp_path / "py")
+    assert [d.record["data"] for d in table] == [r["data"] for r in table_of(tmp_path / "py")]
+
+
 def test_diagnose_defaults_are_the_library_and_cli_defaults():
     """bsdfit.diagnose's keyword defaults are the library's (DiagnoseOptions::default()),
     and `bsdfit diagnose --help` shows the same ones."""

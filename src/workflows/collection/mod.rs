@@ -440,7 +440,13 @@ fn diagnose_cell(
     if cfg.pictures {
         write_report(&out.join(REPORTS_DIR).join(&l.name), &file.data, &d)?;
     }
-    Ok(CellRecord::of_diagnosis(l, &file, &d, opts.max_steps))
+    Ok(CellRecord::of_diagnosis(
+        l,
+        Some(file.hash.clone()),
+        &file.data,
+        &d,
+        opts.max_steps,
+    ))
 }
 
 /// `diagnose --emit-slurm TASKS`: the job scripts of the collection `cfg` in OUT/slurm/,
@@ -497,4 +503,61 @@ pub fn emit_slurm(
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Names are file names; files that share one take their folder's name first, and a
+    /// number where even that is shared.
+    #[test]
+    fn cell_names_are_unique_and_readable() {
+        let files: Vec<PathBuf> = [
+            "lab/a.csv",
+            "lab/b c.astm",
+            "other/a.csv",
+            "x/lab/a.csv",
+            "y/lab/a.csv",
+        ]
+        .iter()
+        .map(PathBuf::from)
+        .collect();
+        let names: Vec<String> = cell_names(&files).into_iter().map(|l| l.name).collect();
+        assert_eq!(
+            names,
+            [
+                "lab_a.csv",
+                "b_c.astm",
+                "other_a.csv",
+                "lab_a.csv-2",
+                "lab_a.csv-3"
+            ]
+        );
+    }
+
+    /// A folder gives its files of a format read, sorted, and names the others; a folder
+    /// with none is an error naming it.
+    #[test]
+    fn folders_give_their_data_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::write(d.join("b.csv"), "# bsdfit dataset v1\n").unwrap();
+        std::fs::write(
+            d.join("a.csv"),
+            "theta_i,phi_i,theta_o,phi_o,wavelength_nm,value,u\n",
+        )
+        .unwrap();
+        std::fs::write(d.join("notes.txt"), "hello\n").unwrap();
+        std::fs::write(d.join(".hidden.csv"), "# bsdfit dataset v1\n").unwrap();
+        let mut notes = Vec::new();
+        let listed = list_data(&[d.to_path_buf()], &mut |n| notes.push(n)).unwrap();
+        let names: Vec<&str> = listed.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(names, ["a.csv", "b.csv"]);
+        assert!(notes.iter().any(|n| n.contains("notes.txt")), "{notes:?}");
+        let empty = tempfile::tempdir().unwrap();
+        std::fs::write(empty.path().join("notes.txt"), "hello\n").unwrap();
+        let e = list_data(&[empty.path().to_path_buf()], &mut |_| {}).unwrap_err();
+        assert!(e.to_string().contains("holds no data file"), "{e}");
+    }
 }

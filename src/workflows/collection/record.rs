@@ -2,8 +2,8 @@
 //! `diagnoses.csv` and `diagnoses.json` (docs/output.md).
 
 use super::Listed;
+use crate::data::Dataset;
 use crate::output::files::write_if_changed;
-use crate::output::results::DataFile;
 use crate::workflows::diagnose::Diagnosis;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
@@ -116,10 +116,12 @@ impl CellRecord {
         }
     }
 
-    /// The record of a finished diagnosis of `file` (its seconds are the caller's).
+    /// The record of a finished diagnosis of `data`, the bytes keyed `hash` (its seconds
+    /// are the caller's).
     pub fn of_diagnosis(
         l: &Listed,
-        file: &DataFile,
+        hash: Option<String>,
+        data: &Dataset,
         d: &Diagnosis,
         max_steps: usize,
     ) -> CellRecord {
@@ -178,12 +180,12 @@ impl CellRecord {
         CellRecord {
             data: l.name.clone(),
             path: l.path.display().to_string(),
-            hash: Some(file.hash.clone()),
+            hash,
             status: CellStatus::Done,
             error: None,
-            material: Some(file.data.material.clone()),
-            samples: file.data.len(),
-            channels: file.data.channel_count(),
+            material: Some(data.material.clone()),
+            samples: data.len(),
+            channels: data.channel_count(),
             start_model: d.start_model.clone(),
             start_chi2_red: d.steps.first().and_then(|s| finite(s.chi2_red)),
             final_model: Some(d.final_model.clone()),
