@@ -25,7 +25,7 @@ echo "== SIMD parity capped at AVX2 and at the baseline (SSE2); the run above us
 BSDFIT_SIMD=avx2 cargo test --test simd_parity
 BSDFIT_SIMD=baseline cargo test --test simd_parity
 
-echo "== Python module: pip install ./python into a fresh venv, then pytest =="
+echo "== Python module: its wheel installed into a fresh venv, then pytest =="
 VENV=target/python-test-venv
 rm -rf "$VENV"
 if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
@@ -38,7 +38,10 @@ if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
     python3 -m venv "$VENV"
 fi
 "$VENV/bin/pip" install --quiet --upgrade pip
-"$VENV/bin/pip" install --quiet ./python pytest mypy matplotlib
+# The package as users get it: one abi3 wheel (scripts/build-wheel.sh), installed here and
+# again, by test_wheel.py, into a venv with no Rust toolchain on the PATH.
+PYTHON="$VENV/bin/python" bash scripts/build-wheel.sh
+"$VENV/bin/pip" install --quiet target/wheels/bsdfit-*-abi3-*.whl pytest mypy matplotlib
 # Mitsuba 3 checks the RGL and Mitsuba exports and the RGL reader in a real renderer.
 # Under CI a missing Mitsuba is a failure; elsewhere (a machine PyPI has no wheel for)
 # those tests are reported as skipped (-rs prints why).

@@ -13,26 +13,18 @@ command line, so the same data and seed give the same parameters), with the GIL 
 
 from __future__ import annotations
 
-import json
-import numbers
-import operator
-import os
-import shutil
-import sys
-import time
-import warnings as _warnings
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, List, Mapping, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _bsdfit
-
-from ._args import ArrayLike, PathLike, ProgressArg, ProgressEvent, _broadcast, _numbers, _short, _text
+from ._args import ArrayLike, ProgressEvent, _short, _numbers, _broadcast, _text
 from ._dataset import Dataset
 from ._diagnose import Diagnosis, Step, diagnose, diagnose_many
 from ._fit import Fit, fit
 from ._sweep import Battery, battery, sweep
+
 
 __all__ = [
     "Dataset",

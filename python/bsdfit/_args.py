@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import json
 import numbers
 import operator
 import os
 import shutil
 import sys
 import time
-import warnings as _warnings
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _bsdfit
+
 
 ArrayLike = Union[float, Sequence[float], np.ndarray]
 PathLike = Union[str, "os.PathLike[str]"]
@@ -258,3 +256,20 @@ def _assume(
         )
     rel, abs_ = (float(v) for v in pair)
     return (rel, abs_)
+
+
+def _slurm_binary(given: Optional[PathLike]) -> str:
+    """The ``bsdfit`` command the Slurm job scripts run: ``given``, else the one this
+    package installed beside this Python (``pip install`` puts it there), else the one on
+    the PATH."""
+    if given is not None:
+        return os.path.realpath(_path("slurm_binary", given))
+    beside = os.path.join(os.path.dirname(sys.executable), "bsdfit")
+    found = beside if os.path.isfile(beside) and os.access(beside, os.X_OK) else shutil.which("bsdfit")
+    if found is None:
+        raise ValueError(
+            "emit_slurm: the job scripts run the bsdfit command, and there is none beside this "
+            "Python or on the PATH: reinstall the package (pip install ./python installs it) "
+            "or give slurm_binary=PATH"
+        )
+    return os.path.realpath(found)

@@ -120,6 +120,9 @@ def fit_defaults() -> Dict[str, Any]:
 def sweep_defaults() -> Dict[str, Any]:
     """The keywords of ``bsdfit.sweep`` that have a library default, and those defaults."""
 
+def run_cli(args: List[str]) -> int:
+    """Run the command line ``args`` (the program's name first); its exit status."""
+
 def diagnose_defaults() -> Dict[str, Any]:
     """The keywords of ``bsdfit.diagnose`` and the library's defaults of them."""
 

@@ -3,22 +3,14 @@
 from __future__ import annotations
 
 import json
-import numbers
-import operator
 import os
-import shutil
-import sys
-import time
-import warnings as _warnings
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _bsdfit
-from ._args import (  # noqa: F401
-    ArrayLike, PathLike, ProgressEvent, ProgressArg, _Bar, _Progress, _U64_MAX, _short, _numbers, _columns, _broadcast, _int, _real, _text, _path, _wavelengths, _assume,
-)
+from ._args import PathLike, ProgressEvent, ProgressArg, _Progress, _int, _real, _text, _path, _wavelengths, _assume, _slurm_binary
 from ._dataset import Dataset
 from ._fit import Fit, _constraint_list, _old_weighting
 from ._fit import fit as _fit
@@ -336,15 +328,7 @@ def diagnose_many(
         bootstrap_restarts, calibrate_all, backend, fix, bounds, prior, backtrack, explore,
     )
     tasks = None if emit_slurm is None else _int("emit_slurm", emit_slurm, 1)
-    binary: Optional[str] = None
-    if tasks is not None:
-        found = shutil.which("bsdfit") if slurm_binary is None else _path("slurm_binary", slurm_binary)
-        if found is None:
-            raise ValueError(
-                "emit_slurm: the job scripts run the bsdfit command line, and there is none "
-                "on the PATH: give slurm_binary=PATH (cargo build --release builds it)"
-            )
-        binary = os.path.realpath(found)
+    binary = None if tasks is None else _slurm_binary(slurm_binary)
     read_wavelengths = _wavelengths(wavelengths)
     read_assume = _assume(assume_uncertainty)
     read_max = None if max_samples is None else _int("max_samples", max_samples, 0)

@@ -3,22 +3,13 @@
 from __future__ import annotations
 
 import json
-import numbers
-import operator
-import os
-import shutil
-import sys
-import time
 import warnings as _warnings
-from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _bsdfit
-from ._args import (  # noqa: F401
-    ArrayLike, PathLike, ProgressEvent, ProgressArg, _Bar, _Progress, _U64_MAX, _short, _numbers, _columns, _broadcast, _int, _real, _text, _path, _wavelengths, _assume,
-)
+from ._args import ArrayLike, PathLike, ProgressEvent, ProgressArg, _Progress, _short, _numbers, _broadcast, _int, _real, _text, _path
 from ._dataset import Dataset
 
 

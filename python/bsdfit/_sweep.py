@@ -3,25 +3,15 @@
 from __future__ import annotations
 
 import json
-import numbers
-import operator
 import os
-import shutil
-import sys
-import time
-import warnings as _warnings
-from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
-
-import numpy as np
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 from . import _bsdfit
-from ._args import (  # noqa: F401
-    ArrayLike, PathLike, ProgressEvent, ProgressArg, _Bar, _Progress, _U64_MAX, _short, _numbers, _columns, _broadcast, _int, _real, _text, _path, _wavelengths, _assume,
-)
+from ._args import PathLike, ProgressEvent, ProgressArg, _Progress, _short, _int, _real, _text, _path, _assume, _slurm_binary
 from ._fit import _old_weighting
 
 
+# The library's defaults of sweep (SweepConfig::default()), shown in its signature.
 _SWEEP_DEFAULTS: Dict[str, Any] = _bsdfit.sweep_defaults()
 
 
@@ -71,15 +61,7 @@ def sweep(
 
     out_path = _path("out", out)
     tasks = None if emit_slurm is None else _int("emit_slurm", emit_slurm, 1)
-    binary: Optional[str] = None
-    if tasks is not None:
-        found = shutil.which("bsdfit") if slurm_binary is None else _path("slurm_binary", slurm_binary)
-        if found is None:
-            raise ValueError(
-                "emit_slurm: the job scripts run the bsdfit command line, and there is none "
-                "on the PATH: give slurm_binary=PATH (cargo build --release builds it)"
-            )
-        binary = os.path.realpath(found)
+    binary = None if tasks is None else _slurm_binary(slurm_binary)
     with _Progress(progress) as reports:
         _bsdfit.sweep(
             [_path("paths", p) for p in paths],

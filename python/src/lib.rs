@@ -13,6 +13,7 @@
 // Each function takes the keyword arguments of its Python call, one Rust argument each.
 #![allow(clippy::too_many_arguments)]
 
+mod console;
 mod diagnosis;
 mod sweeps;
 
@@ -734,6 +735,7 @@ fn _bsdfit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_summary, m)?)?;
     m.add_function(wrap_pyfunction!(fit_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(console::run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(diagnosis::diagnose_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(diagnosis::diagnose_json, m)?)?;
     m.add_function(wrap_pyfunction!(diagnosis::diagnose_many, m)?)?;

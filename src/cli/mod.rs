@@ -229,7 +229,25 @@ pub struct BackendArgs {
 
 /// Parse the command line and run the command; the process exit code.
 pub fn main() -> i32 {
-    match dispatch(Cli::parse().command) {
+    main_with_args(std::env::args_os())
+}
+
+/// Run the command line `args` (the program's name first), as the `bsdfit` binary does:
+/// the exit code. The Python package's `bsdfit` command runs it through the native module.
+pub fn main_with_args<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            // Help and version are printed on stdout with status 0, mistakes on stderr.
+            let _ = e.print();
+            return e.exit_code();
+        }
+    };
+    match dispatch(cli.command) {
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {}", error_text(&e));
