@@ -8,7 +8,8 @@ use super::*;
 /// released while it runs; a panic becomes a RuntimeError.
 #[pyfunction]
 pub(crate) fn run_cli(py: Python<'_>, args: Vec<String>) -> PyResult<i32> {
-    let outcome = py.detach(|| catch_unwind(AssertUnwindSafe(|| bsdfit::cli::main_with_args(args))));
+    let outcome =
+        py.detach(|| catch_unwind(AssertUnwindSafe(|| bsdfit::cli::main_with_args(args))));
     outcome.map_err(|p| {
         let text = p
             .downcast_ref::<String>()

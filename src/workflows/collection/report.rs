@@ -118,7 +118,7 @@ pub fn section(out: &Path, cells: &[CellRecord], pictures: bool) -> String {
                     r.final_model.as_deref().unwrap_or("")
                 };
                 h += &format!(
-                    "<figure class=\"plot\"><img src=\"{}\" alt=\"{w} residuals\"><figcaption>{w}: <code>{}</code></figcaption></figure>",
+                    "<figure><img src=\"{}\" alt=\"{w} residuals\" style=\"width:600px\"><figcaption>{w}: <code>{}</code></figcaption></figure>",
                     esc(&p),
                     esc(model)
                 );
