@@ -463,46 +463,29 @@ pub fn emit_slurm(
 ) -> Result<()> {
     slurm::check_array(tasks, cpus_per_task, cfg.shard.is_some())?;
     let listed = list_data(&cfg.data, &mut |m| obs.note(&m))?;
-    let workdir = std::env::current_dir().context("cannot read the current folder")?;
-    let out = workdir.join(&cfg.out);
-    let dir = out.join("slurm");
-    std::fs::create_dir_all(dir.join("logs"))
-        .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
-    let config = dir.join(COLLECTION_JSON);
-    CollectionConfig {
-        out: out.clone(),
-        ..cfg.clone()
-    }
-    .save(&config)?;
-    let binary = match binary {
-        Some(b) => b.to_path_buf(),
-        None => slurm::bsdfit_binary()?,
-    };
-    slurm::JobScripts {
+    let job = slurm::ArrayJob {
         command: "diagnose",
-        binary: &binary,
-        workdir: &workdir,
-        out: &out,
-        config: &config,
-        tasks,
-        cpus_per_task,
+        config_name: COLLECTION_JSON,
+        runs: "the collection they diagnose",
+        cells: plural(listed.len(), "data set"),
+        cell_count: listed.len(),
         gpu: cfg.backend == BackendChoice::Gpu,
         pictures: cfg.pictures,
-    }
-    .write(&dir)?;
-    obs.note(&format!(
-        "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch, {0}/submit.sh and the collection they diagnose, {0}/{COLLECTION_JSON}; submit with: sh {0}/submit.sh",
-        dir.display(),
-        plural(listed.len(), "data set"),
-    ));
-    if tasks > listed.len() {
-        obs.note(&format!(
-            "note: {tasks} tasks for {}: {} of them will have nothing to do",
-            plural(listed.len(), "data set"),
-            tasks - listed.len()
-        ));
-    }
-    Ok(())
+    };
+    job.emit(
+        &cfg.out,
+        tasks,
+        cpus_per_task,
+        binary,
+        obs,
+        &mut |out, config| {
+            CollectionConfig {
+                out: out.to_path_buf(),
+                ..cfg.clone()
+            }
+            .save(config)
+        },
+    )
 }
 
 #[cfg(test)]

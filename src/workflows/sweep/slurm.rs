@@ -329,46 +329,100 @@ pub fn emit(
 ) -> Result<()> {
     check_array(tasks, cpus_per_task, cfg.shard.is_some())?;
     let (_, all) = read_cells(cfg)?;
-    let workdir = std::env::current_dir().context("cannot read the current folder")?;
-    let out = workdir.join(&cfg.out);
-    let dir = out.join("slurm");
-    std::fs::create_dir_all(dir.join("logs"))
-        .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
-    let saved = SweepConfig {
-        out: out.clone(),
-        ..cfg.clone()
-    };
-    let config = dir.join(SWEEP_JSON);
-    saved.save(&config)?;
-    let binary = match binary {
-        Some(b) => b.to_path_buf(),
-        None => bsdfit_binary()?,
-    };
-    let scripts = JobScripts {
+    let job = ArrayJob {
         command: "sweep",
-        binary: &binary,
-        workdir: &workdir,
-        out: &out,
-        config: &config,
-        tasks,
-        cpus_per_task,
+        config_name: SWEEP_JSON,
+        runs: "the sweep they run",
+        cells: plural(all.len(), "cell"),
+        cell_count: all.len(),
         gpu: cfg.backend == BackendChoice::Gpu,
         pictures: cfg.pictures,
     };
-    scripts.write(&dir)?;
-    obs.note(&format!(
-        "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch, {0}/submit.sh and the sweep they run, {0}/{SWEEP_JSON}; submit with: sh {0}/submit.sh",
-        dir.display(),
-        plural(all.len(), "cell"),
-    ));
-    if tasks > all.len() {
+    job.emit(
+        &cfg.out,
+        tasks,
+        cpus_per_task,
+        binary,
+        obs,
+        &mut |out, config| {
+            SweepConfig {
+                out: out.to_path_buf(),
+                ..cfg.clone()
+            }
+            .save(config)
+        },
+    )
+}
+
+/// A job array of `bsdfit COMMAND --config OUT/slurm/CONFIG --shard auto` tasks and its
+/// merge, as `sweep --emit-slurm` and `diagnose --emit-slurm` write them.
+pub struct ArrayJob {
+    /// `sweep` or `diagnose`.
+    pub command: &'static str,
+    /// The file name of the saved configuration in OUT/slurm/.
+    pub config_name: &'static str,
+    /// What the tasks run, in words (`the sweep they run`).
+    pub runs: &'static str,
+    /// The cells in words (`24 cells`), and their number.
+    pub cells: String,
+    pub cell_count: usize,
+    /// Ask each task for one GPU.
+    pub gpu: bool,
+    pub pictures: bool,
+}
+
+impl ArrayJob {
+    /// Write OUT/slurm/ (`out` relative to the current folder, where the jobs run): the
+    /// configuration (`save` writes it, given the absolute OUT, to the path given), the
+    /// array, the merge and submit.sh; tell `obs` how to submit them.
+    pub fn emit(
+        &self,
+        out: &Path,
+        tasks: usize,
+        cpus_per_task: usize,
+        binary: Option<&Path>,
+        obs: &mut dyn SweepObserver,
+        save: &mut dyn FnMut(&Path, &Path) -> Result<()>,
+    ) -> Result<()> {
+        let workdir = std::env::current_dir().context("cannot read the current folder")?;
+        let out = workdir.join(out);
+        let dir = out.join("slurm");
+        std::fs::create_dir_all(dir.join("logs"))
+            .with_context(|| format!("cannot create {}", dir.join("logs").display()))?;
+        let config = dir.join(self.config_name);
+        save(&out, &config)?;
+        let binary = match binary {
+            Some(b) => b.to_path_buf(),
+            None => bsdfit_binary()?,
+        };
+        JobScripts {
+            command: self.command,
+            binary: &binary,
+            workdir: &workdir,
+            out: &out,
+            config: &config,
+            tasks,
+            cpus_per_task,
+            gpu: self.gpu,
+            pictures: self.pictures,
+        }
+        .write(&dir)?;
         obs.note(&format!(
-            "note: {tasks} tasks for {}: {} of them will have nothing to do",
-            plural(all.len(), "cell"),
-            tasks - all.len()
+            "wrote {0}/array.sbatch ({tasks} tasks for {1}), {0}/merge.sbatch, {0}/submit.sh and {2}, {0}/{3}; submit with: sh {0}/submit.sh",
+            dir.display(),
+            self.cells,
+            self.runs,
+            self.config_name,
         ));
+        if tasks > self.cell_count {
+            obs.note(&format!(
+                "note: {tasks} tasks for {}: {} of them will have nothing to do",
+                self.cells,
+                tasks - self.cell_count
+            ));
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 /// The checks of `--emit-slurm TASKS --slurm-cpus N` (`sharded`: a `--shard` was given).
