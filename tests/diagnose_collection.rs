@@ -346,4 +346,17 @@ fn a_killed_collection_resumes_without_redoing_its_cells() {
         "{}",
         text(&o.stderr)
     );
+    // A sweep's folder is refused too: the collection's report.html would replace its own.
+    let sweep = tmp.path().join("sweep");
+    std::fs::create_dir_all(&sweep).unwrap();
+    std::fs::write(sweep.join("results.csv"), "").unwrap();
+    let mut into_sweep = args.clone();
+    into_sweep[5] = p(&sweep).to_string();
+    let o = run(&into_sweep, &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        text(&o.stderr).contains("holds a sweep"),
+        "{}",
+        text(&o.stderr)
+    );
 }

@@ -60,6 +60,7 @@ pub fn merge(
         .with_context(|| format!("--out: cannot create {}", out.display()))?;
     check_writable_dir(out, "--out")?;
     let _lock = DirLock::acquire(out, "merge", &mut |m| obs.note(&format!("note: {m}")))?;
+    super::refuse_sweep_folder(out)?;
     let mut sources: Vec<PathBuf> = inputs.to_vec();
     let config = if shards {
         let path = out.join("slurm").join(COLLECTION_JSON);

@@ -221,8 +221,22 @@ fn place(cfg: &CollectionConfig) -> Result<(PathBuf, Option<(usize, usize)>)> {
     })
 }
 
-/// Refuse a folder that holds another diagnosis; record this one in a new folder.
+/// Refuse a folder that holds a sweep, whose report.html the collection's would replace.
+pub fn refuse_sweep_folder(out: &Path) -> Result<()> {
+    let sweep = out.join(crate::output::results::RESULTS_CSV);
+    anyhow::ensure!(
+        !sweep.exists(),
+        "{} holds a sweep ({}): give the collection's diagnosis its own --out folder",
+        out.display(),
+        sweep.display()
+    );
+    Ok(())
+}
+
+/// Refuse a folder that holds another diagnosis, or a sweep; record this one in a new
+/// folder.
 fn check_identity(cfg: &CollectionConfig, out: &Path) -> Result<()> {
+    refuse_sweep_folder(out)?;
     let path = out.join(COLLECTION_JSON);
     if path.exists() {
         let saved = CollectionConfig::load(&path)?;
