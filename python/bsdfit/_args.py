@@ -26,6 +26,8 @@ class ProgressEvent:
     ``stage``: ``"fit"`` (restarts converged of ``total``), ``"mc"`` (Monte Carlo replica
     restarts), ``"diagnose"`` (``message`` is the line the command line prints; ``total``
     is None), ``"sweep"`` (fits ended of ``total``; ``message`` names the last),
+    ``"diagnose_many"`` (a collection's data sets ended of ``total``; ``message`` names
+    the last; the steps come as ``"note"``),
     ``"battery"`` (cases ended of ``total``; ``message`` names the last) or ``"note"`` (a
     line the command line prints: a warning, a skipped file).
     """

@@ -176,6 +176,7 @@ pub(crate) fn diagnose_many(
         };
         let mut observer = SweepReporter {
             reporter: Reporter::new(progress),
+            stage: "diagnose_many",
             done: 0,
             total: 0,
         };

@@ -126,9 +126,11 @@ impl Reporter {
     }
 }
 
-/// A sweep's progress as calls of a Python callable (stage `sweep`).
+/// A sweep's or a collection's progress as calls of a Python callable (stage `sweep`, or
+/// `diagnose_many`: cells ended of the total).
 struct SweepReporter {
     reporter: Reporter,
+    stage: &'static str,
     done: u64,
     total: u64,
 }
@@ -140,7 +142,7 @@ impl bsdfit::workflows::sweep::SweepObserver for SweepReporter {
     }
     fn begin(&mut self, total: u64, done: u64) {
         (self.total, self.done) = (total, done);
-        self.reporter.send("sweep", done, Some(total), "");
+        self.reporter.send(self.stage, done, Some(total), "");
     }
     fn alert(&mut self, line: &str) {
         self.note(line);
@@ -148,7 +150,7 @@ impl bsdfit::workflows::sweep::SweepObserver for SweepReporter {
     fn fit_ended(&mut self, what: &str) {
         self.done += 1;
         self.reporter
-            .send("sweep", self.done, Some(self.total), what);
+            .send(self.stage, self.done, Some(self.total), what);
     }
     fn end(&mut self) {}
 }

@@ -49,6 +49,7 @@ pub(crate) fn sweep(
         };
         let mut observer = SweepReporter {
             reporter: Reporter::new(progress),
+            stage: "sweep",
             done: 0,
             total: 0,
         };

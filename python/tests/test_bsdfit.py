@@ -913,7 +913,11 @@ def test_diagnose_many_gives_the_cli_table_as_diagnoses(tmp_path):
         data.write_csv(folder / f"{name}.csv")
     (folder / "broken.csv").write_text("# bsdfit dataset v1\ntheta_i\n1\n")
     options = dict(backend="cpu", bootstrap=0, seed=1, restarts=2, max_steps=1)
-    table = bsdfit.diagnose_many(folder, "lambert", out=tmp_path / "py", progress=False, **options)
+    events = []
+    table = bsdfit.diagnose_many(folder, "lambert", out=tmp_path / "py", progress=events.append, **options)
+    cells = [e for e in events if e.stage == "diagnose_many"]
+    assert cells[-1].done == cells[-1].total == 3, events
+    assert any(e.stage == "note" and "adopt on [backscatter]" in e.message for e in events), events
     by = {d.data: d for d in table}
     assert set(by) == {"flat.csv", "rough.csv", "broken.csv"}, table
     assert not by["broken.csv"].ok and "broken.csv" in (by["broken.csv"].error or "")
