@@ -8,8 +8,8 @@
 
 mod common;
 
-use bsdfit::bsdf::aniso::{AnisoBeckmann, AnisoGg, AnisoGgx};
 use bsdfit::bsdf::microfacet::{Distribution, Masking};
+use bsdfit::bsdf::stretched::{AnisoBeckmann, AnisoGg, AnisoGgx};
 use bsdfit::bsdf::{every_spec, Model};
 use bsdfit::data::Kind;
 use common::{dir, rng, set_param, Eval};

@@ -446,3 +446,70 @@ fn clap_appears_only_in_the_command_line() {
         vec![1, 3]
     );
 }
+
+/// The model files form no circle: no file of `src/bsdf/` uses another that uses it back,
+/// directly or through others (the anisotropic lobes live with their isotropic parents,
+/// over `stretched.rs`). Uses in a file's tests are left out.
+#[test]
+fn the_model_files_form_no_circle() {
+    let files = src("src/bsdf");
+    let name = |p: &Path| p.file_stem().unwrap().to_string_lossy().into_owned();
+    let names: Vec<String> = files.iter().map(|p| name(p)).collect();
+    let mut uses: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+    for p in &files {
+        let text = std::fs::read_to_string(p).unwrap();
+        let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        let mut to: Vec<String> = names
+            .iter()
+            .filter(|n| **n != name(p) && n.as_str() != "mod")
+            .filter(|n| {
+                code.lines()
+                    .filter(|l| !l.trim_start().starts_with("//"))
+                    .any(|l| {
+                        l.contains(&format!("super::{n}::"))
+                            || l.contains(&format!("super::{n}::{{"))
+                    })
+            })
+            .cloned()
+            .collect();
+        to.sort();
+        uses.insert(name(p), to);
+    }
+    // Depth-first search for a path back to the start.
+    fn reaches(
+        uses: &std::collections::BTreeMap<String, Vec<String>>,
+        from: &str,
+        goal: &str,
+        seen: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        for next in uses.get(from).into_iter().flatten() {
+            if next == goal {
+                return Some(vec![next.clone()]);
+            }
+            if !seen.contains(next) {
+                seen.push(next.clone());
+                if let Some(mut path) = reaches(uses, next, goal, seen) {
+                    path.insert(0, next.clone());
+                    return Some(path);
+                }
+            }
+        }
+        None
+    }
+    let circles: Vec<String> = uses
+        .keys()
+        .filter_map(|start| {
+            reaches(&uses, start, start, &mut Vec::new())
+                .map(|path| format!("{start} → {}", path.join(" → ")))
+        })
+        .collect();
+    assert!(
+        circles.is_empty(),
+        "circles between model files: {circles:#?}"
+    );
+    // The check sees a circle: aniso.rs used the lobes' files, which used it back.
+    let mut planted = uses.clone();
+    planted.get_mut("ggx").unwrap().push("aniso".into());
+    planted.get_mut("aniso").unwrap().push("ggx".into());
+    assert!(reaches(&planted, "ggx", "ggx", &mut Vec::new()).is_some());
+}

@@ -1,7 +1,9 @@
 // Anisotropic microfacet lobes (`M+aniso`): α_u along the tangent u, α_v along the
-// bitangent v, the frame turned by φ0 degrees about the normal. Twin of src/bsdf/aniso.rs
-// (the formulas and their sources are there); D, G1 in the stretched forms of Heitz 2014,
-// §5.3, evaluated on the directions turned into the tangent frame.
+// bitangent v, the frame turned by φ0 degrees about the normal. Twin of src/bsdf/stretched.rs
+// (the formulas and their sources are there), of the reflection lobes' anisotropic forms
+// in ggx.rs, fa.rs and coat.rs, and of the `+aniso` suffix (aniso.rs); the BTDF forms are
+// in btdf.wgsl. D, G1 in the stretched forms of Heitz 2014, §5.3, evaluated on the
+// directions turned into the tangent frame.
 
 const ANISO_DEG: f32 = 0.017453292519943295;
 
@@ -124,40 +126,6 @@ fn coat_aniso_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {
     let lo = aniso_local(wo, f);
     let h = half_vector(li, lo);
     return (1.0 - kc) * inner + kc * aniso_ggx_reflection(coat_aniso_alpha_c_u(o), coat_aniso_alpha_c_v(o), li, lo, h);
-}
-
-// Parameters: alpha_u, alpha_v, phi0, eta.
-fn btdf_aniso_tr_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let au = btdf_aniso_tr_alpha_u(o);
-    let av = btdf_aniso_tr_alpha_v(o);
-    let f = aniso_frame(btdf_aniso_tr_phi0(o));
-    let li = aniso_local(wi, f);
-    let lo = aniso_local(wo, f);
-    let g = btdf_geometry(li, lo, btdf_aniso_tr_eta(o));
-    return btdf_transmit(g, aniso_ggx_d(g.m, au, av), aniso_ggx_g1_over_mu(li, au, av), aniso_ggx_g1_over_mu(lo, au, av));
-}
-
-// Parameters: alpha_u, alpha_v, phi0, eta (masked by the anisotropic TR Λ).
-fn btdf_aniso_beckmann_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let au = btdf_aniso_beckmann_alpha_u(o);
-    let av = btdf_aniso_beckmann_alpha_v(o);
-    let f = aniso_frame(btdf_aniso_beckmann_phi0(o));
-    let li = aniso_local(wi, f);
-    let lo = aniso_local(wo, f);
-    let g = btdf_geometry(li, lo, btdf_aniso_beckmann_eta(o));
-    return btdf_transmit(g, aniso_beckmann_d(g.m, au, av), aniso_ggx_g1_over_mu(li, au, av), aniso_ggx_g1_over_mu(lo, au, av));
-}
-
-// Parameters: beta_u, beta_v, phi0, p, eta.
-fn btdf_aniso_gg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let bu = btdf_aniso_gg_beta_u(o);
-    let bv = btdf_aniso_gg_beta_v(o);
-    let s = gg_new(sqrt(bu * bv), btdf_aniso_gg_p(o));
-    let f = aniso_frame(btdf_aniso_gg_phi0(o));
-    let li = aniso_local(wi, f);
-    let lo = aniso_local(wo, f);
-    let g = btdf_geometry(li, lo, btdf_aniso_gg_eta(o));
-    return btdf_transmit(g, aniso_gg_d(g.m, s, bu, bv), aniso_gg_g1_over_mu(li, s, bu, bv), aniso_gg_g1_over_mu(lo, s, bu, bv));
 }
 
 // `+aniso` itself passes its inner model's value through.

@@ -36,6 +36,8 @@ use crate::math::fresnel_transmittance_in;
 use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::f64::consts::PI;
+use std::sync::Arc;
+use super::stretched::{AnisoBeckmann, AnisoGg, AnisoGgx, Frame, ALPHA_U, ALPHA_V, ANISO_WGSL, BETA_U, BETA_V, PHI0};
 
 pub(crate) const BTDF_WGSL: (&str, &str) = ("btdf", include_str!("../../shaders/bsdf/btdf.wgsl"));
 
@@ -269,12 +271,12 @@ impl Bsdf for Btdf {
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {
-            sources: vec![MICROFACET_WGSL, BTDF_WGSL],
+            sources: vec![MICROFACET_WGSL, ANISO_WGSL, BTDF_WGSL],
             function: format!("btdf_{}_eval", self.ndf.name()),
         }
     }
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        super::aniso::btdf(self.ndf)
+        BtdfAniso::of(self.ndf).map(|b| Arc::new(b) as Arc<dyn Bsdf>)
     }
     fn lut(&self) -> Option<Vec<f32>> {
         match self.ndf {
@@ -361,7 +363,7 @@ impl Bsdf for Suffix {
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {
-            sources: vec![MICROFACET_WGSL, BTDF_WGSL],
+            sources: vec![MICROFACET_WGSL, ANISO_WGSL, BTDF_WGSL],
             function: format!("btdf_{}_eval", self.name()),
         }
     }
@@ -465,6 +467,81 @@ pub fn build_absorb(inner: Node) -> Result<Node, String> {
 pub fn build_diffuse(inner: Node) -> Result<Node, String> {
     wrap(Suffix::Diffuse, inner)
 }
+
+// ---------------------------------------------------------------------------------------
+// The anisotropic form (`+aniso`): its entry is not registered (the spec names it as
+// `M+aniso`); it carries the isotropic model's name, kind and role.
+
+/// `btdf(ndf)` with an anisotropic distribution: α_u, α_v, φ0, η (tr, beckmann) or
+/// β_u, β_v, φ0, p, η (gg).
+#[derive(Debug, Clone, Copy)]
+pub struct BtdfAniso {
+    pub ndf: Ndf,
+}
+
+const BTDF_ENTRY: Entry = Entry::term(
+    "btdf",
+    Kind::Btdf,
+    Role::Transmission,
+    "Walter 2007 microfacet transmission, anisotropic",
+    |_| Err("the anisotropic forms are made by +aniso".into()),
+);
+
+impl BtdfAniso {
+    /// The NDFs with an anisotropic form (GTR is not shape-invariant: stretching its
+    /// slopes does not give a GTR).
+    pub fn of(ndf: Ndf) -> Option<BtdfAniso> {
+        matches!(ndf, Ndf::Tr | Ndf::Beckmann | Ndf::Gg).then_some(BtdfAniso { ndf })
+    }
+}
+
+impl Bsdf for BtdfAniso {
+    fn entry(&self) -> &'static Entry {
+        &BTDF_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([0, 1, 2])
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        match self.ndf {
+            Ndf::Gg => vec![BETA_U, BETA_V, PHI0, P_SHAPE, ETA],
+            _ => vec![ALPHA_U, ALPHA_V, PHI0, ETA],
+        }
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
+        let frame = Frame::new(p[2]);
+        let (li, lo) = (frame.local(wi), frame.local(wo));
+        let tr = AnisoGgx { au: p[0], av: p[1] };
+        match self.ndf {
+            Ndf::Tr => walter_transmission(li, lo, p[3], &tr, &tr),
+            Ndf::Beckmann => {
+                walter_transmission(li, lo, p[3], &AnisoBeckmann { au: p[0], av: p[1] }, &tr)
+            }
+            _ => {
+                let gg = AnisoGg::new(p[0], p[1], p[3]);
+                walter_transmission(li, lo, p[4], &gg, &gg)
+            }
+        }
+    }
+    fn reciprocal(&self) -> bool {
+        false
+    }
+    fn wgsl(&self) -> WgslFn {
+        WgslFn {
+            sources: vec![MICROFACET_WGSL, ANISO_WGSL, BTDF_WGSL],
+            function: match self.ndf {
+                Ndf::Tr => "btdf_aniso_tr_eval",
+                Ndf::Beckmann => "btdf_aniso_beckmann_eval",
+                _ => "btdf_aniso_gg_eval",
+            }
+            .into(),
+        }
+    }
+    fn lut(&self) -> Option<Vec<f32>> {
+        (self.ndf == Ndf::Gg).then(|| gg_lambda_table().to_f32())
+    }
+}
+
 
 #[cfg(test)]
 mod tests {

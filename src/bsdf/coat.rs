@@ -13,6 +13,9 @@ use super::microfacet::{ggx_reflection, single_wgsl};
 use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::lanes::{Real, V3};
+use glam::DVec3;
+use std::sync::Arc;
+use super::stretched::{AnisoGgx, Frame, ALPHA_U, ALPHA_V, PHI0};
 
 #[derive(Debug, Clone, Copy)]
 pub struct Coat;
@@ -102,7 +105,7 @@ impl Bsdf for Coat {
     }
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::aniso::coat())
+        Some(Arc::new(CoatAniso))
     }
     fn wgsl(&self) -> WgslFn {
         single_wgsl("coat", include_str!("../../shaders/bsdf/coat.wgsl"))
@@ -129,3 +132,53 @@ pub fn build(inner: Node) -> Result<Node, String> {
     }
     Ok(Node::with(Coat, vec![inner]))
 }
+
+// ---------------------------------------------------------------------------------------
+// The anisotropic form (`+aniso`): its entry is not registered (the spec names it as
+// `M+aniso`); it carries the isotropic model's name, kind and role.
+
+/// `M+coat` with an anisotropic coat: k_c, α_c,u, α_c,v, φ0_c.
+#[derive(Debug, Clone, Copy)]
+pub struct CoatAniso;
+
+const COAT_ENTRY: Entry = Entry::suffix(
+    "coat",
+    Some(Kind::Brdf),
+    InCatalogue::No,
+    "a second GGX lobe, anisotropic",
+    |inner| Ok(Node::with(CoatAniso, vec![inner])),
+);
+
+impl Bsdf for CoatAniso {
+    fn entry(&self) -> &'static Entry {
+        &COAT_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([1, 2, 3])
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![
+            KC,
+            ALPHA_U.renamed("alpha_c_u"),
+            ALPHA_V.renamed("alpha_c_v"),
+            PHI0.renamed("phi0_c"),
+        ]
+    }
+    fn child_roles(&self) -> &'static [&'static str] {
+        &[""]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
+        let kernel = if wi.z <= 0.0 || wo.z <= 0.0 {
+            0.0
+        } else {
+            let frame = Frame::new(p[3]);
+            let (li, lo) = (frame.local(wi), frame.local(wo));
+            AnisoGgx { au: p[1], av: p[2] }.reflection(li, lo, li + lo)
+        };
+        (1.0 - p[0]) * children[0] + p[0] * kernel
+    }
+    fn wgsl(&self) -> WgslFn {
+        super::stretched::wgsl("coat_aniso_eval")
+    }
+}
+

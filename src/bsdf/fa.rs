@@ -12,6 +12,11 @@ use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_transmittance_in;
 use crate::math::lanes::{Real, V3};
+use glam::DVec3;
+use std::sync::Arc;
+use super::stretched::{ggx_aniso_reflect, lobe_kernel, Frame, ALPHA_U, ALPHA_V, PHI0};
+use super::{each_direction, Children, Dir};
+use crate::math::fresnel_transmittance;
 
 #[derive(Debug, Clone, Copy)]
 pub struct FresnelAggregate;
@@ -106,7 +111,7 @@ impl Bsdf for FresnelAggregate {
     }
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::aniso::fa())
+        Some(Arc::new(FaAniso))
     }
     fn wgsl(&self) -> WgslFn {
         WgslFn {
@@ -137,3 +142,66 @@ pub const ENTRY: Entry = Entry::layer(
         super::lambert::ENTRY.name,
     ),
 ]);
+
+// ---------------------------------------------------------------------------------------
+// The anisotropic form (`+aniso`): its entry is not registered (the spec names it as
+// `M+aniso`); it carries the isotropic model's name, kind and role.
+
+/// `fa(B)` with an anisotropic highlight: lobe.α_u, lobe.α_v, lobe.φ0, lobe.η, lobe.k_s.
+#[derive(Debug, Clone, Copy)]
+pub struct FaAniso;
+
+const FA_ENTRY: Entry = Entry::layer(
+    "fa",
+    Kind::Brdf,
+    &[Role::DiffuseBase],
+    "Fresnel aggregate with an anisotropic GGX lobe",
+    |base| Node::with(FaAniso, vec![base]),
+);
+
+impl Bsdf for FaAniso {
+    fn entry(&self) -> &'static Entry {
+        &FA_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([0, 1, 2])
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![
+            ALPHA_U.renamed("lobe.alpha_u"),
+            ALPHA_V.renamed("lobe.alpha_v"),
+            PHI0.renamed("lobe.phi0"),
+            ETA.renamed("lobe.eta"),
+            KS.renamed("lobe.ks"),
+        ]
+    }
+    fn child_roles(&self) -> &'static [&'static str] {
+        &["base"]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let eta = p[3];
+        let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
+        ggx_aniso_reflect(p[4], p[0], p[1], Frame::new(p[2]), eta, wi, wo) + transmit * children[0]
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
+        let (au, av, frame, eta) = (p.get(0, 0), p.get(0, 1), Frame::new(p.get(0, 2)), p.get(0, 3));
+        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
+            if wi.z <= 0.0 || wo.z <= 0.0 {
+                out.fill(0.0);
+                return;
+            }
+            let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
+            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
+            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
+                *o = p.get(i, 4) * lobe + transmit * b;
+            }
+        });
+    }
+    fn wgsl(&self) -> WgslFn {
+        super::stretched::wgsl("fa_aniso_eval")
+    }
+}
+

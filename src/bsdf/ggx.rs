@@ -11,6 +11,9 @@ use crate::data::Kind;
 use crate::math::fresnel_dielectric_in;
 use crate::math::lanes::{Real, V3};
 use glam::DVec3;
+use std::sync::Arc;
+use super::stretched::{ggx_aniso_reflect, lobe_kernel, Frame, ALPHA_U, ALPHA_V, PHI0};
+use super::{each_direction, Children, Dir};
 
 /// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
 pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
@@ -183,7 +186,7 @@ impl Bsdf for Ggx {
     }
     super::kernel::kernel_methods!();
     fn anisotropic(&self) -> Option<std::sync::Arc<dyn Bsdf>> {
-        Some(super::aniso::ggx())
+        Some(Arc::new(GgxAniso))
     }
     fn wgsl(&self) -> WgslFn {
         microfacet::single_wgsl("ggx", include_str!("../../shaders/bsdf/ggx.wgsl"))
@@ -230,3 +233,47 @@ pub const ENTRY: Entry = Entry::leaf(
         },
     ],
 });
+
+// ---------------------------------------------------------------------------------------
+// The anisotropic form (`+aniso`): its entry is not registered (the spec names it as
+// `M+aniso`); it carries the isotropic model's name, kind and role.
+
+/// `ggx` made anisotropic: k_s, α_u, α_v, φ0, η.
+#[derive(Debug, Clone, Copy)]
+pub struct GgxAniso;
+
+const GGX_ENTRY: Entry = Entry::leaf(
+    "ggx",
+    Kind::Brdf,
+    Role::SpecularLobe,
+    "GGX microfacet reflection, anisotropic",
+    || Node::leaf(GgxAniso),
+);
+
+impl Bsdf for GgxAniso {
+    fn entry(&self) -> &'static Entry {
+        &GGX_ENTRY
+    }
+    fn frame_params(&self) -> Option<[usize; 3]> {
+        Some([1, 2, 3])
+    }
+    fn params(&self) -> Vec<ParamDecl> {
+        vec![KS, ALPHA_U, ALPHA_V, PHI0, ETA]
+    }
+    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
+        ggx_aniso_reflect(p[0], p[1], p[2], Frame::new(p[3]), p[4], wi, wo)
+    }
+    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
+        let (au, av, frame, eta) = (p.get(0, 1), p.get(0, 2), Frame::new(p.get(0, 3)), p.get(0, 4));
+        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
+            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = p.get(i, 0) * lobe;
+            }
+        });
+    }
+    fn wgsl(&self) -> WgslFn {
+        super::stretched::wgsl("ggx_aniso_eval")
+    }
+}
+

@@ -33,6 +33,7 @@ pub mod micrograin;
 pub mod ndf_fresnel;
 pub mod registry;
 pub mod spec;
+pub mod stretched;
 #[cfg(test)]
 pub(crate) mod test_support;
 
