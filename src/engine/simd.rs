@@ -8,14 +8,22 @@
 //! one of its nodes declares that it needs f64 ([`crate::bsdf::Model::lane_kind`]).
 //! Losses and normal equations are summed in f64, as on the reference.
 //!
+//! **Where its code is.** The evaluator is the reference's ([`CpuEvaluator`], with
+//! [`Arith::Lanes`]); what only the lanes do lives here: the blocks' directions packed
+//! into lanes ([`LaneDirs`]), the values leaving the lanes, and the loss summed in lane
+//! order in interleaved partial sums.
+//!
 //! **Where it is used.** `--backend simd`, and `--backend auto` where no hardware GPU
 //! exists (a CPU-only cluster node, or a machine whose only Vulkan device is a
 //! software rasterizer such as lavapipe).
 
-use super::cpu::{Arith, CpuEvaluator};
+use super::cpu::{Arith, Block, CpuEvaluator, Part, Scratch, Window};
 use super::{Backend, Evaluator, Problem};
-use crate::bsdf::kernel::LaneKind;
-use crate::math::lanes::instruction_set;
+use crate::bsdf::kernel::{LaneDir, LaneKind, LaneReal};
+use crate::bsdf::{Channels, Dir, Model};
+use crate::engine::loss::{LossTerms, Term, EPS, NO_SAMPLE};
+use crate::math::lanes::{instruction_set, vectorized, F32x8, F64x4, Real, V3};
+use std::ops::Range;
 
 /// The SIMD CPU engine.
 #[derive(Debug, Default, Clone)]
@@ -62,4 +70,298 @@ impl Backend for SimdBackend {
         let kind: LaneKind = self.lanes.unwrap_or_else(|| model.lane_kind());
         Ok(Box::new(CpuEvaluator::new(problems, Arith::Lanes(kind))?))
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// The lane machinery: the blocks' directions packed into lanes, the values leaving the
+// lanes, and the loss summed in lane order. The reference's evaluator
+// ([`super::cpu::CpuEvaluator`]) runs it where its arithmetic is [`Arith::Lanes`].
+
+/// Every block's directions as lane-directions (the last lane-direction of a block
+/// padded with its last direction), block after block, and the loss constants in the
+/// lane order of the blocks' values.
+pub(super) struct LaneDirs {
+    dirs: LaneVec,
+    /// Block b's first lane-direction.
+    at: Vec<usize>,
+    /// Block b's first value in lane order: its m lane-directions × n channels × L
+    /// lanes, value (d · n + i) · L + j at lane j of lane-direction d, channel i.
+    values_at: Vec<usize>,
+    /// The loss constants of the values in lane order (zero for a padding lane); a
+    /// squared term's √w taken into a and g(y): w (a y′ − g(y))² = (√w a y′ − √w g(y))²,
+    /// one product less per row.
+    terms: LossTerms,
+    /// The children's lane values the largest block needs ([`Model::scratch_len`]).
+    scratch_len: usize,
+}
+
+enum LaneVec {
+    F32x8(Vec<LaneDir<F32x8>>),
+    F64x4(Vec<LaneDir<F64x4>>),
+}
+
+impl LaneDirs {
+    /// The lanes of `blocks` of the model `model`, whose row-order loss constants are
+    /// `rows`.
+    pub(super) fn new(
+        kind: LaneKind,
+        model: &Model,
+        dirs: &[Dir],
+        blocks: &[Block],
+        rows: &LossTerms,
+    ) -> LaneDirs {
+        fn pack<R: Real>(dirs: &[Dir], blocks: &[Block]) -> Vec<LaneDir<R>> {
+            let mut v = Vec::new();
+            for b in blocks {
+                let d = &dirs[b.dirs.clone()];
+                for first in (0..d.len()).step_by(R::LANES) {
+                    let lane = |j: usize| d[(first + j).min(d.len() - 1)];
+                    let c = |f: fn(&Dir) -> f64| R::from_fn(|j| f(&lane(j)));
+                    v.push(LaneDir {
+                        wi: V3::new(c(|w| w.0.x), c(|w| w.0.y), c(|w| w.0.z)),
+                        wo: V3::new(c(|w| w.1.x), c(|w| w.1.y), c(|w| w.1.z)),
+                    });
+                }
+            }
+            v
+        }
+        let (dirs, l) = match kind {
+            LaneKind::F32x8 => (LaneVec::F32x8(pack(dirs, blocks)), F32x8::LANES),
+            LaneKind::F64x4 => (LaneVec::F64x4(pack(dirs, blocks)), F64x4::LANES),
+        };
+        let (mut at, mut values_at) = (Vec::new(), Vec::new());
+        // The row of each value in lane order, or NO_SAMPLE for a padding lane.
+        let mut rows_of_values = Vec::new();
+        let mut next = 0;
+        for b in blocks {
+            at.push(next);
+            values_at.push(rows_of_values.len());
+            let (n, len) = (b.n, b.dirs.len());
+            let m = len.div_ceil(l);
+            next += m;
+            for d in 0..m {
+                for i in 0..n {
+                    for j in 0..l {
+                        let direction = d * l + j;
+                        rows_of_values.push(if direction < len {
+                            (b.start + direction * n + i) as u32
+                        } else {
+                            NO_SAMPLE
+                        });
+                    }
+                }
+            }
+        }
+        let mut terms = rows.in_rows(rows_of_values.into_iter());
+        if terms.term == Term::Square {
+            for ((a, gy), s) in terms.a.iter_mut().zip(&mut terms.gy).zip(&terms.sqrt_w) {
+                *a *= s;
+                *gy *= s;
+            }
+        }
+        let widest = blocks.iter().map(|b| b.n * b.dirs.len().div_ceil(l)).max();
+        LaneDirs {
+            dirs,
+            at,
+            values_at,
+            terms,
+            scratch_len: model.scratch_len(widest.unwrap_or(0)),
+        }
+    }
+}
+
+/// The lane buffers of a worker's [`Scratch`] for one lane type.
+trait LaneScratch: LaneReal {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>);
+}
+impl LaneScratch for F32x8 {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
+        (&mut s.out32, &mut s.children32)
+    }
+}
+impl LaneScratch for F64x4 {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
+        (&mut s.out64, &mut s.children64)
+    }
+}
+
+impl<'a> Part<'a> {
+    /// [`Self::blocks_in_reference`] in lanes: each block's lane-directions through
+    /// [`Node::eval_lanes`](crate::bsdf::Node::eval_lanes), its values widened to f64
+    /// in row order (`f(first row, values)`), or, with `lane_order`, in the lane order
+    /// of [`LaneDirs`] (`f(first value in lane order, values)`, padding lanes included).
+    #[inline(always)]
+    pub(super) fn blocks_in_lanes(
+        &self,
+        lanes: &LaneDirs,
+        lane_order: bool,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        f: impl FnMut(usize, &[f64]),
+    ) {
+        match &lanes.dirs {
+            LaneVec::F32x8(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
+            LaneVec::F64x4(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
+        }
+    }
+
+    #[inline(always)]
+    fn blocks_in<R: LaneScratch>(
+        &self,
+        lane_dirs: &[LaneDir<R>],
+        lanes: &LaneDirs,
+        lane_order: bool,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        mut f: impl FnMut(usize, &[f64]),
+    ) {
+        let model = self.problem.model;
+        let stride = model.scalar_count();
+        let l = R::LANES;
+        let views = std::mem::take(&mut scratch.views);
+        let mut out = std::mem::take(&mut scratch.out);
+        for (k, b) in blocks.clone().zip(&self.blocks[blocks]) {
+            let (n, len) = (b.n, b.dirs.len());
+            let m = len.div_ceil(l);
+            let first = lanes.at[k];
+            let (values, children) = R::buffers(scratch);
+            values.resize(n * m, R::zero());
+            if children.len() < lanes.scratch_len {
+                children.resize(lanes.scratch_len, R::zero());
+            }
+            if out.len() < n * m * l {
+                out.resize(n * m * l, 0.0);
+            }
+            let p = Channels::new(&views, stride, &self.group[b.start..b.start + b.n]);
+            model.root.eval_lanes(
+                p,
+                &lane_dirs[first..first + m],
+                &mut values[..n * m],
+                children,
+            );
+            // The values to f64 and the caller's reduction, compiled for the vector
+            // extensions too (a loss's row terms are independent).
+            vectorized(
+                #[inline(always)]
+                || {
+                    if lane_order {
+                        let out = &mut out[..n * m * l];
+                        for (o, v) in out.chunks_exact_mut(l).zip(values.iter()) {
+                            v.store_all_f64(o);
+                        }
+                        f(lanes.values_at[k], out);
+                    } else {
+                        let out = &mut out[..n * len];
+                        // Row (d·L + j)·n + i is lane j of values[d·n + i].
+                        for (d, o) in out.chunks_mut(n * l).enumerate() {
+                            let count = o.len() / n;
+                            for i in 0..n {
+                                values[d * n + i].store_f64(&mut o[i..], n, count);
+                            }
+                        }
+                        f(b.start, out);
+                    }
+                },
+            );
+        }
+        scratch.views = views;
+        scratch.out = out;
+    }
+
+    /// [`Self::cost_sum`] of the SIMD engine: the terms in lane order (constants laid
+    /// out so at prepare time, padding lanes 0), so that values leave the lanes in
+    /// contiguous runs, summed in [`SPLIT`]
+    /// interleaved partial sums, so that the additions do not wait on one another (one
+    /// running sum costs an addition's latency per row, more than the model's lanes
+    /// take). The reference keeps one sum in row order.
+    pub(super) fn cost_sum_split(
+        &self,
+        lanes: &LaneDirs,
+        w: &Window,
+        scratch: &mut Scratch,
+    ) -> f64 {
+        let t = &lanes.terms;
+        let (blocks, t_w) = (w.blocks.clone(), &t.w[..]);
+        match t.term {
+            // a and gy hold √w·a and √w·g(y) here (LaneDirs::terms).
+            Term::Square => {
+                self.sum_in_lanes(lanes, blocks, scratch, [&t.a, &t.gy], |v, [a, gy]| {
+                    let d = a * v - gy;
+                    d * d
+                })
+            }
+            Term::LogSquare => self.sum_in_lanes(
+                lanes,
+                blocks,
+                scratch,
+                [&t.a, &t.gy, t_w],
+                |v, [a, gy, w]| {
+                    let d = (a * v).ln_1p() - gy;
+                    w * d * d
+                },
+            ),
+            Term::AbsRatio => {
+                self.sum_in_lanes(lanes, blocks, scratch, [&t.y, t_w], |v, [y, w]| {
+                    w * (v - y).abs() / (v.abs() + y.abs() + EPS)
+                })
+            }
+        }
+    }
+
+    /// Σ `term(value, constants)` over the blocks' values in lane order, the constants
+    /// the entries of `cols` (lane order too) at each value ([`split_sum`]).
+    #[inline(always)]
+    fn sum_in_lanes<const N: usize>(
+        &self,
+        lanes: &LaneDirs,
+        blocks: Range<usize>,
+        scratch: &mut Scratch,
+        cols: [&[f64]; N],
+        term: impl Fn(f64, [f64; N]) -> f64 + Copy,
+    ) -> f64 {
+        let mut acc = [0.0f64; SPLIT];
+        self.blocks_in_lanes(
+            lanes,
+            true,
+            blocks,
+            scratch,
+            #[inline(always)]
+            |start, values| {
+                let r = start..start + values.len();
+                split_sum(&mut acc, values, cols.map(|c| &c[r.clone()]), term)
+            },
+        );
+        acc.iter().sum()
+    }
+}
+
+/// Partial sums of the SIMD engine's loss ([`Part::cost_sum_split`]).
+const SPLIT: usize = 8;
+
+/// Adds `term(value, constants)` of each row (its value, and its entry of each column
+/// of `cols`) into the partial sums `acc`, row k of the block into `acc[k mod SPLIT]`.
+#[inline(always)]
+fn split_sum<const N: usize>(
+    acc: &mut [f64; SPLIT],
+    values: &[f64],
+    cols: [&[f64]; N],
+    term: impl Fn(f64, [f64; N]) -> f64,
+) {
+    let n = values.len();
+    let cols = cols.map(|c| &c[..n]);
+    // The sums in registers, four rows a step (the compiler makes one vector add of it).
+    let mut sums = *acc;
+    let mut chunks = values.chunks_exact(SPLIT);
+    for (i, v) in (&mut chunks).enumerate() {
+        let at = i * SPLIT;
+        let c: [&[f64; SPLIT]; N] = cols.map(|c| c[at..at + SPLIT].try_into().unwrap());
+        for k in 0..SPLIT {
+            sums[k] += term(v[k], c.map(|c| c[k]));
+        }
+    }
+    let done = n - chunks.remainder().len();
+    for row in done..n {
+        sums[row - done] += term(values[row], cols.map(|c| c[row]));
+    }
+    *acc = sums;
 }
