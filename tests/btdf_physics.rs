@@ -791,13 +791,15 @@ fn wgsl_twins_match_the_rust_constants_and_validate() {
     let src = format!(
         "var<private> P: array<f32, 8>;\n@group(0) @binding(5) var<storage, read> LUT: array<f32>;\nfn lut(k: u32) -> f32 {{ return LUT[k]; }}\n\
          const MU_TABLE_LEN: u32 = 63u;\nconst MU_TABLES: bool = true;\nconst BTDF_GG_PREPARED: bool = true;\n\
-         var<private> RECORD_MU: vec2<u32>;\nfn mu_table_len() -> u32 {{ return 1u; }}\nfn mu_table_at(i: u32) -> f32 {{ return 0.5; }}\n{}\n{}\n{}\n{}\n\
+         var<private> RECORD_MU: vec2<u32>;\nfn mu_table_len() -> u32 {{ return 1u; }}\nfn mu_table_at(i: u32) -> f32 {{ return 0.5; }}\n{}\n{}\n{}\n{}\n{}\n\
          @compute @workgroup_size(1) fn main() {{\n btdf_gg_prepare(0u);\n let wi = vec3<f32>(0.0, 0.0, 1.0); let wo = -wi;\n \
          let v = btdf_tr_eval(0u, wi, wo) + btdf_beckmann_eval(0u, wi, wo) + btdf_gtr_eval(0u, wi, wo) + btdf_gg_eval(0u, wi, wo);\n \
          P[7] = btdf_diffuse_eval(0u, wi, wo, btdf_absorb_eval(0u, wi, wo, btdf_scale_eval(0u, wi, wo, v)));\n}}\n",
         include_str!("../shaders/bsdf/common.wgsl"),
         bsdfit::engine::wgsl::all_accessors(),
         mf,
+        // The anisotropic forms in btdf.wgsl use the stretched distributions.
+        include_str!("../shaders/bsdf/aniso.wgsl"),
         include_str!("../shaders/bsdf/btdf.wgsl"),
     );
     let module =
