@@ -132,9 +132,47 @@ pub struct DiagnoseArgs {
     pub no_pictures: bool,
     /// Run the collection saved in FILE (DIR/slurm/collection.json, written by
     /// --emit-slurm for its array tasks); with it only --shard may be given.
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["data", "model", "out", "json", "report", "emit_slurm"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = CHOOSES_THE_DIAGNOSIS)]
     pub config: Option<PathBuf>,
 }
+
+/// The options that choose a collection's diagnosis, which a saved one (`--config`)
+/// already holds.
+const CHOOSES_THE_DIAGNOSIS: [&str; 33] = [
+    "data",
+    "model",
+    "loss",
+    "weights",
+    "optimizer",
+    "restarts",
+    "seed",
+    "alpha",
+    "max_steps",
+    "bootstrap",
+    "bootstrap_max",
+    "calibrate_all",
+    "bootstrap_restarts",
+    "backend",
+    "json",
+    "report",
+    "fix",
+    "bounds",
+    "prior",
+    "wavelengths",
+    "allow_zero_uncertainty",
+    "assume_uncertainty",
+    "band",
+    "max_samples",
+    "alta_values",
+    "sample_geometry",
+    "no_backtrack",
+    "parallel",
+    "explore",
+    "out",
+    "emit_slurm",
+    "slurm_cpus",
+    "no_pictures",
+];
 
 impl DiagnoseArgs {
     /// The diagnosis these arguments ask for (the loss and weighting words read, the
@@ -334,6 +372,22 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
 mod tests {
     use super::*;
     use clap::Parser;
+
+    /// `--config` runs a saved collection: every option that chooses the diagnosis
+    /// conflicts with it, so none is silently ignored (only --shard may be given).
+    #[test]
+    fn config_conflicts_with_every_option_that_chooses_the_diagnosis() {
+        use clap::CommandFactory;
+        let cli = super::super::Cli::command();
+        let diagnose = cli.find_subcommand("diagnose").expect("diagnose");
+        let left: Vec<String> = diagnose
+            .get_arguments()
+            .map(|a| a.get_id().to_string())
+            .filter(|id| !["config", "shard", "help"].contains(&id.as_str()))
+            .filter(|id| !CHOOSES_THE_DIAGNOSIS.contains(&id.as_str()))
+            .collect();
+        assert!(left.is_empty(), "not in CHOOSES_THE_DIAGNOSIS: {left:?}");
+    }
 
     /// `bsdfit diagnose` without options asks for the library's default diagnosis: the
     /// command line writes no default of its own.
