@@ -247,6 +247,15 @@ fn a_folder_of_four_formats_is_diagnosed_resumed_sharded_and_merged() {
         "merge --shards",
     );
     assert_eq!(table(&slurm_out), t);
+    // The merged folder is the collection's: a run into it with the same options skips
+    // what the array diagnosed (and retries the data set that failed).
+    let o = run(&options(&data, &slurm_out), &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("11 already done"),
+        "{}",
+        text(&o.stderr)
+    );
 }
 
 #[test]

@@ -96,6 +96,17 @@ impl CollectionConfig {
         })
     }
 
+    /// How every file of the collection is read: the options asked for, with one
+    /// selection of wavelengths serving files with different channels
+    /// ([`ReadOptions::wavelengths_at_most`]). Derived here, not stored, so the saved
+    /// options are the ones asked for, whichever run (a task, a merge) saved them.
+    pub fn reading(&self) -> ReadOptions {
+        ReadOptions {
+            wavelengths_at_most: true,
+            ..self.read.clone()
+        }
+    }
+
     /// What makes two runs the same diagnosis (the files may differ: a collection grows).
     fn identity(&self) -> serde_json::Value {
         serde_json::json!({ "read": self.read, "request": self.request })
@@ -310,14 +321,7 @@ pub fn run(cfg: &CollectionConfig, obs: &mut dyn SweepObserver) -> Result<Collec
         ))
     })?;
     let (out, shard) = place(cfg)?;
-    // One selection of wavelengths serves files with different channels.
-    let cfg = &CollectionConfig {
-        read: ReadOptions {
-            wavelengths_at_most: true,
-            ..cfg.read.clone()
-        },
-        ..cfg.clone()
-    };
+    let reading = cfg.reading();
     let listed = list_data(&cfg.data, &mut |m| obs.note(&m))?;
     std::fs::create_dir_all(&out)
         .with_context(|| format!("--out: cannot create {}", out.display()))?;
@@ -330,13 +334,18 @@ pub fn run(cfg: &CollectionConfig, obs: &mut dyn SweepObserver) -> Result<Collec
         .filter(|(i, _)| shard.is_none_or(|(k, n)| i % n == k - 1))
         .map(|(_, l)| l)
         .collect();
-    // Done where this folder, or the collection's own (a merge), holds it for these bytes.
+    // Done where this folder, or the collection's own (a merge), holds it for these bytes
+    // (the file is read for its key only where such a record exists).
     let done = |l: &Listed| {
-        let hash = hash_of(l, &cfg.read);
-        [out.as_path(), cfg.out.as_path()].iter().any(|dir| {
-            read_cell(dir, &l.name)
-                .is_some_and(|r| r.status == CellStatus::Done && r.hash == hash && hash.is_some())
-        })
+        let records: Vec<CellRecord> = [out.as_path(), cfg.out.as_path()]
+            .iter()
+            .filter_map(|dir| read_cell(dir, &l.name))
+            .filter(|r| r.status == CellStatus::Done && r.hash.is_some())
+            .collect();
+        !records.is_empty() && {
+            let hash = hash_of(l, &reading);
+            records.iter().any(|r| r.hash == hash)
+        }
     };
     let todo: Vec<&Listed> = mine.iter().copied().filter(|l| !done(l)).collect();
     let shard_note = shard
@@ -403,7 +412,7 @@ fn run_cell(
         obs.alert(a);
     }
     let seconds = t0.elapsed().as_secs_f64();
-    let hash = hash_of(l, &cfg.read);
+    let hash = hash_of(l, &cfg.reading());
     match outcome {
         Ok(Ok(mut r)) => {
             r.seconds = seconds;
@@ -431,7 +440,7 @@ fn diagnose_cell(
     backend: &dyn Backend,
     alert: &mut dyn FnMut(String),
 ) -> Result<CellRecord> {
-    let file = DataFile::read(&l.path, &cfg.read)?;
+    let file = DataFile::read(&l.path, &cfg.reading())?;
     for n in &file.data.notices {
         alert(format!("{}: note: {n}", l.name));
     }
