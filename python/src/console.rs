@@ -5,17 +5,10 @@
 use super::*;
 
 /// Run the command line `args` (the program's name first); its exit code. The GIL is
-/// released while it runs; a panic becomes a RuntimeError.
+/// released while it runs; a panic becomes a RuntimeError, as in every native call.
 #[pyfunction]
 pub(crate) fn run_cli(py: Python<'_>, args: Vec<String>) -> PyResult<i32> {
     let outcome =
-        py.detach(|| catch_unwind(AssertUnwindSafe(|| bsdfit::cli::main_with_args(args))));
-    outcome.map_err(|p| {
-        let text = p
-            .downcast_ref::<String>()
-            .map(String::as_str)
-            .or_else(|| p.downcast_ref::<&str>().copied())
-            .unwrap_or("a panic");
-        PyRuntimeError::new_err(format!("internal error in bsdfit: {text}"))
-    })
+        py.detach(|| catch_unwind(AssertUnwindSafe(|| Ok(bsdfit::cli::main_with_args(args)))));
+    caught(outcome)
 }

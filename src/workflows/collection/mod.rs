@@ -404,13 +404,10 @@ fn run_cell(
     obs: &mut dyn SweepObserver,
 ) -> CellRecord {
     let t0 = Instant::now();
-    let mut alerts: Vec<String> = Vec::new();
+    // The path's lines are shown as they come (a diagnosis can take minutes).
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        diagnose_cell(cfg, l, out, backend, &mut |line| alerts.push(line))
+        diagnose_cell(cfg, l, out, backend, &mut |line| obs.alert(&line))
     }));
-    for a in &alerts {
-        obs.alert(a);
-    }
     let seconds = t0.elapsed().as_secs_f64();
     let hash = hash_of(l, &cfg.reading());
     match outcome {
