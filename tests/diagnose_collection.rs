@@ -355,6 +355,20 @@ fn a_killed_collection_resumes_without_redoing_its_cells() {
         "{}",
         text(&o.stderr)
     );
+    // Folders of two different diagnoses are not merged into one table.
+    let mut on = other.clone();
+    let out_on = tmp.path().join("out-on");
+    on[5] = p(&out_on).to_string();
+    assert_ok(&run(&on, &[]), "diagnose from on");
+    let both = tmp.path().join("both");
+    let o = bsdfit(&["merge", p(&out), p(&out_on), "--out", p(&both)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        text(&o.stderr).contains("cannot be merged into")
+            && text(&o.stderr).contains("other options"),
+        "{}",
+        text(&o.stderr)
+    );
     // A sweep's folder is refused too: the collection's report.html would replace its own.
     let sweep = tmp.path().join("sweep");
     std::fs::create_dir_all(&sweep).unwrap();

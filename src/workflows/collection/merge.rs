@@ -71,12 +71,11 @@ pub fn merge(
             )
         })?;
         sources.extend(slurm::shard_dirs(out)?);
+        super::check_identity(&cfg, out)?;
         Some(cfg)
     } else {
         None
     };
-    // The options of the merged folder: the array's, else the first input's.
-    let own = out.join(COLLECTION_JSON);
     let mut added = 0;
     for src in &sources {
         anyhow::ensure!(
@@ -84,12 +83,12 @@ pub fn merge(
             "{} is not a collection's folder (no {CELLS_DIR}/ or {COLLECTION_JSON})",
             src.display()
         );
-        if !own.exists() {
-            let saved = match &config {
-                Some(c) => c.clone(),
-                None => CollectionConfig::load(&src.join(COLLECTION_JSON))?,
-            };
-            saved.save(&own)?;
+        // The same diagnosis as the merged folder's (the array's, else the first input's).
+        let saved = src.join(COLLECTION_JSON);
+        if saved.exists() {
+            super::check_identity(&CollectionConfig::load(&saved)?, out).with_context(|| {
+                format!("{} cannot be merged into {}", src.display(), out.display())
+            })?;
         }
         for r in read_cells(src)? {
             let old = super::read_cell(out, &r.data);
