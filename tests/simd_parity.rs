@@ -104,33 +104,24 @@ fn lane_kinds_and_kernels_are_reported() {
         "instruction set: {}",
         bsdfit::math::lanes::instruction_set()
     );
-    // Which catalogue nodes still run lane by lane through the reference, over every
-    // spec the registry derives: exactly these, so that a kernel lost fails here and a
-    // kernel added must strike its node off the list. Outside `+aniso` specs none; in
-    // them, the anisotropic lobes (named as their isotropic parents).
-    let mut isotropic: Vec<&str> = Vec::new();
-    let mut anisotropic: Vec<&str> = Vec::new();
+    // No catalogue node runs lane by lane through the reference, over every spec the
+    // registry derives, `+aniso` forms included (the per-lane fallback is for models
+    // defined outside the crate, as tests/toy_model.rs's).
+    let mut missing: Vec<(String, Vec<&str>)> = Vec::new();
     for spec in [Kind::Brdf, Kind::Btdf].into_iter().flat_map(every_spec) {
-        let missing = Model::parse(&spec, 3).unwrap().nodes_without_kernel();
-        if spec.contains("+aniso") {
-            anisotropic.extend(missing);
-        } else {
-            isotropic.extend(missing);
+        let m = Model::parse(&spec, 3).unwrap().nodes_without_kernel();
+        if !m.is_empty() {
+            missing.push((spec, m));
         }
     }
-    for v in [&mut isotropic, &mut anisotropic] {
-        v.sort_unstable();
-        v.dedup();
-    }
-    assert!(
-        isotropic.is_empty(),
-        "nodes without a kernel: {isotropic:?}"
-    );
-    assert_eq!(
-        anisotropic,
-        ["btdf", "coat", "fa", "ggx"],
-        "nodes without a kernel in +aniso specs"
-    );
+    assert!(missing.is_empty(), "nodes without a kernel: {missing:?}");
+    // The walk reaches the anisotropic lobes (a walk that skipped them would pass).
+    let anisotropic = [Kind::Brdf, Kind::Btdf]
+        .into_iter()
+        .flat_map(every_spec)
+        .filter(|s| s.contains("+aniso"))
+        .count();
+    assert!(anisotropic >= 4, "{anisotropic} +aniso specs walked");
 }
 
 /// The level that runs is the one `BSDFIT_SIMD` asks for (CI runs this file three times:

@@ -495,6 +495,70 @@ impl BtdfAniso {
     }
 }
 
+impl Kernel for BtdfAniso {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let (bu, bv, frame) = (p.get(0, 0), p.get(0, 1), Frame::new(p.get(0, 2)));
+        let (p3, p4) = (p.get(0, 3), if p.count() > 4 { p.get(0, 4) } else { 0.0 });
+        let tr = AnisoGgx { au: bu, av: bv };
+        let beckmann = AnisoBeckmann { au: bu, av: bv };
+        let gg = (self.ndf == Ndf::Gg).then(|| AnisoGg::new(bu, bv, p3));
+        // (Closures marked inline: out of line they would be compiled without the
+        // vector extensions of the kernel that calls them.)
+        for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
+            let (li, lo) = (frame.local_in(wi), frame.local_in(wo));
+            let value = match (self.ndf, &gg) {
+                (_, Some(gg)) => walter_in(
+                    li,
+                    lo,
+                    p4,
+                    #[inline(always)]
+                    |m| gg.d_in(m),
+                    #[inline(always)]
+                    |w| gg.g1_over_mu_in(w),
+                ),
+                (Ndf::Beckmann, None) => walter_in(
+                    li,
+                    lo,
+                    p3,
+                    #[inline(always)]
+                    |m| beckmann.d_in(m),
+                    #[inline(always)]
+                    |w| tr.g1_over_mu_in(w),
+                ),
+                _ => walter_in(
+                    li,
+                    lo,
+                    p3,
+                    #[inline(always)]
+                    |m| tr.d_in(m),
+                    #[inline(always)]
+                    |w| tr.g1_over_mu_in(w),
+                ),
+            };
+            out.fill(value);
+        }
+    }
+}
+
+/// Eq. 1 over any [`Real`] with the distribution `d` and the Smith G1/|μ| `g1_over_mu`
+/// (the anisotropic lobes, whose distributions are not [`Ndf`]'s).
+#[inline(always)]
+fn walter_in<R: Real>(
+    wi: V3<R>,
+    wo: V3<R>,
+    eta: f64,
+    d: impl Fn(V3<R>) -> R,
+    g1_over_mu: impl Fn(V3<R>) -> R,
+) -> R {
+    let (r, valid) = refraction_in(wi, wo, eta);
+    if !R::any(valid) {
+        return R::zero();
+    }
+    let value = transmit(&r, eta, d(r.m), g1_over_mu(wi), g1_over_mu(wo));
+    R::select(valid, value, R::zero())
+}
+
 impl Bsdf for BtdfAniso {
     fn entry(&self) -> &'static Entry {
         &BTDF_ENTRY
@@ -508,21 +572,7 @@ impl Bsdf for BtdfAniso {
             _ => vec![ALPHA_U, ALPHA_V, PHI0, ETA],
         }
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        let frame = Frame::new(p[2]);
-        let (li, lo) = (frame.local(wi), frame.local(wo));
-        let tr = AnisoGgx { au: p[0], av: p[1] };
-        match self.ndf {
-            Ndf::Tr => walter_transmission(li, lo, p[3], &tr, &tr),
-            Ndf::Beckmann => {
-                walter_transmission(li, lo, p[3], &AnisoBeckmann { au: p[0], av: p[1] }, &tr)
-            }
-            _ => {
-                let gg = AnisoGg::new(p[0], p[1], p[3]);
-                walter_transmission(li, lo, p[4], &gg, &gg)
-            }
-        }
-    }
+    super::kernel::kernel_methods!();
     fn reciprocal(&self) -> bool {
         false
     }

@@ -13,7 +13,6 @@ use super::microfacet::{ggx_reflection, single_wgsl};
 use super::{Bsdf, Channels, Entry, InCatalogue, Node, ParamDecl, WgslFn};
 use crate::data::Kind;
 use crate::math::lanes::{Real, V3};
-use glam::DVec3;
 use std::sync::Arc;
 use super::stretched::{AnisoGgx, Frame, ALPHA_U, ALPHA_V, PHI0};
 
@@ -149,6 +148,24 @@ const COAT_ENTRY: Entry = Entry::suffix(
     |inner| Ok(Node::with(CoatAniso, vec![inner])),
 );
 
+impl Kernel for CoatAniso {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], inner: LaneChildren<R>, out: &mut [R]) {
+        let (lobe, frame) = (AnisoGgx { au: p.get(0, 1), av: p.get(0, 2) }, Frame::new(p.get(0, 3)));
+        blend_block(
+            p,
+            dirs,
+            inner,
+            out,
+            #[inline(always)]
+            |wi, wo| {
+                let (li, lo) = (frame.local_in(wi), frame.local_in(wo));
+                lobe.reflection_in(li, lo, li + lo)
+            },
+        );
+    }
+}
+
 impl Bsdf for CoatAniso {
     fn entry(&self) -> &'static Entry {
         &COAT_ENTRY
@@ -167,16 +184,7 @@ impl Bsdf for CoatAniso {
     fn child_roles(&self) -> &'static [&'static str] {
         &[""]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        let kernel = if wi.z <= 0.0 || wo.z <= 0.0 {
-            0.0
-        } else {
-            let frame = Frame::new(p[3]);
-            let (li, lo) = (frame.local(wi), frame.local(wo));
-            AnisoGgx { au: p[1], av: p[2] }.reflection(li, lo, li + lo)
-        };
-        (1.0 - p[0]) * children[0] + p[0] * kernel
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         super::stretched::wgsl("coat_aniso_eval")
     }

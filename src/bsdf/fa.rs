@@ -12,11 +12,9 @@ use super::microfacet::MICROFACET_WGSL;
 use crate::data::Kind;
 use crate::math::fresnel_transmittance_in;
 use crate::math::lanes::{Real, V3};
-use glam::DVec3;
 use std::sync::Arc;
-use super::stretched::{ggx_aniso_reflect, lobe_kernel, Frame, ALPHA_U, ALPHA_V, PHI0};
-use super::{each_direction, Children, Dir};
-use crate::math::fresnel_transmittance;
+use super::ggx::aniso_lobe;
+use super::stretched::{Frame, ALPHA_U, ALPHA_V, PHI0};
 
 #[derive(Debug, Clone, Copy)]
 pub struct FresnelAggregate;
@@ -70,7 +68,22 @@ pub fn aggregate_block_with<R: Real>(
     lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
     channel: impl Fn(&GgxLobe<R>, usize) -> R,
 ) {
-    let (eta, n) = (p.get(0, 1), p.len());
+    aggregate_block_at(p, p.get(0, 1), dirs, base, out, lobe, channel);
+}
+
+/// [`aggregate_block_with`] with the interface's index η given (the anisotropic lobe's
+/// parameters put it fourth).
+#[inline(always)]
+pub fn aggregate_block_at<R: Real>(
+    p: Channels,
+    eta: f64,
+    dirs: &[LaneDir<R>],
+    base: LaneChildren<R>,
+    out: &mut [R],
+    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
+    channel: impl Fn(&GgxLobe<R>, usize) -> R,
+) {
+    let n = p.len();
     let zero = R::zero();
     let (mut ti, mut to) = (Memo::default(), Memo::default());
     for (d, (wi, wo), out) in lanes(dirs, n, out) {
@@ -159,6 +172,24 @@ const FA_ENTRY: Entry = Entry::layer(
     |base| Node::with(FaAniso, vec![base]),
 );
 
+impl Kernel for FaAniso {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
+        let (au, av, frame, eta) = (p.get(0, 0), p.get(0, 1), Frame::new(p.get(0, 2)), p.get(0, 3));
+        aggregate_block_at(
+            p,
+            eta,
+            dirs,
+            base,
+            out,
+            #[inline(always)]
+            |wi, wo| aniso_lobe(au, av, frame, eta, wi, wo),
+            #[inline(always)]
+            |lobe, i| lobe.scaled_outer(R::splat(p.get(i, 4))),
+        );
+    }
+}
+
 impl Bsdf for FaAniso {
     fn entry(&self) -> &'static Entry {
         &FA_ENTRY
@@ -178,28 +209,7 @@ impl Bsdf for FaAniso {
     fn child_roles(&self) -> &'static [&'static str] {
         &["base"]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return 0.0;
-        }
-        let eta = p[3];
-        let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
-        ggx_aniso_reflect(p[4], p[0], p[1], Frame::new(p[2]), eta, wi, wo) + transmit * children[0]
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], base: Children, out: &mut [f64]) {
-        let (au, av, frame, eta) = (p.get(0, 0), p.get(0, 1), Frame::new(p.get(0, 2)), p.get(0, 3));
-        each_direction(dirs, p.len(), out, |d, wi, wo, out| {
-            if wi.z <= 0.0 || wo.z <= 0.0 {
-                out.fill(0.0);
-                return;
-            }
-            let transmit = fresnel_transmittance(wi.z, eta) * fresnel_transmittance(wo.z, eta);
-            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
-            for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
-                *o = p.get(i, 4) * lobe + transmit * b;
-            }
-        });
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         super::stretched::wgsl("fa_aniso_eval")
     }

@@ -12,8 +12,7 @@ use crate::math::fresnel_dielectric_in;
 use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::sync::Arc;
-use super::stretched::{ggx_aniso_reflect, lobe_kernel, Frame, ALPHA_U, ALPHA_V, PHI0};
-use super::{each_direction, Children, Dir};
+use super::stretched::{AnisoGgx, Frame, ALPHA_U, ALPHA_V, PHI0};
 
 /// The GGX reflection lobe, shared by `ggx` and the lobe of `fa(B)`.
 pub fn ggx_reflect(ks: f64, alpha: f64, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
@@ -101,6 +100,12 @@ impl<R: Real> GgxLobe<R> {
     #[inline(always)]
     pub fn scaled_by(&self, ks: R, factor: R) -> R {
         R::select(self.above, ks * self.fresnel * factor * self.kernel, R::zero())
+    }
+    /// k_s · (F · kernel): the anisotropic lobes' order (their f64 values predate the
+    /// lanes and stay bit for bit).
+    #[inline(always)]
+    pub fn scaled_outer(&self, ks: R) -> R {
+        R::select(self.above, ks * (self.fresnel * self.kernel), R::zero())
     }
     /// cos θd = ωi·h (1 below the surface).
     #[inline(always)]
@@ -250,6 +255,38 @@ const GGX_ENTRY: Entry = Entry::leaf(
     || Node::leaf(GgxAniso),
 );
 
+impl Kernel for GgxAniso {
+    #[inline(always)]
+    fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
+        let (au, av, frame, eta) = (p.get(0, 1), p.get(0, 2), Frame::new(p.get(0, 3)), p.get(0, 4));
+        lobe_block_with(
+            p,
+            dirs,
+            out,
+            #[inline(always)]
+            |wi, wo| aniso_lobe(au, av, frame, eta, wi, wo),
+            #[inline(always)]
+            |lobe, i| lobe.scaled_outer(R::splat(p.get(i, 0))),
+        );
+    }
+}
+
+/// The anisotropic GGX lobe's F(ωi·h; η) and kernel D G1 G1 / (4 μi μo) at directions in
+/// the data's frame (`ggx+aniso`, `fa(B)+aniso`): the isotropic lobe's Fresnel factor,
+/// half vector and side tests, none of which depends on the azimuth, on the directions
+/// turned into the tangent frame, with the stretched GGX's kernel.
+#[inline(always)]
+pub fn aniso_lobe<R: Real>(au: f64, av: f64, frame: Frame, eta: f64, wi: V3<R>, wo: V3<R>) -> GgxLobe<R> {
+    let (li, lo) = (frame.local_in(wi), frame.local_in(wo));
+    GgxLobe::at_with(
+        eta,
+        li,
+        lo,
+        #[inline(always)]
+        |m| AnisoGgx { au, av }.reflection_in(li, lo, m),
+    )
+}
+
 impl Bsdf for GgxAniso {
     fn entry(&self) -> &'static Entry {
         &GGX_ENTRY
@@ -260,20 +297,8 @@ impl Bsdf for GgxAniso {
     fn params(&self) -> Vec<ParamDecl> {
         vec![KS, ALPHA_U, ALPHA_V, PHI0, ETA]
     }
-    fn eval(&self, p: &[f64], wi: DVec3, wo: DVec3, _children: &[f64]) -> f64 {
-        ggx_aniso_reflect(p[0], p[1], p[2], Frame::new(p[3]), p[4], wi, wo)
-    }
-    fn eval_channels(&self, p: Channels, dirs: &[Dir], _: Children, out: &mut [f64]) {
-        let (au, av, frame, eta) = (p.get(0, 1), p.get(0, 2), Frame::new(p.get(0, 3)), p.get(0, 4));
-        each_direction(dirs, p.len(), out, |_, wi, wo, out| {
-            let lobe = lobe_kernel(au, av, frame, eta, wi, wo);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = p.get(i, 0) * lobe;
-            }
-        });
-    }
+    super::kernel::kernel_methods!();
     fn wgsl(&self) -> WgslFn {
         super::stretched::wgsl("ggx_aniso_eval")
     }
 }
-

@@ -29,7 +29,7 @@
 
 use super::microfacet::{Distribution, Gg, Masking, C2_MIN, MICROFACET_WGSL};
 use super::{ParamDecl, WgslFn};
-use crate::math::fresnel_dielectric;
+use crate::math::lanes::{Real, V3};
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -108,25 +108,27 @@ impl Frame {
     /// `w` in the tangent frame: (w·u, w·v, w·n).
     #[inline]
     pub fn local(&self, w: DVec3) -> DVec3 {
-        DVec3::new(
-            w.x * self.cos + w.y * self.sin,
-            w.y * self.cos - w.x * self.sin,
-            w.z,
-        )
+        self.local_in(V3::from(w)).into()
+    }
+    /// [`Self::local`] over any [`Real`].
+    #[inline(always)]
+    pub fn local_in<R: Real>(&self, w: V3<R>) -> V3<R> {
+        let (cos, sin) = (R::splat(self.cos), R::splat(self.sin));
+        V3::new(w.x * cos + w.y * sin, w.y * cos - w.x * sin, w.z)
     }
 }
 
 /// (α_u ω_x)² + (α_v ω_y)²: α² sin²θ of the isotropic forms.
-#[inline]
-fn projected2(au: f64, av: f64, w: DVec3) -> f64 {
-    let (x, y) = (au * w.x, av * w.y);
+#[inline(always)]
+fn projected2<R: Real>(au: f64, av: f64, w: V3<R>) -> R {
+    let (x, y) = (R::splat(au) * w.x, R::splat(av) * w.y);
     x * x + y * y
 }
 
 /// (m_x/α_u)² + (m_y/α_v)²: sin²θ/α² of the isotropic forms.
-#[inline]
-fn stretched2(au: f64, av: f64, m: DVec3) -> f64 {
-    let (x, y) = (m.x / au, m.y / av);
+#[inline(always)]
+fn stretched2<R: Real>(au: f64, av: f64, m: V3<R>) -> R {
+    let (x, y) = (m.x / R::splat(au), m.y / R::splat(av));
     x * x + y * y
 }
 
@@ -139,44 +141,59 @@ pub struct AnisoGgx {
 
 impl Distribution for AnisoGgx {
     fn d(&self, m: DVec3) -> f64 {
-        if m.z <= 0.0 {
-            return 0.0;
-        }
-        let t = stretched2(self.au, self.av, m) + m.z * m.z;
-        1.0 / (PI * self.au * self.av * t * t)
+        self.d_in(m.into())
     }
 }
 
 impl Masking for AnisoGgx {
     fn lambda(&self, w: DVec3) -> f64 {
         let mu = w.z.abs();
-        let as2 = projected2(self.au, self.av, w);
+        let as2 = projected2(self.au, self.av, V3::from(w));
         as2 / (2.0 * mu * (mu + (mu * mu + as2).sqrt()))
     }
     fn g1_over_mu(&self, w: DVec3) -> f64 {
-        let mu = w.z.abs();
-        2.0 / (mu + (mu * mu + projected2(self.au, self.av, w)).sqrt())
+        self.g1_over_mu_in(w.into())
     }
 }
 
 impl AnisoGgx {
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
+        let t = stretched2(self.au, self.av, m) + m.z * m.z;
+        let d = R::splat(1.0) / (R::splat(PI * self.au * self.av) * t * t);
+        R::select(m.z.le(R::zero()), R::zero(), d)
+    }
+    /// [`Masking::g1_over_mu`] over any [`Real`].
+    #[inline(always)]
+    pub fn g1_over_mu_in<R: Real>(&self, w: V3<R>) -> R {
+        R::splat(2.0) / self.r(w)
+    }
+    /// μ + √(μ² + α_u² ω_x² + α_v² ω_y²), μ = |ω_z|: 2μ / G1(ω).
+    #[inline(always)]
+    fn r<R: Real>(&self, w: V3<R>) -> R {
+        let mu = w.z.abs();
+        mu + (mu * mu + projected2(self.au, self.av, w)).sqrt()
+    }
     /// D(h) G1(ωi, h) G1(ωo, h) / (4 μi μo) at `m`, any positive multiple of the half
     /// vector: with G1(ω) = 2μ/(μ + r), r = √(μ² + α_u² ω_x² + α_v² ω_y²), the μi μo
     /// cancel, and D(m/|m|) = |m|⁴ / (π α_u α_v t²), t = (m_x/α_u)² + (m_y/α_v)² + m_z²,
     /// so the kernel is |m|⁴ / (π α_u α_v t² (μi + ri)(μo + ro)) (the isotropic
-    /// [`super::microfacet::Ggx::reflection`] at α_u = α_v). ωi and ωo above.
+    /// [`super::microfacet::ggx_reflection`] at α_u = α_v). ωi and ωo above.
     #[inline]
     pub fn reflection(&self, wi: DVec3, wo: DVec3, m: DVec3) -> f64 {
-        if m.z <= 0.0 || wi.dot(m) * wi.z <= 0.0 || wo.dot(m) * wo.z <= 0.0 {
-            return 0.0;
-        }
+        self.reflection_in(wi.into(), wo.into(), m.into())
+    }
+    /// [`Self::reflection`] over any [`Real`].
+    #[inline(always)]
+    pub fn reflection_in<R: Real>(&self, wi: V3<R>, wo: V3<R>, m: V3<R>) -> R {
+        // D = 0 below; χ⁺ of G1: a facet facing away from ωi or ωo masks it.
+        let zero = R::zero();
+        let masked = m.z.le(zero) | (wi.dot(m) * wi.z).le(zero) | (wo.dot(m) * wo.z).le(zero);
         let t = stretched2(self.au, self.av, m) + m.z * m.z;
-        let m2 = m.length_squared();
-        let r = |w: DVec3| {
-            let mu = w.z.abs();
-            mu + (mu * mu + projected2(self.au, self.av, w)).sqrt()
-        };
-        m2 * m2 / (PI * self.au * self.av * t * t * r(wi) * r(wo))
+        let m2 = m.dot(m);
+        let value = m2 * m2 / (R::splat(PI * self.au * self.av) * t * t * self.r(wi) * self.r(wo));
+        R::select(masked, zero, value)
     }
 }
 
@@ -189,11 +206,18 @@ pub struct AnisoBeckmann {
 
 impl Distribution for AnisoBeckmann {
     fn d(&self, m: DVec3) -> f64 {
+        self.d_in(m.into())
+    }
+}
+
+impl AnisoBeckmann {
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
         let c2 = m.z * m.z;
-        if m.z <= 0.0 || c2 < C2_MIN {
-            return 0.0;
-        }
-        (-stretched2(self.au, self.av, m) / c2 - 2.0 * c2.ln()).exp() / (PI * self.au * self.av)
+        let s = stretched2(self.au, self.av, m);
+        let d = (-s / c2 - R::splat(2.0) * c2.ln()).exp() / R::splat(PI * self.au * self.av);
+        R::select(m.z.le(R::zero()) | c2.lt(R::splat(C2_MIN)), R::zero(), d)
     }
 }
 
@@ -219,62 +243,40 @@ impl AnisoGg {
         }
     }
     /// (μ, μΛ) as the isotropic form, with β sinθ → √(β_u² ω_x² + β_v² ω_y²).
-    fn mu_lambda(&self, w: DVec3) -> (f64, f64) {
+    #[inline(always)]
+    fn mu_lambda<R: Real>(&self, w: V3<R>) -> (R, R) {
         let bs = projected2(self.bu, self.bv, w).sqrt();
         self.shape.mu_lambda_at(w.z.abs(), bs)
+    }
+    /// [`Distribution::d`] over any [`Real`].
+    #[inline(always)]
+    pub fn d_in<R: Real>(&self, m: V3<R>) -> R {
+        let c2 = m.z * m.z;
+        let d = self
+            .shape
+            .d_at(self.ln_norm, stretched2(self.bu, self.bv, m) / c2, c2);
+        R::select(m.z.le(R::zero()) | c2.lt(R::splat(C2_MIN)), R::zero(), d)
+    }
+    /// [`Masking::g1_over_mu`] over any [`Real`].
+    #[inline(always)]
+    pub fn g1_over_mu_in<R: Real>(&self, w: V3<R>) -> R {
+        let (mu, mu_lambda) = self.mu_lambda(w);
+        R::splat(1.0) / (mu + mu_lambda)
     }
 }
 
 impl Distribution for AnisoGg {
     fn d(&self, m: DVec3) -> f64 {
-        let c2 = m.z * m.z;
-        if m.z <= 0.0 || c2 < C2_MIN {
-            return 0.0;
-        }
-        self.shape
-            .d_at(self.ln_norm, stretched2(self.bu, self.bv, m) / c2, c2)
+        self.d_in(m.into())
     }
 }
 
 impl Masking for AnisoGg {
     fn lambda(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(w);
+        let (mu, mu_lambda) = self.mu_lambda(V3::from(w));
         mu_lambda / mu
     }
     fn g1_over_mu(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(w);
-        1.0 / (mu + mu_lambda)
+        self.g1_over_mu_in(w.into())
     }
-}
-
-/// The anisotropic GGX reflection lobe k_s F(ωi·h; η) D G1 G1 / (4 μi μo), directions in
-/// the data's frame.
-pub fn ggx_aniso_reflect(
-    ks: f64,
-    au: f64,
-    av: f64,
-    frame: Frame,
-    eta: f64,
-    wi: DVec3,
-    wo: DVec3,
-) -> f64 {
-    ks * lobe_kernel(au, av, frame, eta, wi, wo)
-}
-
-/// What the channels of one direction share: F(ωi·h; η) · D G1 G1 / (4 μi μo), 0 below
-/// the surface (k_s is the lobe's only rgb parameter).
-#[inline]
-pub(crate) fn lobe_kernel(au: f64, av: f64, frame: Frame, eta: f64, wi: DVec3, wo: DVec3) -> f64 {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
-    }
-    let (li, lo) = (frame.local(wi), frame.local(wo));
-    let sum = li + lo;
-    let len = sum.length();
-    let (m, cos_h) = if len < 1e-12 {
-        (DVec3::Z, li.z)
-    } else {
-        (sum, 0.5 * len)
-    };
-    fresnel_dielectric(cos_h, eta) * AnisoGgx { au, av }.reflection(li, lo, m)
 }
