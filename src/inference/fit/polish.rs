@@ -1,5 +1,5 @@
-//! LM's search settings, and the f64 polish of each problem's best restart on the CPU
-//! reference.
+//! LM's search settings, and the f64 polish of each problem's best restart (on the CPU
+//! reference, or on the SIMD engine's f64 lanes, whose values are the reference's).
 
 use super::UnitBox;
 use crate::bsdf::Model;
@@ -52,7 +52,8 @@ pub(super) fn search_options(lm: &lm::LmOptions, polish: bool, u: f64) -> lm::Lm
 }
 
 /// Continue the best restart of each problem (`per` consecutive restarts each) with
-/// Levenberg–Marquardt in f64 on the CPU reference (`eval`, holding every problem), from
+/// Levenberg–Marquardt in f64 (`eval`, holding every problem: the CPU reference or the
+/// SIMD engine's f64 lanes, the same model values), from
 /// where the search stopped, with f64's forward-difference step and tolerance (an f64
 /// run never ends above its start). Returns, per problem, the polished restart (index
 /// within the problem).
