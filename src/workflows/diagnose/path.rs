@@ -696,7 +696,8 @@ fn path_bic(steps: &[Step], k: usize) -> f64 {
 /// (the start fit, each round's candidate table, the decision).
 ///
 /// The path is greedy (the best significant extension at each step). When it ends with
-/// the misfit still exceeding the uncertainties, each earlier step is revisited once with
+/// the misfit still exceeding the uncertainties, or consistent only through a data-driven
+/// factor (then only its analytic steps), each earlier step is revisited once with
 /// the best significant candidate of another effect, continued greedily, and the path
 /// whose final model has the lowest BIC is reported — the first that ends consistent, if
 /// any (an effect can mimic another at first, e.g. rough micrograins a coarsely sampled
@@ -761,8 +762,15 @@ fn diagnose_path(
     let mut cache = FitCache::new();
     let (greedy, ok) = extend_path(data, backend, opts, log, &mut cache, vec![step0])?;
     let mut best_path = greedy.clone();
-    if !ok && opts.backtrack {
+    // A data-driven factor is the last resort: a path that ended consistent only through
+    // one is revisited at its analytic steps as an inconsistent path is, so that an
+    // analytic explanation another path finds wins where its BIC is lower (a micrograin
+    // base first taken for a Fresnel aggregate leaves a misfit a tabulated NDF absorbs).
+    let driven = |s: &Step| s.effect.is_some_and(Effect::is_data_driven);
+    let through_factor = ok && greedy.iter().any(driven);
+    if (!ok || through_factor) && opts.backtrack {
         let rounds = (0..greedy.len().saturating_sub(1))
+            .filter(|&r| !(through_factor && driven(&greedy[r + 1])))
             .flat_map(|r| [(r, Instead::OtherEffect), (r, Instead::OtherForm)]);
         for (r, instead) in rounds {
             let adopted = greedy[r + 1].effect;
@@ -798,9 +806,12 @@ fn diagnose_path(
             steps.push(step);
             let (path, consistent) = extend_path(data, backend, opts, log, &mut cache, steps)?;
             if path_bic(&path, data.len()) < path_bic(&best_path, data.len()) {
+                // Nothing significant remains on a consistent path; one consistent only
+                // through a data-driven factor goes on looking for an analytic one.
+                let stop = consistent && !path.iter().any(driven);
                 best_path = path;
-                if consistent {
-                    break; // nothing significant remains on this path
+                if stop {
+                    break;
                 }
             }
         }
