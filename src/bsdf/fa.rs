@@ -48,6 +48,7 @@ pub fn aggregate_block<R: Real>(
 ) {
     aggregate_block_with(
         p,
+        p.get(0, 1),
         dirs,
         base,
         out,
@@ -57,24 +58,11 @@ pub fn aggregate_block<R: Real>(
     );
 }
 
-/// [`aggregate_block`] with channel i's highlight taken by `channel` from the direction's
-/// lobe (`+fresnel` reshapes F per channel).
+/// [`aggregate_block`] with the interface's index η given (the anisotropic lobe's
+/// parameters put it fourth) and channel i's highlight taken by `channel` from the
+/// direction's lobe (`+fresnel` reshapes F per channel).
 #[inline(always)]
 pub fn aggregate_block_with<R: Real>(
-    p: Channels,
-    dirs: &[LaneDir<R>],
-    base: LaneChildren<R>,
-    out: &mut [R],
-    lobe: impl Fn(V3<R>, V3<R>) -> GgxLobe<R>,
-    channel: impl Fn(&GgxLobe<R>, usize) -> R,
-) {
-    aggregate_block_at(p, p.get(0, 1), dirs, base, out, lobe, channel);
-}
-
-/// [`aggregate_block_with`] with the interface's index η given (the anisotropic lobe's
-/// parameters put it fourth).
-#[inline(always)]
-pub fn aggregate_block_at<R: Real>(
     p: Channels,
     eta: f64,
     dirs: &[LaneDir<R>],
@@ -176,7 +164,7 @@ impl Kernel for FaAniso {
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
         let (au, av, frame, eta) = (p.get(0, 0), p.get(0, 1), Frame::new(p.get(0, 2)), p.get(0, 3));
-        aggregate_block_at(
+        aggregate_block_with(
             p,
             eta,
             dirs,

@@ -216,6 +216,7 @@ impl Kernel for FaFresnel {
         let (alpha, eta) = (p.get(0, 0), p.get(0, 1));
         aggregate_block_with(
             p,
+            p.get(0, 1),
             dirs,
             base,
             out,

@@ -122,6 +122,7 @@ impl Kernel for FaNdfFresnel {
         let tab = ndf::table(p.get(0, 0), |k| p.get(0, 3 + k));
         aggregate_block_with(
             p,
+            p.get(0, 1),
             dirs,
             base,
             out,
