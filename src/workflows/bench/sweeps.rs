@@ -229,12 +229,41 @@ fn rel_diff(c: f64, g: f64) -> f64 {
 /// A fitted value of a results row: its name (`rho[1]` for an array entry), unit-box
 /// coordinate, and whether the fit determined it (a finite standard uncertainty smaller
 /// than the parameter's declared range; null where the normal matrix is singular).
+#[derive(Clone, Debug)]
 struct UnitParam {
     name: String,
     unit: f64,
     value: f64,
     std: Option<f64>,
     determined: bool,
+}
+
+/// `g`'s anisotropic frames turned into the form nearest `c`'s: (α_u, α_v, φ0) and
+/// (α_v, α_u, φ0 ∓ 90°) are one surface, and a fit reports the form with |φ0| ≤ 45°
+/// (`Model::canonical_form`), so two fits of one surface whose φ0 lies near ±45° can
+/// report the two forms; compared as they stand they would differ by 90° in φ0.
+fn align_frames(model: &str, c: &[UnitParam], g: &mut [UnitParam]) {
+    let Ok(m) = Model::parse(model, 1) else {
+        return;
+    };
+    let (names, decls) = (m.flat_names(), m.flat_decls());
+    let at = |v: &[UnitParam], k: usize| v.iter().position(|p| p.name == names[k]);
+    for [u, v, phi] in m.frames() {
+        let (Some(cphi), Some(gu), Some(gv), Some(gphi)) =
+            (at(c, phi), at(g, u), at(g, v), at(g, phi))
+        else {
+            continue;
+        };
+        let (pc, pg) = (c[cphi].value, g[gphi].value);
+        let turned = pg - 90f64.copysign(pg);
+        if (turned - pc).abs() < (pg - pc).abs() {
+            let (a, b) = (g[gu].clone(), g[gv].clone());
+            g[gu] = UnitParam { name: a.name, ..b };
+            g[gv] = UnitParam { name: b.name, ..a };
+            g[gphi].value = turned;
+            g[gphi].unit = decls[phi].to_unit(turned);
+        }
+    }
 }
 
 /// A results row's fitted values ([`UnitParam`]), in the JSON's order.
@@ -379,7 +408,9 @@ pub fn compare_sweeps(cpu: &[Row], gpu: &[Row]) -> SweepComparison {
             lower_on_gpu += usize::from(order_key(g.best_loss) < order_key(c.best_loss));
             continue;
         }
-        for (pc, pg) in unit_params(c).into_iter().zip(unit_params(g)) {
+        let (pcs, mut pgs) = (unit_params(c), unit_params(g));
+        align_frames(&c.model, &pcs, &mut pgs);
+        for (pc, pg) in pcs.into_iter().zip(pgs) {
             if !(pc.determined && pg.determined) {
                 undetermined += 1;
                 continue;
@@ -718,6 +749,37 @@ mod tests {
             c.max_param_diff_over_tolerance
         );
         assert!(!c.within_tolerance);
+    }
+
+    /// Two fits of one anisotropic surface with φ0 near 45°, one in each form
+    /// ((α_u, α_v, φ0) and (α_v, α_u, φ0 − 90°)): within tolerance once aligned; the same
+    /// numbers without the swap of the roughnesses are another surface, and are not.
+    #[test]
+    fn the_two_forms_of_an_anisotropic_frame_are_one_surface() {
+        let row = |params: &str| Row {
+            model: "ggx+aniso".into(),
+            ..vmf_row(
+                "a",
+                1.0,
+                params,
+                r#"{"ks":[0.01,0.01,0.01],"alpha_u":0.01,"alpha_v":0.01,"phi0":1.0,"eta":0.05}"#,
+            )
+        };
+        let p = |au: f64, av: f64, phi: f64| {
+            format!(
+                r#"{{"ks":[0.2,0.3,0.4],"alpha_u":{au},"alpha_v":{av},"phi0":{phi},"eta":1.5}}"#
+            )
+        };
+        let cpu = [row(&p(0.1, 0.3, 44.9))];
+        let c = compare_sweeps(&cpu, &[row(&p(0.3, 0.1, -45.05))]);
+        assert!(c.within_tolerance, "{:?}", c.max_param_diff_over_tolerance);
+        assert!(
+            c.max_param_diff_unit_box.value < 1e-3,
+            "{:?}",
+            c.max_param_diff_unit_box
+        );
+        let c = compare_sweeps(&cpu, &[row(&p(0.1, 0.3, -45.05))]);
+        assert!(!c.within_tolerance, "{:?}", c.max_param_diff_over_tolerance);
     }
 
     #[test]
