@@ -204,36 +204,58 @@ pub fn transmit<R: Real>(r: &Refraction<R>, eta: f64, d: R, g1i_over_mu: R, g1o_
 
 impl Ndf {
     /// f_t for this NDF with parameters `p` (in [`Ndf::params`] order) over any [`Real`]:
-    /// the kernel of `btdf(…)`.
+    /// the kernel of `btdf(…)`, Eq. 1 ([`walter_in`]) with the NDF's D and G1.
     #[inline(always)]
     pub fn eval_in<R: Real>(self, p: [f64; 3], wi: V3<R>, wo: V3<R>) -> R {
-        let eta = match self {
-            Ndf::Tr | Ndf::Beckmann => p[1],
-            Ndf::Gtr | Ndf::Gg => p[2],
-        };
-        let (r, valid) = refraction_in(wi, wo, eta);
-        if !R::any(valid) {
-            return R::zero();
-        }
-        let (d, g1i, g1o) = match self {
-            Ndf::Tr | Ndf::Beckmann | Ndf::Gtr => {
-                let d = match self {
-                    Ndf::Tr => ggx_d(p[0], r.m),
-                    Ndf::Beckmann => Beckmann { alpha: p[0] }.d_in(r.m),
-                    _ => Gtr {
+        // (Closures marked inline: out of line they would be compiled without the
+        // vector extensions of the kernel that calls them.)
+        match self {
+            Ndf::Gg => {
+                let gg = Gg::new(p[0], p[1]);
+                walter_in(
+                    wi,
+                    wo,
+                    p[2],
+                    #[inline(always)]
+                    |m| gg.d_in(m),
+                    #[inline(always)]
+                    |w| gg.g1_over_mu_in(w),
+                )
+            }
+            Ndf::Tr => walter_in(
+                wi,
+                wo,
+                p[1],
+                #[inline(always)]
+                |m| ggx_d(p[0], m),
+                #[inline(always)]
+                |w| ggx_g1_over_mu(p[0], w),
+            ),
+            Ndf::Beckmann => walter_in(
+                wi,
+                wo,
+                p[1],
+                #[inline(always)]
+                |m| Beckmann { alpha: p[0] }.d_in(m),
+                #[inline(always)]
+                |w| ggx_g1_over_mu(p[0], w),
+            ),
+            Ndf::Gtr => walter_in(
+                wi,
+                wo,
+                p[2],
+                #[inline(always)]
+                |m| {
+                    Gtr {
                         alpha: p[0],
                         gamma: p[1],
                     }
-                    .d_in(r.m),
-                };
-                (d, ggx_g1_over_mu(p[0], wi), ggx_g1_over_mu(p[0], wo))
-            }
-            Ndf::Gg => {
-                let gg = Gg::new(p[0], p[1]);
-                (gg.d_in(r.m), gg.g1_over_mu_in(wi), gg.g1_over_mu_in(wo))
-            }
-        };
-        R::select(valid, transmit(&r, eta, d, g1i, g1o), R::zero())
+                    .d_in(m)
+                },
+                #[inline(always)]
+                |w| ggx_g1_over_mu(p[0], w),
+            ),
+        }
     }
 }
 
@@ -542,7 +564,7 @@ impl Kernel for BtdfAniso {
 }
 
 /// Eq. 1 over any [`Real`] with the distribution `d` and the Smith G1/|μ| `g1_over_mu`
-/// (the anisotropic lobes, whose distributions are not [`Ndf`]'s).
+/// (every `btdf` lobe, isotropic and anisotropic).
 #[inline(always)]
 fn walter_in<R: Real>(
     wi: V3<R>,
