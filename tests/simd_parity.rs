@@ -89,12 +89,22 @@ fn every_model_matches_the_cpu_reference_at_grazing_angles() {
     assert_no_failures(&failures);
 }
 
-/// The lanes a model runs in: f32 unless a node asks for f64; every kernel of the
-/// catalogue is named (a node without one is evaluated through the reference).
+/// The lanes a model runs in: sixteen f32 lanes unless a node asks for eight or for f64,
+/// and sixteen only under AVX-512; every kernel of the catalogue is named (a node without one is evaluated through the reference).
 #[test]
 fn lane_kinds_and_kernels_are_reported() {
+    use bsdfit::bsdf::kernel::LaneKind;
+    use bsdfit::math::lanes::{level, Level};
     let m = Model::parse("fa(lambert)", 3).unwrap();
-    assert_eq!(m.lane_kind(), bsdfit::bsdf::kernel::LaneKind::F32x8);
+    assert_eq!(m.lane_kind(), LaneKind::F32x16);
+    // The micrograin's memos make eight lanes its faster width; f64 where a node asks.
+    let rmg = Model::parse("rmg(lambert)+coat", 3).unwrap();
+    assert_eq!(rmg.lane_kind(), LaneKind::F32x8);
+    // Sixteen lanes run only where AVX-512 does (the parity tests above then check them;
+    // under BSDFIT_SIMD=avx2 or baseline, the eight).
+    let sixteen = LaneKind::F32x16.on_this_processor();
+    assert_eq!(sixteen == LaneKind::F32x16, level() == Level::Avx512);
+    assert_eq!(LaneKind::F32x8.on_this_processor(), LaneKind::F32x8);
     assert!(
         m.nodes_without_kernel().is_empty(),
         "{:?}",

@@ -1,7 +1,7 @@
 //! One model source for two CPU engines: a node written once over a [`Real`] as a
 //! [`Kernel`] is the f64 reference (`Kernel::block::<f64>`, one direction at a time) and
-//! the SIMD engine (`Kernel::block::<F32x8>` or `::<F64x4>`, eight or four directions
-//! in the lanes of one value), as Mitsuba's Dr.Jit types or pbrt-v4's `PBRT_CPU_GPU`
+//! the SIMD engine (`Kernel::block::<F32x8>`, `::<F32x16>` or `::<F64x4>`: eight,
+//! sixteen or four directions in the lanes of one value), as Mitsuba's Dr.Jit types or pbrt-v4's `PBRT_CPU_GPU`
 //! functions serve several back ends from one text.
 //!
 //! A node opts in with `impl Kernel for X` and `kernel_methods!()` in its `impl Bsdf`,
@@ -11,7 +11,7 @@
 //! call its f64 `eval_channels` ([`by_reference`]).
 
 use super::{Bsdf, Channels, Children, Dir};
-use crate::math::lanes::{level, vectorized, F32x8, F64x4, Level, Real, V3};
+use crate::math::lanes::{level, vectorized, F32x16, F32x8, F64x4, Level, Real, V3};
 use glam::DVec3;
 
 /// A direction pair (ωi, ωo) in lanes.
@@ -49,6 +49,11 @@ pub trait Kernel: Bsdf {
     /// Whether the node needs f64 lanes (its f32 form loses what data can see); a model
     /// with one such node runs in [`F64x4`] on the SIMD engine.
     const F64_LANES: bool = false;
+    /// Whether the node's f32 kernel runs faster in eight lanes than in sixteen: one
+    /// whose cost is in per-lane work that wider lanes share less (a memo that hits only
+    /// when every lane repeats its argument, a series run until its slowest lane has
+    /// converged). A model with one such node runs in eight f32 lanes everywhere.
+    const NARROW_LANES: bool = false;
     /// The n = `p.len()` channels at every lane-direction of `dirs`: `out[d · n + i]`
     /// receives lane-direction d, channel i; `children` holds the children's values the
     /// same way. Per lane, the value [`Bsdf::eval`] gives (for R = f64 it *is* `eval`).
@@ -85,8 +90,21 @@ impl<T: PassThrough> Kernel for T {
 pub enum LaneKind {
     /// Eight f32 lanes (the GPU engine's precision).
     F32x8,
+    /// Sixteen f32 lanes (the same precision, one AVX-512 register).
+    F32x16,
     /// Four f64 lanes.
     F64x4,
+}
+
+impl LaneKind {
+    /// The kind as it runs on this processor: sixteen f32 lanes only where AVX-512 runs
+    /// ([`level`]; else eight, two AVX registers' worth being no faster than one).
+    pub fn on_this_processor(self) -> LaneKind {
+        match self {
+            LaneKind::F32x16 if level() != Level::Avx512 => LaneKind::F32x8,
+            kind => kind,
+        }
+    }
 }
 
 /// [`Bsdf::eval`] of a kernel: one direction, one channel.
@@ -208,6 +226,15 @@ macro_rules! kernel_methods {
         ) {
             $crate::bsdf::kernel::run_lanes(self, p, dirs, children, out)
         }
+        fn eval_f32x16(
+            &self,
+            p: $crate::bsdf::Channels,
+            dirs: &[$crate::bsdf::kernel::LaneDir<$crate::math::lanes::F32x16>],
+            children: $crate::bsdf::kernel::LaneChildren<$crate::math::lanes::F32x16>,
+            out: &mut [$crate::math::lanes::F32x16],
+        ) {
+            $crate::bsdf::kernel::run_lanes(self, p, dirs, children, out)
+        }
         fn eval_f64x4(
             &self,
             p: $crate::bsdf::Channels,
@@ -220,8 +247,10 @@ macro_rules! kernel_methods {
         fn lanes(&self) -> Option<$crate::bsdf::kernel::LaneKind> {
             Some(if <Self as $crate::bsdf::kernel::Kernel>::F64_LANES {
                 $crate::bsdf::kernel::LaneKind::F64x4
-            } else {
+            } else if <Self as $crate::bsdf::kernel::Kernel>::NARROW_LANES {
                 $crate::bsdf::kernel::LaneKind::F32x8
+            } else {
+                $crate::bsdf::kernel::LaneKind::F32x16
             })
         }
     };
@@ -246,6 +275,14 @@ pub fn run_lanes<K: Kernel, R: LaneReal>(
         if level() == Level::Baseline {
             return k.block::<R>(p, dirs, children, out);
         }
+        if R::AVX512 && level() != Level::Avx512 {
+            // Sixteen lanes asked for where AVX-512 does not run (a test's choice): the
+            // array form, compiled for what the processor has.
+            return vectorized(
+                #[inline(always)]
+                || k.block::<R>(p, dirs, children, out),
+            );
+        }
         #[allow(clippy::let_unit_value)]
         let () = R::SAME_LAYOUT;
         // SAFETY: R and R::Reg have one size and alignment (SAME_LAYOUT), LaneDir and
@@ -261,8 +298,8 @@ pub fn run_lanes<K: Kernel, R: LaneReal>(
             )
         };
         let children = LaneChildren::new(values, children.m, children.n);
-        // Past the baseline test, `vectorized` runs this in its AVX2 or AVX-512 function,
-        // the only places the AVX types may be used.
+        // Past the tests above, `vectorized` runs this in its AVX2 or AVX-512 function,
+        // the only places the AVX types may be used (Avx16 in the AVX-512 one only).
         vectorized(
             #[inline(always)]
             || k.block::<R::Reg>(p, dirs, children, out),
@@ -304,6 +341,19 @@ impl LaneReal for F32x8 {
         out: &mut [Self],
     ) {
         b.eval_f32x8(p, dirs, children, out)
+    }
+}
+
+impl LaneReal for F32x16 {
+    #[inline]
+    fn eval_node(
+        b: &dyn Bsdf,
+        p: Channels,
+        dirs: &[LaneDir<Self>],
+        children: LaneChildren<Self>,
+        out: &mut [Self],
+    ) {
+        b.eval_f32x16(p, dirs, children, out)
     }
 }
 

@@ -9,7 +9,7 @@
 //! that the node functions read — the same layout on the CPU and the GPU.
 
 use crate::data::Kind;
-use crate::math::lanes::{F32x8, F64x4};
+use crate::math::lanes::{F32x16, F32x8, F64x4};
 pub use channels::{each_direction, Channels, Children, Dir, MAX_CHILDREN};
 pub use decl::{
     Builder, Entry, GgxPlace, InCatalogue, LobePart, MitsubaBsdf, MitsubaField, ParamDecl, Role,
@@ -141,6 +141,16 @@ pub trait Bsdf: Send + Sync + fmt::Debug {
         dirs: &[kernel::LaneDir<F32x8>],
         children: kernel::LaneChildren<F32x8>,
         out: &mut [F32x8],
+    ) {
+        kernel::by_reference(self, p, dirs, children, out)
+    }
+    /// The same in sixteen f32 lanes.
+    fn eval_f32x16(
+        &self,
+        p: Channels,
+        dirs: &[kernel::LaneDir<F32x16>],
+        children: kernel::LaneChildren<F32x16>,
+        out: &mut [F32x16],
     ) {
         kernel::by_reference(self, p, dirs, children, out)
     }
@@ -795,16 +805,18 @@ impl Model {
             .collect()
     }
 
-    /// The lanes the SIMD engine evaluates the model in: f64 where a node needs it.
+    /// The lanes the SIMD engine evaluates the model in: f64 where a node needs it, else
+    /// sixteen f32 lanes unless a node runs faster in eight
+    /// ([`kernel::Kernel::NARROW_LANES`]; the engine takes eight where the processor
+    /// lacks AVX-512: [`kernel::LaneKind::on_this_processor`]).
     pub fn lane_kind(&self) -> kernel::LaneKind {
-        if self
-            .nodes()
-            .iter()
-            .any(|n| n.bsdf.lanes() == Some(kernel::LaneKind::F64x4))
-        {
+        let kinds: Vec<_> = self.nodes().iter().filter_map(|n| n.bsdf.lanes()).collect();
+        if kinds.contains(&kernel::LaneKind::F64x4) {
             kernel::LaneKind::F64x4
-        } else {
+        } else if kinds.contains(&kernel::LaneKind::F32x8) {
             kernel::LaneKind::F32x8
+        } else {
+            kernel::LaneKind::F32x16
         }
     }
 

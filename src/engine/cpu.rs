@@ -46,7 +46,7 @@ use super::{Backend, Evaluator, Problem};
 use crate::bsdf::kernel::LaneKind;
 use crate::bsdf::{Channels, Dir, Model};
 use crate::engine::loss::{LossTerms, Term, EPS};
-use crate::math::lanes::{F32x8, F64x4};
+use crate::math::lanes::{F32x16, F32x8, F64x4};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::ops::Range;
@@ -245,7 +245,7 @@ impl<'a> Part<'a> {
     ) {
         match &self.lanes {
             None => self.blocks_in_reference(blocks, scratch, f),
-            Some(lanes) => self.blocks_in_lanes(lanes, false, blocks, scratch, f),
+            Some(lanes) => self.blocks_in_lanes(lanes, blocks, scratch, f),
         }
     }
 
@@ -343,6 +343,8 @@ pub(super) struct Scratch {
     /// A block's values and its nodes' children's values in lanes (SIMD engine).
     pub(super) out32: Vec<F32x8>,
     pub(super) children32: Vec<F32x8>,
+    pub(super) out16: Vec<F32x16>,
+    pub(super) children16: Vec<F32x16>,
     pub(super) out64: Vec<F64x4>,
     pub(super) children64: Vec<F64x4>,
 }

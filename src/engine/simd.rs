@@ -1,6 +1,6 @@
 //! The SIMD CPU engine: the CPU reference's evaluator (directions grouped by channels,
 //! blocks, windows, the same streamed reductions in f64) with model values computed in
-//! SIMD lanes of eight f32 or four f64 directions ([`crate::math::lanes`]) from the
+//! SIMD lanes of sixteen or eight f32 or four f64 directions ([`crate::math::lanes`]) from the
 //! same model source as the reference ([`crate::bsdf::kernel`]).
 //!
 //! **Precision.** A model runs in f32 lanes (the GPU engine's arithmetic, and its
@@ -22,7 +22,7 @@ use super::{Backend, Evaluator, Problem};
 use crate::bsdf::kernel::{LaneDir, LaneKind, LaneReal};
 use crate::bsdf::{Channels, Dir, Model};
 use crate::engine::loss::{LossTerms, Term, EPS, NO_SAMPLE};
-use crate::math::lanes::{instruction_set, vectorized, F32x8, F64x4, Real, V3};
+use crate::math::lanes::{instruction_set, vectorized, F32x16, F32x8, F64x4, Real, V3};
 use std::ops::Range;
 
 /// The SIMD CPU engine.
@@ -67,7 +67,9 @@ impl Backend for SimdBackend {
             .first()
             .ok_or_else(|| anyhow::anyhow!("no problem to evaluate"))?
             .model;
-        let kind: LaneKind = self.lanes.unwrap_or_else(|| model.lane_kind());
+        let kind: LaneKind = self
+            .lanes
+            .unwrap_or_else(|| model.lane_kind().on_this_processor());
         Ok(Box::new(CpuEvaluator::new(problems, Arith::Lanes(kind))?))
     }
 }
@@ -97,6 +99,7 @@ pub(super) struct LaneDirs {
 
 enum LaneVec {
     F32x8(Vec<LaneDir<F32x8>>),
+    F32x16(Vec<LaneDir<F32x16>>),
     F64x4(Vec<LaneDir<F64x4>>),
 }
 
@@ -127,6 +130,7 @@ impl LaneDirs {
         }
         let (dirs, l) = match kind {
             LaneKind::F32x8 => (LaneVec::F32x8(pack(dirs, blocks)), F32x8::LANES),
+            LaneKind::F32x16 => (LaneVec::F32x16(pack(dirs, blocks)), F32x16::LANES),
             LaneKind::F64x4 => (LaneVec::F64x4(pack(dirs, blocks)), F64x4::LANES),
         };
         let (mut at, mut values_at) = (Vec::new(), Vec::new());
@@ -179,6 +183,11 @@ impl LaneScratch for F32x8 {
         (&mut s.out32, &mut s.children32)
     }
 }
+impl LaneScratch for F32x16 {
+    fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
+        (&mut s.out16, &mut s.children16)
+    }
+}
 impl LaneScratch for F64x4 {
     fn buffers(s: &mut Scratch) -> (&mut Vec<Self>, &mut Vec<Self>) {
         (&mut s.out64, &mut s.children64)
@@ -188,32 +197,33 @@ impl LaneScratch for F64x4 {
 impl<'a> Part<'a> {
     /// [`Self::blocks_in_reference`] in lanes: each block's lane-directions through
     /// [`Node::eval_lanes`](crate::bsdf::Node::eval_lanes), its values widened to f64
-    /// in row order (`f(first row, values)`), or, with `lane_order`, in the lane order
-    /// of [`LaneDirs`] (`f(first value in lane order, values)`, padding lanes included).
+    /// in row order (`f(first row, values)`).
     #[inline(always)]
     pub(super) fn blocks_in_lanes(
         &self,
         lanes: &LaneDirs,
-        lane_order: bool,
         blocks: Range<usize>,
         scratch: &mut Scratch,
-        f: impl FnMut(usize, &[f64]),
+        mut f: impl FnMut(usize, &[f64]),
     ) {
+        let mut rows = InRows(&mut f);
         match &lanes.dirs {
-            LaneVec::F32x8(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
-            LaneVec::F64x4(dirs) => self.blocks_in(dirs, lanes, lane_order, blocks, scratch, f),
+            LaneVec::F32x8(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut rows),
+            LaneVec::F32x16(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut rows),
+            LaneVec::F64x4(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut rows),
         }
     }
 
+    /// Each block's values in lanes, handed to `sink` as they leave the kernel (inside
+    /// the function compiled for the vector extensions, so the sink's loop is too).
     #[inline(always)]
     fn blocks_in<R: LaneScratch>(
         &self,
         lane_dirs: &[LaneDir<R>],
         lanes: &LaneDirs,
-        lane_order: bool,
         blocks: Range<usize>,
         scratch: &mut Scratch,
-        mut f: impl FnMut(usize, &[f64]),
+        sink: &mut impl BlockSink,
     ) {
         let model = self.problem.model;
         let stride = model.scalar_count();
@@ -229,9 +239,6 @@ impl<'a> Part<'a> {
             if children.len() < lanes.scratch_len {
                 children.resize(lanes.scratch_len, R::zero());
             }
-            if out.len() < n * m * l {
-                out.resize(n * m * l, 0.0);
-            }
             let p = Channels::new(&views, stride, &self.group[b.start..b.start + b.n]);
             model.root.eval_lanes(
                 p,
@@ -239,29 +246,10 @@ impl<'a> Part<'a> {
                 &mut values[..n * m],
                 children,
             );
-            // The values to f64 and the caller's reduction, compiled for the vector
-            // extensions too (a loss's row terms are independent).
+            let values = &values[..n * m];
             vectorized(
                 #[inline(always)]
-                || {
-                    if lane_order {
-                        let out = &mut out[..n * m * l];
-                        for (o, v) in out.chunks_exact_mut(l).zip(values.iter()) {
-                            v.store_all_f64(o);
-                        }
-                        f(lanes.values_at[k], out);
-                    } else {
-                        let out = &mut out[..n * len];
-                        // Row (d·L + j)·n + i is lane j of values[d·n + i].
-                        for (d, o) in out.chunks_mut(n * l).enumerate() {
-                            let count = o.len() / n;
-                            for i in 0..n {
-                                values[d * n + i].store_f64(&mut o[i..], n, count);
-                            }
-                        }
-                        f(b.start, out);
-                    }
-                },
+                || sink.block(b, lanes.values_at[k], values, &mut out),
             );
         }
         scratch.views = views;
@@ -269,11 +257,11 @@ impl<'a> Part<'a> {
     }
 
     /// [`Self::cost_sum`] of the SIMD engine: the terms in lane order (constants laid
-    /// out so at prepare time, padding lanes 0), so that values leave the lanes in
-    /// contiguous runs, summed in [`SPLIT`]
-    /// interleaved partial sums, so that the additions do not wait on one another (one
-    /// running sum costs an addition's latency per row, more than the model's lanes
-    /// take). The reference keeps one sum in row order.
+    /// out so at prepare time, padding lanes 0), taken straight from the lane values
+    /// (widened in registers, never stored as f64), summed in [`SPLIT`] interleaved
+    /// partial sums, so that the additions do not wait on one another (one running sum
+    /// costs an addition's latency per row, more than the model's lanes take). The
+    /// reference keeps one sum in row order.
     pub(super) fn cost_sum_split(
         &self,
         lanes: &LaneDirs,
@@ -309,7 +297,7 @@ impl<'a> Part<'a> {
     }
 
     /// Σ `term(value, constants)` over the blocks' values in lane order, the constants
-    /// the entries of `cols` (lane order too) at each value ([`split_sum`]).
+    /// the entries of `cols` (lane order too) at each value ([`SplitSum`]).
     #[inline(always)]
     fn sum_in_lanes<const N: usize>(
         &self,
@@ -319,49 +307,83 @@ impl<'a> Part<'a> {
         cols: [&[f64]; N],
         term: impl Fn(f64, [f64; N]) -> f64 + Copy,
     ) -> f64 {
-        let mut acc = [0.0f64; SPLIT];
-        self.blocks_in_lanes(
-            lanes,
-            true,
-            blocks,
-            scratch,
-            #[inline(always)]
-            |start, values| {
-                let r = start..start + values.len();
-                split_sum(&mut acc, values, cols.map(|c| &c[r.clone()]), term)
-            },
-        );
-        acc.iter().sum()
+        let mut sum = SplitSum {
+            acc: [0.0; SPLIT],
+            cols,
+            term,
+        };
+        match &lanes.dirs {
+            LaneVec::F32x8(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut sum),
+            LaneVec::F32x16(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut sum),
+            LaneVec::F64x4(dirs) => self.blocks_in(dirs, lanes, blocks, scratch, &mut sum),
+        }
+        sum.acc.iter().sum()
+    }
+}
+
+/// What [`Part::blocks_in`] does with each block's lane values: `values[d · n + i]` is
+/// lane-direction d, channel i of `block`, whose first value in lane order is
+/// `lane_start`; `out` is room for the block's values as f64.
+trait BlockSink {
+    fn block<R: Real>(
+        &mut self,
+        block: &Block,
+        lane_start: usize,
+        values: &[R],
+        out: &mut Vec<f64>,
+    );
+}
+
+/// The values widened to f64 in row order, for a caller's `f(first row, values)`.
+struct InRows<'f, F>(&'f mut F);
+
+impl<F: FnMut(usize, &[f64])> BlockSink for InRows<'_, F> {
+    #[inline(always)]
+    fn block<R: Real>(&mut self, b: &Block, _: usize, values: &[R], out: &mut Vec<f64>) {
+        let (n, len, l) = (b.n, b.dirs.len(), R::LANES);
+        if out.len() < n * len {
+            out.resize(n * len, 0.0);
+        }
+        let out = &mut out[..n * len];
+        // Row (d·L + j)·n + i is lane j of values[d·n + i].
+        for (d, o) in out.chunks_mut(n * l).enumerate() {
+            let count = o.len() / n;
+            for i in 0..n {
+                values[d * n + i].store_f64(&mut o[i..], n, count);
+            }
+        }
+        (self.0)(b.start, out);
     }
 }
 
 /// Partial sums of the SIMD engine's loss ([`Part::cost_sum_split`]).
-const SPLIT: usize = 8;
+const SPLIT: usize = 16;
 
-/// Adds `term(value, constants)` of each row (its value, and its entry of each column
-/// of `cols`) into the partial sums `acc`, row k of the block into `acc[k mod SPLIT]`.
-#[inline(always)]
-fn split_sum<const N: usize>(
-    acc: &mut [f64; SPLIT],
-    values: &[f64],
-    cols: [&[f64]; N],
-    term: impl Fn(f64, [f64; N]) -> f64,
-) {
-    let n = values.len();
-    let cols = cols.map(|c| &c[..n]);
-    // The sums in registers, four rows a step (the compiler makes one vector add of it).
-    let mut sums = *acc;
-    let mut chunks = values.chunks_exact(SPLIT);
-    for (i, v) in (&mut chunks).enumerate() {
-        let at = i * SPLIT;
-        let c: [&[f64; SPLIT]; N] = cols.map(|c| c[at..at + SPLIT].try_into().unwrap());
-        for k in 0..SPLIT {
-            sums[k] += term(v[k], c.map(|c| c[k]));
+/// Σ `term(value, constants)` of each value in lane order (its entry of each column of
+/// `cols` the constants), value k of a block into `acc[k mod SPLIT]`: with eight lanes,
+/// lane j into `acc[j]`, so each lane value is widened and summed in registers.
+struct SplitSum<'c, const N: usize, T> {
+    acc: [f64; SPLIT],
+    cols: [&'c [f64]; N],
+    term: T,
+}
+
+impl<const N: usize, T: Fn(f64, [f64; N]) -> f64> BlockSink for SplitSum<'_, N, T> {
+    #[inline(always)]
+    fn block<R: Real>(&mut self, _: &Block, start: usize, values: &[R], _: &mut Vec<f64>) {
+        let l = R::LANES;
+        let cols = self.cols.map(|c| &c[start..start + values.len() * l]);
+        let mut sums = self.acc;
+        // SPLIT / l lane values a step, each lane into a sum of its own.
+        for (s, chunk) in values.chunks(SPLIT / l).enumerate() {
+            let at = s * SPLIT;
+            let c = cols.map(|c| &c[at..at + chunk.len() * l]);
+            for (u, v) in chunk.iter().enumerate() {
+                for j in 0..l {
+                    sums[u * l + j] += (self.term)(v.lane(j), c.map(|c| c[u * l + j]));
+                }
+            }
         }
+        self.acc = sums;
     }
-    let done = n - chunks.remainder().len();
-    for row in done..n {
-        sums[row - done] += term(values[row], cols.map(|c| c[row]));
-    }
-    *acc = sums;
 }

@@ -1,10 +1,10 @@
-//! Lane types of the same layout as [`F32x8`] and [`F64x4`] whose operations are AVX
-//! instructions: kernels run in them inside the functions compiled for AVX2 or AVX-512
-//! (`bsdf::kernel::run_lanes`), where an explicit instruction per operation leaves
+//! Lane types of the same layout as [`F32x8`], [`F64x4`] and [`F32x16`] whose operations
+//! are AVX instructions: kernels run in them inside the functions compiled for AVX2 or
+//! AVX-512 (`bsdf::kernel::run_lanes`), where an explicit instruction per operation leaves
 //! nothing to the compiler's vectorizer (which kept part of the array form scalar).
-//! Never used outside such a function.
+//! Never used outside such a function ([`Avx16`] only inside the AVX-512 one).
 
-use super::{F32x8, F64x4, Real};
+use super::{F32x16, F32x8, F64x4, Real};
 use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -334,9 +334,215 @@ fn exp_m1_f64(x: __m256d) -> __m256d {
     unsafe { std::mem::transmute::<[f64; 4], __m256d>(a.map(f64::exp_m1)) }
 }
 
+/// Sixteen f32 lanes in one AVX-512 register ([`F32x16`]'s layout). Comparisons give a
+/// mask register (a bit a lane); e^x, e^x − 1 and arccos run the eight-lane polynomials
+/// on each half, which costs the same instructions per lane.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct Avx16(pub __m512);
+
+/// A comparison's result in sixteen lanes: bit j set where lane j holds.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct Avx16Mask(pub __mmask16);
+
+// SAFETY (every `unsafe` below): Avx16 exists only inside the function compiled with
+// AVX-512 (F, VL, DQ, BW; see the module's comment and `run_lanes`); the operations are
+// that extension's intrinsics on registers of the right type.
+impl BitAnd for Avx16Mask {
+    type Output = Self;
+    #[inline(always)]
+    fn bitand(self, o: Self) -> Self {
+        Avx16Mask(self.0 & o.0)
+    }
+}
+impl BitOr for Avx16Mask {
+    type Output = Self;
+    #[inline(always)]
+    fn bitor(self, o: Self) -> Self {
+        Avx16Mask(self.0 | o.0)
+    }
+}
+impl Not for Avx16Mask {
+    type Output = Self;
+    #[inline(always)]
+    fn not(self) -> Self {
+        Avx16Mask(!self.0)
+    }
+}
+impl Add for Avx16 {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        unsafe { Avx16(_mm512_add_ps(self.0, o.0)) }
+    }
+}
+impl Sub for Avx16 {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        unsafe { Avx16(_mm512_sub_ps(self.0, o.0)) }
+    }
+}
+impl Mul for Avx16 {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        unsafe { Avx16(_mm512_mul_ps(self.0, o.0)) }
+    }
+}
+impl Div for Avx16 {
+    type Output = Self;
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        unsafe { Avx16(_mm512_div_ps(self.0, o.0)) }
+    }
+}
+impl Neg for Avx16 {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        unsafe { Avx16(_mm512_xor_ps(self.0, _mm512_set1_ps(-0.0))) }
+    }
+}
+impl Avx16 {
+    #[inline(always)]
+    fn array(self) -> F32x16 {
+        // SAFETY: same size and layout.
+        unsafe { std::mem::transmute::<__m512, F32x16>(self.0) }
+    }
+    #[inline(always)]
+    fn from_array(a: F32x16) -> Self {
+        // SAFETY: same size and layout.
+        Avx16(unsafe { std::mem::transmute::<F32x16, __m512>(a) })
+    }
+    /// The two halves, for the eight-lane AVX functions. (Called by name: a function
+    /// passed as a value is called through a shim compiled without the extensions.)
+    #[inline(always)]
+    fn halves(self) -> (__m256, __m256) {
+        unsafe {
+            (
+                _mm512_castps512_ps256(self.0),
+                _mm512_extractf32x8_ps::<1>(self.0),
+            )
+        }
+    }
+    #[inline(always)]
+    fn join((lo, hi): (__m256, __m256)) -> Self {
+        unsafe { Avx16(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo), hi)) }
+    }
+}
+impl Real for Avx16 {
+    type Mask = Avx16Mask;
+    const LANES: usize = 16;
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        unsafe { Avx16(_mm512_set1_ps(x as f32)) }
+    }
+    #[inline(always)]
+    fn lane(self, i: usize) -> f64 {
+        self.array().0[i] as f64
+    }
+    #[inline(always)]
+    fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+        Self::from_array(F32x16::from_fn(f))
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        unsafe { Avx16(_mm512_sqrt_ps(self.0)) }
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        unsafe { Avx16(_mm512_abs_ps(self.0)) }
+    }
+    /// The other operand where one is NaN (as `f64::min`; the instruction returns its
+    /// second operand where either is NaN).
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        unsafe {
+            let m = _mm512_min_ps(self.0, o.0);
+            let nan = _mm512_cmp_ps_mask::<_CMP_UNORD_Q>(o.0, o.0);
+            Avx16(_mm512_mask_blend_ps(nan, m, self.0))
+        }
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        unsafe {
+            let m = _mm512_max_ps(self.0, o.0);
+            let nan = _mm512_cmp_ps_mask::<_CMP_UNORD_Q>(o.0, o.0);
+            Avx16(_mm512_mask_blend_ps(nan, m, self.0))
+        }
+    }
+    #[inline(always)]
+    fn clamp(self, lo: f64, hi: f64) -> Self {
+        unsafe {
+            let lo = _mm512_set1_ps(lo as f32);
+            Avx16(_mm512_min_ps(
+                _mm512_max_ps(self.0, lo),
+                _mm512_set1_ps(hi as f32),
+            ))
+        }
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        let (lo, hi) = self.halves();
+        Self::join((exp_f32(lo), exp_f32(hi)))
+    }
+    #[inline(always)]
+    fn ln(self) -> Self {
+        Self::from_array(self.array().ln())
+    }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        let (lo, hi) = self.halves();
+        Self::join((acos_f32(lo), acos_f32(hi)))
+    }
+    #[inline(always)]
+    fn exp_m1(self) -> Self {
+        let (lo, hi) = self.halves();
+        Self::join((exp_m1_f32(lo), exp_m1_f32(hi)))
+    }
+    #[inline(always)]
+    fn powf(self, e: f64) -> Self {
+        Self::from_array(self.array().powf(e))
+    }
+    #[inline(always)]
+    fn lt(self, o: Self) -> Avx16Mask {
+        unsafe { Avx16Mask(_mm512_cmp_ps_mask::<_CMP_LT_OQ>(self.0, o.0)) }
+    }
+    #[inline(always)]
+    fn le(self, o: Self) -> Avx16Mask {
+        unsafe { Avx16Mask(_mm512_cmp_ps_mask::<_CMP_LE_OQ>(self.0, o.0)) }
+    }
+    #[inline(always)]
+    fn select(m: Avx16Mask, a: Self, b: Self) -> Self {
+        unsafe { Avx16(_mm512_mask_blend_ps(m.0, b.0, a.0)) }
+    }
+    #[inline(always)]
+    fn any(m: Avx16Mask) -> bool {
+        m.0 != 0
+    }
+    #[inline(always)]
+    fn store_f64(&self, out: &mut [f64], stride: usize, count: usize) {
+        self.array().store_f64(out, stride, count)
+    }
+    #[inline(always)]
+    fn store_all_f64(&self, out: &mut [f64]) {
+        self.array().store_all_f64(out)
+    }
+    #[inline(always)]
+    fn same_bits(self, o: Self) -> bool {
+        unsafe {
+            _mm512_cmpeq_epi32_mask(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0)) == 0xFFFF
+        }
+    }
+}
+
 /// The AVX type of the same layout as an array lane type.
 pub trait Avx: Real {
     type Reg: Real;
+    /// Whether `Reg` needs AVX-512 (else AVX2 suffices).
+    const AVX512: bool = false;
     /// Same size and alignment (checked where a slice is cast).
     const SAME_LAYOUT: () = assert!(
         std::mem::size_of::<Self>() == std::mem::size_of::<Self::Reg>()
@@ -348,6 +554,10 @@ impl Avx for F32x8 {
 }
 impl Avx for F64x4 {
     type Reg = Avx4d;
+}
+impl Avx for F32x16 {
+    type Reg = Avx16;
+    const AVX512: bool = true;
 }
 
 #[cfg(test)]
@@ -384,6 +594,73 @@ mod tests {
                 "acos({x}) = {a}, want {want}"
             );
         }
+    }
+
+    /// The sixteen AVX-512 lanes give the eight AVX lanes' values bit for bit, operation
+    /// by operation (the halves of e^x, e^x − 1 and arccos, the mask-register
+    /// comparisons, NaN handling of min and max, select, any, same_bits).
+    #[test]
+    fn sixteen_lanes_are_two_eight_lane_halves() {
+        if !(is_x86_feature_detected!("avx512f")
+            && is_x86_feature_detected!("avx512vl")
+            && is_x86_feature_detected!("avx512dq")
+            && is_x86_feature_detected!("avx512bw"))
+        {
+            eprintln!("no AVX-512 on this processor: the sixteen lanes are never used here");
+            return;
+        }
+        #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+        fn run(a: &[f32; 16], b: &[f32; 16]) -> (Vec<Vec<u32>>, Vec<Vec<u32>>) {
+            fn ops<R: Real>(a: R, b: R) -> Vec<R> {
+                let m = a.lt(b) | !b.le(R::splat(0.5));
+                vec![
+                    (a / b + a * b - b).sqrt(),
+                    a.min(b),
+                    a.max(b),
+                    a.abs().clamp(-1.0, 1.0).acos(),
+                    (a * R::splat(40.0)).exp(),
+                    (a * R::splat(0.3)).exp_m1(),
+                    R::select(m & a.le(b), -a, b),
+                ]
+            }
+            // Each operation's lanes as f32 bits.
+            fn lanes<R: Real>(v: Vec<R>) -> Vec<Vec<u32>> {
+                v.iter()
+                    .map(|r| {
+                        (0..R::LANES)
+                            .map(|j| (r.lane(j) as f32).to_bits())
+                            .collect()
+                    })
+                    .collect()
+            }
+            let load16 = |x: &[f32; 16]| Avx16(unsafe { _mm512_loadu_ps(x.as_ptr()) });
+            let load8 = |x: &[f32]| Avx8(unsafe { _mm256_loadu_ps(x.as_ptr()) });
+            let got = lanes(ops(load16(a), load16(b)));
+            let lo = lanes(ops(load8(&a[..8]), load8(&b[..8])));
+            let hi = lanes(ops(load8(&a[8..]), load8(&b[8..])));
+            let want = lo
+                .into_iter()
+                .zip(hi)
+                .map(|(l, h)| [l, h].concat())
+                .collect();
+            // any and same_bits look at every lane, the sixteenth too.
+            let x = load16(a);
+            let last = Avx16(_mm512_mask_blend_ps(1 << 15, x.0, _mm512_set1_ps(99.0)));
+            assert!(Avx16::any(x.lt(Avx16::splat(-1.5))) && !Avx16::any(x.lt(Avx16::splat(-9.0))));
+            assert!(x.same_bits(x) && !x.same_bits(last));
+            (got, want)
+        }
+        let a: [f32; 16] = std::array::from_fn(|j| {
+            [0.5, -1.0, 2.0, 1e-30, f32::NAN, 3.0, 0.0, 7.5][j % 8] * (1.0 + j as f32 / 16.0)
+        });
+        // Some lanes equal (a comparison's ≤ against <) and one at the 0.5 compared with.
+        let b: [f32; 16] = std::array::from_fn(|j| match j % 5 {
+            0 => a[j],
+            1 => 0.5,
+            _ => [0.25, 4.0, -2.0, 1.0, 1.0, f32::NAN, 0.0, 2.5][(j + 3) % 8],
+        });
+        let (got, want) = unsafe { run(&a, &b) };
+        assert_eq!(got, want);
     }
 
     /// e^x and e^x − 1 of the AVX f32 lanes against f64, over [−87, 88] and near 0:

@@ -1,5 +1,6 @@
 //! Numbers a model is written over once: `f64` for the reference, and SIMD lanes of
-//! several directions at a time for the SIMD CPU engine ([`F32x8`], [`F64x4`]).
+//! several directions at a time for the SIMD CPU engine ([`F32x8`], [`F32x16`],
+//! [`F64x4`]).
 //!
 //! **Why plain arrays.** A lane type is an array with element-wise operations marked
 //! `#[inline(always)]`; [`vectorized`] runs a kernel inside a function compiled for the
@@ -208,10 +209,10 @@ impl<const N: usize> Not for Lanes<N> {
 
 /// Defines an array lane type of `$n` × `$t` with [`Real`].
 macro_rules! lane_type {
-    ($(#[$doc:meta])* $name:ident, $t:ty, $n:literal) => {
+    ($(#[$doc:meta])* $name:ident, $t:ty, $n:literal, align $align:literal) => {
         $(#[$doc])*
         #[derive(Clone, Copy, Debug, PartialEq)]
-        #[repr(C, align(32))]
+        #[repr(C, align($align))]
         pub struct $name(pub [$t; $n]);
 
         impl $name {
@@ -361,13 +362,23 @@ lane_type!(
     /// Eight f32 lanes: one AVX register, two SSE or NEON registers.
     F32x8,
     f32,
-    8
+    8,
+    align 32
+);
+lane_type!(
+    /// Sixteen f32 lanes: one AVX-512 register (the SIMD engine's f32 lanes where the
+    /// processor has AVX-512).
+    F32x16,
+    f32,
+    16,
+    align 64
 );
 lane_type!(
     /// Four f64 lanes, for models whose f32 form loses what the data can see.
     F64x4,
     f64,
-    4
+    4,
+    align 32
 );
 
 /// A 3-vector of [`Real`]s: the directions of one lane-vector of direction pairs.
