@@ -331,44 +331,24 @@ pub trait LaneReal: LaneBase {
     );
 }
 
-impl LaneReal for F32x8 {
-    #[inline]
-    fn eval_node(
-        b: &dyn Bsdf,
-        p: Channels,
-        dirs: &[LaneDir<Self>],
-        children: LaneChildren<Self>,
-        out: &mut [Self],
-    ) {
-        b.eval_f32x8(p, dirs, children, out)
-    }
+/// [`LaneReal`] of a lane type: the node's entry point of that type.
+macro_rules! lane_real {
+    ($($t:ty => $entry:ident),*) => {$(
+        impl LaneReal for $t {
+            #[inline]
+            fn eval_node(
+                b: &dyn Bsdf,
+                p: Channels,
+                dirs: &[LaneDir<Self>],
+                children: LaneChildren<Self>,
+                out: &mut [Self],
+            ) {
+                b.$entry(p, dirs, children, out)
+            }
+        }
+    )*};
 }
-
-impl LaneReal for F32x16 {
-    #[inline]
-    fn eval_node(
-        b: &dyn Bsdf,
-        p: Channels,
-        dirs: &[LaneDir<Self>],
-        children: LaneChildren<Self>,
-        out: &mut [Self],
-    ) {
-        b.eval_f32x16(p, dirs, children, out)
-    }
-}
-
-impl LaneReal for F64x4 {
-    #[inline]
-    fn eval_node(
-        b: &dyn Bsdf,
-        p: Channels,
-        dirs: &[LaneDir<Self>],
-        children: LaneChildren<Self>,
-        out: &mut [Self],
-    ) {
-        b.eval_f64x4(p, dirs, children, out)
-    }
-}
+lane_real!(F32x8 => eval_f32x8, F32x16 => eval_f32x16, F64x4 => eval_f64x4);
 
 /// Lane-direction d of a block with its n outputs: the loop of a [`Kernel::block`]
 /// whose directions are independent (`for (d, (wi, wo), out) in lanes(dirs, n, out)`).

@@ -370,34 +370,20 @@ impl Not for Avx16Mask {
         Avx16Mask(!self.0)
     }
 }
-impl Add for Avx16 {
-    type Output = Self;
-    #[inline(always)]
-    fn add(self, o: Self) -> Self {
-        unsafe { Avx16(_mm512_add_ps(self.0, o.0)) }
-    }
+/// The arithmetic of [`Avx16`]: one AVX-512 instruction each.
+macro_rules! avx16_arithmetic {
+    ($($op:ident $f:ident $intrinsic:ident),*) => {$(
+        impl $op for Avx16 {
+            type Output = Self;
+            #[inline(always)]
+            fn $f(self, o: Self) -> Self {
+                unsafe { Avx16($intrinsic(self.0, o.0)) }
+            }
+        }
+    )*};
 }
-impl Sub for Avx16 {
-    type Output = Self;
-    #[inline(always)]
-    fn sub(self, o: Self) -> Self {
-        unsafe { Avx16(_mm512_sub_ps(self.0, o.0)) }
-    }
-}
-impl Mul for Avx16 {
-    type Output = Self;
-    #[inline(always)]
-    fn mul(self, o: Self) -> Self {
-        unsafe { Avx16(_mm512_mul_ps(self.0, o.0)) }
-    }
-}
-impl Div for Avx16 {
-    type Output = Self;
-    #[inline(always)]
-    fn div(self, o: Self) -> Self {
-        unsafe { Avx16(_mm512_div_ps(self.0, o.0)) }
-    }
-}
+avx16_arithmetic!(Add add _mm512_add_ps, Sub sub _mm512_sub_ps, Mul mul _mm512_mul_ps,
+    Div div _mm512_div_ps);
 impl Neg for Avx16 {
     type Output = Self;
     #[inline(always)]
