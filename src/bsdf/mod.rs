@@ -806,18 +806,15 @@ impl Model {
     }
 
     /// The lanes the SIMD engine evaluates the model in: f64 where a node needs it, else
-    /// sixteen f32 lanes unless a node runs faster in eight
-    /// ([`kernel::Kernel::NARROW_LANES`]; the engine takes eight where the processor
-    /// lacks AVX-512: [`kernel::LaneKind::on_this_processor`]).
+    /// sixteen f32 lanes unless a node runs faster in eight ([`kernel::Kernel::NARROW_LANES`];
+    /// eight without AVX-512: [`kernel::LaneKind::on_this_processor`]).
     pub fn lane_kind(&self) -> kernel::LaneKind {
+        use kernel::LaneKind::{F32x16, F32x8, F64x4};
         let kinds: Vec<_> = self.nodes().iter().filter_map(|n| n.bsdf.lanes()).collect();
-        if kinds.contains(&kernel::LaneKind::F64x4) {
-            kernel::LaneKind::F64x4
-        } else if kinds.contains(&kernel::LaneKind::F32x8) {
-            kernel::LaneKind::F32x8
-        } else {
-            kernel::LaneKind::F32x16
-        }
+        [F64x4, F32x8]
+            .into_iter()
+            .find(|k| kinds.contains(k))
+            .unwrap_or(F32x16)
     }
 
     /// The nodes without a [`kernel::Kernel`] (evaluated lane by lane through the f64
