@@ -90,7 +90,8 @@ fn every_model_matches_the_cpu_reference_at_grazing_angles() {
 }
 
 /// The lanes a model runs in: sixteen f32 lanes unless a node asks for eight or for f64,
-/// and sixteen only under AVX-512; every kernel of the catalogue is named (a node without one is evaluated through the reference).
+/// and sixteen only under AVX-512; every kernel of the catalogue is named (a node
+/// without one is evaluated through the reference).
 #[test]
 fn lane_kinds_and_kernels_are_reported() {
     use bsdfit::bsdf::kernel::LaneKind;

@@ -1,8 +1,8 @@
 //! One model source for two CPU engines: a node written once over a [`Real`] as a
 //! [`Kernel`] is the f64 reference (`Kernel::block::<f64>`, one direction at a time) and
 //! the SIMD engine (`Kernel::block::<F32x8>`, `::<F32x16>` or `::<F64x4>`: eight,
-//! sixteen or four directions in the lanes of one value), as Mitsuba's Dr.Jit types or pbrt-v4's `PBRT_CPU_GPU`
-//! functions serve several back ends from one text.
+//! sixteen or four directions in the lanes of one value), as Mitsuba's Dr.Jit types or
+//! pbrt-v4's `PBRT_CPU_GPU` functions serve several back ends from one text.
 //!
 //! A node opts in with `impl Kernel for X` and `kernel_methods!()` in its `impl Bsdf`,
 //! which derives `eval`, `eval_channels` and the lane entry points from the kernel. A

@@ -60,7 +60,8 @@ pub fn rmg_layer(
 
 impl Kernel for RoughMicrograin {
     /// The grain's factors of μi or μo alone (the Λ series) come from memos that hit
-    /// only when every lane repeats μ: in sixteen lanes `rmg(eon)` ran 0.8× as fast as in eight.
+    /// only when every lane repeats μ: in sixteen lanes `rmg(eon)` ran 0.8× as fast as
+    /// in eight.
     const NARROW_LANES: bool = true;
     /// The weight and the grain's specular term and transmittances once per direction.
     #[inline(always)]

@@ -1,7 +1,7 @@
 //! The SIMD CPU engine: the CPU reference's evaluator (directions grouped by channels,
 //! blocks, windows, the same streamed reductions in f64) with model values computed in
-//! SIMD lanes of sixteen or eight f32 or four f64 directions ([`crate::math::lanes`]) from the
-//! same model source as the reference ([`crate::bsdf::kernel`]).
+//! SIMD lanes of sixteen or eight f32 or four f64 directions ([`crate::math::lanes`])
+//! from the same model source as the reference ([`crate::bsdf::kernel`]).
 //!
 //! **Precision.** A model runs in f32 lanes (the GPU engine's arithmetic, and its
 //! accuracy contract: `tests/simd_parity.rs` holds it to the GPU parity bounds) unless
