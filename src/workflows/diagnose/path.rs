@@ -12,8 +12,13 @@ use super::{
 use crate::bsdf::Model;
 use crate::data::Dataset;
 use crate::engine::Backend;
-use crate::inference::stats::{bic, format_p};
+use crate::inference::stats::format_p;
 use anyhow::Result;
+
+mod search;
+use search::{analytic_search, note_choice, with_factors};
+#[cfg(test)]
+use search::{backtrack_alternative, Instead};
 
 /// Every candidate fitted so far in a diagnosis, by spec (a failed fit by its error).
 type FitCache = std::collections::HashMap<String, std::result::Result<FitResult, String>>;
@@ -309,37 +314,60 @@ fn extend_path(
         match pick(&scored, data.len()) {
             Ok(best) => adopt(data, opts, log, &mut steps, &current, &best, scored),
             Err(why) if !driven.is_empty() => {
-                // No analytic effect: try the data-driven factors on the same model.
-                log(format!(
-                    "  → no analytic effect ({why}); trying the data-driven factors"
-                ));
-                let (more, more_seconds) = score_round(
-                    data,
-                    backend,
-                    opts,
-                    log,
-                    cache,
-                    &current,
-                    std::mem::take(&mut driven),
-                );
-                log_round(log, &more);
-                if let Some(s) = steps.last_mut().unwrap().round_seconds.as_mut() {
-                    s.fits += more_seconds.fits;
-                    s.scoring += more_seconds.scoring;
-                    s.bootstraps += more_seconds.bootstraps;
-                }
-                let picked = pick(&more, data.len());
-                let mut scored = scored;
-                scored.extend(more);
-                match picked {
-                    Ok(best) => adopt(data, opts, log, &mut steps, &current, &best, scored),
-                    Err(why_driven) => {
-                        let why = format!("{why}; no data-driven factor either ({why_driven})");
-                        return Ok(stop(log, steps, &current, scored, &why, opts));
-                    }
+                let (d, o) = (data, opts);
+                if let Some(consistent) =
+                    try_factors(d, backend, o, log, cache, &mut steps, scored, driven, &why)
+                {
+                    return Ok((steps, consistent));
                 }
             }
             Err(why) => return Ok(stop(log, steps, &current, scored, &why, opts)),
+        }
+    }
+}
+
+/// The data-driven factors `driven` of the path's last model, fitted after a round whose
+/// analytic candidates `scored` adopted nothing (`why`): adopts the best significant one
+/// (None: the path goes on) or stops the path saying why (whether it ended consistent).
+#[allow(clippy::too_many_arguments)]
+fn try_factors(
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    cache: &mut FitCache,
+    steps: &mut Vec<Step>,
+    mut scored: Vec<Scored>,
+    driven: Vec<Candidate>,
+    why: &str,
+) -> Option<bool> {
+    let current = steps.last().expect("a step").fit.clone();
+    log(format!(
+        "  → no analytic effect ({why}); trying the data-driven factors"
+    ));
+    let (more, more_seconds) = score_round(data, backend, opts, log, cache, &current, driven);
+    log_round(log, &more);
+    let last = steps.last_mut().unwrap();
+    match last.round_seconds.as_mut() {
+        Some(s) => {
+            s.fits += more_seconds.fits;
+            s.scoring += more_seconds.scoring;
+            s.bootstraps += more_seconds.bootstraps;
+        }
+        None => last.round_seconds = Some(more_seconds),
+    }
+    let picked = pick(&more, data.len());
+    scored.extend(more);
+    match picked {
+        Ok(best) => {
+            adopt(data, opts, log, steps, &current, &best, scored);
+            None
+        }
+        Err(why_driven) => {
+            let why = format!("{why}; no data-driven factor either ({why_driven})");
+            let (done, consistent) = stop(log, std::mem::take(steps), &current, scored, &why, opts);
+            *steps = done;
+            Some(consistent)
         }
     }
 }
@@ -569,66 +597,6 @@ fn defer_undeciding(
     }
 }
 
-/// Which candidates of a round a backtrack may try instead of the one it adopted.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Instead {
-    /// Another effect.
-    OtherEffect,
-    /// Another model of the same effect (`fa(lambert)` for `lambert+coat`: the adopted
-    /// form of a specular lobe can be the wrong one — a conductor's highlight is first
-    /// taken by a coat, whose blend then leaves the body's Fresnel dimming to false
-    /// grazing and retro effects).
-    OtherForm,
-}
-
-/// The candidate a backtrack tries at a round that adopted `adopted` (`adopted_spec`):
-/// the adoptable one of another effect, or of the same effect in another model, with the
-/// lowest ΔBIC, deferred tests calibrated now where they could be it (an index into
-/// `scored`).
-#[allow(clippy::too_many_arguments)]
-fn backtrack_alternative(
-    scored: &mut [Scored],
-    adopted: Option<Effect>,
-    adopted_spec: &str,
-    instead: Instead,
-    data: &Dataset,
-    backend: &dyn Backend,
-    opts: &DiagnoseOptions,
-    current: &FitResult,
-    log: &mut dyn FnMut(String),
-) -> Option<usize> {
-    let mut order: Vec<usize> = (0..scored.len())
-        .filter(|&i| {
-            let s = &scored[i];
-            let wanted = match instead {
-                Instead::OtherEffect => Some(s.candidate.effect) != adopted,
-                Instead::OtherForm => {
-                    Some(s.candidate.effect) == adopted && s.candidate.spec != adopted_spec
-                }
-            };
-            wanted && (s.adoptable() || s.is_deferred())
-        })
-        .collect();
-    order.sort_by(|&a, &b| scored[a].delta_bic.total_cmp(&scored[b].delta_bic));
-    for i in order {
-        if scored[i].is_deferred() {
-            scored[i].undefer();
-            calibrate_round(
-                std::slice::from_mut(&mut scored[i]),
-                data,
-                backend,
-                opts,
-                current,
-                log,
-            );
-        }
-        if scored[i].adoptable() {
-            return Some(i);
-        }
-    }
-    None
-}
-
 /// The round's candidate table in the log: each candidate's fit, test, BIC, share of the
 /// flagged misfit removed, fit time and verdict.
 fn log_round(log: &mut dyn FnMut(String), scored: &[Scored]) {
@@ -684,12 +652,6 @@ fn pick(scored: &[Scored], samples: usize) -> std::result::Result<Scored, String
         ));
     }
     Ok(best)
-}
-
-/// BIC of a path's final model: χ² + P ln K.
-fn path_bic(steps: &[Step], k: usize) -> f64 {
-    let f = &steps.last().expect("a step").fit;
-    bic(f.chi2, f.params, k)
 }
 
 /// Run the discrepancy workflow from `start` on `data`. `log` receives progress lines
@@ -760,80 +722,24 @@ fn diagnose_path(
     };
     log_step(log, 0, &step0, data, opts);
     let mut cache = FitCache::new();
-    let (greedy, ok) = extend_path(data, backend, opts, log, &mut cache, vec![step0])?;
-    let mut best_path = greedy.clone();
-    // A data-driven factor is the last resort: a path that ended consistent only through
-    // one is revisited at its analytic steps as an inconsistent path is, so that an
-    // analytic explanation another path finds wins where its BIC is lower (a micrograin
-    // base first taken for a Fresnel aggregate leaves a misfit a tabulated NDF absorbs).
-    let driven = |s: &Step| s.effect.is_some_and(Effect::is_data_driven);
-    let through_factor = ok && greedy.iter().any(driven);
-    if (!ok || through_factor) && opts.backtrack {
-        let rounds = (0..greedy.len().saturating_sub(1))
-            .filter(|&r| !(through_factor && driven(&greedy[r + 1])))
-            .flat_map(|r| [(r, Instead::OtherEffect), (r, Instead::OtherForm)]);
-        for (r, instead) in rounds {
-            let adopted = greedy[r + 1].effect;
-            let mut scored = greedy[r].candidates.clone();
-            let Some(alt) = backtrack_alternative(
-                &mut scored,
-                adopted,
-                &greedy[r + 1].model,
-                instead,
-                data,
-                backend,
-                opts,
-                &greedy[r].fit,
-                log,
-            ) else {
-                continue;
-            };
-            let scored = &scored;
-            let alt = &scored[alt];
-            log(format!(
-                "  ↺ {} ended with χ²_red = {:.3}: trying {} [{}] instead of {} at step {}",
-                greedy.last().unwrap().model,
-                greedy.last().unwrap().chi2_red,
-                alt.candidate.spec,
-                alt.candidate.effect,
-                greedy[r + 1].model,
-                r + 1
-            ));
-            let mut steps: Vec<Step> = greedy[..=r].to_vec();
-            steps[r].candidates = scored.clone();
-            let (step, _) = adopt_step(data, &steps[r].fit, alt, scored, opts);
-            log_step(log, r + 1, &step, data, opts);
-            steps.push(step);
-            let (path, consistent) = extend_path(data, backend, opts, log, &mut cache, steps)?;
-            if path_bic(&path, data.len()) < path_bic(&best_path, data.len()) {
-                // Nothing significant remains on a consistent path; one consistent only
-                // through a data-driven factor goes on looking for an analytic one.
-                let stop = consistent && !path.iter().any(driven);
-                best_path = path;
-                if stop {
-                    break;
-                }
-            }
-        }
-        if best_path.last().unwrap().model != greedy.last().unwrap().model {
-            let g = greedy.last().unwrap();
-            let note = format!(
-                ". Chosen over the greedy path {} (final χ²_red = {:.3}, BIC {:.1} higher)",
-                greedy
-                    .iter()
-                    .map(|s| s.model.as_str())
-                    .collect::<Vec<_>>()
-                    .join(" → "),
-                g.chi2_red,
-                path_bic(&greedy, data.len()) - path_bic(&best_path, data.len())
-            );
-            log(format!(
-                "  ↺ chose {}{note}",
-                best_path.last().unwrap().model
-            ));
-            best_path.last_mut().unwrap().evidence.push_str(&note);
-        }
-    }
+    // The analytic search first, greedy and then backtracking without the data-driven
+    // factors: they are the last resort, tried only where no analytic path ends consistent
+    // (and each costs the fits of many knots; a micrograin base first taken for a Fresnel
+    // aggregate leaves a misfit a tabulated NDF would absorb, which the backtrack cures).
+    let analytic = DiagnoseOptions {
+        data_driven: false,
+        ..opts.clone()
+    };
+    let searched = analytic_search(data, backend, &analytic, log, &mut cache, step0)?;
+    let greedy = searched.paths[0].clone();
+    let best = &searched.paths[searched.best];
+    let mut best_path = if opts.data_driven && !consistency(&best.last().unwrap().fit, opts.alpha).0
+    {
+        with_factors(data, backend, opts, log, &mut cache, searched)?
+    } else {
+        best.clone()
+    };
+    note_choice(log, &greedy, &mut best_path);
     let best_path = super::prune::prune(data, backend, opts, log, best_path)?;
     Ok(Diagnosis::of_steps(
         model.spec.clone(),
