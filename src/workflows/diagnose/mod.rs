@@ -110,8 +110,9 @@ pub struct DiagnoseOptions {
     /// subsample of this many, and the path found is confirmed on all of them
     /// (`explore`); 0: always on all data.
     pub explore: usize,
-    /// Whether a round where no analytic effect is significant tries the data-driven
-    /// factors (`highlight_shape`: `+ndf`). On for `diagnose`; the battery, which measures
+    /// Whether the data-driven factors (`+ndf`, `+fresnel`, `+body`) are tried where no
+    /// analytic path ends consistent (at the ends of the analytic paths, in a round where
+    /// no analytic effect is significant). On for `diagnose`; the battery, which measures
     /// the catalogue's effects, turns it off.
     pub data_driven: bool,
 }

@@ -732,12 +732,10 @@ fn diagnose_path(
     };
     let searched = analytic_search(data, backend, &analytic, log, &mut cache, step0)?;
     let greedy = searched.paths[0].clone();
-    let best = &searched.paths[searched.best];
-    let mut best_path = if opts.data_driven && !consistency(&best.last().unwrap().fit, opts.alpha).0
-    {
+    let mut best_path = if opts.data_driven && !searched.consistent {
         with_factors(data, backend, opts, log, &mut cache, searched)?
     } else {
-        best.clone()
+        searched.paths[searched.best].clone()
     };
     note_choice(log, &greedy, &mut best_path);
     let best_path = super::prune::prune(data, backend, opts, log, best_path)?;

@@ -13,17 +13,38 @@ use anyhow::Result;
 /// How the analytic path's stop is written in its last step's evidence.
 const STOPPED: &str = ". Stopped: ";
 
-/// The paths of an analytic search, the greedy one first.
+/// The paths of a search, the greedy one first.
 pub(super) struct Searched {
     pub paths: Vec<Vec<Step>>,
     /// The path chosen: the lowest BIC at its end, the first consistent one if any.
     pub best: usize,
+    /// Whether the chosen path ends consistent.
+    pub consistent: bool,
+}
+
+impl Searched {
+    fn new(greedy: Vec<Step>, consistent: bool) -> Searched {
+        Searched {
+            paths: vec![greedy],
+            best: 0,
+            consistent,
+        }
+    }
+    /// Add `path`; it is chosen where its BIC is lower, or where it is the first that ends
+    /// consistent. Whether the search is over (a consistent path is chosen).
+    fn add(&mut self, path: Vec<Step>, consistent: bool, k: usize) -> bool {
+        let lower = path_bic(&path, k) < path_bic(&self.paths[self.best], k);
+        self.paths.push(path);
+        if !self.consistent && (lower || consistent) {
+            self.best = self.paths.len() - 1;
+            self.consistent = consistent;
+        }
+        self.consistent
+    }
 }
 
 /// The greedy path from `step0`, and where it ends with the misfit still exceeding the
-/// uncertainties, each earlier step revisited once with the best significant candidate of
-/// another effect (and of another form of the same effect), continued greedily until a
-/// path ends consistent.
+/// uncertainties, its backtracking ([`backtrack`]) until a path ends consistent.
 pub(super) fn analytic_search(
     data: &Dataset,
     backend: &dyn Backend,
@@ -33,15 +54,29 @@ pub(super) fn analytic_search(
     step0: Step,
 ) -> Result<Searched> {
     let (greedy, ok) = extend_path(data, backend, opts, log, cache, vec![step0])?;
-    let mut searched = Searched {
-        paths: vec![greedy],
-        best: 0,
-    };
-    if ok || !opts.backtrack {
-        return Ok(searched);
+    let mut searched = Searched::new(greedy, ok);
+    if !ok && opts.backtrack {
+        let greedy = searched.paths[0].clone();
+        backtrack(data, backend, opts, log, cache, &greedy, 0, &mut searched)?;
     }
-    let greedy = searched.paths[0].clone();
-    let rounds = (0..greedy.len().saturating_sub(1))
+    Ok(searched)
+}
+
+/// Each step of the `greedy` path from round `first` on revisited once with the best
+/// significant candidate of another effect (and of another form of the same effect),
+/// continued greedily; every path into `searched`, until one ends consistent.
+#[allow(clippy::too_many_arguments)]
+fn backtrack(
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+    cache: &mut FitCache,
+    greedy: &[Step],
+    first: usize,
+    searched: &mut Searched,
+) -> Result<()> {
+    let rounds = (first..greedy.len().saturating_sub(1))
         .flat_map(|r| [(r, Instead::OtherEffect), (r, Instead::OtherForm)]);
     for (r, instead) in rounds {
         let adopted = greedy[r + 1].effect;
@@ -70,23 +105,18 @@ pub(super) fn analytic_search(
         log_step(log, r + 1, &step, data, opts);
         steps.push(step);
         let (path, consistent) = extend_path(data, backend, opts, log, cache, steps)?;
-        let lower =
-            path_bic(&path, data.len()) < path_bic(&searched.paths[searched.best], data.len());
-        searched.paths.push(path);
-        if lower {
-            searched.best = searched.paths.len() - 1;
-            if consistent {
-                break;
-            }
+        if searched.add(path, consistent, data.len()) {
+            break;
         }
     }
-    Ok(searched)
+    Ok(())
 }
 
 /// Where no analytic path ends consistent: the data-driven factors at the end of each
 /// analytic path that stopped before `--max-steps`, lowest BIC first, each path then
-/// continued greedily. The first that ends consistent wins; else the lowest BIC of all,
-/// the analytic paths' included.
+/// continued greedily and backtracked from its first data-driven round on. The first
+/// path that ends consistent wins; else the lowest BIC of all, the analytic paths'
+/// included.
 pub(super) fn with_factors(
     data: &Dataset,
     backend: &dyn Backend,
@@ -96,21 +126,38 @@ pub(super) fn with_factors(
     searched: Searched,
 ) -> Result<Vec<Step>> {
     let k = data.len();
-    let mut best = searched.paths[searched.best].clone();
-    let mut open: Vec<Vec<Step>> = searched.paths;
+    let mut open: Vec<Vec<Step>> = searched.paths.clone();
+    let mut searched = searched;
     open.retain(|p| p.len() <= opts.max_steps);
     open.sort_by(|a, b| path_bic(a, k).total_cmp(&path_bic(b, k)));
+    // Two paths can end at the same model (`rmg(lambert)` then `+coat`, or `lambert+coat`
+    // then `rmg`): its factors are tried once.
+    let mut ends = std::collections::HashSet::new();
+    open.retain(|p| ends.insert(p.last().expect("a step").model.clone()));
     for path in open {
-        let path = factors_at_end(data, backend, opts, log, cache, path)?;
-        let consistent = consistency(&path.last().expect("a step").fit, opts.alpha).0;
-        if consistent || path_bic(&path, k) < path_bic(&best, k) {
-            best = path;
-            if consistent {
+        let first = path.len() - 1;
+        let greedy = factors_at_end(data, backend, opts, log, cache, path)?;
+        let consistent = consistency(&greedy.last().expect("a step").fit, opts.alpha).0;
+        if searched.add(greedy.clone(), consistent, k) {
+            break;
+        }
+        if opts.backtrack && greedy.len() > first + 1 {
+            backtrack(
+                data,
+                backend,
+                opts,
+                log,
+                cache,
+                &greedy,
+                first,
+                &mut searched,
+            )?;
+            if searched.consistent {
                 break;
             }
         }
     }
-    Ok(best)
+    Ok(searched.paths.swap_remove(searched.best))
 }
 
 /// The note on a path chosen over the `greedy` one (its last step's evidence and the log).
