@@ -72,6 +72,69 @@ fn f64_lanes_give_the_reference_values_bit_for_bit() {
     assert_no_failures(&failures);
 }
 
+/// The per-block tables of factors of μ alone (`SlotMemo`, keyed by the engine's μ slots)
+/// on data that repeat a set of polar angles, as goniometers do: each lane
+/// of a lane-direction has its own μ, and the same μ comes back many lane-directions
+/// later, so values come from the table, from the one-entry memo and from fresh
+/// computations. In f64 lanes every model must give the reference's values bit for bit
+/// (a value taken from another slot, or another block's, would not).
+#[test]
+fn tables_of_mu_give_the_reference_values_bit_for_bit() {
+    use rand::{Rng, SeedableRng};
+    let f64_lanes = SimdBackend::with_lanes(bsdfit::bsdf::kernel::LaneKind::F64x4);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    // 25 polar angles: in the engine's walk order (by μi, then μo) μo changes at nearly
+    // every direction, and each of its values comes back under every μi.
+    let thetas: Vec<f64> = (0..25).map(|k| 3.5 * k as f64).collect();
+    let mut failures = Vec::new();
+    for (kind, spec) in all_specs() {
+        let channels = if kind == Kind::Brdf { 3 } else { 1 };
+        // Every channel at each direction, so that the engine's blocks run long.
+        let mut rows: Vec<(usize, RawRow)> = Vec::new();
+        for _ in 0..600 / channels {
+            let (ti, to) = (rng.random_range(0..25), rng.random_range(0..25));
+            let phi_o = rng.random_range(0.0..360.0);
+            for wavelength_nm in [450.0, 550.0, 650.0].into_iter().take(channels) {
+                let value: f64 = rng.random_range(0.01..2.0);
+                let row = RawRow {
+                    theta_i: thetas[ti],
+                    phi_i: 0.0,
+                    theta_o: thetas[to],
+                    phi_o,
+                    wavelength_nm,
+                    value,
+                    uncertainty: 0.02 * value,
+                };
+                rows.push((rows.len() + 1, row));
+            }
+        }
+        let data = Dataset::from_rows(kind, "grid", &rows, "<grid>", &ReadOptions::default())
+            .expect("valid grid data");
+        let model = Model::parse(&spec, channels).unwrap();
+        let params = random_params(&model, 3, 92);
+        let problem = Problem {
+            model: &model,
+            data: &data,
+            loss: Loss::new(Metric::Chi2, Weights::Uniform),
+        };
+        let c = CpuBackend::new()
+            .prepare(problem)
+            .unwrap()
+            .values(&params)
+            .unwrap();
+        let s = f64_lanes.prepare(problem).unwrap().values(&params).unwrap();
+        let bad = c
+            .iter()
+            .zip(&s)
+            .filter(|(a, b)| !(a.is_finite() && a.to_bits() == b.to_bits()))
+            .count();
+        if bad > 0 {
+            failures.push(format!("{spec}: {bad} of {} values differ", c.len()));
+        }
+    }
+    assert_no_failures(&failures);
+}
+
 /// Every model at grazing angles (θi and θo between 86° and 89.9°), where the f32 lanes
 /// directions are least accurate: the bound of the random test plus, per value, twice
 /// what the f64 model moves when its directions are rounded to f32 (as on the grid).

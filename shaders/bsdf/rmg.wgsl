@@ -13,7 +13,7 @@ fn rmg_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
 
 // Per candidate, before the record loop (RMG_PREPARED: the model has one rmg node): G1(μ)/μ
 // at every μ of the candidate's problem (micrograin.wgsl, MG_G1_OVER_MU). The CPU twin
-// memoizes the same factors per run of directions (RoughGrainMemo).
+// tabulates the same factors per block of directions, keyed by the same μ (RoughGrainMemo).
 fn rmg_prepare(o: u32) {
     mg_fill_g1_table(rmg_tau0(o), rmg_beta(o));
 }

@@ -20,6 +20,22 @@ use glam::DVec3;
 pub struct LaneDir<R> {
     pub wi: V3<R>,
     pub wo: V3<R>,
+    /// Where the SIMD engine lays out a block: the slots of μi = ωi.z and μo = ωo.z among
+    /// the block's distinct polar cosines (exact small integers; equal cosines, equal
+    /// slots), for per-block tables of factors of μ alone ([`SlotMemo`]); −1 where there
+    /// are none (the f64 reference, a direction at a time).
+    pub mu_slots: [R; 2],
+}
+
+impl<R: Real> LaneDir<R> {
+    /// A direction pair without μ slots.
+    pub fn new(wi: V3<R>, wo: V3<R>) -> Self {
+        LaneDir {
+            wi,
+            wo,
+            mu_slots: [R::splat(-1.0); 2],
+        }
+    }
 }
 
 /// The children's values for a block of m lane-directions × n channels: child k at
@@ -111,10 +127,7 @@ impl LaneKind {
 #[inline]
 pub fn eval_one<K: Kernel>(k: &K, p: &[f64], wi: DVec3, wo: DVec3, children: &[f64]) -> f64 {
     let mut out = [0.0];
-    let dirs = [LaneDir {
-        wi: wi.into(),
-        wo: wo.into(),
-    }];
+    let dirs = [LaneDir::new(wi.into(), wo.into())];
     k.block::<f64>(
         Channels::one(p),
         &dirs,
@@ -136,21 +149,15 @@ pub fn eval_f64<K: Kernel>(k: &K, p: Channels, dirs: &[Dir], children: Children,
     }
     if m <= CHUNK {
         let zero = V3::from(DVec3::ZERO);
-        let mut lane = [LaneDir { wi: zero, wo: zero }; CHUNK];
+        let mut lane = [LaneDir::new(zero, zero); CHUNK];
         for (l, &(wi, wo)) in lane.iter_mut().zip(dirs) {
-            *l = LaneDir {
-                wi: wi.into(),
-                wo: wo.into(),
-            };
+            *l = LaneDir::new(wi.into(), wo.into());
         }
         k.block::<f64>(p, &lane[..m], LaneChildren::new(children.values, m, n), out);
     } else {
         let lane: Vec<LaneDir<f64>> = dirs
             .iter()
-            .map(|&(wi, wo)| LaneDir {
-                wi: wi.into(),
-                wo: wo.into(),
-            })
+            .map(|&(wi, wo)| LaneDir::new(wi.into(), wo.into()))
             .collect();
         k.block::<f64>(p, &lane, LaneChildren::new(children.values, m, n), out);
     }
@@ -168,7 +175,7 @@ pub fn by_reference<R: Real>(
     let (n, m, l) = (p.len(), dirs.len(), R::LANES);
     let flat: Vec<Dir> = dirs
         .iter()
-        .flat_map(|LaneDir { wi, wo }| {
+        .flat_map(|LaneDir { wi, wo, .. }| {
             (0..l).map(|j| {
                 (
                     DVec3::new(wi.x.lane(j), wi.y.lane(j), wi.z.lane(j)),
@@ -397,5 +404,71 @@ impl<R: Real> Memo<R> {
                 value
             }
         }
+    }
+}
+
+/// A table of a function of μ alone over one block of lane-directions, keyed by the
+/// engine's μ slots ([`LaneDir::mu_slots`]): each distinct μ of the block is computed
+/// once, where a [`Memo`] recomputes whenever any lane's μ differs from the last
+/// lane-direction's (in sixteen lanes, nearly always: the lanes span several θo). A
+/// value is computed in lanes with the others of its lane-direction, each lane's
+/// arithmetic its own, so the table's values are the memo's bit for bit. Without slots
+/// (the f64 reference) it is a [`Memo`].
+#[derive(Clone, Debug)]
+pub struct SlotMemo<R> {
+    values: Vec<f64>,
+    memo: Memo<R>,
+}
+
+impl<R: Real> Default for SlotMemo<R> {
+    fn default() -> Self {
+        SlotMemo {
+            values: Vec::new(),
+            memo: Memo::default(),
+        }
+    }
+}
+
+impl<R: Real> SlotMemo<R> {
+    /// f(x) where x is the lanes' μ and `slot` their slots.
+    #[inline(always)]
+    pub fn get(&mut self, slot: R, x: R, f: impl FnOnce(R) -> R) -> R {
+        // The one-entry memo first: a hit costs one comparison, the table a load per lane.
+        match self.memo.last {
+            Some((key, value)) if key.same_bits(x) => return value,
+            _ if slot.lane(0) < 0.0 => return self.memo.get(x, f),
+            _ => {}
+        }
+        let value = self.tabulated(slot, x, f);
+        self.memo.last = Some((x, value));
+        value
+    }
+
+    /// f(x) from the table, the lanes it lacks computed and added.
+    #[inline(always)]
+    fn tabulated(&mut self, slot: R, x: R, f: impl FnOnce(R) -> R) -> R {
+        let mut at = [0.0; 16];
+        slot.store_all_f64(&mut at[..R::LANES]);
+        let mut miss = false;
+        let values = &self.values;
+        let v = R::from_fn(|j| match values.get(at[j] as usize) {
+            Some(&v) if !v.is_nan() => v,
+            _ => {
+                miss = true;
+                0.0
+            }
+        });
+        if !miss {
+            return v;
+        }
+        let fresh = f(x);
+        for (j, &s) in at[..R::LANES].iter().enumerate() {
+            let s = s as usize;
+            if s >= self.values.len() {
+                self.values.resize(s + 1, f64::NAN);
+            }
+            self.values[s] = fresh.lane(j);
+        }
+        fresh
     }
 }

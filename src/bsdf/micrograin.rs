@@ -38,7 +38,7 @@
 //! inside w; G1/μ is computed as 1/(γβ (σ + Λσ)), finite at μ → 0, so nothing divides by
 //! zero at grazing.
 
-use super::kernel::Memo;
+use super::kernel::{LaneDir, SlotMemo};
 use super::microfacet::{ggx_d, MICROFACET_WGSL};
 use super::{ParamDecl, Role, WgslFn};
 use crate::math::lanes::{Real, V3};
@@ -270,38 +270,33 @@ pub struct RoughGrain<R: Real = f64> {
     has_spec: R::Mask,
 }
 
-/// One-entry caches of [`RoughGrain`]'s factors of μi or μo alone (the Fresnel
-/// transmittances and G1/μ, whose Λ series is most of the grain's cost), for a run of
-/// directions of one parameter vector: consecutive directions often share θi or θo.
-#[derive(Clone, Copy, Debug)]
+/// Caches of [`RoughGrain`]'s factors of μi or μo alone (the Fresnel transmittances and
+/// G1/μ, whose Λ series is most of the grain's cost) over one block of directions of one
+/// parameter vector: per-block tables keyed by the engine's μ slots in lanes, one-entry
+/// memos in the f64 reference ([`SlotMemo`]).
+#[derive(Clone, Debug)]
 pub struct RoughGrainMemo<R: Real = f64> {
-    t_i: Memo<R>,
-    t_o: Memo<R>,
-    g_i: Memo<R>,
-    g_o: Memo<R>,
+    t_i: SlotMemo<R>,
+    t_o: SlotMemo<R>,
+    g_i: SlotMemo<R>,
+    g_o: SlotMemo<R>,
 }
 
 impl<R: Real> Default for RoughGrainMemo<R> {
     fn default() -> Self {
         RoughGrainMemo {
-            t_i: Memo::default(),
-            t_o: Memo::default(),
-            g_i: Memo::default(),
-            g_o: Memo::default(),
+            t_i: SlotMemo::default(),
+            t_o: SlotMemo::default(),
+            g_i: SlotMemo::default(),
+            g_o: SlotMemo::default(),
         }
     }
 }
 
 impl RoughGrain {
     pub fn at(tau0: f64, beta: f64, eta_g: f64, wi: DVec3, wo: DVec3) -> RoughGrain {
-        Self::at_memo(
-            &mut RoughGrainMemo::default(),
-            tau0,
-            beta,
-            eta_g,
-            wi.into(),
-            wo.into(),
-        )
+        let dir = LaneDir::new(wi.into(), wo.into());
+        Self::at_memo(&mut RoughGrainMemo::default(), tau0, beta, eta_g, &dir)
     }
 }
 
@@ -314,10 +309,11 @@ impl<R: Real> RoughGrain<R> {
         tau0: f64,
         beta: f64,
         eta_g: f64,
-        wi: V3<R>,
-        wo: V3<R>,
+        dir: &LaneDir<R>,
     ) -> RoughGrain<R> {
+        let (wi, wo) = (dir.wi, dir.wo);
         let (mu_i, mu_o) = (wi.z, wo.z);
+        let [slot_i, slot_o] = dir.mu_slots;
         let zero = R::zero();
         let above = zero.lt(mu_i) & zero.lt(mu_o);
         if !R::any(above) {
@@ -329,10 +325,12 @@ impl<R: Real> RoughGrain<R> {
         }
         let eta = R::splat(eta_g.max(1.0));
         let transmit = memo.t_i.get(
+            slot_i,
             mu_i,
             #[inline(always)]
             |mu| fresnel_transmittance_in(mu, eta),
         ) * memo.t_o.get(
+            slot_o,
             mu_o,
             #[inline(always)]
             |mu| fresnel_transmittance_in(mu, eta),
@@ -346,11 +344,13 @@ impl<R: Real> RoughGrain<R> {
         let spec = fresnel_dielectric_in(cd, eta)
             * ndf_in(tau0, beta, h)
             * memo.g_i.get(
+                slot_i,
                 mu_i,
                 #[inline(always)]
                 |mu| g1_over_mu_in(tau0, beta, mu),
             )
             * memo.g_o.get(
+                slot_o,
                 mu_o,
                 #[inline(always)]
                 |mu| g1_over_mu_in(tau0, beta, mu),

@@ -59,9 +59,11 @@ pub fn rmg_layer(
 }
 
 impl Kernel for RoughMicrograin {
-    /// The grain's factors of μi or μo alone (the Λ series) come from memos that hit
-    /// only when every lane repeats μ: in sixteen lanes `rmg(eon)` ran 0.8× as fast as
-    /// in eight.
+    /// Eight lanes: with the grain's factors of μi or μo alone (the Λ series) from
+    /// one-entry memos, sixteen lanes ran `rmg(eon)` 0.8× as fast as eight; with the
+    /// per-block μ tables ([`super::kernel::SlotMemo`]) sixteen are no faster (medians of
+    /// five alternated pairs: 0.88× on `bench`'s built-in set, 1.00–1.11× on a
+    /// 5,130-sample off-plane file).
     const NARROW_LANES: bool = true;
     /// The weight and the grain's specular term and transmittances once per direction.
     #[inline(always)]
@@ -76,7 +78,7 @@ impl Kernel for RoughMicrograin {
                 continue;
             }
             let w = weight_in(tau0, beta, wi.z, wo.z);
-            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, wi, wo);
+            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, &dirs[d]);
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 *o = R::select(above, layer(w, grain.value(R::splat(p.get(i, 2))), b), zero);
             }

@@ -117,12 +117,15 @@ impl LaneDirs {
             let mut v = Vec::new();
             for b in blocks {
                 let d = &dirs[b.dirs.clone()];
+                let slots = mu_slots(d);
                 for first in (0..d.len()).step_by(R::LANES) {
-                    let lane = |j: usize| d[(first + j).min(d.len() - 1)];
-                    let c = |f: fn(&Dir) -> f64| R::from_fn(|j| f(&lane(j)));
+                    let at = |j: usize| (first + j).min(d.len() - 1);
+                    let c = |f: fn(&Dir) -> f64| R::from_fn(|j| f(&d[at(j)]));
+                    let slot = |k: usize| R::from_fn(|j| slots[at(j)][k] as f64);
                     v.push(LaneDir {
                         wi: V3::new(c(|w| w.0.x), c(|w| w.0.y), c(|w| w.0.z)),
                         wo: V3::new(c(|w| w.1.x), c(|w| w.1.y), c(|w| w.1.z)),
+                        mu_slots: [slot(0), slot(1)],
                     });
                 }
             }
@@ -172,6 +175,19 @@ impl LaneDirs {
             scratch_len: model.scratch_len(widest.unwrap_or(0)),
         }
     }
+}
+
+/// Each direction's slots of μi and μo among the distinct polar cosines of `dirs`, a block
+/// ([`LaneDir::mu_slots`]): one numbering for both, in order of first appearance.
+fn mu_slots(dirs: &[Dir]) -> Vec<[u32; 2]> {
+    let mut slot_of = std::collections::HashMap::new();
+    let mut slot = |mu: f64| {
+        let next = slot_of.len() as u32;
+        *slot_of.entry(mu.to_bits()).or_insert(next)
+    };
+    dirs.iter()
+        .map(|(wi, wo)| [slot(wi.z), slot(wo.z)])
+        .collect()
 }
 
 /// The lane buffers of a worker's [`Scratch`] for one lane type.
