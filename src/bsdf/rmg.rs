@@ -59,11 +59,12 @@ pub fn rmg_layer(
 }
 
 impl Kernel for RoughMicrograin {
-    /// Eight lanes: with the grain's factors of μi or μo alone (the Λ series) from
-    /// one-entry memos, sixteen lanes ran `rmg(eon)` 0.8× as fast as eight; with the
-    /// per-block μ tables ([`super::kernel::SlotMemo`]) sixteen are no faster (medians of
-    /// five alternated pairs: 0.88× on `bench`'s built-in set, 1.00–1.11× on a
-    /// 5,130-sample off-plane file).
+    /// Eight lanes: with G1(μ)/μ from one-entry memos, sixteen lanes ran `rmg(eon)` 0.8×
+    /// as fast as eight; with it from per-block μ tables ([`super::kernel::SlotMemo`])
+    /// sixteen are no faster overall (medians of four alternated pairs, sixteen against
+    /// eight: `rmg(lambert)` 0.98× and `rmg(eon)` 0.87× on `bench`'s built-in set,
+    /// `rmg(lambert)` 0.98× and `rmg(lambert)+mrm82+coat` 1.19× on a 5,130-sample
+    /// off-plane file).
     const NARROW_LANES: bool = true;
     /// The weight and the grain's specular term and transmittances once per direction.
     #[inline(always)]
