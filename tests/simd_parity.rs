@@ -34,42 +34,45 @@ fn tested() -> &'static dyn Backend {
 /// tolerance. NaN never passes.
 #[test]
 fn f64_lanes_give_the_reference_values_bit_for_bit() {
-    let f64_lanes = SimdBackend::with_lanes(bsdfit::bsdf::kernel::LaneKind::F64x4);
     let mut failures = Vec::new();
     for (kind, spec) in all_specs() {
         let channels = if kind == Kind::Brdf { 3 } else { 1 };
         let data = random_dataset(kind, channels, 61, 90);
-        let model = Model::parse(&spec, channels).unwrap();
-        let params = random_params(&model, 4, 91);
-        let problem = Problem {
-            model: &model,
-            data: &data,
-            loss: Loss::new(Metric::Chi2, Weights::Uniform),
-        };
-        let c = CpuBackend::new()
-            .prepare(problem)
-            .unwrap()
-            .values(&params)
-            .unwrap();
-        let s = f64_lanes.prepare(problem).unwrap().values(&params).unwrap();
-        let bad = c
-            .iter()
-            .zip(&s)
-            .filter(|(a, b)| !(a.is_finite() && a.to_bits() == b.to_bits()))
-            .count();
-        if bad > 0 {
-            let (a, b) = c
-                .iter()
-                .zip(&s)
-                .find(|(a, b)| !(a.is_finite() && a.to_bits() == b.to_bits()))
-                .unwrap();
-            failures.push(format!(
-                "{spec}: {bad} of {} values differ (first: cpu {a:e}, simd f64 {b:e})",
-                c.len()
-            ));
-        }
+        failures.extend(f64_lanes_differ(&spec, channels, &data, (4, 91)));
     }
     assert_no_failures(&failures);
+}
+
+/// The model `spec` on `data` at `draw.0` random parameter vectors (seed `draw.1`) in the SIMD engine's f64
+/// lanes against the CPU reference: None where every value is the reference's bit for bit
+/// (NaN never is), else what differs.
+fn f64_lanes_differ(
+    spec: &str,
+    channels: usize,
+    data: &Dataset,
+    draw: (usize, u64),
+) -> Option<String> {
+    let f64_lanes = SimdBackend::with_lanes(bsdfit::bsdf::kernel::LaneKind::F64x4);
+    let model = Model::parse(spec, channels).unwrap();
+    let params = random_params(&model, draw.0, draw.1);
+    let problem = Problem {
+        model: &model,
+        data,
+        loss: Loss::new(Metric::Chi2, Weights::Uniform),
+    };
+    let c = CpuBackend::new()
+        .prepare(problem)
+        .unwrap()
+        .values(&params)
+        .unwrap();
+    let s = f64_lanes.prepare(problem).unwrap().values(&params).unwrap();
+    let differ = |(a, b): &(&f64, &f64)| !(a.is_finite() && a.to_bits() == b.to_bits());
+    let bad = c.iter().zip(&s).filter(differ).count();
+    let (a, b) = c.iter().zip(&s).find(differ)?;
+    Some(format!(
+        "{spec}: {bad} of {} values differ (first: cpu {a:e}, simd f64 {b:e})",
+        c.len()
+    ))
 }
 
 /// The per-block tables of factors of μ alone (`SlotMemo`, keyed by the engine's μ slots)
@@ -81,7 +84,6 @@ fn f64_lanes_give_the_reference_values_bit_for_bit() {
 #[test]
 fn tables_of_mu_give_the_reference_values_bit_for_bit() {
     use rand::{Rng, SeedableRng};
-    let f64_lanes = SimdBackend::with_lanes(bsdfit::bsdf::kernel::LaneKind::F64x4);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     // 25 polar angles: in the engine's walk order (by μi, then μo) μo changes at nearly
     // every direction, and each of its values comes back under every μi.
@@ -110,27 +112,7 @@ fn tables_of_mu_give_the_reference_values_bit_for_bit() {
         }
         let data = Dataset::from_rows(kind, "grid", &rows, "<grid>", &ReadOptions::default())
             .expect("valid grid data");
-        let model = Model::parse(&spec, channels).unwrap();
-        let params = random_params(&model, 3, 92);
-        let problem = Problem {
-            model: &model,
-            data: &data,
-            loss: Loss::new(Metric::Chi2, Weights::Uniform),
-        };
-        let c = CpuBackend::new()
-            .prepare(problem)
-            .unwrap()
-            .values(&params)
-            .unwrap();
-        let s = f64_lanes.prepare(problem).unwrap().values(&params).unwrap();
-        let bad = c
-            .iter()
-            .zip(&s)
-            .filter(|(a, b)| !(a.is_finite() && a.to_bits() == b.to_bits()))
-            .count();
-        if bad > 0 {
-            failures.push(format!("{spec}: {bad} of {} values differ", c.len()));
-        }
+        failures.extend(f64_lanes_differ(&spec, channels, &data, (3, 92)));
     }
     assert_no_failures(&failures);
 }
