@@ -289,11 +289,9 @@ fn extend_path(
             analytic
         };
         if cands.is_empty() {
-            steps
-                .last_mut()
-                .unwrap()
-                .evidence
-                .push_str(". Stopped: the catalogue has no extension of this model");
+            steps.last_mut().unwrap().evidence.push_str(&format!(
+                "{STOPPED}the catalogue has no extension of this model"
+            ));
             return Ok((steps, consistency(&current, opts.alpha).0));
         }
         log(format!(
@@ -392,6 +390,10 @@ fn adopt(
     steps.push(step);
 }
 
+/// How a path's stop is written in its last step's evidence (read back where the
+/// data-driven factors go on from an analytic path's end: [`search::with_factors`]).
+const STOPPED: &str = ". Stopped: ";
+
 /// End the path at its last model, saying `why`; whether it ended consistent.
 fn stop(
     log: &mut dyn FnMut(String),
@@ -403,7 +405,7 @@ fn stop(
 ) -> (Vec<Step>, bool) {
     log(format!("  → stop: {why}"));
     let last = steps.last_mut().unwrap();
-    last.evidence.push_str(&format!(". Stopped: {why}"));
+    last.evidence.push_str(&format!("{STOPPED}{why}"));
     last.candidates = scored;
     (steps, consistency(current, opts.alpha).0)
 }

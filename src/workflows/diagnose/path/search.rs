@@ -4,14 +4,11 @@
 use super::super::fit::calibrate_round;
 use super::super::score::consistency;
 use super::super::{extensions, Candidate, DiagnoseOptions, Effect, FitResult, Scored, Step};
-use super::{adopt_step, extend_path, log_step, try_factors, FitCache};
+use super::{adopt_step, extend_path, log_step, try_factors, FitCache, STOPPED};
 use crate::data::Dataset;
 use crate::engine::Backend;
 use crate::inference::stats::bic;
 use anyhow::Result;
-
-/// How the analytic path's stop is written in its last step's evidence.
-const STOPPED: &str = ". Stopped: ";
 
 /// The paths of a search, the greedy one first.
 pub(super) struct Searched {
@@ -123,18 +120,20 @@ pub(super) fn with_factors(
     opts: &DiagnoseOptions,
     log: &mut dyn FnMut(String),
     cache: &mut FitCache,
-    searched: Searched,
+    mut searched: Searched,
 ) -> Result<Vec<Step>> {
     let k = data.len();
-    let mut open: Vec<Vec<Step>> = searched.paths.clone();
-    let mut searched = searched;
-    open.retain(|p| p.len() <= opts.max_steps);
-    open.sort_by(|a, b| path_bic(a, k).total_cmp(&path_bic(b, k)));
+    let paths = &searched.paths;
+    let mut open: Vec<usize> = (0..paths.len())
+        .filter(|&i| paths[i].len() <= opts.max_steps)
+        .collect();
+    open.sort_by(|&a, &b| path_bic(&paths[a], k).total_cmp(&path_bic(&paths[b], k)));
     // Two paths can end at the same model (`rmg(lambert)` then `+coat`, or `lambert+coat`
     // then `rmg`): its factors are tried once.
     let mut ends = std::collections::HashSet::new();
-    open.retain(|p| ends.insert(p.last().expect("a step").model.clone()));
-    for path in open {
+    open.retain(|&i| ends.insert(paths[i].last().expect("a step").model.as_str()));
+    for i in open {
+        let path = searched.paths[i].clone();
         let first = path.len() - 1;
         let greedy = factors_at_end(data, backend, opts, log, cache, path)?;
         let consistent = consistency(&greedy.last().expect("a step").fit, opts.alpha).0;
