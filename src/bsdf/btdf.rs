@@ -24,7 +24,7 @@
 //! components of m (no 1 − cos² cancellation at sharp peaks); G1/|μ| is evaluated in forms
 //! without a division by μ, so grazing θt gives no 0·∞.
 
-use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
+use super::kernel::{lanes, Kernel, LaneChildren, LaneDir, SlotMemo};
 use super::microfacet::{
     gg_lambda_table, ggx_d, ggx_g1_over_mu, Beckmann, Distribution, Gg, Gtr, Masking,
     MICROFACET_WGSL,
@@ -273,9 +273,51 @@ impl Kernel for Btdf {
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], _: LaneChildren<R>, out: &mut [R]) {
         let third = if p.count() > 2 { p.get(0, 2) } else { 0.0 };
         let p3 = [p.get(0, 0), p.get(0, 1), third];
+        if self.ndf == Ndf::Gg && !R::F64 {
+            return gg_tabled(p3, dirs, p.len(), out);
+        }
         for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
             out.fill(self.ndf.eval_in(p3, wi, wo));
         }
+    }
+}
+
+/// `btdf(gg)` in f32 lanes with G1/|μ| from per-block tables keyed by the engine's μ
+/// slots ([`SlotMemo`], as the GPU's `btdf_gg_prepare` tabulates it per candidate): each
+/// G1 reads sixteen entries of the Λ table lane by lane, otherwise most of the kernel's
+/// cost. f32 lanes only: G1 takes sinθ from the direction's x and y, which a slot (keyed
+/// by μ) does not see, so directions sharing a μ get the first one's value, equal to
+/// rounding but not bit for bit as f64 lanes must be.
+#[inline(always)]
+fn gg_tabled<R: Real>(p: [f64; 3], dirs: &[LaneDir<R>], n: usize, out: &mut [R]) {
+    let gg = Gg::new(p[0], p[1]);
+    let (mut g_i, mut g_o) = (SlotMemo::default(), SlotMemo::default());
+    for (dir, out) in dirs.iter().zip(out.chunks_exact_mut(n.max(1))) {
+        let ([slot_i, slot_o], wi, wo) = (dir.mu_slots, dir.wi, dir.wo);
+        let value = walter_with_g1(
+            wi,
+            wo,
+            p[2],
+            #[inline(always)]
+            |m| gg.d_in(m),
+            #[inline(always)]
+            || {
+                let g1i = g_i.get(
+                    slot_i,
+                    wi.z,
+                    #[inline(always)]
+                    |_| gg.g1_over_mu_in(wi),
+                );
+                let g1o = g_o.get(
+                    slot_o,
+                    wo.z,
+                    #[inline(always)]
+                    |_| gg.g1_over_mu_in(wo),
+                );
+                (g1i, g1o)
+            },
+        );
+        out.fill(value);
     }
 }
 
@@ -573,11 +615,32 @@ fn walter_in<R: Real>(
     d: impl Fn(V3<R>) -> R,
     g1_over_mu: impl Fn(V3<R>) -> R,
 ) -> R {
+    walter_with_g1(
+        wi,
+        wo,
+        eta,
+        d,
+        #[inline(always)]
+        || (g1_over_mu(wi), g1_over_mu(wo)),
+    )
+}
+
+/// [`walter_in`] with the pair G1(ωi)/|μi|, G1(ωo)/|μo| from `g1`, called only where a
+/// lane refracts.
+#[inline(always)]
+fn walter_with_g1<R: Real>(
+    wi: V3<R>,
+    wo: V3<R>,
+    eta: f64,
+    d: impl Fn(V3<R>) -> R,
+    g1: impl FnOnce() -> (R, R),
+) -> R {
     let (r, valid) = refraction_in(wi, wo, eta);
     if !R::any(valid) {
         return R::zero();
     }
-    let value = transmit(&r, eta, d(r.m), g1_over_mu(wi), g1_over_mu(wo));
+    let (g1i_over_mu, g1o_over_mu) = g1();
+    let value = transmit(&r, eta, d(r.m), g1i_over_mu, g1o_over_mu);
     R::select(valid, value, R::zero())
 }
 

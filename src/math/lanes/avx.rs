@@ -97,6 +97,7 @@ macro_rules! avx_type {
         impl Real for $name {
             type Mask = $mask;
             const LANES: usize = $n;
+            const F64: bool = std::mem::size_of::<$t>() == 8;
             #[inline(always)]
             fn splat(x: f64) -> Self {
                 unsafe { $name($set1(x as $t)) }
@@ -421,6 +422,7 @@ impl Avx16 {
 impl Real for Avx16 {
     type Mask = Avx16Mask;
     const LANES: usize = 16;
+    const F64: bool = false;
     #[inline(always)]
     fn splat(x: f64) -> Self {
         unsafe { Avx16(_mm512_set1_ps(x as f32)) }

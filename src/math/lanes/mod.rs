@@ -46,6 +46,9 @@ pub trait Real:
         + Not<Output = Self::Mask>;
     /// How many numbers one value holds.
     const LANES: usize;
+    /// Whether the lanes hold f64 (the reference's arithmetic, which f64 lanes must
+    /// reproduce bit for bit: a shortcut exact only to rounding is for f32 lanes alone).
+    const F64: bool;
     /// Every lane `x` (rounded to the lane's precision).
     fn splat(x: f64) -> Self;
     /// Lane i as f64.
@@ -103,6 +106,7 @@ pub trait Real:
 impl Real for f64 {
     type Mask = bool;
     const LANES: usize = 1;
+    const F64: bool = true;
     #[inline(always)]
     fn splat(x: f64) -> f64 {
         x
@@ -267,6 +271,7 @@ macro_rules! lane_type {
         impl Real for $name {
             type Mask = Lanes<$n>;
             const LANES: usize = $n;
+            const F64: bool = std::mem::size_of::<$t>() == 8;
             #[inline(always)]
             fn splat(x: f64) -> Self {
                 $name([x as $t; $n])
