@@ -290,7 +290,8 @@ impl Kernel for Btdf {
 /// rounding but not bit for bit as f64 lanes must be.
 #[inline(always)]
 fn gg_tabled<R: Real>(p: [f64; 3], dirs: &[LaneDir<R>], n: usize, out: &mut [R]) {
-    let gg = Gg::new(p[0], p[1]);
+    let (gg, row) = (Gg::new(p[0], p[1]), gg_lambda_table().row(p[1]));
+    let row = Some(&row);
     let (mut g_i, mut g_o) = (SlotMemo::default(), SlotMemo::default());
     for (dir, out) in dirs.iter().zip(out.chunks_exact_mut(n.max(1))) {
         let ([slot_i, slot_o], wi, wo) = (dir.mu_slots, dir.wi, dir.wo);
@@ -306,13 +307,13 @@ fn gg_tabled<R: Real>(p: [f64; 3], dirs: &[LaneDir<R>], n: usize, out: &mut [R])
                     slot_i,
                     wi.z,
                     #[inline(always)]
-                    |_| gg.g1_over_mu_in(wi),
+                    |_| gg.g1_over_mu_with(wi, row),
                 );
                 let g1o = g_o.get(
                     slot_o,
                     wo.z,
                     #[inline(always)]
-                    |_| gg.g1_over_mu_in(wo),
+                    |_| gg.g1_over_mu_with(wo, row),
                 );
                 (g1i, g1o)
             },
@@ -567,6 +568,8 @@ impl Kernel for BtdfAniso {
         let tr = AnisoGgx { au: bu, av: bv };
         let beckmann = AnisoBeckmann { au: bu, av: bv };
         let gg = (self.ndf == Ndf::Gg).then(|| AnisoGg::new(bu, bv, p3));
+        // In f32 lanes the Λ table at this p, read four values a lane instead of sixteen.
+        let row = gg.as_ref().filter(|_| !R::F64).map(AnisoGg::row);
         // (Closures marked inline: out of line they would be compiled without the
         // vector extensions of the kernel that calls them.)
         for (_, (wi, wo), out) in lanes(dirs, p.len(), out) {
@@ -579,7 +582,7 @@ impl Kernel for BtdfAniso {
                     #[inline(always)]
                     |m| gg.d_in(m),
                     #[inline(always)]
-                    |w| gg.g1_over_mu_in(w),
+                    |w| gg.g1_over_mu_with(w, row.as_ref()),
                 ),
                 (Ndf::Beckmann, None) => walter_in(
                     li,

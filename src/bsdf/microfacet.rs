@@ -266,19 +266,23 @@ impl Gg {
     /// (μ, μ Λ) with μ Λ = T̂ · J0 · (β sinθ + μ / r_c), T̂ from the table at x = b/(1+b),
     /// b = r_c β tanθ; finite at μ = 0.
     #[inline(always)]
-    fn mu_lambda<R: Real>(&self, w: V3<R>) -> (R, R) {
+    fn mu_lambda<R: Real>(&self, w: V3<R>, row: Option<&LambdaRow>) -> (R, R) {
         let bs = R::splat(self.beta) * (w.x * w.x + w.y * w.y).sqrt();
-        self.mu_lambda_at(w.z.abs(), bs)
+        self.mu_lambda_at(w.z.abs(), bs, row)
     }
 
     /// (μ, μ Λ) at μ = |cos θ| and the width `bs` the direction sees (β sinθ; the
-    /// anisotropic form's projected width, [`super::aniso`]). In lanes the table is read
-    /// lane by lane.
+    /// anisotropic form's projected width, [`super::stretched`]), T̂ from the table at
+    /// this shape p, or from its `row` at p where given (f32 lanes). In lanes the
+    /// table's values are read lane by lane.
     #[inline(always)]
-    pub(super) fn mu_lambda_at<R: Real>(&self, mu: R, bs: R) -> (R, R) {
+    pub(super) fn mu_lambda_at<R: Real>(&self, mu: R, bs: R, row: Option<&LambdaRow>) -> (R, R) {
         let b = bs * R::splat(self.rc);
         let x = b / (mu + b);
-        let t = gg_lambda_table().interpolate_in(self.p, x);
+        let t = match row {
+            Some(row) => row.interpolate_in(x),
+            None => gg_lambda_table().interpolate_in(self.p, x),
+        };
         (mu, t * R::splat(self.j0) * (bs + mu / R::splat(self.rc)))
     }
 
@@ -307,7 +311,13 @@ impl Gg {
     /// [`Masking::g1_over_mu`] over any [`Real`].
     #[inline(always)]
     pub fn g1_over_mu_in<R: Real>(&self, w: V3<R>) -> R {
-        let (mu, mu_lambda) = self.mu_lambda(w);
+        self.g1_over_mu_with(w, None)
+    }
+
+    /// [`Self::g1_over_mu_in`] with T̂ from the table's `row` at this p where given.
+    #[inline(always)]
+    pub fn g1_over_mu_with<R: Real>(&self, w: V3<R>, row: Option<&LambdaRow>) -> R {
+        let (mu, mu_lambda) = self.mu_lambda(w, row);
         R::splat(1.0) / (mu + mu_lambda)
     }
 }
@@ -321,7 +331,7 @@ impl Distribution for Gg {
 
 impl Masking for Gg {
     fn lambda(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(V3::from(w));
+        let (mu, mu_lambda) = self.mu_lambda(V3::from(w), None);
         mu_lambda / mu
     }
 
@@ -432,28 +442,38 @@ impl LambdaTable {
     #[inline(always)]
     pub fn interpolate_in<R: Real>(&self, p: f64, x: R) -> R {
         let stride = self.na + 2;
-        let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
-            * (self.np - 1) as f64;
-        let ip = (fp as usize).min(self.np - 2);
-        let wp = catmull_rom_weights(fp - ip as f64);
-        let fa = x.clamp(0.0, 1.0) * R::splat((self.na - 1) as f64);
-        let mut ia = [0usize; 16];
-        for (j, ia) in ia.iter_mut().enumerate().take(R::LANES) {
-            *ia = (fa.lane(j) as usize).min(self.na - 2);
-        }
-        let wa = catmull_rom_weights_in(fa - R::from_fn(|j| ia[j] as f64));
+        let (ip, wp) = self.p_weights(p);
+        let (ia, wa) = x_weights(self.na, x);
         // Grid node (ip − 1, ia − 1) is stored at (ip, ia).
         let mut t = R::zero();
         for (i, &wpi) in wp.iter().enumerate() {
             let row = &self.data[(ip + i) * stride..];
-            let r = wa[0] * gather(row, &ia, 0)
-                + wa[1] * gather(row, &ia, 1)
-                + wa[2] * gather(row, &ia, 2)
-                + wa[3] * gather(row, &ia, 3);
-            t = t + R::splat(wpi) * r;
+            t = t + R::splat(wpi) * weigh_row(row, &ia, &wa);
         }
         // Cubic overshoot where T̂ leaves 0 must not make Λ negative (G1 > 1).
         t.max(R::zero())
+    }
+
+    /// The table collapsed at shape p ([`LambdaRow`]).
+    pub fn row(&self, p: f64) -> LambdaRow {
+        let (ip, wp) = self.p_weights(p);
+        let mut data = [0.0; GG_NA_STRIDE];
+        for (i, &wpi) in wp.iter().enumerate() {
+            let row = &self.data[(ip + i) * GG_NA_STRIDE..(ip + i + 1) * GG_NA_STRIDE];
+            for (d, &v) in data.iter_mut().zip(row) {
+                *d += wpi * v;
+            }
+        }
+        LambdaRow { data }
+    }
+
+    /// The first of the four grid rows the interpolation at p weighs, and their weights.
+    #[inline(always)]
+    fn p_weights(&self, p: f64) -> (usize, [f64; 4]) {
+        let fp = ((p.ln() - self.ln_p_lo) / (self.ln_p_hi - self.ln_p_lo)).clamp(0.0, 1.0)
+            * (self.np - 1) as f64;
+        let ip = (fp as usize).min(self.np - 2);
+        (ip, catmull_rom_weights(fp - ip as f64))
     }
 
     /// Λ at shape p and a = β tanθ, from the table.
@@ -470,6 +490,46 @@ impl LambdaTable {
     pub fn to_f32(&self) -> Vec<f32> {
         self.data.iter().map(|&v| v as f32).collect()
     }
+}
+
+/// The GG Λ table at one shape p: the four rows the bicubic interpolation weighs in p,
+/// summed once per parameter vector, so that T̂ at x reads four values per lane instead
+/// of sixteen. For f32 lanes: the sums run in another order than
+/// [`LambdaTable::interpolate_in`]'s, so the values are equal to rounding, not bit for bit.
+#[derive(Clone, Debug)]
+pub struct LambdaRow {
+    data: [f64; GG_NA_STRIDE],
+}
+
+impl LambdaRow {
+    /// T̂ at x (the table's clamp and Catmull–Rom weights in x).
+    #[inline(always)]
+    pub fn interpolate_in<R: Real>(&self, x: R) -> R {
+        let (ia, wa) = x_weights(GG_NA, x);
+        weigh_row(&self.data, &ia, &wa).max(R::zero())
+    }
+}
+
+/// Per lane, the first of the four grid columns (of `na`) the interpolation at x weighs,
+/// and their weights.
+#[inline(always)]
+fn x_weights<R: Real>(na: usize, x: R) -> ([usize; 16], [R; 4]) {
+    let fa = x.clamp(0.0, 1.0) * R::splat((na - 1) as f64);
+    let mut ia = [0usize; 16];
+    for (j, ia) in ia.iter_mut().enumerate().take(R::LANES) {
+        *ia = (fa.lane(j) as usize).min(na - 2);
+    }
+    let wa = catmull_rom_weights_in(fa - R::from_fn(|j| ia[j] as f64));
+    (ia, wa)
+}
+
+/// Σ_k wa[k] · row[ia + k] per lane: one row's cubic in x.
+#[inline(always)]
+fn weigh_row<R: Real>(row: &[f64], ia: &[usize; 16], wa: &[R; 4]) -> R {
+    wa[0] * gather(row, ia, 0)
+        + wa[1] * gather(row, ia, 1)
+        + wa[2] * gather(row, ia, 2)
+        + wa[3] * gather(row, ia, 3)
 }
 
 /// Lane j of the result is `row[ia[j] + k]`.

@@ -27,7 +27,9 @@
 //! same surface, so φ0 ranges over [−90°, 90°] and every surface is found with
 //! |φ0| ≤ 45°, away from the bounds; fits report that form ([`Bsdf::frame_params`]).
 
-use super::microfacet::{Distribution, Gg, Masking, C2_MIN, MICROFACET_WGSL};
+use super::microfacet::{
+    gg_lambda_table, Distribution, Gg, LambdaRow, Masking, C2_MIN, MICROFACET_WGSL,
+};
 use super::{ParamDecl, WgslFn};
 use crate::math::lanes::{Real, V3};
 use glam::DVec3;
@@ -244,9 +246,9 @@ impl AnisoGg {
     }
     /// (μ, μΛ) as the isotropic form, with β sinθ → √(β_u² ω_x² + β_v² ω_y²).
     #[inline(always)]
-    fn mu_lambda<R: Real>(&self, w: V3<R>) -> (R, R) {
+    fn mu_lambda<R: Real>(&self, w: V3<R>, row: Option<&LambdaRow>) -> (R, R) {
         let bs = projected2(self.bu, self.bv, w).sqrt();
-        self.shape.mu_lambda_at(w.z.abs(), bs)
+        self.shape.mu_lambda_at(w.z.abs(), bs, row)
     }
     /// [`Distribution::d`] over any [`Real`].
     #[inline(always)]
@@ -260,8 +262,18 @@ impl AnisoGg {
     /// [`Masking::g1_over_mu`] over any [`Real`].
     #[inline(always)]
     pub fn g1_over_mu_in<R: Real>(&self, w: V3<R>) -> R {
-        let (mu, mu_lambda) = self.mu_lambda(w);
+        self.g1_over_mu_with(w, None)
+    }
+    /// [`Self::g1_over_mu_in`] with T̂ from the Λ table's `row` at this p where given
+    /// ([`Self::row`]).
+    #[inline(always)]
+    pub fn g1_over_mu_with<R: Real>(&self, w: V3<R>, row: Option<&LambdaRow>) -> R {
+        let (mu, mu_lambda) = self.mu_lambda(w, row);
         R::splat(1.0) / (mu + mu_lambda)
+    }
+    /// The Λ table at this shape p, for [`Self::g1_over_mu_with`] in f32 lanes.
+    pub fn row(&self) -> LambdaRow {
+        gg_lambda_table().row(self.shape.p)
     }
 }
 
@@ -273,7 +285,7 @@ impl Distribution for AnisoGg {
 
 impl Masking for AnisoGg {
     fn lambda(&self, w: DVec3) -> f64 {
-        let (mu, mu_lambda) = self.mu_lambda(V3::from(w));
+        let (mu, mu_lambda) = self.mu_lambda(V3::from(w), None);
         mu_lambda / mu
     }
     fn g1_over_mu(&self, w: DVec3) -> f64 {
