@@ -692,7 +692,7 @@ mod tests {
         let special = [0.0, -0.0, -1.0, -f32::MIN_POSITIVE, f32::NAN, f32::INFINITY];
         xs.extend(special);
         xs.extend([f32::MAX, f32::MIN_POSITIVE, 1e-45]);
-        while xs.len() % 8 != 0 {
+        while !xs.len().is_multiple_of(8) {
             xs.push(1.0);
         }
         let got = unsafe { run(&xs) };
