@@ -630,6 +630,17 @@ impl Avx for F32x16 {
 mod tests {
     use super::*;
 
+    /// `op` of each run of eight values, in the AVX lanes.
+    #[target_feature(enable = "avx2,fma")]
+    fn in_avx8(xs: &[f32], op: impl Fn(Avx8) -> Avx8) -> Vec<f32> {
+        xs.chunks_exact(8)
+            .flat_map(|c| {
+                let v = op(Avx8(unsafe { _mm256_loadu_ps(c.as_ptr()) }));
+                (0..8).map(move |j| v.lane(j) as f32)
+            })
+            .collect()
+    }
+
     /// arccos of the AVX f32 lanes against f64 on [−1, 1]: within 3e-7 absolute (a few
     /// f32 ulps of values up to π), NaN never passing.
     #[test]
@@ -638,21 +649,12 @@ mod tests {
             eprintln!("no AVX2 on this processor: the AVX lanes are never used here");
             return;
         }
-        #[target_feature(enable = "avx2,fma")]
-        fn run(xs: &[f32]) -> Vec<f32> {
-            xs.chunks_exact(8)
-                .flat_map(|c| {
-                    let v = Avx8(unsafe { _mm256_loadu_ps(c.as_ptr()) }).acos();
-                    (0..8).map(move |j| v.lane(j) as f32)
-                })
-                .collect()
-        }
         let xs: Vec<f32> = (0..16000)
             .map(|k| -1.0 + k as f32 / 8000.0)
             .chain([1.0])
             .collect();
         let xs = &xs[..xs.len() / 8 * 8];
-        let got = unsafe { run(xs) };
+        let got = unsafe { in_avx8(xs, |v| v.acos()) };
         for (&x, &a) in xs.iter().zip(&got) {
             let want = (x as f64).acos();
             assert!(
@@ -672,15 +674,6 @@ mod tests {
             eprintln!("no AVX2 on this processor: the AVX lanes are never used here");
             return;
         }
-        #[target_feature(enable = "avx2,fma")]
-        fn run(xs: &[f32]) -> Vec<f32> {
-            xs.chunks_exact(8)
-                .flat_map(|c| {
-                    let v = Avx8(unsafe { _mm256_loadu_ps(c.as_ptr()) }).ln();
-                    (0..8).map(move |j| v.lane(j) as f32)
-                })
-                .collect()
-        }
         // Every binade (subnormals too) at 64 points, the neighbourhood of 1 densely, and
         // the special values.
         let mut xs: Vec<f32> = (0..64 * 278)
@@ -695,7 +688,7 @@ mod tests {
         while !xs.len().is_multiple_of(8) {
             xs.push(1.0);
         }
-        let got = unsafe { run(&xs) };
+        let got = unsafe { in_avx8(&xs, |v| v.ln()) };
         for (&x, &a) in xs.iter().zip(&got) {
             let want = (x as f64).ln();
             let ok = if want.is_nan() {
