@@ -413,7 +413,7 @@ fn exp_m1_f64(x: __m256d) -> __m256d {
 }
 
 /// Sixteen f32 lanes in one AVX-512 register ([`F32x16`]'s layout). Comparisons give a
-/// mask register (a bit a lane); e^x, e^x − 1 and arccos run the eight-lane polynomials
+/// mask register (a bit a lane); e^x, e^x − 1, ln and arccos run the eight-lane polynomials
 /// on each half, which costs the same instructions per lane.
 #[derive(Clone, Copy, Debug)]
 #[repr(transparent)]
