@@ -15,7 +15,7 @@
 
 use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
 use super::micrograin::{
-    layer, layer_wgsl, weight, weight_in, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0,
+    layer, layer_wgsl, weight, weight_in, Grains, BETA_LO, MICROGRAIN_BASES, RHO_G, TAU0,
 };
 use super::effect::{Adds, Effect};
 use super::{Bsdf, Channels, Entry, Node, ParamDecl, WgslFn};
@@ -43,11 +43,11 @@ impl Kernel for DiffuseMicrograin {
     /// The visibility weight once per direction (τ0 and β are shared).
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
-        let (tau0, beta) = (p.get(0, 0), p.get(0, 1));
+        let grains = Grains::new(p.get(0, 0), p.get(0, 1));
         let zero = R::zero();
         for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
             let below = wi.z.le(zero) | wo.z.le(zero);
-            let w = weight_in(tau0, beta, wi.z, wo.z);
+            let w = weight_in(&grains, wi.z, wo.z);
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 let v = layer(w, R::splat(p.get(i, 2)) * R::splat(FRAC_1_PI), b);
                 *o = R::select(below, zero, v);

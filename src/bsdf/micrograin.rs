@@ -110,6 +110,27 @@ pub fn lambda0(tau0: f64) -> f64 {
     -(-tau0).ln_1p()
 }
 
+/// The grains' shared parameters clamped to their ranges, with Λ0 taken once per
+/// parameter vector: in a lane kernel, libm's `log1p` once per lane group was 5 % of a
+/// micrograin model's time.
+#[derive(Clone, Copy, Debug)]
+pub struct Grains {
+    tau0: f64,
+    beta: f64,
+    l0: f64,
+}
+
+impl Grains {
+    pub fn new(tau0: f64, beta: f64) -> Grains {
+        let tau0 = clamp_tau(tau0);
+        Grains {
+            tau0,
+            beta: clamp_beta(beta),
+            l0: lambda0(tau0),
+        }
+    }
+}
+
 /// γβ(θ) = √(β² sin²θ + cos²θ): projected area of a (1, 1, β) ellipsoid seen from θ, over π.
 pub fn gamma_beta(beta: f64, mu: f64) -> f64 {
     gamma_beta_in(beta, mu)
@@ -124,29 +145,28 @@ fn gamma_beta_in<R: Real>(beta: f64, mu: R) -> R {
 
 /// Visibility weight w of the grains (Eqs. 21–23): 1 − (1 − τ0)^{½(γβ(θi)/μi + γβ(θo)/μo)}.
 pub fn weight(tau0: f64, beta: f64, mu_i: f64, mu_o: f64) -> f64 {
-    weight_in(tau0, beta, mu_i, mu_o)
+    weight_in(&Grains::new(tau0, beta), mu_i, mu_o)
 }
 
 /// [`weight`] over any [`Real`].
 #[inline(always)]
-pub fn weight_in<R: Real>(tau0: f64, beta: f64, mu_i: R, mu_o: R) -> R {
-    let (tau0, beta) = (clamp_tau(tau0), clamp_beta(beta));
+pub fn weight_in<R: Real>(g: &Grains, mu_i: R, mu_o: R) -> R {
+    let beta = g.beta;
     let mi = mu_i.abs().clamp(MU_MIN, 1.0);
     let mo = mu_o.abs().clamp(MU_MIN, 1.0);
     let e = R::splat(0.5) * (gamma_beta_in(beta, mi) / mi + gamma_beta_in(beta, mo) / mo);
-    (-(R::splat(-lambda0(tau0)) * e).exp_m1()).clamp(0.0, 1.0)
+    (-(R::splat(-g.l0) * e).exp_m1()).clamp(0.0, 1.0)
 }
 
 /// Micrograin NDF (Eq. 17) at the unit micro-normal `h` (local frame).
 pub fn ndf(tau0: f64, beta: f64, h: DVec3) -> f64 {
-    ndf_in(tau0, beta, h.into())
+    ndf_in(&Grains::new(tau0, beta), h.into())
 }
 
 /// [`ndf`] over any [`Real`].
 #[inline(always)]
-fn ndf_in<R: Real>(tau0: f64, beta: f64, h: V3<R>) -> R {
-    let (tau0, beta) = (clamp_tau(tau0), clamp_beta(beta));
-    let l0 = lambda0(tau0);
+fn ndf_in<R: Real>(g: &Grains, h: V3<R>) -> R {
+    let (tau0, beta, l0) = (g.tau0, g.beta, g.l0);
     let (c2, s2) = (h.z * h.z, h.x * h.x + h.y * h.y);
     let u = s2 / (R::splat(beta * beta) * c2 + s2);
     let d = R::splat(l0 / tau0) * (R::splat(-l0) * u).exp() * ggx_d(beta, h);
@@ -154,17 +174,17 @@ fn ndf_in<R: Real>(tau0: f64, beta: f64, h: V3<R>) -> R {
 }
 
 /// (σ, S) with σ = μ/γβ and S = Λ·σ, from the first `terms` terms of the Λ series.
-/// Expects clamped τ0, β. In lanes, a lane whose series has converged adds no more
+/// In lanes, a lane whose series has converged adds no more
 /// terms while the others go on.
 #[inline(always)]
-fn lambda_parts_n<R: Real>(tau0: f64, beta: f64, mu: R, terms: usize) -> (R, R) {
+fn lambda_parts_n<R: Real>(grains: &Grains, mu: R, terms: usize) -> (R, R) {
+    let (tau0, beta, l0) = (grains.tau0, grains.beta, grains.l0);
     let one = R::splat(1.0);
     let mu = mu.clamp(0.0, 1.0);
     let s2 = (one - mu * mu).max(R::zero());
     let g = (R::splat(beta * beta) * s2 + mu * mu).sqrt();
     let sn = mu / g;
     let c2 = R::splat(beta * beta) * s2 / (g * g);
-    let l0 = lambda0(tau0);
     let mut wk = l0 * (1.0 - tau0) / tau0; // w_0 = Λ0/(e^{Λ0} − 1)
     let mut c2k = one; // c^{2k}
     let mut j = c2 / (one + sn); // J_0 = 1 − σ, without cancellation
@@ -218,7 +238,7 @@ const SERIES: [SeriesTerm; LAMBDA_TERMS] = {
 };
 
 fn lambda_parts(tau0: f64, beta: f64, mu: f64) -> (f64, f64) {
-    lambda_parts_n(clamp_tau(tau0), clamp_beta(beta), mu, LAMBDA_TERMS)
+    lambda_parts_n(&Grains::new(tau0, beta), mu, LAMBDA_TERMS)
 }
 
 /// Smith Λ of the micrograin NDF at direction cosine μ (infinite at μ = 0).
@@ -239,14 +259,14 @@ pub fn g1(tau0: f64, beta: f64, mu: f64) -> f64 {
 
 /// G1(μ)/μ = 1/(γβ (σ + S)), finite as μ → 0.
 pub fn g1_over_mu(tau0: f64, beta: f64, mu: f64) -> f64 {
-    g1_over_mu_in(tau0, beta, mu)
+    g1_over_mu_in(&Grains::new(tau0, beta), mu)
 }
 
 /// [`g1_over_mu`] over any [`Real`].
 #[inline(always)]
-fn g1_over_mu_in<R: Real>(tau0: f64, beta: f64, mu: R) -> R {
-    let (sn, s) = lambda_parts_n(clamp_tau(tau0), clamp_beta(beta), mu, LAMBDA_TERMS);
-    R::splat(1.0) / (gamma_beta_in(clamp_beta(beta), mu.clamp(0.0, 1.0)) * (sn + s))
+fn g1_over_mu_in<R: Real>(g: &Grains, mu: R) -> R {
+    let (sn, s) = lambda_parts_n(g, mu, LAMBDA_TERMS);
+    R::splat(1.0) / (gamma_beta_in(g.beta, mu.clamp(0.0, 1.0)) * (sn + s))
 }
 
 /// Rough dielectric grain (rmg): F(ωi·h) D(h) G1(μi) G1(μo)/(4 μi μo) plus
@@ -298,7 +318,12 @@ impl<R: Real> Default for RoughGrainMemo<R> {
 impl RoughGrain {
     pub fn at(tau0: f64, beta: f64, eta_g: f64, wi: DVec3, wo: DVec3) -> RoughGrain {
         let dir = LaneDir::new(wi.into(), wo.into());
-        Self::at_memo(&mut RoughGrainMemo::default(), tau0, beta, eta_g, &dir)
+        Self::at_memo(
+            &mut RoughGrainMemo::default(),
+            &Grains::new(tau0, beta),
+            eta_g,
+            &dir,
+        )
     }
 }
 
@@ -308,8 +333,7 @@ impl<R: Real> RoughGrain<R> {
     #[inline(always)]
     pub fn at_memo(
         memo: &mut RoughGrainMemo<R>,
-        tau0: f64,
-        beta: f64,
+        grains: &Grains,
         eta_g: f64,
         dir: &LaneDir<R>,
     ) -> RoughGrain<R> {
@@ -342,18 +366,18 @@ impl<R: Real> RoughGrain<R> {
         let h = V3::new(hs.x / hl, hs.y / hl, hs.z / hl);
         let cd = wi.dot(h).clamp(0.0, 1.0);
         let spec = fresnel_dielectric_in(cd, eta)
-            * ndf_in(tau0, beta, h)
+            * ndf_in(grains, h)
             * memo.g_i.get(
                 slot_i,
                 mu_i,
                 #[inline(always)]
-                |mu| g1_over_mu_in(tau0, beta, mu),
+                |mu| g1_over_mu_in(grains, mu),
             )
             * memo.g_o.get(
                 slot_o,
                 mu_o,
                 #[inline(always)]
-                |mu| g1_over_mu_in(tau0, beta, mu),
+                |mu| g1_over_mu_in(grains, mu),
             )
             * R::splat(0.25);
         RoughGrain {
@@ -536,7 +560,7 @@ mod tests {
     #[test]
     fn lambda_series_truncation() {
         let g1n = |t: f64, b: f64, mu: f64, n: usize| {
-            let (sn, s) = lambda_parts_n(t, b, mu, n);
+            let (sn, s) = lambda_parts_n(&Grains::new(t, b), mu, n);
             sn / (sn + s)
         };
         let mut worst7 = 0.0f64;

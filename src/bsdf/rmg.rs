@@ -21,7 +21,7 @@
 
 use super::kernel::{lanes, Kernel, LaneChildren, LaneDir};
 use super::micrograin::{
-    layer, layer_wgsl, rough_grain, weight, weight_in, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G,
+    layer, layer_wgsl, rough_grain, weight, weight_in, Grains, RoughGrain, RoughGrainMemo, BETA_LO, ETA_G,
     MICROGRAIN_BASES, RHO_G, TAU0,
 };
 use super::effect::{Adds, Effect};
@@ -69,7 +69,7 @@ impl Kernel for RoughMicrograin {
     /// The weight and the grain's specular term and transmittances once per direction.
     #[inline(always)]
     fn block<R: Real>(&self, p: Channels, dirs: &[LaneDir<R>], base: LaneChildren<R>, out: &mut [R]) {
-        let (tau0, beta, eta_g) = (p.get(0, 0), p.get(0, 1), p.get(0, 3));
+        let (grains, eta_g) = (Grains::new(p.get(0, 0), p.get(0, 1)), p.get(0, 3));
         let mut memo = RoughGrainMemo::default();
         let zero = R::zero();
         for (d, (wi, wo), out) in lanes(dirs, p.len(), out) {
@@ -78,8 +78,8 @@ impl Kernel for RoughMicrograin {
                 out.fill(zero);
                 continue;
             }
-            let w = weight_in(tau0, beta, wi.z, wo.z);
-            let grain = RoughGrain::at_memo(&mut memo, tau0, beta, eta_g, &dirs[d]);
+            let w = weight_in(&grains, wi.z, wo.z);
+            let grain = RoughGrain::at_memo(&mut memo, &grains, eta_g, &dirs[d]);
             for (i, (o, &b)) in out.iter_mut().zip(base.at(0, d)).enumerate() {
                 *o = R::select(above, layer(w, grain.value(R::splat(p.get(i, 2))), b), zero);
             }
