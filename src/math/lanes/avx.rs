@@ -1,8 +1,9 @@
 //! Lane types of the same layout as [`F32x8`], [`F64x4`] and [`F32x16`] whose operations
-//! are AVX instructions: kernels run in them inside the functions compiled for AVX2 or
-//! AVX-512 (`bsdf::kernel::run_lanes`), where an explicit instruction per operation leaves
-//! nothing to the compiler's vectorizer (which kept part of the array form scalar).
-//! Never used outside such a function ([`Avx16`] only inside the AVX-512 one).
+//! are AVX instructions (and FMA): kernels run in them inside the functions compiled for
+//! AVX2 + FMA or AVX-512 (`bsdf::kernel::run_lanes`), where an explicit instruction per
+//! operation leaves nothing to the compiler's vectorizer (which kept part of the array
+//! form scalar). Never used outside such a function ([`Avx16`] only inside the AVX-512
+//! one).
 
 use super::{F32x16, F32x8, F64x4, Real};
 use std::arch::x86_64::*;
@@ -16,7 +17,7 @@ macro_rules! avx_type {
      blend $blend:ident, and $and:ident, or $or:ident, xor $xor:ident,
      andnot $andnot:ident, movemask $movemask:ident,
      exp $exp:ident, exp_m1 $exp_m1:ident, acos $acos:ident, ln $ln:ident,
-     powf $powf:ident) => {
+     powf $powf:ident, mul_add $mul_add:ident) => {
         #[derive(Clone, Copy, Debug)]
         #[repr(transparent)]
         pub struct $name(pub $reg);
@@ -162,6 +163,10 @@ macro_rules! avx_type {
                 $name($powf(self.0, e))
             }
             #[inline(always)]
+            fn mul_add(self, a: Self, b: Self) -> Self {
+                $name($mul_add(self.0, a.0, b.0))
+            }
+            #[inline(always)]
             fn lt(self, o: Self) -> $mask {
                 unsafe { $mask($cmp::<_CMP_LT_OQ>(self.0, o.0)) }
             }
@@ -204,13 +209,29 @@ avx_type!(Avx8, Avx8Mask, __m256, f32, 8, F32x8,
     sqrt _mm256_sqrt_ps, min _mm256_min_ps, max _mm256_max_ps, set1 _mm256_set1_ps,
     cmp _mm256_cmp_ps, blend _mm256_blendv_ps, and _mm256_and_ps, or _mm256_or_ps,
     xor _mm256_xor_ps, andnot _mm256_andnot_ps, movemask _mm256_movemask_ps,
-    exp exp_f32, exp_m1 exp_m1_f32, acos acos_f32, ln ln_f32, powf pow_f32);
+    exp exp_f32, exp_m1 exp_m1_f32, acos acos_f32, ln ln_f32, powf pow_f32,
+    mul_add fused_f32);
 avx_type!(Avx4d, Avx4dMask, __m256d, f64, 4, F64x4,
     add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
     sqrt _mm256_sqrt_pd, min _mm256_min_pd, max _mm256_max_pd, set1 _mm256_set1_pd,
     cmp _mm256_cmp_pd, blend _mm256_blendv_pd, and _mm256_and_pd, or _mm256_or_pd,
     xor _mm256_xor_pd, andnot _mm256_andnot_pd, movemask _mm256_movemask_pd,
-    exp exp_f64, exp_m1 exp_m1_f64, acos acos_f64, ln ln_f64, powf pow_f64);
+    exp exp_f64, exp_m1 exp_m1_f64, acos acos_f64, ln ln_f64, powf pow_f64,
+    mul_add unfused_f64);
+
+/// a · b + c in eight f32 lanes, one rounding (FMA).
+#[inline(always)]
+fn fused_f32(a: __m256, b: __m256, c: __m256) -> __m256 {
+    // SAFETY: FMA is enabled with AVX2 in every function these types run in.
+    unsafe { _mm256_fmadd_ps(a, b, c) }
+}
+
+/// a · b + c in four f64 lanes, rounded twice (the reference's operations).
+#[inline(always)]
+fn unfused_f64(a: __m256d, b: __m256d, c: __m256d) -> __m256d {
+    // SAFETY: as fused_f32.
+    unsafe { _mm256_add_pd(_mm256_mul_pd(a, b), c) }
+}
 
 /// e^x in eight f32 lanes: x = n ln 2 + r (Cody–Waite, |r| ≤ ½ ln 2), e^r by the
 /// degree-7 polynomial of Cephes' `expf`, 2^n by the exponent bits; x clamped to
@@ -219,7 +240,8 @@ avx_type!(Avx4d, Avx4dMask, __m256d, f64, 4, F64x4,
 /// evaluation.
 #[inline(always)]
 fn exp_f32(x: __m256) -> __m256 {
-    // SAFETY: AVX2 instructions only, inside AVX2 functions (module comment).
+    // SAFETY: AVX2 and FMA instructions only, inside the functions compiled for both
+    // (module comment).
     unsafe {
         // Below −87.3 the result (subnormal or 0) is returned as 0.
         let tiny = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(-87.3));
@@ -230,8 +252,8 @@ fn exp_f32(x: __m256) -> __m256 {
         let n = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(
             _mm256_mul_ps(x, _mm256_set1_ps(std::f32::consts::LOG2_E)),
         );
-        let r = _mm256_sub_ps(x, _mm256_mul_ps(n, _mm256_set1_ps(0.693_359_4)));
-        let r = _mm256_sub_ps(r, _mm256_mul_ps(n, _mm256_set1_ps(-2.121_944_4e-4)));
+        let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(0.693_359_4), x);
+        let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(-2.121_944_4e-4), r);
         let mut p = _mm256_set1_ps(1.987_569_1e-4);
         for k in [
             1.398_199_9e-3,
@@ -240,10 +262,10 @@ fn exp_f32(x: __m256) -> __m256 {
             0.166_666_65,
             0.5,
         ] {
-            p = _mm256_add_ps(_mm256_mul_ps(p, r), _mm256_set1_ps(k));
+            p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(k));
         }
         let p = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(p, r), r), r),
+            _mm256_fmadd_ps(_mm256_mul_ps(p, r), r, r),
             _mm256_set1_ps(1.0),
         );
         // 2^128 has no f32 (x above 88.38 rounds to n = 128): 2^127 and p doubled.
@@ -274,7 +296,7 @@ fn exp_m1_f32(x: __m256) -> __m256 {
             0.5,
             1.0,
         ] {
-            p = _mm256_add_ps(_mm256_mul_ps(p, x), _mm256_set1_ps(k));
+            p = _mm256_fmadd_ps(p, x, _mm256_set1_ps(k));
         }
         let small = _mm256_mul_ps(p, x);
         let large = _mm256_sub_ps(exp_f32(x), _mm256_set1_ps(1.0));
@@ -326,15 +348,12 @@ fn ln_f32(x: __m256) -> __m256 {
             -2.499_999_4e-1,
             3.333_333e-1,
         ] {
-            p = _mm256_add_ps(_mm256_mul_ps(p, t), _mm256_set1_ps(k));
+            p = _mm256_fmadd_ps(p, t, _mm256_set1_ps(k));
         }
         let y = _mm256_mul_ps(_mm256_mul_ps(p, t), t2);
-        let y = _mm256_add_ps(y, _mm256_mul_ps(e, _mm256_set1_ps(-2.121_944_4e-4)));
-        let y = _mm256_sub_ps(y, _mm256_mul_ps(_mm256_set1_ps(0.5), t2));
-        let r = _mm256_add_ps(
-            _mm256_add_ps(t, y),
-            _mm256_mul_ps(e, _mm256_set1_ps(0.693_359_4)),
-        );
+        let y = _mm256_fmadd_ps(e, _mm256_set1_ps(-2.121_944_4e-4), y);
+        let y = _mm256_fnmadd_ps(_mm256_set1_ps(0.5), t2, y);
+        let r = _mm256_fmadd_ps(e, _mm256_set1_ps(0.693_359_4), _mm256_add_ps(t, y));
         // libm's special values: ln 0 = −∞, ln(x < 0) = NaN, ln NaN = NaN, ln ∞ = ∞.
         let zero = _mm256_setzero_ps();
         let r = _mm256_blendv_ps(
@@ -434,10 +453,10 @@ fn acos_f32(x: __m256) -> __m256 {
         let s = _mm256_blendv_ps(a, _mm256_sqrt_ps(z_big), big);
         let mut p = _mm256_set1_ps(4.216_32e-2);
         for k in [2.418_131e-2, 4.547_002_6e-2, 7.495_300_3e-2, 0.166_667_52] {
-            p = _mm256_add_ps(_mm256_mul_ps(p, z), _mm256_set1_ps(k));
+            p = _mm256_fmadd_ps(p, z, _mm256_set1_ps(k));
         }
         // asin of s: s + s z P(z).
-        let asin = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(p, z), s), s);
+        let asin = _mm256_fmadd_ps(_mm256_mul_ps(p, z), s, s);
         let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_setzero_ps());
         // |x| ≤ ½: π/2 − sign(x) asin|x|.
         let signed = _mm256_blendv_ps(asin, _mm256_sub_ps(_mm256_setzero_ps(), asin), negative);
@@ -633,6 +652,10 @@ impl Real for Avx16 {
     fn powf(self, e: f64) -> Self {
         let (lo, hi) = self.halves();
         Self::join((pow_f32(lo, e), pow_f32(hi, e)))
+    }
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        unsafe { Avx16(_mm512_fmadd_ps(self.0, a.0, b.0)) }
     }
     #[inline(always)]
     fn lt(self, o: Self) -> Avx16Mask {
