@@ -93,6 +93,9 @@ pub(super) struct LaneDirs {
     /// squared term's √w taken into a and g(y): w (a y′ − g(y))² = (√w a y′ − √w g(y))²,
     /// one product less per row.
     terms: LossTerms,
+    /// A squared term's √w·a and √w·g(y) in f32 for f32 lanes ([`SquareSum32`]; `terms`
+    /// then keeps no f64 copies of them).
+    square32: Option<(Vec<f32>, Vec<f32>)>,
     /// The children's lane values the largest block needs ([`Model::scratch_len`]).
     scratch_len: usize,
 }
@@ -166,12 +169,18 @@ impl LaneDirs {
                 *gy *= s;
             }
         }
+        let square32 =
+            (terms.term == Term::Square && !matches!(kind, LaneKind::F64x4)).then(|| {
+                let f32s = |v: &mut Vec<f64>| std::mem::take(v).iter().map(|&x| x as f32).collect();
+                (f32s(&mut terms.a), f32s(&mut terms.gy))
+            });
         let widest = blocks.iter().map(|b| b.n * b.dirs.len().div_ceil(l)).max();
         LaneDirs {
             dirs,
             at,
             values_at,
             terms,
+            square32,
             scratch_len: model.scratch_len(widest.unwrap_or(0)),
         }
     }
@@ -287,6 +296,20 @@ impl<'a> Part<'a> {
         let t = &lanes.terms;
         let (blocks, t_w) = (w.blocks.clone(), &t.w[..]);
         match t.term {
+            Term::Square if lanes.square32.is_some() => {
+                let (a, gy) = lanes.square32.as_ref().expect("matched");
+                let mut sum = SquareSum32 {
+                    acc: [0.0; SPLIT],
+                    a,
+                    gy,
+                };
+                match &lanes.dirs {
+                    LaneVec::F32x8(d) => self.blocks_in(d, lanes, blocks, scratch, &mut sum),
+                    LaneVec::F32x16(d) => self.blocks_in(d, lanes, blocks, scratch, &mut sum),
+                    LaneVec::F64x4(_) => unreachable!("f64 lanes keep the f64 terms"),
+                }
+                sum.acc.iter().sum()
+            }
             // a and gy hold √w·a and √w·g(y) here (LaneDirs::terms).
             Term::Square => {
                 self.sum_in_lanes(lanes, blocks, scratch, [&t.a, &t.gy], |v, [a, gy]| {
@@ -374,6 +397,46 @@ impl<F: FnMut(usize, &[f64])> BlockSink for InRows<'_, F> {
 
 /// Partial sums of the SIMD engine's loss ([`Part::cost_sum_split`]).
 const SPLIT: usize = 16;
+
+/// Lane values summed in f32 between two additions to the f64 sums of [`SquareSum32`]:
+/// each f32 partial sum then holds at most 64 terms, 64 ε of relative error at worst.
+const F32_RUN: usize = 64;
+
+/// [`SplitSum`] of a squared term (√w a y′ − √w g(y))² in f32 lanes: the residual and
+/// its square in f32 with partial sums of [`F32_RUN`] lane values, widened to f64 only
+/// there. Widening every value first took three times the instructions (a seventh of
+/// `ggx`'s time). The residual's f32 rounding is of the order of the f32 model value's
+/// own, so the sum keeps the engine's accuracy (`REL_COST` of the parity tests).
+struct SquareSum32<'c> {
+    acc: [f64; SPLIT],
+    a: &'c [f32],
+    gy: &'c [f32],
+}
+
+impl BlockSink for SquareSum32<'_> {
+    #[inline(always)]
+    fn block<R: Real>(&mut self, _: &Block, start: usize, values: &[R], _: &mut Vec<f64>) {
+        let l = R::LANES;
+        let end = start + values.len() * l;
+        let (a, gy) = (&self.a[start..end], &self.gy[start..end]);
+        for (r, run) in values.chunks(F32_RUN).enumerate() {
+            let mut part = [0f32; SPLIT];
+            for (s, chunk) in run.chunks(SPLIT / l).enumerate() {
+                let at = (r * F32_RUN + s * (SPLIT / l)) * l;
+                let (a, gy) = (&a[at..at + chunk.len() * l], &gy[at..at + chunk.len() * l]);
+                for (u, v) in chunk.iter().enumerate() {
+                    for j in 0..l {
+                        let d = a[u * l + j] * v.lane(j) as f32 - gy[u * l + j];
+                        part[u * l + j] += d * d;
+                    }
+                }
+            }
+            for (acc, p) in self.acc.iter_mut().zip(part) {
+                *acc += p as f64;
+            }
+        }
+    }
+}
 
 /// Σ `term(value, constants)` of each value in lane order (its entry of each column of
 /// `cols` the constants), value k of a block into `acc[k mod SPLIT]`: with eight lanes,
