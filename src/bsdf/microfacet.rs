@@ -118,8 +118,8 @@ pub fn ggx_reflection<R: Real>(alpha: R, wi: V3<R>, wo: V3<R>, m: V3<R>) -> R {
     let zero = R::zero();
     let masked = m.z.le(zero) | (wi.dot(m) * wi.z).le(zero) | (wo.dot(m) * wo.z).le(zero);
     let a2 = alpha * alpha;
-    let (c2, s2) = (m.z * m.z, m.x * m.x + m.y * m.y);
-    let (t, m2) = (a2 * c2 + s2, c2 + s2);
+    let (c2, s2) = (m.z * m.z, m.x.mul_add(m.x, m.y * m.y));
+    let (t, m2) = (a2.mul_add(c2, s2), c2 + s2);
     let value = a2 * (m2 * m2) / (R::splat(PI) * t * t * ggx_r(a2, wi) * ggx_r(a2, wo));
     R::select(masked, zero, value)
 }
@@ -128,7 +128,7 @@ pub fn ggx_reflection<R: Real>(alpha: R, wi: V3<R>, wo: V3<R>, m: V3<R>) -> R {
 #[inline(always)]
 fn ggx_r<R: Real>(a2: R, w: V3<R>) -> R {
     let mu = w.z.abs();
-    mu + (mu * mu + a2 * (w.x * w.x + w.y * w.y)).sqrt()
+    mu + mu.mul_add(mu, a2 * w.x.mul_add(w.x, w.y * w.y)).sqrt()
 }
 
 impl Masking for Ggx {

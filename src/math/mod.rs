@@ -49,7 +49,7 @@ pub fn fresnel_dielectric(cos_i: f64, eta: f64) -> f64 {
 #[inline(always)]
 pub fn fresnel_dielectric_in<R: Real>(cos_i: R, eta: R) -> R {
     let c = cos_i.abs();
-    let g2 = eta * eta - R::splat(1.0) + c * c;
+    let g2 = c.mul_add(c, eta * eta - R::splat(1.0));
     // g² ≤ 0: total internal reflection (only possible for eta < 1).
     let tir = g2.le(R::zero());
     let g = g2.sqrt();
@@ -57,9 +57,10 @@ pub fn fresnel_dielectric_in<R: Real>(cos_i: R, eta: R) -> R {
     // over one common denominator: one division instead of two (the CPU backend evaluates
     // this once per sample direction; d ≥ 1 − c² > 0 and g + c > 0 past the test above).
     let (gm, gp) = (g - c, g + c);
-    let n = c * gp - R::splat(1.0);
-    let d = c * gm + R::splat(1.0);
-    let f = (R::splat(0.5) * gm * gm * (d * d + n * n) / (gp * gp * (d * d))).clamp(0.0, 1.0);
+    // (x.mul_add(y, z) is x·y + z, fused in f32 lanes only: the reference keeps its bits.)
+    let n = c.mul_add(gp, R::splat(-1.0));
+    let d = c.mul_add(gm, R::splat(1.0));
+    let f = (R::splat(0.5) * gm * gm * d.mul_add(d, n * n) / (gp * gp * (d * d))).clamp(0.0, 1.0);
     R::select(tir, R::splat(1.0), f)
 }
 
@@ -77,7 +78,7 @@ pub fn fresnel_transmittance(cos_i: f64, eta: f64) -> f64 {
 #[inline(always)]
 pub fn fresnel_transmittance_in<R: Real>(cos_i: R, eta: R) -> R {
     let c = cos_i.abs();
-    let g2 = eta * eta - R::splat(1.0) + c * c;
+    let g2 = c.mul_add(c, eta * eta - R::splat(1.0));
     // g² ≤ 0: total internal reflection (only possible for eta < 1).
     let tir = g2.le(R::zero());
     let g = g2.sqrt();
@@ -85,8 +86,9 @@ pub fn fresnel_transmittance_in<R: Real>(cos_i: R, eta: R) -> R {
     // 2cg (1/s² + η²/p²), s = c + g, p = η²c + g, over one common denominator (one
     // division instead of two; still a sum of positive terms).
     let s2 = (c + g) * (c + g);
-    let p2 = (e2 * c + g) * (e2 * c + g);
-    let t = (R::splat(2.0) * c * g * (p2 + e2 * s2) / (s2 * p2)).clamp(0.0, 1.0);
+    let p = e2.mul_add(c, g);
+    let p2 = p * p;
+    let t = (R::splat(2.0) * c * g * e2.mul_add(s2, p2) / (s2 * p2)).clamp(0.0, 1.0);
     R::select(tir, R::zero(), t)
 }
 
