@@ -176,10 +176,11 @@ fn diagnose_names_the_bodys_profile() {
     }
 }
 
-/// The diagnosis's report pictures the fitted profile of each step with `+body`
+/// The diagnosis's report pictures the tabulated factors of each step that has any
 /// (`factors_<step>.svg`, with the smoothness prior's weight stated beside it) and of no
-/// other step; the body's panel holds the knots the data see, their band, and the
-/// analytic reference ρ ≡ 1 of the base.
+/// other step; at a step with `+body` the body's panel holds the knots the data see, their
+/// band, and the analytic reference ρ ≡ 1 of the base. (A path may take `+fresnel` before
+/// `+body`: that step's picture shows the Fresnel curve.)
 fn report_pictures_the_profile(
     data: &bsdfit::data::Dataset,
     d: &bsdfit::workflows::diagnose::Diagnosis,
@@ -190,15 +191,20 @@ fn report_pictures_the_profile(
     let html = std::fs::read_to_string(dir.path().join("index.html")).unwrap();
     for (i, s) in d.steps.iter().enumerate() {
         let picture = dir.path().join(format!("factors_{i}.svg"));
-        let has_body = s.model.contains("+body");
-        assert_eq!(picture.exists(), has_body, "step {i}: {}", s.model);
-        if !has_body {
+        let has_factors = ["+body", "+fresnel", "+ndf"]
+            .iter()
+            .any(|f| s.model.contains(f));
+        assert_eq!(picture.exists(), has_factors, "step {i}: {}", s.model);
+        if !has_factors {
+            continue;
+        }
+        assert!(html.contains(&format!("factors_{i}.svg")));
+        assert!(html.contains("σ_s = "), "the prior's weight is stated");
+        if !s.model.contains("+body") {
             continue;
         }
         let svg = std::fs::read_to_string(&picture).unwrap();
         assert!(svg.contains("profile"), "step {i}: the panel's title");
-        assert!(html.contains(&format!("factors_{i}.svg")));
-        assert!(html.contains("σ_s = "), "the prior's weight is stated");
         let panels = factor_panels(data, &s.fit, None);
         let bodies: Vec<_> = panels
             .iter()

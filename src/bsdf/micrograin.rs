@@ -173,9 +173,8 @@ fn ndf_in<R: Real>(g: &Grains, h: V3<R>) -> R {
     R::select(h.z.le(R::zero()), R::zero(), d)
 }
 
-/// (σ, S) with σ = μ/γβ and S = Λ·σ, from the first `terms` terms of the Λ series.
-/// In lanes, a lane whose series has converged adds no more
-/// terms while the others go on.
+/// (σ, S) with σ = μ/γβ and S = Λ·σ, from the first `terms` terms of the Λ series. In
+/// lanes, a lane whose series has converged adds no more terms while the others go on.
 #[inline(always)]
 fn lambda_parts_n<R: Real>(grains: &Grains, mu: R, terms: usize) -> (R, R) {
     let (tau0, beta, l0) = (grains.tau0, grains.beta, grains.l0);
