@@ -243,8 +243,9 @@ fn exp_f32(x: __m256) -> __m256 {
     // SAFETY: AVX2 and FMA instructions only, inside the functions compiled for both
     // (module comment).
     unsafe {
-        // Below −87.3 the result (subnormal or 0) is returned as 0.
+        // Below −87.3 the result (subnormal or 0) is returned as 0, above ln f32::MAX ∞.
         let tiny = _mm256_cmp_ps::<_CMP_LT_OQ>(x, _mm256_set1_ps(-87.3));
+        let huge = _mm256_cmp_ps::<_CMP_GT_OQ>(x, _mm256_set1_ps(88.722_84));
         let x = _mm256_min_ps(
             _mm256_max_ps(x, _mm256_set1_ps(-87.3)),
             _mm256_set1_ps(88.722_84),
@@ -276,7 +277,11 @@ fn exp_f32(x: __m256) -> __m256 {
             _mm256_cvtps_epi32(n),
             _mm256_set1_epi32(127),
         ));
-        _mm256_andnot_ps(tiny, _mm256_mul_ps(p, _mm256_castsi256_ps(bits)))
+        _mm256_blendv_ps(
+            _mm256_andnot_ps(tiny, _mm256_mul_ps(p, _mm256_castsi256_ps(bits))),
+            _mm256_set1_ps(f32::INFINITY),
+            huge,
+        )
     }
 }
 
@@ -406,11 +411,7 @@ fn pow_f32(x: __m256, e: f64) -> __m256 {
     unsafe {
         let sign = _mm256_set1_ps(-0.0);
         let y = _mm256_mul_ps(ln_f32(_mm256_andnot_ps(sign, x)), _mm256_set1_ps(e));
-        let r = _mm256_blendv_ps(
-            exp_f32(y),
-            _mm256_set1_ps(f32::INFINITY),
-            _mm256_cmp_ps::<_CMP_GT_OQ>(y, _mm256_set1_ps(88.722_84)),
-        );
+        let r = exp_f32(y);
         let r = if !integer {
             // (−∞ excepted: (−∞)^e is ∞^e for an e not an odd integer.)
             let negative = _mm256_and_ps(
