@@ -3,8 +3,8 @@
 // C(mu)) of that same D, C read from a 65-entry table at mu_j = (j/64)^2. f32 twin of
 // src/bsdf/ndf.rs, which documents the distribution, the knots and the quadrature. A
 // candidate's table is built by its node's prepare function after the candidate is loaded
-// (into NDF_TABLE for the highlight of ggx or fa, COAT_NDF_TABLE for a coat: a model has
-// at most one of each); without the prepared constant, per record.
+// (into NDF_TABLE for the highlight of ggx or fa or the lobe of btdf(tr), COAT_NDF_TABLE
+// for a coat: a model has at most one of each); without the prepared constant, per record.
 
 const NDF_KNOTS: u32 = 16u;
 const NDF_MU_POINTS: u32 = 65u;
@@ -141,10 +141,9 @@ fn ndf_c(tab: ptr<private, NdfTable>, mu: f32) -> f32 {
     return (*tab).c[j] + f * ((*tab).c[j + 1u] - (*tab).c[j]);
 }
 
-// D(h) G1(wi) G1(wo) / (4 mu_i mu_o) at m = any positive multiple of the half vector, with
-// the chi+ side tests of Smith G1; wi and wo above the surface.
-fn ndf_reflection(tab: ptr<private, NdfTable>, wi: vec3<f32>, wo: vec3<f32>, m: vec3<f32>) -> f32 {
-    if (m.z <= 0.0 || dot(wi, m) * wi.z <= 0.0 || dot(wo, m) * wo.z <= 0.0) {
+// D at m = any positive multiple of a unit normal (0 for m.z <= 0).
+fn ndf_d(tab: ptr<private, NdfTable>, m: vec3<f32>) -> f32 {
+    if (m.z <= 0.0) {
         return 0.0;
     }
     let a2 = (*tab).alpha * (*tab).alpha;
@@ -154,8 +153,22 @@ fn ndf_reflection(tab: ptr<private, NdfTable>, wi: vec3<f32>, wo: vec3<f32>, m: 
     let len = sqrt(len2);
     let t = a2 * c2 + s2;
     let ggx = a2 * (len2 * len2) / (PI * t * t);
-    let e = exp(ndf_deviation(tab, ndf_knot_coordinate(s2 / (len * (len + m.z))))) * (*tab).inv_norm;
-    return ggx * e / (4.0 * (wi.z + ndf_c(tab, wi.z)) * (wo.z + ndf_c(tab, wo.z)));
+    return ggx * exp(ndf_deviation(tab, ndf_knot_coordinate(s2 / (len * (len + m.z))))) * (*tab).inv_norm;
+}
+
+// Smith's G1(w)/|mu| of the table's D, 1/(|mu| + C(|mu|)); no side test.
+fn ndf_g1_over_mu(tab: ptr<private, NdfTable>, w: vec3<f32>) -> f32 {
+    let mu = abs(w.z);
+    return 1.0 / (mu + ndf_c(tab, mu));
+}
+
+// D(h) G1(wi) G1(wo) / (4 mu_i mu_o) at m = any positive multiple of the half vector, with
+// the chi+ side tests of Smith G1; wi and wo above the surface.
+fn ndf_reflection(tab: ptr<private, NdfTable>, wi: vec3<f32>, wo: vec3<f32>, m: vec3<f32>) -> f32 {
+    if (m.z <= 0.0 || dot(wi, m) * wi.z <= 0.0 || dot(wo, m) * wo.z <= 0.0) {
+        return 0.0;
+    }
+    return ndf_d(tab, m) / (4.0 * (wi.z + ndf_c(tab, wi.z)) * (wo.z + ndf_c(tab, wo.z)));
 }
 
 // The half vector as the GGX lobe takes it: m the unnormalised sum wi + wo (the normal

@@ -326,6 +326,11 @@ impl Bsdf for Btdf {
     fn entry(&self) -> &'static Entry {
         &ENTRY
     }
+    /// TR's lobe is GGX's, which `+ndf` makes data-driven (the other distributions are not
+    /// at the table's zero deviation, so they would not embed).
+    fn ggx_lobe(&self) -> Option<(super::GgxPlace, super::Tabulated)> {
+        (self.ndf == Ndf::Tr).then(|| (super::GgxPlace::Transmission, super::Tabulated::default()))
+    }
     fn params(&self) -> Vec<ParamDecl> {
         self.ndf.params()
     }
@@ -611,7 +616,7 @@ impl Kernel for BtdfAniso {
 /// Eq. 1 over any [`Real`] with the distribution `d` and the Smith G1/|μ| `g1_over_mu`
 /// (every `btdf` lobe, isotropic and anisotropic).
 #[inline(always)]
-fn walter_in<R: Real>(
+pub(super) fn walter_in<R: Real>(
     wi: V3<R>,
     wo: V3<R>,
     eta: f64,

@@ -8,13 +8,14 @@ use super::spec::Ast;
 use super::Node;
 use crate::data::Kind;
 
-/// The three nodes that hold an isotropic GGX lobe: `ggx`, the highlight of `fa(B)`, the
-/// lobe of `+coat`.
+/// The nodes that hold an isotropic GGX (Trowbridge–Reitz) lobe: `ggx`, the highlight of
+/// `fa(B)`, the lobe of `+coat`, and the transmission lobe of `btdf(tr)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GgxPlace {
     Ggx,
     Aggregate,
     Coat,
+    Transmission,
 }
 
 /// Which factors of a GGX lobe are tabulated: its NDF (`+ndf`), its Fresnel curve

@@ -19,8 +19,8 @@ pub enum Effect {
     LongTail,
     Anisotropy,
     DiffuseFloor,
-    /// The highlight's microfacet distribution is not of an analytic family: a
-    /// data-driven NDF (`+ndf`).
+    /// The highlight's (or the transmission lobe's) microfacet distribution is not of an
+    /// analytic family: a data-driven NDF (`+ndf`).
     HighlightShape,
     /// The highlight's Fresnel curve is not the dielectric one: a data-driven factor per
     /// channel in θd (`+fresnel`).

@@ -359,9 +359,10 @@ impl Bsdf for FresnelCurve {
 /// `+coat`, wherever they sit) by its form with a data-driven Fresnel curve, each with
 /// knots of its own, and wrap the result in the pass-through `+fresnel` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    super::brdf_form_suffix(
+    super::registry::form_suffix(
         inner,
         ENTRY.name,
+        Some(Kind::Brdf),
         |t| &mut t.fresnel,
         FresnelCurve,
         "an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)",

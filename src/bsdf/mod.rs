@@ -23,6 +23,8 @@ pub use spec::{render_spec, Ast};
 use std::fmt;
 use std::sync::Arc;
 
+/// The data-driven form `+ndf` puts in place of `btdf(tr)`'s lobe (no entry of its own).
+pub mod btdf_ndf;
 mod channels;
 pub mod decl;
 pub mod effect;
@@ -369,43 +371,9 @@ impl Node {
     }
 }
 
-/// Another form of a node, where it has one ([`Bsdf::anisotropic`]; the GGX lobes' forms
-/// of [`registry::ggx_form`]).
+/// Another form of a node, where it has one ([`Bsdf::anisotropic`]; the microfacet lobes'
+/// forms of [`registry::ggx_form`]).
 pub type FormOf<'a> = dyn Fn(&dyn Bsdf) -> Option<Arc<dyn Bsdf>> + 'a;
-
-/// The build of a BRDF suffix that tabulates one factor of each isotropic GGX lobe
-/// (`+ndf`, `+fresnel`): every lobe whose `factor` is not yet tabulated is swapped for the
-/// form that adds it ([`registry::ggx_form`]) and the result wrapped in the suffix's
-/// pass-through node `wrap`; refused on BTDF models, when given twice, and where no node
-/// holds such a lobe (`needs` says which do).
-pub fn brdf_form_suffix(
-    inner: Node,
-    suffix: &'static str,
-    factor: fn(&mut Tabulated) -> &mut bool,
-    wrap: impl Bsdf + 'static,
-    needs: &str,
-) -> Result<Node, String> {
-    if inner.bsdf.kind() != Kind::Brdf {
-        return Err(format!("+{suffix} applies to BRDF models"));
-    }
-    let form = |b: &dyn Bsdf| {
-        let (place, mut tabulated) = b.ggx_lobe()?;
-        let f = factor(&mut tabulated);
-        if *f {
-            return None;
-        }
-        *f = true;
-        Some(registry::ggx_form(place, tabulated))
-    };
-    let (swapped, count, names) = inner.with_forms(&form);
-    if names.contains(&suffix) {
-        return Err(format!("+{suffix} given twice"));
-    }
-    if count == 0 {
-        return Err(format!("+{suffix} needs {needs}"));
-    }
-    Ok(Node::with(wrap, vec![swapped]))
-}
 
 /// A parameter of a compiled model: its declaration, full name and place in the flat vector.
 #[derive(Clone, Debug)]

@@ -49,7 +49,7 @@ pub const KNOTS: usize = 16;
 /// Cosines of the masking table: μ_j = (j / (MU_POINTS − 1))².
 pub const MU_POINTS: usize = 65;
 
-pub(super) const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
+pub(crate) const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
 
 /// The free knots' names, as `ggx+ndf` and the highlight of `fa(B)+ndf` declare them.
 pub(super) const NAMES: [&str; KNOTS - 1] = [
@@ -296,6 +296,17 @@ impl NdfTable {
     }
 }
 
+impl NdfTable {
+    /// Smith's G1(ω)/|μ| of the table's D: 1/(|μ| + C(|μ|)), μ = cos θ (a direction below
+    /// the surface masked as seen from that side). The χ⁺ side tests are the caller's.
+    #[inline(always)]
+    pub fn g1_over_mu<R: Real>(&self, w: V3<R>) -> R {
+        let mu = w.z.abs();
+        let c = R::from_fn(|l| self.facing_away(mu.lane(l)));
+        R::splat(1.0) / (mu + c)
+    }
+}
+
 thread_local! {
     /// The last tables built on this thread: a fit evaluates one parameter vector over
     /// many blocks of directions, so each vector's table is built once per thread.
@@ -496,9 +507,9 @@ fn ndf_wgsl(function: &str) -> WgslFn {
 /// Registry entry: a suffix of BRDF models with a GGX highlight.
 pub const ENTRY: Entry = Entry::suffix(
     "ndf",
-    Some(Kind::Brdf),
+    None,
     InCatalogue::No,
-    "data-driven NDFs of the GGX lobes (ggx, fa, +coat): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 16 knots, Smith masking from the same D",
+    "data-driven NDFs of the GGX lobes (ggx, fa, +coat, btdf(tr)): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 16 knots, Smith masking from the same D",
     build,
 )
 // s = 0 is GGX: M embeds in M+ndf (diagnose's F test). Offered once no analytic effect is.
@@ -507,13 +518,18 @@ pub const ENTRY: Entry = Entry::suffix(
 /// The `+ndf` node: passes its inner model's value through (the distribution lives in
 /// the highlight [`build`] put in place of the GGX one).
 #[derive(Debug, Clone, Copy)]
-pub struct Ndf;
+pub struct Ndf {
+    kind: Kind,
+}
 
 impl super::kernel::PassThrough for Ndf {}
 
 impl Bsdf for Ndf {
     fn entry(&self) -> &'static Entry {
         &ENTRY
+    }
+    fn kind(&self) -> Kind {
+        self.kind
     }
     fn params(&self) -> Vec<ParamDecl> {
         vec![]
@@ -528,15 +544,17 @@ impl Bsdf for Ndf {
 }
 
 /// Replace every isotropic GGX lobe of `inner` (`ggx`, the highlight of `fa(B)`, the lobe
-/// of `+coat`, wherever they sit) by its data-driven form, each with knots of its own,
-/// and wrap the result in the pass-through `+ndf` node.
+/// of `+coat`, the lobe of `btdf(tr)`, wherever they sit) by its data-driven form, each
+/// with knots of its own, and wrap the result in the pass-through `+ndf` node.
 pub fn build(inner: Node) -> Result<Node, String> {
-    super::brdf_form_suffix(
+    let kind = inner.bsdf.kind();
+    super::registry::form_suffix(
         inner,
         ENTRY.name,
+        None,
         |t| &mut t.ndf,
-        Ndf,
-        "an isotropic GGX lobe: ggx, fa(B) or +coat (before any +aniso)",
+        Ndf { kind },
+        "an isotropic GGX lobe: ggx, fa(B), +coat or btdf(tr) (before any +aniso)",
     )
 }
 
@@ -670,18 +688,52 @@ mod tests {
         assert!(slope.abs() < 1e-5, "ds/dx at the normal: {slope}");
     }
 
-    /// +ndf takes the highlight of ggx and fa(B) wherever it sits, once, and refuses
-    /// models without one.
+    /// +ndf takes the highlight of ggx and fa(B) and the lobe of btdf(tr) wherever it
+    /// sits, once, and refuses models without one (the other BTDF distributions are not
+    /// GGX at zero deviation).
     #[test]
     fn the_suffix_swaps_the_ggx_highlight() {
         for (spec, knots) in [("ggx+ndf", "ndf1"), ("fa(eon)+ndf", "lobe.ndf1"), ("fa(lambert)+coat+ndf", "lobe.ndf15"),
             ("fa(lambert)+coat+ndf", "ndf_c1"),
-            ("rmg(lambert)+coat+ndf", "ndf_c15"), ("rmg(ggx)+ndf", "base.ndf3")] {
+            ("rmg(lambert)+coat+ndf", "ndf_c15"), ("rmg(ggx)+ndf", "base.ndf3"),
+            ("btdf(tr)+ndf", "ndf15"), ("btdf(tr)+diffuse+scale+ndf", "ndf1")] {
             let m = Model::parse(spec, 3).unwrap_or_else(|e| panic!("{spec}: {e}"));
             assert!(m.params.iter().any(|p| p.name == knots), "{spec}: {:?}", m.params.iter().map(|p| &p.name).collect::<Vec<_>>());
         }
-        for spec in ["lambert+ndf", "ggx+ndf+ndf", "ggx+aniso+ndf", "btdf(tr)+ndf"] {
+        assert_eq!(Model::parse("btdf(tr)+ndf", 1).unwrap().kind, Kind::Btdf);
+        for spec in ["lambert+ndf", "ggx+ndf+ndf", "ggx+aniso+ndf", "btdf(beckmann)+ndf", "btdf(gg)+ndf",
+            "btdf(tr)+aniso+ndf", "btdf(tr)+fresnel", "btdf(tr)+ndf+fresnel"] {
             assert!(Model::parse(spec, 1).is_err(), "{spec} parsed");
         }
+    }
+
+    /// At zero deviation `btdf(tr)+ndf` is `btdf(tr)` within the table's quadrature error
+    /// (3e-4 relative, as the reflection lobe), so `btdf(tr)` embeds in it.
+    #[test]
+    fn the_transmission_lobe_at_zero_deviation_is_tr() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut compared = 0;
+        for alpha in [0.02, 0.1, 0.3, 0.7] {
+            let tr = Model::parse("btdf(tr)", 1).unwrap();
+            let ndf = Model::parse("btdf(tr)+ndf", 1).unwrap();
+            let eta = rng.random_range(1.1..2.0);
+            let mut p = vec![0.0; ndf.dim];
+            p[0] = alpha;
+            p[1] = eta;
+            for _ in 0..400 {
+                let wi = dir(rng.random_range(0.0..86f64).to_radians(), 0.0);
+                let o = dir(rng.random_range(0.0..86f64).to_radians(), rng.random_range(0.0..PI));
+                let wo = DVec3::new(o.x, o.y, -o.z);
+                let (a, b) = (tr.eval(&[alpha, eta], 0, wi, wo), ndf.eval(&p, 0, wi, wo));
+                assert!(!b.is_nan());
+                if a > 1e-12 {
+                    assert!((b / a - 1.0).abs() < 3e-4, "α {alpha}: {b} against {a}");
+                    compared += 1;
+                } else {
+                    assert!(b <= 1e-9, "α {alpha}: {b} against {a}");
+                }
+            }
+        }
+        assert!(compared > 400, "{compared} values compared");
     }
 }

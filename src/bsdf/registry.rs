@@ -5,18 +5,19 @@
 
 use super::decl::{Builder, Entry, GgxPlace, InCatalogue, Role, Tabulated};
 use super::spec::Ast;
-use super::{coat, fa, fresnel, ggx, ndf, ndf_fresnel, Bsdf};
+use super::{btdf, btdf_ndf, coat, fa, fresnel, ggx, ndf, ndf_fresnel, Bsdf};
 use super::{Node, SpecError, REGISTRY};
 use crate::data::Kind;
 use std::sync::Arc;
 use std::sync::RwLock;
 
-/// The node holding the GGX lobe of `place` with the factors `tabulated`: the one table
-/// of the twelve lobe forms, from which `+ndf` and `+fresnel` swap a lobe for the form
-/// with one factor more (see [`super::brdf_form_suffix`]).
-pub fn ggx_form(place: GgxPlace, tabulated: Tabulated) -> Arc<dyn Bsdf> {
-    use GgxPlace::{Aggregate, Coat, Ggx};
-    match (place, tabulated.ndf, tabulated.fresnel) {
+/// The node holding the microfacet lobe of `place` with the factors `tabulated`: the one
+/// table of the lobe forms, from which `+ndf` and `+fresnel` swap a lobe for the form with
+/// one factor more (see [`form_suffix`]). None where the place has no such form (a
+/// transmission lobe's Fresnel factor is a transmittance, not tabulated).
+pub fn ggx_form(place: GgxPlace, tabulated: Tabulated) -> Option<Arc<dyn Bsdf>> {
+    use GgxPlace::{Aggregate, Coat, Ggx, Transmission};
+    Some(match (place, tabulated.ndf, tabulated.fresnel) {
         (Ggx, false, false) => Arc::new(ggx::Ggx),
         (Ggx, true, false) => Arc::new(ndf::GgxNdf),
         (Ggx, false, true) => Arc::new(fresnel::GgxFresnel),
@@ -29,7 +30,46 @@ pub fn ggx_form(place: GgxPlace, tabulated: Tabulated) -> Arc<dyn Bsdf> {
         (Coat, true, false) => Arc::new(ndf::CoatNdf),
         (Coat, false, true) => Arc::new(fresnel::CoatFresnel),
         (Coat, true, true) => Arc::new(ndf_fresnel::CoatNdfFresnel),
+        (Transmission, false, false) => Arc::new(btdf::Btdf { ndf: btdf::Ndf::Tr }),
+        (Transmission, true, false) => Arc::new(btdf_ndf::BtdfNdf),
+        (Transmission, _, true) => return None,
+    })
+}
+
+/// The build of a suffix that tabulates one factor of each isotropic microfacet lobe
+/// (`+ndf`, `+fresnel`): every lobe whose `factor` is not yet tabulated is swapped for the
+/// form that adds it ([`ggx_form`]) and the result wrapped in the suffix's pass-through
+/// node `wrap`; refused on models of another kind than `kind` (where given), when given
+/// twice, and where no node holds such a lobe (`needs` says which do).
+pub fn form_suffix(
+    inner: Node,
+    suffix: &'static str,
+    kind: Option<Kind>,
+    factor: fn(&mut Tabulated) -> &mut bool,
+    wrap: impl Bsdf + 'static,
+    needs: &str,
+) -> Result<Node, String> {
+    if let Some(kind) = kind.filter(|&k| inner.bsdf.kind() != k) {
+        let kind = kind.to_string().to_uppercase();
+        return Err(format!("+{suffix} applies to {kind} models"));
     }
+    let form = |b: &dyn Bsdf| {
+        let (place, mut tabulated) = b.ggx_lobe()?;
+        let f = factor(&mut tabulated);
+        if *f {
+            return None;
+        }
+        *f = true;
+        ggx_form(place, tabulated)
+    };
+    let (swapped, count, names) = inner.with_forms(&form);
+    if names.contains(&suffix) {
+        return Err(format!("+{suffix} given twice"));
+    }
+    if count == 0 {
+        return Err(format!("+{suffix} needs {needs}"));
+    }
+    Ok(Node::with(wrap, vec![swapped]))
 }
 
 fn is_suffix(e: &Entry) -> bool {

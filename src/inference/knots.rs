@@ -9,7 +9,7 @@
 
 use crate::bsdf::ndf::{knot_angle, NdfTable, KNOTS};
 use crate::bsdf::Model;
-use crate::data::Dataset;
+use crate::data::{Dataset, Kind};
 use crate::inference::covariance::Covariance;
 use crate::inference::mc_summary::{shortest_interval, COVERAGE};
 use std::ops::Range;
@@ -32,8 +32,12 @@ pub struct Factor {
     pub name: String,
     pub channel: Option<usize>,
     /// The amplitude whose part of the fitted value is the factor's signal (k_s, k_c or
-    /// the body's albedo ρ, all channels).
+    /// the body's albedo ρ, all channels); empty for a transmission lobe, which has none
+    /// of its own: its part is the model's whole value (with `+diffuse`, the floor's too).
     amplitude: Range<usize>,
+    /// A transmission lobe's η (flat index): its samples' half vector is the refraction
+    /// one, −(ωi + η ωo) normalised (Walter 2007, Eq. 16), not ωi + ωo.
+    refraction_eta: Option<usize>,
     inputs: Inputs,
 }
 
@@ -84,22 +88,33 @@ impl Factor {
         for (i, prefix) in found(&NDF_LOBES.map(|l| l.0)) {
             let (stem, alpha, ks) = NDF_LOBES[i];
             let name = format!("{prefix}{stem}");
-            if let (Some(alpha), Some(ks), Some(knots)) = (
-                find(&format!("{prefix}{alpha}")),
-                find(&format!("{prefix}{ks}")),
-                knots_of(&name, KNOTS),
-            ) {
-                out.push(Factor {
-                    kind: FactorKind::Ndf,
-                    name,
-                    channel: None,
-                    amplitude: range(ks),
-                    inputs: Inputs::Ndf {
-                        alpha: alpha.index,
-                        knots: knots.iter().map(|q| q.index).collect(),
-                    },
-                });
-            }
+            let (Some(alpha), Some(knots)) =
+                (find(&format!("{prefix}{alpha}")), knots_of(&name, KNOTS))
+            else {
+                continue;
+            };
+            // A reflection lobe's amplitude, or a transmission lobe's η (`btdf(tr)+ndf`).
+            let (amplitude, refraction_eta) = match model.kind {
+                Kind::Brdf => match find(&format!("{prefix}{ks}")) {
+                    Some(ks) => (range(ks), None),
+                    None => continue,
+                },
+                Kind::Btdf => match find(&format!("{prefix}eta")) {
+                    Some(eta) => (0..0, Some(eta.index)),
+                    None => continue,
+                },
+            };
+            out.push(Factor {
+                kind: FactorKind::Ndf,
+                name,
+                channel: None,
+                amplitude,
+                refraction_eta,
+                inputs: Inputs::Ndf {
+                    alpha: alpha.index,
+                    knots: knots.iter().map(|q| q.index).collect(),
+                },
+            });
         }
         // The lobes: the knots' stem, the amplitude and the reference curve's η (`ggx`,
         // `fa`'s highlight under `lobe.`; a coat's reference is F ≡ 1).
@@ -126,6 +141,7 @@ impl Factor {
                     name: name.clone(),
                     channel: Some(c),
                     amplitude: range(ks),
+                    refraction_eta: None,
                     inputs: Inputs::Fresnel {
                         ks: at(ks),
                         eta: eta.map(|e| e.index),
@@ -145,6 +161,7 @@ impl Factor {
                     name,
                     channel: None,
                     amplitude: range(rho),
+                    refraction_eta: None,
                     inputs: Inputs::Body {
                         knots: knots.iter().map(|q| q.index).collect(),
                     },
@@ -357,7 +374,7 @@ pub fn bands(
         .into_iter()
         .filter(|f| f.kind == FactorKind::Ndf)
         .map(|f| {
-            let samples = factor_samples(model, data, flat, f.amplitude.clone());
+            let samples = factor_samples(model, data, flat, &f);
             let signal = signal_at_knots(&f.degrees(), &samples, |s| [s.theta_h_deg; 2]);
             let rows = f
                 .values_and_sd(flat, cov)
@@ -392,10 +409,11 @@ fn propagated_sd(cov: &Covariance, grad: &[(usize, f64)]) -> Option<f64> {
     })
 }
 
-/// One sample's view of a factor: the half vector's angle θh, the angle θd between ωi and
-/// it, |θi| and |θo| (degrees), the sample's channel, and the factor's part of the fitted
-/// value in units of the sample's uncertainty, f − f(amplitude = 0) (the lobe is k_s times
-/// a kernel, the body ρ times one; what remains at 0 is the rest of the model).
+/// One sample's view of a factor: the half vector's angle θh (the refraction half vector
+/// for a transmission lobe), the angle θd between ωi and it, |θi| and |θo| (degrees), the
+/// sample's channel, and the factor's part of the fitted value in units of the sample's
+/// uncertainty, f − f(amplitude = 0) (the lobe is k_s times a kernel, the body ρ times
+/// one; what remains at 0 is the rest of the model; a transmission lobe's part is f).
 #[derive(Clone, Copy)]
 struct FactorSample {
     theta_h_deg: f64,
@@ -406,21 +424,34 @@ struct FactorSample {
     z: f64,
 }
 
-fn factor_samples(
-    model: &Model,
-    data: &Dataset,
-    flat: &[f64],
-    amplitude: Range<usize>,
-) -> Vec<FactorSample> {
+fn factor_samples(model: &Model, data: &Dataset, flat: &[f64], f: &Factor) -> Vec<FactorSample> {
     let mut off = flat.to_vec();
-    off[amplitude].fill(0.0);
+    off[f.amplitude.clone()].fill(0.0);
+    let whole = f.amplitude.is_empty();
+    let eta = f.refraction_eta.map(|e| flat[e]);
     data.samples
         .iter()
         .map(|s| {
             let (wi, wo) = (s.wi(), s.wo());
             let g = model.group_of(s);
-            let part = model.eval(flat, g, wi, wo) - model.eval(&off, g, wi, wo);
-            let h = wi + wo;
+            let value = model.eval(flat, g, wi, wo);
+            let part = if whole {
+                value
+            } else {
+                value - model.eval(&off, g, wi, wo)
+            };
+            let h = match eta {
+                // Walter's m = −(ωi + η ωo), on the side of the normal.
+                Some(eta) => {
+                    let m = -(wi + eta * wo);
+                    if m.z < 0.0 {
+                        -m
+                    } else {
+                        m
+                    }
+                }
+                None => wi + wo,
+            };
             let cos_d = (wi.dot(h) / h.length().max(1e-300)).clamp(-1.0, 1.0);
             FactorSample {
                 theta_h_deg: (h.x.hypot(h.y)).atan2(h.z).to_degrees(),
@@ -475,7 +506,7 @@ pub fn fresnel_bands(
         .map(|f| {
             let c = f.channel.unwrap_or(0);
             if samples.as_ref().is_none_or(|(n, _)| *n != f.name) {
-                let s = factor_samples(model, data, flat, f.amplitude.clone());
+                let s = factor_samples(model, data, flat, &f);
                 samples = Some((f.name.clone(), s));
             }
             let own: Vec<FactorSample> = samples
@@ -537,7 +568,7 @@ pub fn body_bands(
         .into_iter()
         .filter(|f| f.kind == FactorKind::Body)
         .map(|f| {
-            let samples = factor_samples(model, data, flat, f.amplitude.clone());
+            let samples = factor_samples(model, data, flat, &f);
             let signal =
                 signal_at_knots(&f.degrees(), &samples, |s| [s.theta_i_deg, s.theta_o_deg]);
             let rows = f

@@ -91,7 +91,7 @@ pub const EFFECTS: &[EffectEntry] = &[
     },
     EffectEntry {
         effect: Effect::HighlightShape,
-        signature: "misfit across the highlight that no analytic lobe width removes: a peak or tail of another shape",
+        signature: "misfit across the highlight (or the transmitted peak) that no analytic lobe width removes: a peak or tail of another shape",
         lobe_around: None,
         max_half_width_deg: None,
     },

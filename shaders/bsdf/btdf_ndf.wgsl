@@ -1,0 +1,36 @@
+// The transmission lobe of `btdf(tr)` with the data-driven NDF (`btdf(tr)+ndf`): Walter's
+// transmission (btdf.wgsl) with D and the Smith G1/|mu| of the NDF table (ndf.wgsl, in
+// NDF_TABLE: a BTDF model has one lobe). f32 twin of src/bsdf/btdf_ndf.rs.
+
+// Parameters: alpha, eta, ndf1 .. ndf15.
+fn btdf_ndf_prepare(o: u32) {
+    ndf_build(&NDF_TABLE, btdf_ndf_alpha(o), array<f32, 15>(
+        btdf_ndf_ndf1(o),
+        btdf_ndf_ndf2(o),
+        btdf_ndf_ndf3(o),
+        btdf_ndf_ndf4(o),
+        btdf_ndf_ndf5(o),
+        btdf_ndf_ndf6(o),
+        btdf_ndf_ndf7(o),
+        btdf_ndf_ndf8(o),
+        btdf_ndf_ndf9(o),
+        btdf_ndf_ndf10(o),
+        btdf_ndf_ndf11(o),
+        btdf_ndf_ndf12(o),
+        btdf_ndf_ndf13(o),
+        btdf_ndf_ndf14(o),
+        btdf_ndf_ndf15(o),
+    ));
+}
+
+fn btdf_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
+    if (!BTDF_NDF_PREPARED) {
+        btdf_ndf_prepare(o);
+    }
+    let g = btdf_geometry(wi, wo, btdf_ndf_eta(o));
+    if (!g.valid) {
+        return 0.0;
+    }
+    let d = ndf_d(&NDF_TABLE, g.m);
+    return btdf_transmit(g, d, ndf_g1_over_mu(&NDF_TABLE, wi), ndf_g1_over_mu(&NDF_TABLE, wo));
+}
