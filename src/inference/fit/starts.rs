@@ -22,27 +22,7 @@ pub(super) fn screened_starts(
         |q: usize| -> Option<Vec<f64>> { opts.problem_points.get(q).map(|p| obj.space.to_unit(p)) };
     let owns: Vec<Option<Vec<f64>>> = problems.clone().map(own).collect();
     let problems = problems.len();
-    let mut pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
-    // A tabulated factor's knots start at their neutral value (the analytic lobe or
-    // body): a uniform draw over their range (e^±15 per knot) is a random shape, not a
-    // start, and on a sharp lobe it lands in a basin of nonsense shapes with the
-    // roughness on its bound. The draws vary the analytic parameters.
-    let space = obj.space;
-    let knots: Vec<(usize, f64)> = space
-        .free
-        .iter()
-        .enumerate()
-        .filter(|&(_, &j)| space.decls[j].knot)
-        .map(|(pos, &j)| {
-            let d = &space.decls[j];
-            (pos, d.to_unit(d.neutral.unwrap_or(d.default)))
-        })
-        .collect();
-    for u in &mut pool {
-        for &(pos, neutral) in &knots {
-            u[pos] = neutral;
-        }
-    }
+    let pool = random_starts(obj.dim(), opts.restarts * opts.screen.max(1), opts.seed);
     let mut starts = Vec::with_capacity(problems * (initial.len() + opts.restarts));
     if opts.screen <= 1 {
         for own in &owns {
