@@ -111,9 +111,11 @@ fn backtrack(
 
 /// Where no analytic path ends consistent: the data-driven factors at the end of each
 /// analytic path that stopped before `--max-steps`, lowest BIC first, each path then
-/// continued greedily and backtracked from its first data-driven round on. The first
-/// path that ends consistent wins; else the lowest BIC of all, the analytic paths'
-/// included.
+/// continued greedily and backtracked from its first data-driven round on. A path whose
+/// last model takes no factor is cut back to its last model that does (on BTDF data a
+/// path that swapped `btdf(tr)` for `btdf(gtr)` takes `+ndf` before the swap: only TR's
+/// lobe has a data-driven form). The first path that ends consistent wins; else the
+/// lowest BIC of all, the analytic paths' included.
 pub(super) fn with_factors(
     data: &Dataset,
     backend: &dyn Backend,
@@ -128,12 +130,31 @@ pub(super) fn with_factors(
         .filter(|&i| paths[i].len() <= opts.max_steps)
         .collect();
     open.sort_by(|&a, &b| path_bic(&paths[a], k).total_cmp(&path_bic(&paths[b], k)));
+    // Each path up to its last model with a factor to try (none: left out).
+    let takes_factors = |model: &str| {
+        extensions(model, data).is_ok_and(|c| c.iter().any(|c| c.effect.is_data_driven()))
+    };
+    let cut: Vec<(Vec<Step>, String)> = open
+        .iter()
+        .filter_map(|&i| {
+            let path = &paths[i];
+            let last = path.iter().rposition(|s| takes_factors(&s.model))?;
+            Some((path[..=last].to_vec(), path.last()?.model.clone()))
+        })
+        .collect();
     // Two paths can end at the same model (`rmg(lambert)` then `+coat`, or `lambert+coat`
     // then `rmg`): its factors are tried once.
     let mut ends = std::collections::HashSet::new();
-    open.retain(|&i| ends.insert(paths[i].last().expect("a step").model.as_str()));
-    for i in open {
-        let path = searched.paths[i].clone();
+    for (path, end) in cut {
+        let model = path.last().expect("a step").model.clone();
+        if !ends.insert(model.clone()) {
+            continue;
+        }
+        if model != end {
+            log(format!(
+                "the path's end {end} takes no data-driven factor: back to {model}, its last model that does"
+            ));
+        }
         let first = path.len() - 1;
         let greedy = factors_at_end(data, backend, opts, log, cache, path)?;
         let consistent = consistency(&greedy.last().expect("a step").fit, opts.alpha).0;
