@@ -272,3 +272,39 @@ pub fn fit_truth_with(
 pub fn chi2_red(c: &bsdfit::inference::fit::Conclusions) -> f64 {
     c.chi2 / c.dof as f64
 }
+
+/// Checks a fitted NDF's knots (`bsdfit::inference::knots::bands`, one lobe) against the
+/// truth's D: each row printed, finite, marked measured exactly where its signal reaches
+/// `MEASURED_SIGNAL`; at each measured knot that `tolerance(truth's D)` holds (Some(t)),
+/// ln(D / D_truth) within 3σ + t. Returns how many knots were held.
+pub fn check_knots(
+    name: &str,
+    rows: &[bsdfit::inference::knots::KnotBand],
+    d: Ndf,
+    tolerance: impl Fn(f64) -> Option<f64>,
+) -> usize {
+    let mut held = 0;
+    for knot in rows {
+        let truth = d(knot.theta_deg.to_radians().cos());
+        let sigma = knot.sigma_ln_d.expect("a band with the prior on");
+        let diff = (knot.d / truth).ln();
+        eprintln!(
+            "  {:>5.2}°: D {:.4e} (truth {truth:.4e}) ln ratio {diff:+.4} σ {sigma:.4} signal {:.1}",
+            knot.theta_deg, knot.d, knot.signal
+        );
+        assert!(knot.d.is_finite() && knot.d >= 0.0 && sigma.is_finite());
+        assert_eq!(
+            knot.measured,
+            knot.signal >= bsdfit::inference::knots::MEASURED_SIGNAL
+        );
+        if let (true, Some(t)) = (knot.measured, tolerance(truth)) {
+            held += 1;
+            assert!(
+                diff.abs() <= 3.0 * sigma + t,
+                "{name} at {:.2}°: ln D {diff:+.4} from the truth, σ {sigma:.4}",
+                knot.theta_deg
+            );
+        }
+    }
+    held
+}
