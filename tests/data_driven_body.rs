@@ -14,7 +14,7 @@ use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
 use bsdfit::inference::knots::{body_bands, MEASURED_SIGNAL};
 use bsdfit::workflows::diagnose::embed;
-use common::truths::{chi2_red, fit_truth, fresnel, ggx, measure, Isotropic, RHO};
+use common::truths::{chi2_red, diagnose_truth, fit_truth, fresnel, ggx, measure, Isotropic, RHO};
 use std::f64::consts::PI;
 
 /// ln ρ(μ) of the two bodies, 0 at the normal: Minnaert's (μi μo)^(k−1) with k = 1.3,
@@ -115,8 +115,7 @@ fn non_lambertian_bodies_come_back() {
 /// micrograins for the brightening one) are dropped by the backward elimination.
 #[test]
 fn diagnose_names_the_bodys_profile() {
-    use bsdfit::engine::simd::SimdBackend;
-    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
+    use bsdfit::workflows::diagnose::Effect;
     let lobe = Isotropic::new(|c| ggx(c, 0.2));
     for (name, ln_rho, seed) in [
         ("minnaert", minnaert as fn(f64) -> f64, 13),
@@ -124,22 +123,7 @@ fn diagnose_names_the_bodys_profile() {
     ] {
         let truth = |wi, wo| truth(&lobe, ln_rho, wi, wo);
         let data = measure(&[0.0], &truth, seed);
-        let opts = DiagnoseOptions {
-            seed: 2,
-            restarts: 8,
-            ..Default::default()
-        };
-        let t0 = std::time::Instant::now();
-        let d = diagnose(&data, "lambert", &SimdBackend::new(), &opts, &mut |l| {
-            eprintln!("{l}")
-        })
-        .unwrap();
-        eprintln!(
-            "{name}: diagnose {:.1} s, {} → {:?}",
-            t0.elapsed().as_secs_f64(),
-            d.final_model,
-            d.effects
-        );
+        let d = diagnose_truth(name, &data, "lambert");
         assert!(
             d.effects.contains(&Effect::SpecularLobe),
             "{name}: {:?}",

@@ -14,7 +14,7 @@ use bsdfit::bsdf::Model;
 use bsdfit::inference::knots::bands;
 use bsdfit::workflows::diagnose::embed;
 use common::truths::{
-    beckmann, check_knots, chi2_red, fit_truth, gtr, measure_btdf, Isotropic, Ndf,
+    beckmann, check_knots, chi2_red, diagnose_truth, fit_truth, gtr, measure_btdf, Isotropic, Ndf,
 };
 
 #[test]
@@ -87,26 +87,10 @@ fn data_driven_transmission_ndfs_come_back() {
 /// free S lowers χ²; the truth has S = 1. The test does not forbid that name.)
 #[test]
 fn diagnose_names_the_transmission_lobes_shape() {
-    use bsdfit::engine::simd::SimdBackend;
-    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
+    use bsdfit::workflows::diagnose::Effect;
     let lobe = Isotropic::new(|c| 0.6 * beckmann(c, 0.1) + 0.4 * beckmann(c, 0.4));
     let data = measure_btdf(&|wi, wo| lobe.transmission(wi, wo), 62);
-    let opts = DiagnoseOptions {
-        seed: 2,
-        restarts: 8,
-        ..Default::default()
-    };
-    let t0 = std::time::Instant::now();
-    let d = diagnose(&data, "btdf(tr)", &SimdBackend::new(), &opts, &mut |l| {
-        eprintln!("{l}")
-    })
-    .unwrap();
-    eprintln!(
-        "diagnose: {:.1} s, {} → {:?}",
-        t0.elapsed().as_secs_f64(),
-        d.final_model,
-        d.effects
-    );
+    let d = diagnose_truth("two-scale", &data, "btdf(tr)");
     assert!(
         d.effects.contains(&Effect::HighlightShape),
         "{:?}",

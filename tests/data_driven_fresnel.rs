@@ -11,13 +11,13 @@ mod common;
 use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
-use bsdfit::engine::simd::SimdBackend;
 use bsdfit::inference::fit::Conclusions;
 use bsdfit::inference::knots::{fresnel_bands, MEASURED_SIGNAL};
 use bsdfit::math::fresnel_dielectric as dielectric;
 use bsdfit::workflows::diagnose::embed;
 use common::truths::{
-    chi2_red, conductor_fresnel, fit_truth, fresnel, ggx, measure_channels, Isotropic, RHO,
+    chi2_red, conductor_fresnel, diagnose_truth, fit_truth, fresnel, ggx, measure_channels,
+    Isotropic, RHO,
 };
 use std::f64::consts::PI;
 
@@ -118,26 +118,11 @@ fn a_conductors_fresnel_curve_comes_back() {
 /// not the highlight's shape: the truth's NDF is GGX), and ends within the noise.
 #[test]
 fn diagnose_names_the_fresnel_curve_of_a_conductor() {
-    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions, Effect};
+    use bsdfit::workflows::diagnose::Effect;
     let lobe = Isotropic::new(|c| ggx(c, 0.2));
     let truth = |ch: usize, wi, wo| gold(&lobe, ch, wi, wo);
     let data = measure_channels(&[0.0], &WAVELENGTHS, &truth, 8);
-    let opts = DiagnoseOptions {
-        seed: 2,
-        restarts: 8,
-        ..Default::default()
-    };
-    let t0 = std::time::Instant::now();
-    let d = diagnose(&data, "lambert", &SimdBackend::new(), &opts, &mut |l| {
-        eprintln!("{l}")
-    })
-    .unwrap();
-    eprintln!(
-        "diagnose: {:.1} s, {} → {:?}",
-        t0.elapsed().as_secs_f64(),
-        d.final_model,
-        d.effects
-    );
+    let d = diagnose_truth("gold", &data, "lambert");
     assert_eq!(
         d.effects.first(),
         Some(&Effect::SpecularLobe),

@@ -308,3 +308,29 @@ pub fn check_knots(
     }
     held
 }
+
+/// `diagnose` of truth data from `start` on the SIMD engine (seed 2, 8 restarts, the
+/// library's other defaults), its log and then its time, final model and effects on
+/// stderr under `name`.
+pub fn diagnose_truth(
+    name: &str,
+    data: &Dataset,
+    start: &str,
+) -> bsdfit::workflows::diagnose::Diagnosis {
+    use bsdfit::workflows::diagnose::{diagnose, DiagnoseOptions};
+    let opts = DiagnoseOptions {
+        seed: 2,
+        restarts: 8,
+        ..Default::default()
+    };
+    let t0 = std::time::Instant::now();
+    let backend = bsdfit::engine::simd::SimdBackend::new();
+    let d = diagnose(data, start, &backend, &opts, &mut |l| eprintln!("{l}")).unwrap();
+    eprintln!(
+        "{name}: diagnose {:.1} s, {} → {:?}",
+        t0.elapsed().as_secs_f64(),
+        d.final_model,
+        d.effects
+    );
+    d
+}
