@@ -406,11 +406,19 @@ impl<'a> CpuEvaluator<'a> {
         Ok(())
     }
 
-    fn count(&self, owners: &[usize]) {
+    /// Count `per_candidate` evaluations of every sample for each candidate of
+    /// `owners`: one atomic add per problem, not per candidate (on sixteen cores the
+    /// serial part of a call is what keeps small batches from scaling).
+    fn count(&self, owners: &[usize], per_candidate: u64) {
+        let mut candidates = vec![0u64; self.parts.len()];
         for &q in owners {
-            let part = &self.parts[q];
-            part.evaluations
-                .fetch_add(part.samples as u64, Ordering::Relaxed);
+            candidates[q] += 1;
+        }
+        for (part, k) in self.parts.iter().zip(candidates) {
+            if k > 0 {
+                part.evaluations
+                    .fetch_add(k * per_candidate * part.samples as u64, Ordering::Relaxed);
+            }
         }
     }
 
@@ -454,29 +462,37 @@ impl Evaluator for CpuEvaluator<'_> {
     }
 
     /// Every (candidate, window) sum in parallel, then each candidate's sums added in
-    /// window order and finished.
+    /// window order and finished (in the candidate's task where it has one window).
     fn costs_of(&mut self, owners: &[usize], params: &[f64]) -> anyhow::Result<Vec<f64>> {
         self.check(owners, params)?;
         let p = self.dim();
-        let tasks = self.tasks(owners.len(), |i| owners[i]);
-        let sums: Vec<f64> = tasks
-            .par_iter()
-            .map(|&(c, w)| {
-                self.with_scratch(|scratch| {
-                    let part = &self.parts[owners[c]];
-                    Model::views_into(&params[c * p..(c + 1) * p], &self.slots, &mut scratch.views);
-                    part.cost_sum(&self.rows[owners[c]].terms, &part.windows[w], scratch)
-                })
+        let window_sum = |c: usize, w: usize| {
+            self.with_scratch(|scratch| {
+                let part = &self.parts[owners[c]];
+                Model::views_into(&params[c * p..(c + 1) * p], &self.slots, &mut scratch.views);
+                part.cost_sum(&self.rows[owners[c]].terms, &part.windows[w], scratch)
             })
-            .collect();
-        let mut costs = vec![0.0; owners.len()];
-        for (&(c, _), s) in tasks.iter().zip(sums) {
-            costs[c] += s;
-        }
-        for (c, &q) in costs.iter_mut().zip(owners) {
-            *c = self.rows[q].terms.finish_sum(*c);
-        }
-        self.count(owners);
+        };
+        let costs = if owners.iter().all(|&q| self.parts[q].windows.len() == 1) {
+            // One window per candidate (sparse data): each task also finishes its cost,
+            // so nothing but the collection runs between two parallel calls.
+            (0..owners.len())
+                .into_par_iter()
+                .map(|c| self.rows[owners[c]].terms.finish_sum(window_sum(c, 0)))
+                .collect()
+        } else {
+            let tasks = self.tasks(owners.len(), |i| owners[i]);
+            let sums: Vec<f64> = tasks.par_iter().map(|&(c, w)| window_sum(c, w)).collect();
+            let mut costs = vec![0.0; owners.len()];
+            for (&(c, _), s) in tasks.iter().zip(sums) {
+                costs[c] += s;
+            }
+            for (c, &q) in costs.iter_mut().zip(owners) {
+                *c = self.rows[q].terms.finish_sum(*c);
+            }
+            costs
+        };
+        self.count(owners, 1);
         Ok(costs)
     }
 
@@ -533,7 +549,7 @@ impl Evaluator for CpuEvaluator<'_> {
                 rows: &self.rows,
             })?;
         }
-        self.count(owners);
+        self.count(owners, 1);
         Ok(())
     }
 
@@ -587,11 +603,7 @@ impl Evaluator for CpuEvaluator<'_> {
         for (&(g, _), s) in tasks.iter().zip(&partial) {
             sums[g].add(s);
         }
-        for &q in owners {
-            let part = &self.parts[q];
-            part.evaluations
-                .fetch_add(((m + 1) * part.samples) as u64, Ordering::Relaxed);
-        }
+        self.count(owners, (m + 1) as u64);
         Ok(sums
             .iter()
             .zip(steps.chunks(m.max(1)))
