@@ -77,6 +77,23 @@ enum PollFailed {
     Other(String),
 }
 
+/// The process's one Vulkan instance, made on first use and kept: on an NVIDIA H200
+/// (driver 580) a process that dropped its first instance found no adapter through a
+/// second one ("vulkan drivers/libraries could not be loaded": `tests/gpu_records.rs`,
+/// whose tests each open a device, passed its first test and failed the next three).
+/// Devices opened one after another in one process (tests, the Python module) share it.
+fn vulkan_instance() -> wgpu::Instance {
+    static INSTANCE: std::sync::OnceLock<wgpu::Instance> = std::sync::OnceLock::new();
+    INSTANCE
+        .get_or_init(|| {
+            wgpu::Instance::new(wgpu::InstanceDescriptor {
+                backends: wgpu::Backends::VULKAN,
+                ..wgpu::InstanceDescriptor::new_without_display_handle()
+            })
+        })
+        .clone()
+}
+
 impl Device {
     /// Open the first Vulkan adapter (a discrete GPU if present, else e.g. lavapipe),
     /// asking for every limit it offers and for subgroups where it has them.
@@ -92,11 +109,7 @@ impl Device {
         if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
             std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
         }
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::VULKAN,
-            ..wgpu::InstanceDescriptor::new_without_display_handle()
-        });
-        let adapter = instance
+        let adapter = vulkan_instance()
             .request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
                 ..Default::default()

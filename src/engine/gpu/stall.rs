@@ -6,9 +6,14 @@
 //!
 //! llvmpipe (lavapipe) ends an invocation's loops once they have run 65,535 iterations
 //! in all (shaders/engine/kernel.wgsl, `loops_completed`), so the work is spread over
-//! many invocations, each a loop within that bound. How long a workgroup takes is
-//! measured on the device first (two short passes: the slope between them leaves out
-//! the cost of a submission), then the grid is scaled to the time wanted.
+//! many invocations, each a loop within that bound. How long a workgroup adds to a pass
+//! is measured on the device first, then the grid is scaled to the time wanted. A GPU
+//! runs thousands of workgroups at once, so a small grid takes the time of one: the grid
+//! is doubled until a pass takes about twice the last (the device is full), and the
+//! slope between those two passes (which leaves out the cost of a submission) is the
+//! time per workgroup. (Two fixed passes of 8 and 40 workgroups, full on lavapipe's
+//! cores, took the same time on an H200, whose stall then ended in well under the
+//! read-back timeout and `tests/gpu_fault.rs`'s hang tests failed there.)
 
 use super::device::Device;
 use anyhow::{Context, Result};
@@ -17,9 +22,11 @@ use std::time::{Duration, Instant};
 
 const SHADER: &str = include_str!("../../../shaders/engine/stall.wgsl");
 
-/// Workgroups of the calibration passes.
-const SMALL: u32 = 8;
-const LARGE: u32 = 40;
+/// Workgroups of the first calibration pass.
+const FIRST: u32 = 8;
+/// The calibration stops doubling at this many workgroups, or once a pass takes this long.
+const MOST: u32 = 1 << 22;
+const LONG_S: f64 = 1.0;
 
 pub struct Stall {
     pipeline: wgpu::ComputePipeline,
@@ -114,7 +121,8 @@ impl Stall {
         encoder.finish()
     }
 
-    /// Seconds per workgroup: the slope between a small and a large pass, each waited
+    /// Seconds per workgroup once the device is full: the grid doubled until a pass
+    /// takes 1.6 times the last, then the slope between those two passes, each waited
     /// for in full.
     fn measure(&self, device: &Device) -> Result<f64> {
         let time = |groups: u32| -> Result<f64> {
@@ -131,16 +139,20 @@ impl Stall {
         };
         // The least of two tries of each: work of other threads on the device can only
         // lengthen a pass, and a stall sized from a lengthened pass would be too short.
-        let (small, large) = (
-            time(SMALL)?.min(time(SMALL)?),
-            time(LARGE)?.min(time(LARGE)?),
-        );
-        let slope = (large - small) / f64::from(LARGE - SMALL);
-        Ok(if slope > 0.0 {
-            slope
-        } else {
-            large / f64::from(LARGE)
+        let best = |groups: u32| -> Result<f64> { Ok(time(groups)?.min(time(groups)?)) };
+        let (mut groups, mut last) = (FIRST, best(FIRST)?);
+        loop {
+            let (next, t) = (2 * groups, best(2 * groups)?);
+            if t > 1.6 * last || next >= MOST || t > LONG_S {
+                let slope = (t - last) / f64::from(groups);
+                let per_group = if t > 1.6 * last {
+                    slope
+                } else {
+                    t / f64::from(next)
+                };
+                return Ok(per_group.max(1e-9));
+            }
+            (groups, last) = (next, t);
         }
-        .max(1e-7))
     }
 }
