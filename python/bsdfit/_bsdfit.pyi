@@ -181,6 +181,7 @@ def battery(
     cases: int,
     nulls: int,
     misspecified: int,
+    misspecified_btdf: int,
     seed: int,
     effects: Optional[List[str]],
     signal: Tuple[float, float],

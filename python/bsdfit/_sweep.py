@@ -121,6 +121,7 @@ def battery(
     cases: int = _BATTERY_DEFAULTS["cases"],
     nulls: int = _BATTERY_DEFAULTS["nulls"],
     misspecified: int = _BATTERY_DEFAULTS["misspecified"],
+    misspecified_btdf: int = _BATTERY_DEFAULTS["misspecified_btdf"],
     seed: int = _BATTERY_DEFAULTS["seed"],
     effects: Optional[Sequence[str]] = None,
     signal: Tuple[float, float] = _BATTERY_DEFAULTS["signal"],
@@ -134,7 +135,9 @@ def battery(
     """Run the diagnosis's randomized battery (``bsdfit battery``): ``cases`` cases per
     hidden effect (``effects``: names as ``diagnose`` gives them; default every effect)
     and ``nulls`` cases with nothing hidden, then ``misspecified`` null cases whose
-    isotropic truths lie outside the catalogue (diagnosed from ``fa(lambert)``), the effect's pre-fit ``signal`` and the
+    isotropic truths lie outside the catalogue (diagnosed from ``fa(lambert)``) and
+    ``misspecified_btdf`` transmission ones (rough dielectrics whose NDF is outside the
+    BTDF catalogue, diagnosed from ``btdf(tr)``), the effect's pre-fit ``signal`` and the
     sample counts drawn log-uniformly from their ``(lo, hi)`` ranges, each diagnosed with
     ``restarts`` restarts per fit. The same ``seed`` draws the same battery; ``case=ID``
     runs that case only. ``data_driven=True`` offers the data-driven factors in each
@@ -148,6 +151,7 @@ def battery(
             _int("cases", cases, 0),
             _int("nulls", nulls, 0),
             _int("misspecified", misspecified, 0),
+            _int("misspecified_btdf", misspecified_btdf, 0),
             _int("seed", seed, 0),
             listed,
             _range("signal", signal, integer=False),

@@ -75,6 +75,7 @@ pub(crate) fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     dict.set_item("cases", d.cases)?;
     dict.set_item("nulls", d.nulls)?;
     dict.set_item("misspecified", d.misspecified)?;
+    dict.set_item("misspecified_btdf", d.misspecified_btdf)?;
     dict.set_item("seed", d.seed)?;
     dict.set_item("signal", d.signal)?;
     dict.set_item("samples", d.samples)?;
@@ -88,12 +89,13 @@ pub(crate) fn battery_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// the command line prints. `progress` (a callable or None) hears of each case as it
 /// ends (stage `battery`).
 #[pyfunction]
-#[pyo3(signature = (cases, nulls, misspecified, seed, effects, signal, samples, restarts, backend, case, data_driven, progress))]
+#[pyo3(signature = (cases, nulls, misspecified, misspecified_btdf, seed, effects, signal, samples, restarts, backend, case, data_driven, progress))]
 pub(crate) fn battery(
     py: Python<'_>,
     cases: usize,
     nulls: usize,
     misspecified: usize,
+    misspecified_btdf: usize,
     seed: u64,
     effects: Option<Vec<String>>,
     signal: (f64, f64),
@@ -114,6 +116,7 @@ pub(crate) fn battery(
             cases,
             nulls,
             misspecified,
+            misspecified_btdf,
             seed,
             effects: match effects {
                 None => defaults.effects.clone(),

@@ -864,14 +864,14 @@ def test_battery_is_the_command_lines_battery(tmp_path):
     """bsdfit.battery draws and diagnoses the cases `bsdfit battery` does with the same
     options: the same outcomes (but the seconds each took) and the same rates table,
     with a progress event per case; bad options are refused naming the keyword."""
-    options = dict(cases=1, nulls=1, misspecified=1, effects=["scale"], samples=(20, 60),
-                   restarts=2, seed=3)
+    options = dict(cases=1, nulls=1, misspecified=1, misspecified_btdf=1, effects=["scale"],
+                   samples=(20, 60), restarts=2, seed=3)
     events = []
     result = bsdfit.battery(backend="cpu", progress=events.append, **options)
-    assert len(result) == 3 and "3 cases" in repr(result)
+    assert len(result) == 4 and "4 cases" in repr(result)
     out = tmp_path / "battery.json"
     cli = run_cli("battery", "--cases", "1", "--nulls", "1", "--misspecified", "1",
-                  "--effects", "scale",
+                  "--misspecified-btdf", "1", "--effects", "scale",
                   "--samples", "20,60", "--restarts", "2", "--seed", "3", "--backend", "cpu",
                   "--json", str(out))
     expected = json.loads(out.read_text())
@@ -879,12 +879,13 @@ def test_battery_is_the_command_lines_battery(tmp_path):
         for o in outcomes:
             o.pop("seconds")
     assert result.outcomes == expected
-    assert [o["case"]["hidden"] for o in expected] == ["scale", None, None]
-    assert [o["case"].get("misspecified") for o in expected] == [None, None, "beckmann-ndf"]
-    assert "Misspecified null cases" in result.table
+    assert [o["case"]["hidden"] for o in expected] == ["scale", None, None, None]
+    assert [o["case"].get("misspecified") for o in expected] == [
+        None, None, "beckmann-ndf", "btdf-two-scale-ndf"]
+    assert "Misspecified null cases" in result.table and "`btdf(tr)`" in result.table
     assert result.table.strip() in cli.stdout
     assert [(e.stage, e.done, e.total) for e in events] == [
-        ("battery", 0, 3), ("battery", 1, 3), ("battery", 2, 3), ("battery", 3, 3)]
+        ("battery", k, 4) for k in range(5)]
     with pytest.raises(ValueError, match="effects: unknown effect 'glare' \\(known: backscatter"):
         bsdfit.battery(effects=["glare"], backend="cpu", progress=False)
     with pytest.raises(ValueError, match="signal='0,30': 0 < LO ≤ HI"):

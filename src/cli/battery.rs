@@ -25,6 +25,11 @@ pub struct BatteryArgs {
     /// table says which effects were named on them.
     #[arg(long, default_value_t = BatteryOptions::default().misspecified)]
     pub misspecified: usize,
+    /// Misspecified transmission cases: rough dielectrics whose NDF is outside the BTDF
+    /// catalogue (a two-scale Beckmann mixture, a Student-t NDF), at one incidence
+    /// azimuth and at several, diagnosed from btdf(tr); drawn after the reflection ones.
+    #[arg(long, default_value_t = BatteryOptions::default().misspecified_btdf)]
+    pub misspecified_btdf: usize,
     /// Seed of the cases (a non-negative integer): the same seed draws the same battery.
     #[arg(long, default_value_t = BatteryOptions::default().seed, value_parser = super::parse_seed, allow_hyphen_values = true)]
     pub seed: u64,
@@ -91,6 +96,7 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
         cases: a.cases,
         nulls: a.nulls,
         misspecified: a.misspecified,
+        misspecified_btdf: a.misspecified_btdf,
         seed: a.seed,
         effects,
         signal: pair(&a.signal, "--signal")?,
@@ -125,9 +131,14 @@ pub fn run(a: &BatteryArgs) -> Result<()> {
             }
         }
         progress.println(format!(
-            "case {:>4} {:<16} {:<28} → {:<34} SNR {:>5.1}  χ²_red {:>9.3} → {:>7.3}  named [{}]{}{}{}",
+            "case {:>4} {:<18} {:<28} → {:<34} SNR {:>5.1}  χ²_red {:>9.3} → {:>7.3}  named [{}]{}{}{}",
             o.case.id,
-            o.case.hidden.as_deref().unwrap_or("none"),
+            // A misspecified case hides nothing: its truth's family says what it is.
+            o.case
+                .hidden
+                .as_deref()
+                .or(o.case.misspecified.as_deref())
+                .unwrap_or("none"),
             o.case.start,
             o.final_model,
             o.snr,

@@ -44,6 +44,10 @@ pub struct BatteryOptions {
     /// ([`super::misspecified`]), diagnosed from `fa(lambert)`; they cycle through the
     /// families, at one incidence azimuth and then at several.
     pub misspecified: usize,
+    /// Misspecified transmission cases: rough dielectrics whose NDF is outside the BTDF
+    /// catalogue ([`super::misspecified::BTDF_FAMILIES`]), diagnosed from `btdf(tr)`,
+    /// drawn after the reflection ones and cycling the same way.
+    pub misspecified_btdf: usize,
     pub seed: u64,
     /// The effects to hide (default: every effect of the table).
     pub effects: Vec<Effect>,
@@ -63,6 +67,7 @@ impl Default for BatteryOptions {
             cases: 20,
             nulls: 40,
             misspecified: 10,
+            misspecified_btdf: 4,
             seed: 1,
             effects: Effect::all().filter(|e| !e.is_data_driven()).collect(),
             signal: (1.0, 30.0),
@@ -98,12 +103,13 @@ impl BatteryOptions {
         match self.only {
             // An id past the plan would run nothing and print an empty table.
             Some(id) if id >= planned => Err(crate::choice::field_error(format!(
-                "{{case={id}}}: this battery has cases 0–{} ({} per effect × {} effects, {} null, {} misspecified)",
+                "{{case={id}}}: this battery has cases 0–{} ({} per effect × {} effects, {} null, {} misspecified, {} misspecified BTDF)",
                 planned.saturating_sub(1),
                 self.cases,
                 self.effects.len(),
                 self.nulls,
-                self.misspecified
+                self.misspecified,
+                self.misspecified_btdf
             ))),
             _ => Ok(()),
         }
@@ -120,7 +126,7 @@ impl BatteryOptions {
 
     /// The cases of the whole plan, whether or not `only` picks one.
     fn planned(&self) -> usize {
-        self.effects.len() * self.cases + self.nulls + self.misspecified
+        self.effects.len() * self.cases + self.nulls + self.misspecified + self.misspecified_btdf
     }
 }
 
@@ -649,15 +655,16 @@ pub fn run_case(
             let consistent = last.fit.p_consistent() >= opts.diagnose.alpha;
             let (detected, false_effect) = match &case.hidden {
                 // An isotropic truth without backscatter, retroreflection or decay: only
-                // a second specular lobe or a data-driven factor (a reshaped highlight, its
-                // Fresnel curve, or the body's profile: the truth's body is a plain
-                // Lambertian one, where `fa`'s is Fresnel-transmitted) is not a false
-                // effect.
+                // a second specular lobe, another NDF family for a transmitted lobe (the
+                // analytic ways to reshape the lobe: `long_tail` swaps the family) or a
+                // data-driven factor (a reshaped highlight, its Fresnel curve, or the
+                // body's profile: the truth's body is a plain Lambertian one, where `fa`'s
+                // is Fresnel-transmitted) is not a false effect.
                 None if case.misspecified.is_some() => (
                     false,
-                    d.effects
-                        .iter()
-                        .any(|e| *e != Effect::SpecularLobe && !e.is_data_driven()),
+                    d.effects.iter().any(|e| {
+                        ![Effect::SpecularLobe, Effect::LongTail].contains(e) && !e.is_data_driven()
+                    }),
                 ),
                 None => (false, !named.is_empty()),
                 Some(h) => (
@@ -732,14 +739,19 @@ pub fn run_battery(
     #[derive(Clone, Copy)]
     enum Draw {
         Hidden(Option<Effect>),
-        Misspecified(usize),
+        Misspecified((&'static str, bool)),
     }
     let mut plan: Vec<Draw> = Vec::new();
     for &e in &opts.effects {
         plan.extend(std::iter::repeat_n(Draw::Hidden(Some(e)), opts.cases));
     }
     plan.extend(std::iter::repeat_n(Draw::Hidden(None), opts.nulls));
-    plan.extend((0..opts.misspecified).map(Draw::Misspecified));
+    plan.extend(
+        (0..opts.misspecified)
+            .map(misspecified::family_of)
+            .chain((0..opts.misspecified_btdf).map(misspecified::btdf_family_of))
+            .map(Draw::Misspecified),
+    );
     let mut out = Vec::with_capacity(plan.len());
     for (id, draw) in plan.into_iter().enumerate() {
         if opts.only.is_some_and(|o| o != id) {
@@ -747,14 +759,14 @@ pub fn run_battery(
         }
         let drawn = match draw {
             Draw::Hidden(hidden) => generate(hidden, id, opts),
-            Draw::Misspecified(k) => misspecified::generate(k, id, opts),
+            Draw::Misspecified(family) => misspecified::generate(family, id, opts),
         };
         let outcome = match drawn {
             Ok((case, data)) => run_case(case, &data, backend, opts),
             Err(e) => {
                 let (hidden, misspecified) = match draw {
                     Draw::Hidden(h) => (h.map(|e| e.name().to_string()), None),
-                    Draw::Misspecified(k) => (None, Some(misspecified::family_of(k).0.to_string())),
+                    Draw::Misspecified((family, _)) => (None, Some(family.to_string())),
                 };
                 let case = Case {
                     id,

@@ -16,6 +16,15 @@
 //! - `schlick`: the GGX NDF with Schlick's Fresnel F0 + (1 − F0)(1 − cos)⁵ in place of
 //!   the exact dielectric one.
 //!
+//! The transmission families are rough dielectric interfaces (Walter et al. 2007, Eq. 21:
+//! air above, index η below, exact (1 − F), Smith masking from D), their NDF outside the
+//! BTDF catalogue's TR, Beckmann, GTR and generalized-Gaussian families:
+//!
+//! - `btdf-two-scale-ndf`: the two-scale Beckmann mixture above;
+//! - `btdf-student-ndf`: the Student-t NDF of Ribardière et al. 2017,
+//!   D = (1 + tan²θ / ((γ − 1) α²))^(−γ) / (π α² cos⁴θ), with γ ∉ {2, ∞} (γ = 2 is GGX,
+//!   γ → ∞ Beckmann).
+//!
 //! Where masking is Smith's, Λ is integrated numerically from the truth's own D:
 //! 1 + Λ(ω) = (1/cos θ) ∫ ⟨ω·m⟩ D(m) dm (Heitz 2014, Eq. 8 and 19), so no family borrows
 //! a closed form of the catalogue's. The truths have no backscatter, no retroreflection,
@@ -42,6 +51,10 @@ pub const FAMILIES: [&str; 5] = [
     "v-cavity-shadowing",
     "schlick-fresnel",
 ];
+
+/// The transmission families, in the order the battery cycles through them (its
+/// `misspecified_btdf` cases).
+pub const BTDF_FAMILIES: [&str; 2] = ["btdf-two-scale-ndf", "btdf-student-ndf"];
 
 /// The data-driven factor that represents what each family's truth lacks in the
 /// catalogue: the NDF's shape for the three distributions and for V-cavity shadowing (a
@@ -71,6 +84,11 @@ enum Ndf {
         a2: f64,
         w: f64,
     },
+    /// Ribardière et al. 2017's Student-t distribution.
+    Student {
+        alpha: f64,
+        gamma: f64,
+    },
 }
 
 fn beckmann(c: f64, a: f64) -> f64 {
@@ -99,6 +117,12 @@ impl Ndf {
                 k / (1.0 + (a2 - 1.0) * c * c).powf(gamma)
             }
             Ndf::TwoScale { a1, a2, w } => w * beckmann(c, a1) + (1.0 - w) * beckmann(c, a2),
+            Ndf::Student { alpha, gamma } => {
+                // ∫ D cos θ dω = 1 by t = tan²θ: π K (γ − 1) α² / (γ − 1) with K = 1/(π α²).
+                let (a2, c2) = (alpha * alpha, c * c);
+                let tan2 = (1.0 - c2) / c2;
+                (1.0 + tan2 / ((gamma - 1.0) * a2)).powf(-gamma) / (PI * a2 * c2 * c2)
+            }
         }
     }
 }
@@ -132,6 +156,8 @@ const LAMBDA_POINTS: usize = 256;
 #[derive(Clone, Debug)]
 pub struct Truth {
     pub family: &'static str,
+    /// A BRDF (a body and a highlight) or a BTDF (a rough dielectric's transmission).
+    pub kind: Kind,
     ndf: Ndf,
     fresnel: Fresnel,
     /// Smith masking from the NDF (tabulated Λ) when Some; V-cavity when None.
@@ -143,6 +169,9 @@ pub struct Truth {
 impl Truth {
     /// A truth of `family` with `channels` body albedos, its parameters drawn from `rng`.
     pub fn draw(family: &'static str, channels: usize, rng: &mut ChaCha8Rng) -> Truth {
+        if BTDF_FAMILIES.contains(&family) {
+            return Truth::draw_btdf(family, rng);
+        }
         let eta = rng.random_range(1.3..1.8);
         let alpha = (rng.random_range(0.05f64.ln()..0.4f64.ln())).exp();
         let (ndf, fresnel, smith) = match family {
@@ -165,6 +194,7 @@ impl Truth {
         };
         let lambda = smith.then(|| smith_lambda(&ndf));
         Truth {
+            kind: Kind::Brdf,
             family: FAMILIES
                 .iter()
                 .copied()
@@ -175,6 +205,37 @@ impl Truth {
             lambda,
             ks: rng.random_range(0.5..1.0),
             rho: (0..channels).map(|_| rng.random_range(0.05..0.7)).collect(),
+        }
+    }
+
+    /// A transmission truth of `family` (one of [`BTDF_FAMILIES`]), one channel: a rough
+    /// dielectric of index η ∈ [1.3, 1.8] with no body, no absorption and no scale.
+    fn draw_btdf(family: &'static str, rng: &mut ChaCha8Rng) -> Truth {
+        let eta = rng.random_range(1.3..1.8);
+        let ndf = if family == "btdf-two-scale-ndf" {
+            Ndf::TwoScale {
+                a1: rng.random_range(0.04..0.1),
+                a2: rng.random_range(0.2..0.45),
+                w: rng.random_range(0.3..0.7),
+            }
+        } else {
+            Ndf::Student {
+                alpha: (rng.random_range(0.05f64.ln()..0.35f64.ln())).exp(),
+                gamma: *[1.6, 3.0, 6.0].choose(rng).expect("non-empty"),
+            }
+        };
+        Truth {
+            family: BTDF_FAMILIES
+                .iter()
+                .copied()
+                .find(|f| *f == family)
+                .unwrap_or("btdf-student-ndf"),
+            kind: Kind::Btdf,
+            lambda: Some(smith_lambda(&ndf)),
+            ndf,
+            fresnel: Fresnel::Exact(eta),
+            ks: 1.0,
+            rho: vec![0.0],
         }
     }
 
@@ -190,6 +251,7 @@ impl Truth {
                     1.0 - w
                 )
             }
+            Ndf::Student { alpha, gamma } => format!("Student-t α = {alpha:.3}, γ = {gamma}"),
         };
         let masking = if self.lambda.is_some() {
             "Smith masking from D"
@@ -200,6 +262,12 @@ impl Truth {
             Fresnel::Exact(eta) => format!("exact Fresnel η = {eta:.2}"),
             Fresnel::Schlick(f0) => format!("Schlick Fresnel F0 = {f0:.3}"),
         };
+        if self.kind == Kind::Btdf {
+            return format!(
+                "{}: rough dielectric transmission ({ndf}, {masking}, 1 − {fresnel})",
+                self.family
+            );
+        }
         let rho: Vec<String> = self.rho.iter().map(|r| format!("{r:.2}")).collect();
         format!(
             "{}: Lambertian ρ = {} + {:.2} × ({ndf}, {masking}, {fresnel})",
@@ -219,13 +287,64 @@ impl Truth {
         }
     }
 
-    /// The BRDF in channel `ch` for directions above the surface.
+    /// The BRDF in channel `ch` for directions above the surface; for a transmission
+    /// truth, its BTDF with `wo` below the surface.
     pub fn eval(&self, wi: DVec3, wo: DVec3, ch: usize) -> f64 {
+        if self.kind == Kind::Btdf {
+            return self.transmission(wi, wo);
+        }
         let body = self.rho[ch] / PI;
         let h = (wi + wo).normalize();
         let spec = self.ks * self.fresnel.at(wi.dot(h)) * self.ndf.d(h.z) * self.masking(wi, wo, h)
             / (4.0 * wi.z * wo.z);
         body + spec
+    }
+}
+
+impl Truth {
+    /// Walter et al. 2007, Eq. 21 without the η² radiance factor (the convention of the
+    /// catalogue's BTDFs): |i·m| |o·m| (1 − F(i·m)) G1(i) G1(o) D(m) / (μi |μo| (i·m + η o·m)²),
+    /// m = −(ωi + η ωo)/‖·‖ turned above the surface; ωi above, ωo below.
+    fn transmission(&self, wi: DVec3, wo: DVec3) -> f64 {
+        let Fresnel::Exact(eta) = self.fresnel else {
+            return 0.0;
+        };
+        if wi.z <= 0.0 || wo.z >= 0.0 {
+            return 0.0;
+        }
+        let mut m = -(wi + eta * wo).normalize();
+        if m.z < 0.0 {
+            m = -m;
+        }
+        let (im, om) = (wi.dot(m), wo.dot(m));
+        if im <= 0.0 || om >= 0.0 {
+            return 0.0;
+        }
+        let g1 = |mu: f64| {
+            self.lambda
+                .as_ref()
+                .map_or(1.0, |t| 1.0 / (1.0 + lookup(t, mu)))
+        };
+        let denom = im + eta * om;
+        self.ks
+            * im
+            * om.abs()
+            * (1.0 - self.fresnel.at(im))
+            * g1(wi.z)
+            * g1(-wo.z)
+            * self.ndf.d(m.z)
+            / (wi.z * wo.z.abs() * denom * denom)
+    }
+
+    /// Where the truth's lobe peaks for incidence at `theta_i` degrees: the mirror angle,
+    /// or the refracted one (Snell).
+    fn peak_theta(&self, theta_i: f64) -> f64 {
+        match (self.kind, &self.fresnel) {
+            (Kind::Btdf, Fresnel::Exact(eta)) => {
+                (theta_i.to_radians().sin() / eta).asin().to_degrees()
+            }
+            _ => theta_i,
+        }
     }
 }
 
@@ -295,27 +414,38 @@ pub fn measure(
         for &ti in &incidences {
             for k in 0..per {
                 let (to, po) = if k % 4 == 0 {
-                    // Near the mirror direction, where the highlight's shape shows.
+                    // Near the mirror (or refracted) direction, where the lobe's shape
+                    // shows.
                     let d = rng.random_range(0.0f64..6.0);
                     let a = rng.random_range(0.0..2.0 * PI);
-                    let to = (ti + d * a.cos()).abs().clamp(0.5, 85.0);
+                    let to = (truth.peak_theta(ti) + d * a.cos()).abs().clamp(0.5, 85.0);
                     (to, pi + 180.0 + d * a.sin() * 2.0)
                 } else {
                     let to = rng.random::<f64>().sqrt().asin().to_degrees().min(85.0);
                     (to, pi + rng.random_range(0.0..360.0))
                 };
                 let wi = direction(ti, pi);
-                let wo = direction(to, po);
+                let mut wo = direction(to, po);
+                // A BTDF file's θo is measured from the far side's normal.
+                if truth.kind == Kind::Btdf {
+                    wo.z = -wo.z;
+                }
                 for (ch, &wl) in wavelengths.iter().take(channels).enumerate() {
                     let f = truth.eval(wi, wo, ch);
                     let u = ((noise.0 * f).powi(2) + noise.1.powi(2)).sqrt();
+                    let mut n: f64 = gauss.sample(rng);
+                    // Far from a transmitted lobe f is near 0, and the reader refuses
+                    // values more than 3 σ below it.
+                    if truth.kind == Kind::Btdf {
+                        n = n.clamp(-3.0, 3.0);
+                    }
                     let row = RawRow {
                         theta_i: ti,
                         phi_i: pi,
                         theta_o: to,
                         phi_o: po,
                         wavelength_nm: if channels == 1 { 550.0 } else { wl },
-                        value: f + u * gauss.sample(rng),
+                        value: f + u * n,
                         uncertainty: u,
                     };
                     raw.push((raw.len() + 1, row));
@@ -324,7 +454,7 @@ pub fn measure(
         }
     }
     Ok(Dataset::from_rows(
-        Kind::Brdf,
+        truth.kind,
         &truth.describe(),
         &raw,
         "<battery>",
@@ -347,11 +477,24 @@ pub(super) fn family_of(k: usize) -> (&'static str, bool) {
     (FAMILIES[k % n], (k / n) % 2 == 1)
 }
 
+/// [`family_of`] for the `k`-th transmission case, from [`BTDF_FAMILIES`].
+pub(super) fn btdf_family_of(k: usize) -> (&'static str, bool) {
+    let n = BTDF_FAMILIES.len();
+    (BTDF_FAMILIES[k % n], (k / n) % 2 == 1)
+}
+
 /// The start model of the misspecified cases, from the effect table: the first BRDF model
 /// of the catalogue (a Lambertian body) with its first extension that adds a specular
 /// lobe (`fa(lambert)`, the catalogue's GGX highlight over it), the model the truths
-/// depart from.
+/// depart from; on transmission data the first BTDF model of the catalogue (`btdf(tr)`,
+/// Walter's BTDF with the GGX NDF).
 pub fn start_model(data: &Dataset) -> Result<String> {
+    if data.kind == Kind::Btdf {
+        return crate::bsdf::catalogue(Kind::Btdf)
+            .into_iter()
+            .next()
+            .ok_or_else(|| anyhow!("no BTDF model in the catalogue"));
+    }
     let body = crate::bsdf::catalogue(Kind::Brdf)
         .into_iter()
         .next()
@@ -363,14 +506,25 @@ pub fn start_model(data: &Dataset) -> Result<String> {
         .ok_or_else(|| anyhow!("no specular lobe extends {body}"))
 }
 
-/// Draw the `k`-th misspecified null case of a battery: an isotropic truth
-/// of the family [`family_of`] gives, one or three channels, about a log-uniform number of
-/// samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
-pub fn generate(k: usize, id: usize, opts: &BatteryOptions) -> Result<(Case, Dataset)> {
+/// Draw a misspecified null case of a battery, case `id`: an isotropic truth of `family`
+/// (from [`family_of`] or [`btdf_family_of`]) measured at one incidence azimuth or at
+/// `several`, one or three channels (a transmission truth: one), about a log-uniform
+/// number of samples in `opts.samples` (at most 4,000), noise of 1–5 % with a floor.
+pub fn generate(
+    (family, several): (&'static str, bool),
+    id: usize,
+    opts: &BatteryOptions,
+) -> Result<(Case, Dataset)> {
     let seed = case_seed(opts, id);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (family, several) = family_of(k);
+    // Drawn for every family, so a reflection case draws what it did before the
+    // transmission families existed; a transmission truth has one channel.
     let channels = if rng.random::<f64>() < 0.5 { 3 } else { 1 };
+    let channels = if BTDF_FAMILIES.contains(&family) {
+        1
+    } else {
+        channels
+    };
     let truth = Truth::draw(family, channels, &mut rng);
     let first: f64 = rng.random_range(0.0..180.0);
     let azimuths: Vec<f64> = if several {
@@ -418,7 +572,8 @@ pub fn generate(k: usize, id: usize, opts: &BatteryOptions) -> Result<(Case, Dat
 
 /// The misspecified null cases as a markdown table: per family and geometry (one
 /// incidence azimuth or several), how many cases named each effect, and the false
-/// effects (any effect but a second specular lobe); empty without such cases.
+/// effects (any effect but a second specular lobe, another NDF family for a transmitted
+/// lobe, or a data-driven factor); empty without such cases.
 pub fn table(outcomes: &[Outcome]) -> String {
     let cases: Vec<&Outcome> = outcomes
         .iter()
@@ -427,12 +582,15 @@ pub fn table(outcomes: &[Outcome]) -> String {
     if cases.is_empty() {
         return String::new();
     }
-    let start = &cases[0].case.start;
+    let mut starts: Vec<&str> = cases.iter().map(|o| o.case.start.as_str()).collect();
+    starts.sort();
+    starts.dedup();
+    let start = starts.join("` or `");
     let mut s = format!(
         "\nMisspecified null cases (isotropic truths outside the catalogue, diagnosed from `{start}`):\n\n| truth | incidence azimuths | cases | the truth's factor named | anisotropy named | anisotropy refused (cases) | retro_lobe named | other effects named | false effects |\n|---|---|---|---|---|---|---|---|---|\n"
     );
     let several = |o: &Outcome| !o.case.geometry.starts_with("hemisphere at 1 ");
-    for family in FAMILIES {
+    for family in FAMILIES.into_iter().chain(BTDF_FAMILIES) {
         for multi in [false, true] {
             let group: Vec<&&Outcome> = cases
                 .iter()
@@ -497,7 +655,7 @@ pub fn table(outcomes: &[Outcome]) -> String {
         })
         .count();
     s += &format!(
-        "\nThe truth's own factor named on {right} of {}. Anisotropy named on {} of {} isotropic truths; false effects on {} (any analytic effect but a specular lobe; the data-driven factors are not false here). Anisotropy refused: cases where a significant, identifiable `+aniso` candidate was refused because its surface-fixed frame did no better than an isotropic lobe of the same shape (at one incidence azimuth: did not break the mirror symmetry about the plane of incidence).\n",
+        "\nThe truth's own factor named on {right} of {}. Anisotropy named on {} of {} isotropic truths; false effects on {} (any analytic effect but a second specular lobe or, on transmission, another NDF family for the lobe (`long_tail`); the data-driven factors are not false here). Anisotropy refused: cases where a significant, identifiable `+aniso` candidate was refused because its surface-fixed frame did no better than an isotropic lobe of the same shape (at one incidence azimuth: did not break the mirror symmetry about the plane of incidence).\n",
         cases.len(),
         anis,
         cases.len(),
@@ -530,6 +688,14 @@ mod tests {
                 a1: 0.05,
                 a2: 0.3,
                 w: 0.5,
+            },
+            Ndf::Student {
+                alpha: 0.1,
+                gamma: 1.6,
+            },
+            Ndf::Student {
+                alpha: 0.3,
+                gamma: 6.0,
             },
         ];
         for ndf in ndfs {
@@ -594,12 +760,100 @@ mod tests {
     #[test]
     fn every_family_draws_and_measures() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        for family in FAMILIES {
+        for family in FAMILIES.into_iter().chain(BTDF_FAMILIES) {
             let t = Truth::draw(family, 3, &mut rng);
             assert_eq!(t.family, family);
             let d = measure(&t, &[20.0], 600, (0.02, 1e-4), &mut rng).unwrap();
-            assert!(d.len() >= 450 && d.samples.iter().all(|s| s.value.is_finite()));
+            let channels = if t.kind == Kind::Btdf { 1 } else { 3 };
+            assert!(d.len() >= 150 * channels && d.samples.iter().all(|s| s.value.is_finite()));
+            assert_eq!(d.kind, t.kind);
             assert_eq!(d.azimuth_coverage().one_azimuth(), Some(20.0));
+            if t.kind == Kind::Btdf {
+                // The transmitted lobe is there, and where Snell puts it: the brightest
+                // sample lies within 8° of the refracted direction, far above the floor.
+                let top = d
+                    .samples
+                    .iter()
+                    .max_by(|a, b| a.value.total_cmp(&b.value))
+                    .expect("samples");
+                let peak = t.peak_theta(top.theta_i.to_degrees());
+                assert!(
+                    top.transmitted
+                        && (top.theta_o.to_degrees() - peak).abs() < 8.0
+                        && top.value > 100.0 * 1e-4,
+                    "{family}: brightest {top:?}, refracted θ {peak:.1}°"
+                );
+            }
         }
+    }
+
+    /// Student-t's limits are the catalogue's: γ = 2 is GGX, a large γ is Beckmann.
+    #[test]
+    fn student_t_is_ggx_at_two_and_beckmann_in_the_limit() {
+        for c in [0.99, 0.9, 0.7, 0.5] {
+            let ggx = Ndf::Ggx(0.2).d(c);
+            let st = Ndf::Student {
+                alpha: 0.2,
+                gamma: 2.0,
+            }
+            .d(c);
+            assert!((st / ggx - 1.0).abs() < 1e-12, "c {c}: {st} vs {ggx}");
+            let b = Ndf::Beckmann(0.2).d(c);
+            // (1 + x/γ)^(−γ) = e^(−x) (1 + x²/(2γ) + …): 3e-5 at x = 75 (c = 0.5); the
+            // base's rounding, raised to γ, adds γ·1e-16.
+            let st = Ndf::Student {
+                alpha: 0.2,
+                gamma: 1e8,
+            }
+            .d(c);
+            assert!((st / b - 1.0).abs() < 1e-3, "c {c}: {st} vs {b}");
+        }
+    }
+
+    /// The transmission truth conserves energy and is the BTDF a rough interface gives:
+    /// its albedo Σ f |cos θo| dω at normal incidence is at most 1 − F(0) and, for a
+    /// smooth-ish lobe, within a few per cent of it (little masking at α ≈ 0.05), and it
+    /// peaks on the refracted direction.
+    #[test]
+    fn the_transmission_truth_conserves_energy_and_peaks_where_snell_says() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let truth = Truth {
+            ndf: Ndf::Student {
+                alpha: 0.05,
+                gamma: 3.0,
+            },
+            lambda: Some(smith_lambda(&Ndf::Student {
+                alpha: 0.05,
+                gamma: 3.0,
+            })),
+            ..Truth::draw("btdf-student-ndf", 1, &mut rng)
+        };
+        let Fresnel::Exact(eta) = truth.fresnel else {
+            panic!("exact Fresnel")
+        };
+        let wi = direction(0.0, 0.0);
+        let nt = 4000;
+        let dt = (PI / 2.0) / nt as f64;
+        let mut albedo = 0.0;
+        for i in 0..nt {
+            let th = (i as f64 + 0.5) * dt;
+            let mut wo = direction(th.to_degrees(), 0.0);
+            wo.z = -wo.z;
+            albedo += truth.transmission(wi, wo) * th.cos() * th.sin() * dt * 2.0 * PI;
+        }
+        let t0 = (1.0 - truth.fresnel.at(1.0)) / (eta * eta);
+        assert!(
+            albedo <= t0 * 1.001 && albedo > 0.95 * t0,
+            "albedo {albedo}, (1 − F)/η² {t0}"
+        );
+        let ti = 40.0;
+        let peak = truth.peak_theta(ti);
+        assert!((peak - (ti.to_radians().sin() / eta).asin().to_degrees()).abs() < 1e-9);
+        let at = |t: f64| {
+            let mut wo = direction(t, 180.0);
+            wo.z = -wo.z;
+            truth.transmission(direction(ti, 0.0), wo)
+        };
+        assert!(at(peak) > at(peak + 3.0) && at(peak) > at(peak - 3.0));
     }
 }
