@@ -3,7 +3,8 @@
 # target/wheels/: the native module, the Python API and the `bsdfit` command (which runs
 # the command line through the native module). Needs a Rust toolchain and pip; pip fetches
 # maturin, the build backend. PYTHON names the interpreter whose pip builds (default
-# python3). Usage: scripts/build-wheel.sh
+# python3); MATURIN_PEP517_ARGS passes maturin options (the tests build with
+# `--profile ci`, the profile of their own build). Usage: scripts/build-wheel.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}

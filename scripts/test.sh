@@ -15,17 +15,25 @@ if ! ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1; then
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq mesa-vulkan-drivers >/dev/null
 fi
 
-echo "== cargo fmt --check =="
-cargo fmt --check
-echo "== cargo clippy =="
-cargo clippy --workspace --all-targets --quiet -- -D warnings
-echo "== cargo test =="
-cargo test --all-targets
-echo "== SIMD parity capped at AVX2 and at the baseline (SSE2); the run above used the widest =="
-BSDFIT_SIMD=avx2 cargo test --test simd_parity
-BSDFIT_SIMD=baseline cargo test --test simd_parity
+# Each phase says when it starts (seconds since the script began), so a slow CI run shows
+# where its time went.
+phase() { echo "== $1 == (${SECONDS} s)"; }
 
-echo "== Python module: its wheel installed into a fresh venv, then pytest =="
+phase "cargo fmt --check"
+cargo fmt --check
+phase "cargo clippy"
+cargo clippy --workspace --all-targets --quiet -- -D warnings
+# The tests, the Python wheel and the Slurm test share one build of the `ci` profile
+# (Cargo.toml: release code with debug assertions and overflow checks), built once: the
+# tests' fits and diagnoses run several times faster than at the test profile's
+# opt-level 1, and the wheel does not compile the library a second time.
+phase "cargo test (profile ci)"
+cargo test --profile ci --all-targets
+phase "SIMD parity capped at AVX2 and at the baseline (SSE2); the run above used the widest"
+BSDFIT_SIMD=avx2 cargo test --profile ci --test simd_parity
+BSDFIT_SIMD=baseline cargo test --profile ci --test simd_parity
+
+phase "Python module: its wheel installed into a fresh venv, then pytest"
 VENV=target/python-test-venv
 rm -rf "$VENV"
 if ! python3 -m venv "$VENV" >/dev/null 2>&1; then
@@ -40,7 +48,7 @@ fi
 "$VENV/bin/pip" install --quiet --upgrade pip
 # The package as users get it: one abi3 wheel (scripts/build-wheel.sh), installed here and
 # again, by test_wheel.py, into a venv with no Rust toolchain on the PATH.
-PYTHON="$VENV/bin/python" bash scripts/build-wheel.sh
+PYTHON="$VENV/bin/python" MATURIN_PEP517_ARGS="--profile ci" bash scripts/build-wheel.sh
 "$VENV/bin/pip" install --quiet target/wheels/bsdfit-*-abi3-*.whl pytest mypy matplotlib
 # Mitsuba 3 checks the RGL and Mitsuba exports and the RGL reader in a real renderer.
 # Under CI a missing Mitsuba is a failure; elsewhere (a machine PyPI has no wheel for)
@@ -50,10 +58,11 @@ if ! "$VENV/bin/pip" install --quiet mitsuba; then
     echo "note: Mitsuba 3 could not be installed; the Mitsuba checks will be skipped"
 fi
 # The CLI comparisons use the binary `cargo test` just built.
-BSDFIT_CLI="$PWD/target/debug/bsdfit" "$VENV/bin/python" -m pytest -q -rs python/tests
+BSDFIT_CLI="$PWD/target/ci/bsdfit" "$VENV/bin/python" -m pytest -q -rs python/tests
 
-echo "== export --format mitsuba checked in Mitsuba 3 =="
-BSDFIT_PYTHON="$PWD/$VENV/bin/python" cargo test --test export -- --ignored mitsuba_export
+phase "export --format mitsuba checked in Mitsuba 3"
+BSDFIT_PYTHON="$PWD/$VENV/bin/python" cargo test --profile ci --test export -- --ignored mitsuba_export
 
-echo "== Slurm: a sharded sweep on a single-node cluster =="
-bash scripts/test-slurm.sh "$PWD/target/debug/bsdfit"
+phase "Slurm: a sharded sweep on a single-node cluster"
+bash scripts/test-slurm.sh "$PWD/target/ci/bsdfit"
+phase "done"
