@@ -654,18 +654,9 @@ pub fn run_case(
             let last = d.steps.last().expect("a step");
             let consistent = last.fit.p_consistent() >= opts.diagnose.alpha;
             let (detected, false_effect) = match &case.hidden {
-                // An isotropic truth without backscatter, retroreflection or decay: only
-                // a second specular lobe, another NDF family for a transmitted lobe (the
-                // analytic ways to reshape the lobe: `long_tail` swaps the family) or a
-                // data-driven factor (a reshaped highlight, its Fresnel curve, or the
-                // body's profile: the truth's body is a plain Lambertian one, where `fa`'s
-                // is Fresnel-transmitted) is not a false effect.
-                None if case.misspecified.is_some() => (
-                    false,
-                    d.effects.iter().any(|e| {
-                        ![Effect::SpecularLobe, Effect::LongTail].contains(e) && !e.is_data_driven()
-                    }),
-                ),
+                None if case.misspecified.is_some() => {
+                    (false, misspecified::names_a_false_effect(&d.effects))
+                }
                 None => (false, !named.is_empty()),
                 Some(h) => (
                     named.contains(h) && consistent,

@@ -570,6 +570,18 @@ pub fn generate(
     Ok((case, data))
 }
 
+/// Whether a diagnosis of a misspecified case names a false effect. Its truth is
+/// isotropic, without backscatter, retroreflection or decay: only a second specular lobe,
+/// another NDF family for a transmitted lobe (the analytic ways to reshape a lobe:
+/// `long_tail` swaps the family) or a data-driven factor (a reshaped highlight, its
+/// Fresnel curve, or the body's profile: the truth's body is a plain Lambertian one, where
+/// `fa`'s is Fresnel-transmitted) is a right name.
+pub fn names_a_false_effect(effects: &[Effect]) -> bool {
+    effects
+        .iter()
+        .any(|e| ![Effect::SpecularLobe, Effect::LongTail].contains(e) && !e.is_data_driven())
+}
+
 /// The misspecified null cases as a markdown table: per family and geometry (one
 /// incidence azimuth or several), how many cases named each effect, and the false
 /// effects (any effect but a second specular lobe, another NDF family for a transmitted
@@ -784,6 +796,28 @@ mod tests {
                     "{family}: brightest {top:?}, refracted θ {peak:.1}°"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn only_a_lobe_reshaped_or_a_data_driven_factor_is_a_right_name() {
+        use Effect::*;
+        for right in [
+            vec![],
+            vec![SpecularLobe, HighlightShape],
+            vec![LongTail, BodyProfile],
+        ] {
+            assert!(!names_a_false_effect(&right), "{right:?}");
+        }
+        for wrong in [
+            Anisotropy,
+            Absorption,
+            Scale,
+            DiffuseFloor,
+            Backscatter,
+            RetroLobe,
+        ] {
+            assert!(names_a_false_effect(&[LongTail, wrong]), "{wrong:?}");
         }
     }
 
