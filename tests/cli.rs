@@ -208,12 +208,17 @@ fn battery_case_past_the_plan_is_refused() {
         "2",
         "--misspecified",
         "3",
+        "--misspecified-btdf",
+        "1",
         "--case",
-        "5",
+        "6",
     ]);
     assert_clear_error(
         &out,
-        &["error: --case 5: this battery has cases 0–4 (0 per effect × "],
+        &[
+            "error: --case 6: this battery has cases 0–5 (0 per effect × ",
+            "3 misspecified, 1 misspecified BTDF)",
+        ],
     );
 }
 
