@@ -7,13 +7,15 @@
 //! llvmpipe (lavapipe) ends an invocation's loops once they have run 65,535 iterations
 //! in all (shaders/engine/kernel.wgsl, `loops_completed`), so the work is spread over
 //! many invocations, each a loop within that bound. How long a workgroup adds to a pass
-//! is measured on the device first, then the grid is scaled to the time wanted. A GPU
-//! runs thousands of workgroups at once, so a small grid takes the time of one: the grid
-//! is doubled until a pass takes about twice the last (the device is full), and the
-//! slope between those two passes (which leaves out the cost of a submission) is the
-//! time per workgroup. (Two fixed passes of 8 and 40 workgroups, full on lavapipe's
-//! cores, took the same time on an H200, whose stall then ended in well under the
-//! read-back timeout and `tests/gpu_fault.rs`'s hang tests failed there.)
+//! is measured on the device first, then the grid is scaled to the time wanted: the grid
+//! is doubled until one pass takes a quarter of a second, and that pass's time per
+//! workgroup is the measure. A GPU runs thousands of workgroups at once, so a small grid
+//! takes the time of one, and a pass that short is mostly the submission's own cost and
+//! noise; a quarter-second pass fills any device and leaves those out. (Two fixed passes
+//! of 8 and 40 workgroups took the same time on an H200, whose stall then ended in well
+//! under the read-back timeout; then a rule that stopped doubling once a pass took 1.6
+//! times the last stopped, on lavapipe with another test running, at a few milliseconds,
+//! where noise alone doubles a pass, and one hang test of 2 ended before its timeout.)
 
 use super::device::Device;
 use anyhow::{Context, Result};
@@ -23,10 +25,10 @@ use std::time::{Duration, Instant};
 const SHADER: &str = include_str!("../../../shaders/engine/stall.wgsl");
 
 /// Workgroups of the first calibration pass.
-const FIRST: u32 = 8;
+const FIRST: u64 = 8;
 /// The calibration stops doubling at this many workgroups, or once a pass takes this long.
-const MOST: u32 = 1 << 22;
-const LONG_S: f64 = 1.0;
+const MOST: u64 = 1 << 22;
+const LONG_S: f64 = 0.25;
 
 pub struct Stall {
     pipeline: wgpu::ComputePipeline,
@@ -96,11 +98,9 @@ impl Stall {
     pub fn command_buffer(&self, device: &Device, seconds: f64) -> Result<wgpu::CommandBuffer> {
         let per_group = self.calibrate(device)?;
         let groups = (seconds / per_group).ceil().clamp(1.0, 65_535.0 * 65_535.0) as u64;
-        let x = groups.min(65_535) as u32;
-        let y = groups.div_ceil(65_535) as u32;
         self.submitted
             .store(true, std::sync::atomic::Ordering::SeqCst);
-        Ok(self.encode(device, [x, y]))
+        Ok(self.encode(device, grid(groups)))
     }
 
     fn encode(&self, device: &Device, grid: [u32; 2]) -> wgpu::CommandBuffer {
@@ -122,12 +122,13 @@ impl Stall {
     }
 
     /// Seconds per workgroup once the device is full: the grid doubled until a pass
-    /// takes 1.6 times the last, then the slope between those two passes, each waited
-    /// for in full.
+    /// takes [`LONG_S`], each pass waited for in full, then that pass's time per
+    /// workgroup (its fixed cost included, so at most a little high: the stall comes out
+    /// a little shorter than asked, and it is asked for three timeouts).
     fn measure(&self, device: &Device) -> Result<f64> {
-        let time = |groups: u32| -> Result<f64> {
+        let time = |groups: u64| -> Result<f64> {
             let t0 = Instant::now();
-            let index = device.queue.submit(Some(self.encode(device, [groups, 1])));
+            let index = device.queue.submit(Some(self.encode(device, grid(groups))));
             device
                 .device
                 .poll(wgpu::PollType::Wait {
@@ -139,20 +140,21 @@ impl Stall {
         };
         // The least of two tries of each: work of other threads on the device can only
         // lengthen a pass, and a stall sized from a lengthened pass would be too short.
-        let best = |groups: u32| -> Result<f64> { Ok(time(groups)?.min(time(groups)?)) };
-        let (mut groups, mut last) = (FIRST, best(FIRST)?);
+        let best = |groups: u64| -> Result<f64> { Ok(time(groups)?.min(time(groups)?)) };
+        let mut groups = FIRST;
         loop {
-            let (next, t) = (2 * groups, best(2 * groups)?);
-            if t > 1.6 * last || next >= MOST || t > LONG_S {
-                let slope = (t - last) / f64::from(groups);
-                let per_group = if t > 1.6 * last {
-                    slope
-                } else {
-                    t / f64::from(next)
-                };
-                return Ok(per_group.max(1e-9));
+            let t = best(groups)?;
+            if t >= LONG_S || groups >= MOST {
+                let [x, y] = grid(groups);
+                return Ok((t / (f64::from(x) * f64::from(y))).max(1e-9));
             }
-            (groups, last) = (next, t);
+            groups *= 2;
         }
     }
+}
+
+/// A dispatch of at least `groups` workgroups within the 65,535 a dimension allows.
+fn grid(groups: u64) -> [u32; 2] {
+    let x = groups.clamp(1, 65_535);
+    [x as u32, groups.div_ceil(x).min(65_535) as u32]
 }
