@@ -893,8 +893,8 @@ def test_battery_is_the_command_lines_battery(tmp_path):
     with pytest.raises(TypeError, match="samples: expected \\(lo, hi\\)"):
         bsdfit.battery(samples=200, backend="cpu", progress=False)
     # A case id past the plan runs nothing: refused, naming the plan's range.
-    with pytest.raises(ValueError, match="case=3: this battery has cases 0–2"):
-        bsdfit.battery(case=3, backend="cpu", progress=False, **options)
+    with pytest.raises(ValueError, match="case=4: this battery has cases 0–3"):
+        bsdfit.battery(case=4, backend="cpu", progress=False, **options)
 
 
 def test_diagnose_many_gives_the_cli_table_as_diagnoses(tmp_path):
