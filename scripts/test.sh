@@ -23,10 +23,10 @@ phase "cargo fmt --check"
 cargo fmt --check
 phase "cargo clippy"
 cargo clippy --workspace --all-targets --quiet -- -D warnings
-# The tests, the Python wheel and the Slurm test share one build of the `ci` profile
-# (Cargo.toml: release code with debug assertions and overflow checks), built once: the
-# tests' fits and diagnoses run several times faster than at the test profile's
-# opt-level 1, and the wheel does not compile the library a second time.
+# The tests, the Python wheel and the Slurm test use the `ci` profile (Cargo.toml: release
+# code with debug assertions and overflow checks): the tests' fits and diagnoses run
+# faster than at the test profile's opt-level 1, and the wheel reuses most dependencies
+# (it still recompiles the library and the crates whose features pyo3 changes).
 phase "cargo test (profile ci)"
 cargo test --profile ci --all-targets
 phase "SIMD parity capped at AVX2 and at the baseline (SSE2); the run above used the widest"
