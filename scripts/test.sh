@@ -25,13 +25,15 @@ phase "cargo clippy"
 cargo clippy --workspace --all-targets --quiet -- -D warnings
 # The tests, the Python wheel and the Slurm test use the `ci` profile (Cargo.toml: release
 # code with debug assertions and overflow checks): the tests' fits and diagnoses run
-# faster than at the test profile's opt-level 1, and the wheel reuses most dependencies
-# (it still recompiles the library and the crates whose features pyo3 changes).
+# faster than at the test profile's opt-level 1. `--workspace` resolves the shared crates'
+# features with the Python package's, as the wheel's build does (python/Cargo.toml asks
+# for the dev-dependencies' few), so the wheel reuses the compiled library: every cargo
+# command here that builds keeps `--profile ci --workspace`.
 phase "cargo test (profile ci)"
-cargo test --profile ci --all-targets
+cargo test --profile ci --workspace --all-targets
 phase "SIMD parity capped at AVX2 and at the baseline (SSE2); the run above used the widest"
-BSDFIT_SIMD=avx2 cargo test --profile ci --test simd_parity
-BSDFIT_SIMD=baseline cargo test --profile ci --test simd_parity
+BSDFIT_SIMD=avx2 cargo test --profile ci --workspace --test simd_parity
+BSDFIT_SIMD=baseline cargo test --profile ci --workspace --test simd_parity
 
 phase "Python module: its wheel installed into a fresh venv, then pytest"
 VENV=target/python-test-venv
@@ -61,7 +63,7 @@ fi
 BSDFIT_CLI="$PWD/target/ci/bsdfit" "$VENV/bin/python" -m pytest -q -rs python/tests
 
 phase "export --format mitsuba checked in Mitsuba 3"
-BSDFIT_PYTHON="$PWD/$VENV/bin/python" cargo test --profile ci --test export -- --ignored mitsuba_export
+BSDFIT_PYTHON="$PWD/$VENV/bin/python" cargo test --profile ci --workspace --test export -- --ignored mitsuba_export
 
 phase "Slurm: a sharded sweep on a single-node cluster"
 bash scripts/test-slurm.sh "$PWD/target/ci/bsdfit"

@@ -513,3 +513,59 @@ fn the_model_files_form_no_circle() {
     planted.get_mut("aniso").unwrap().push("ggx".into());
     assert!(reaches(&planted, "ggx", "ggx", &mut Vec::new()).is_some());
 }
+
+/// Each package of `cargo tree`'s output with its features, `name version [f,…]`, both
+/// from one command line.
+fn feature_resolution(args: &[&str]) -> std::collections::BTreeMap<String, String> {
+    let out = std::process::Command::new(env!("CARGO"))
+        .args([
+            "tree",
+            "--offline",
+            "--prefix",
+            "none",
+            "--no-dedupe",
+            "-f",
+            "{p} [{f}]",
+        ])
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("cargo runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            let (name, version) = (w.next()?, w.next()?);
+            Some((format!("{name} {version}"), w.last()?.to_string()))
+        })
+        .collect()
+}
+
+/// The README's test command builds the tests with `--workspace` and then the Python
+/// wheel (the Python package alone); the wheel reuses the tests' compiled library only if
+/// every crate the two builds share is resolved with the same features. A crate whose
+/// features differ recompiles with everything above it, the library included (4.5 min on
+/// 2 cores). python/Cargo.toml asks for the features the library's dev-dependencies add.
+#[test]
+fn the_wheel_build_resolves_shared_crates_as_the_test_build() {
+    let tests = feature_resolution(&["--workspace", "-e", "normal,build,dev"]);
+    let wheel = feature_resolution(&["-p", "bsdfit-python", "-e", "normal,build"]);
+    assert!(
+        wheel.len() > 50 && wheel.keys().any(|k| k.starts_with("wgpu ")),
+        "{wheel:?}"
+    );
+    let differ: Vec<String> = wheel
+        .iter()
+        .filter_map(|(k, f)| {
+            let t = tests.get(k)?;
+            (t != f).then(|| format!("{k}: tests {t}, wheel {f}"))
+        })
+        .collect();
+    assert!(differ.is_empty(), "resolved differently: {differ:#?}");
+}
