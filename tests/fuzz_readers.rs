@@ -17,7 +17,7 @@
 #[allow(dead_code)]
 mod fuzz_contract;
 
-use bsdfit::data::readers::{self, alta, astm, merl, rgl, zemax};
+use bsdfit::data::readers::{self, alta, astm, merl, mueller, rgl, zemax};
 use bsdfit::data::{DataError, Dataset, ReadOptions};
 use fuzz_contract::{contract, located};
 use proptest::prelude::*;
@@ -437,6 +437,56 @@ fn astm_text() -> impl Strategy<Value = String> {
                 damaged(l, damages.into_iter().take(n).collect(), eol, ',')
             },
         )
+}
+
+/// Text shaped like a NIST Mueller-matrix BRDF table: a header naming the columns (in the
+/// file's order or another, with Mueller columns or not) and rows of signed angles, with
+/// up to three damages.
+fn mueller_text() -> impl Strategy<Value = String> {
+    (
+        (any::<bool>(), any::<bool>()),
+        prop::collection::vec(
+            (
+                prop_oneof![Just(0.351), Just(0.532), Just(1.064)],
+                -80.0..80.0f64,
+                -180.0..180.0f64,
+                -85.0..85.0f64,
+                -180.0..180.0f64,
+                -0.01..0.7f64,
+            ),
+            1..10,
+        ),
+        prop::collection::vec(line_damage(), 0..4),
+        prop_oneof![2 => Just(0usize), 1 => 1usize..4],
+        prop_oneof![Just("\n"), Just("\r\n")],
+    )
+        .prop_map(|((reorder, mueller), rows, damages, n, eol)| {
+            let mut names = vec!["lambda", "thetai", "phi", "thetar", "phir", "f_r11"];
+            if mueller {
+                names.extend(["f_r12/f_r11", "f_r44/f_r11"]);
+            }
+            let order: Vec<usize> = if reorder {
+                (0..names.len()).rev().collect()
+            } else {
+                (0..names.len()).collect()
+            };
+            let mut l = vec![order
+                .iter()
+                .map(|&i| names[i])
+                .collect::<Vec<_>>()
+                .join(",")];
+            for (w, ti, pi, tr, pr, f) in rows {
+                let cells = [w, ti, pi, tr, pr, f, 0.01, -0.02];
+                l.push(
+                    order
+                        .iter()
+                        .map(|&i| cells[i].to_string())
+                        .collect::<Vec<_>>()
+                        .join(","),
+                );
+            }
+            damaged(l, damages.into_iter().take(n).collect(), eol, ',')
+        })
 }
 
 /// Byte strings that start like a MERL table: its dimensions (or others), then junk.
@@ -874,6 +924,7 @@ fn all_readers(bytes: &[u8], assume: bool, allow_zero: bool) -> Result<(), TestC
     check(rgl::parse(bytes, FILE, &o))?;
     check_located(zemax::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     check_located(astm::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
+    check_located(mueller::parse_reader(bytes, FILE, &o, &mut |_| {}))?;
     // The fuzz targets' lenient set: a channel selection averaged over bands.
     check(readers::parse_bytes(
         bytes,
@@ -887,7 +938,8 @@ fn all_readers(bytes: &[u8], assume: bool, allow_zero: bool) -> Result<(), TestC
 /// seed (another for each scale).
 fn fuzz(scale: u32) {
     use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
-    let (cases, csv_ok, alta_ok, rgl_ok, zemax_ok, astm_ok) = (
+    let (cases, csv_ok, alta_ok, rgl_ok, zemax_ok, astm_ok, mueller_ok) = (
+        AtomicUsize::new(0),
         AtomicUsize::new(0),
         AtomicUsize::new(0),
         AtomicUsize::new(0),
@@ -973,8 +1025,24 @@ fn fuzz(scale: u32) {
             all_readers(t.as_bytes(), a, z)
         },
     );
+    run(
+        seed(8),
+        3000 * scale,
+        (mueller_text(), any::<bool>(), any::<bool>()),
+        |(t, a, z)| {
+            cases.fetch_add(1, Relaxed);
+            if mueller::parse(&t, FILE, &opts(a, z)).is_ok() {
+                mueller_ok.fetch_add(1, Relaxed);
+            }
+            all_readers(t.as_bytes(), a, z)
+        },
+    );
     // Every case ran, and the shaped inputs reach the readers' happy paths too.
-    assert!(cases.load(Relaxed) >= 23_000 * scale as usize, "{cases:?}");
+    assert!(cases.load(Relaxed) >= 26_000 * scale as usize, "{cases:?}");
+    assert!(
+        mueller_ok.load(Relaxed) > 100 * scale as usize,
+        "Mueller-table-shaped inputs read: {mueller_ok:?}"
+    );
     assert!(
         zemax_ok.load(Relaxed) > 100 * scale as usize,
         "Zemax-shaped inputs read: {zemax_ok:?}"
@@ -996,17 +1064,17 @@ fn fuzz(scale: u32) {
         "RGL-shaped inputs read: {rgl_ok:?}"
     );
     eprintln!(
-        "{cases:?} cases; read without error: {csv_ok:?} v1-shaped, {alta_ok:?} ALTA-shaped, {rgl_ok:?} RGL-shaped, {zemax_ok:?} Zemax-shaped, {astm_ok:?} ASTM-shaped"
+        "{cases:?} cases; read without error: {csv_ok:?} v1-shaped, {alta_ok:?} ALTA-shaped, {rgl_ok:?} RGL-shaped, {zemax_ok:?} Zemax-shaped, {astm_ok:?} ASTM-shaped, {mueller_ok:?} Mueller-table-shaped"
     );
 }
 
-/// 23,000 cases, each through all seven readers and the sniffing entry point.
+/// 26,000 cases, each through all eight readers and the sniffing entry point.
 #[test]
 fn readers_never_panic_and_name_the_file() {
     fuzz(1);
 }
 
-/// The same with 15 × more cases (about 345,000), from other seeds.
+/// The same with 15 × more cases (about 390,000), from other seeds.
 #[test]
 #[ignore]
 fn readers_never_panic_and_name_the_file_long() {

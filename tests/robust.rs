@@ -703,6 +703,7 @@ fn every_command_names_every_format_and_every_option_has_help() {
         Format::RglBsdf,
         Format::ZemaxBsdf,
         Format::AstmE1392,
+        Format::MuellerCsv,
     ]
     .map(|f| f.to_string());
     let top = text(&run(&["--help"]).stdout);

@@ -18,7 +18,7 @@ pub struct BenchArgs {
     pub models: Option<Vec<String>>,
     /// Measure on this data file instead of the built-in synthetic sets (816 BRDF samples
     /// in 3 channels, 195 BTDF samples): any format read (bsdfit v1 CSV, ALTA text, MERL
-    /// binary, RGL .bsdf, Zemax BSDF, ASTM E1392; recognised by content).
+    /// binary, RGL .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV; recognised by content).
     #[arg(long, value_name = "FILE")]
     pub data: Option<PathBuf>,
     /// Reading options of --data.

@@ -20,7 +20,7 @@ use std::path::PathBuf;
 #[derive(Args, Clone, Debug)]
 pub struct DiagnoseArgs {
     /// Data files, in any format read (recognised by content): bsdfit v1 CSV, ALTA text,
-    /// MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392; or folders, whose files of those
+    /// MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV; or folders, whose files of those
     /// formats are taken (the others are named and left). One file without --out: its
     /// diagnosis is printed (and --json, --report written); several, a folder, or --out:
     /// a collection, one resumable cell per data set in --out.

@@ -17,7 +17,7 @@ pub struct EvalArgs {
     /// evaluated with the fit of its own plane).
     pub fit: PathBuf,
     /// Evaluate at every sample (geometry and wavelength) of this data file, in any format
-    /// read (bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392;
+    /// read (bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV;
     /// recognised by content). Only its geometries are used: files without uncertainties
     /// need no --assume-uncertainty here.
     #[arg(long, value_name = "DATA")]

@@ -99,7 +99,7 @@ enum Command {
     /// false-effect rates by signal-to-noise.
     Battery(battery::BatteryArgs),
     /// Convert a data file of any format read (bsdfit v1 CSV, ALTA text, MERL binary, RGL
-    /// .bsdf, Zemax BSDF, ASTM E1392; recognised by content) to bsdfit v1 CSV, applying the
+    /// .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV; recognised by content) to bsdfit v1 CSV, applying the
     /// data-selection options.
     Convert(convert::ConvertArgs),
     /// Evaluate a saved fit (`fit --json`) at the geometries of a data file or of a named
@@ -126,7 +126,7 @@ enum Command {
 /// The help of a data-file argument: every format the readers recognise by content
 /// (`data::readers::Format`'s names; `tests/cli.rs` checks each command's help names
 /// them all).
-pub const DATA_FILE_HELP: &str = "Data file, in any format read (recognised by content): bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392";
+pub const DATA_FILE_HELP: &str = "Data file, in any format read (recognised by content): bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV";
 
 /// Data selection and validation, shared by every command that reads measurements.
 #[derive(Args, Clone, Debug)]

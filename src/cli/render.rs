@@ -13,7 +13,7 @@ use clap::Args;
 pub struct RenderArgs {
     /// BRDF data set whose samples make the tabulated baseline (and to which the fit
     /// belongs), in any format read (bsdfit v1 CSV, ALTA text, MERL binary, RGL .bsdf,
-    /// Zemax BSDF, ASTM E1392; recognised by content).
+    /// Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV; recognised by content).
     pub data: std::path::PathBuf,
     /// A fit: the JSON of `bsdfit fit --json`, or results.json of a sweep (then pick the row
     /// with --model and, if several match, --loss/--weights/--optimizer).

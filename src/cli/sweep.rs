@@ -15,7 +15,7 @@ use std::path::PathBuf;
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
     /// Data set files, in any format read (bsdfit v1 CSV, ALTA text, MERL binary, RGL
-    /// .bsdf, Zemax BSDF, ASTM E1392; recognised by content), or directories of *.csv
+    /// .bsdf, Zemax BSDF, ASTM E1392, Mueller-matrix BRDF CSV; recognised by content), or directories of *.csv
     /// files (default: the bundled data/ directory).
     pub data: Vec<PathBuf>,
     /// Model specs, comma-separated (default: the whole catalogue for each kind of data;

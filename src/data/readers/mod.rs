@@ -8,13 +8,14 @@
 //! | RGL `.bsdf` measured material | the tensor file header `tensor_file\0` | [`rgl`] (sampled at `--sample-geometry`) |
 //! | Zemax tabular BSDF | a first line (after `#` comments) starting with a keyword of its header (`Source`, `Symmetry`, …) | [`zemax`] |
 //! | ASTM E1392 text | a first line starting with an upper-case keyword, and a `VARS` line | [`astm`] |
+//! | Mueller-matrix BRDF CSV (NIST, SCATMECH's column names) | a first line naming `lambda`, `thetai`, `phi`, `thetar`, `phir` and `f_r11` | [`mueller`] |
 //!
 //! Content decides, not the extension; only when nothing matches does the extension
 //! (`.binary` → MERL, `.bsdf` → RGL, or Zemax for a text file) pick the reader whose
 //! error will explain the problem, v1 otherwise.
 //!
-//! **Missing uncertainties.** ALTA files without `#VS` intervals and MERL tables carry
-//! none. They are refused unless the user assumes some with `--assume-uncertainty REL,ABS`
+//! **Missing uncertainties.** ALTA files without `#VS` intervals, MERL tables, RGL files
+//! and Mueller-matrix tables carry none. They are refused unless the user assumes some with `--assume-uncertainty REL,ABS`
 //! ([`ReadOptions::assume_uncertainty`]):
 //!
 //! u = sqrt((REL·|value|)² + ABS²)   (sr⁻¹)
@@ -28,6 +29,7 @@
 pub mod alta;
 pub mod astm;
 pub mod merl;
+pub mod mueller;
 pub mod rgl;
 pub mod tensor;
 pub(crate) mod text;
@@ -58,6 +60,7 @@ pub enum Format {
     RglBsdf,
     ZemaxBsdf,
     AstmE1392,
+    MuellerCsv,
 }
 
 impl std::fmt::Display for Format {
@@ -69,6 +72,7 @@ impl std::fmt::Display for Format {
             Format::RglBsdf => "RGL .bsdf",
             Format::ZemaxBsdf => "Zemax BSDF",
             Format::AstmE1392 => "ASTM E1392",
+            Format::MuellerCsv => "Mueller-matrix BRDF CSV",
         })
     }
 }
@@ -117,6 +121,9 @@ pub fn sniff(head: &[u8], len: u64) -> Option<Format> {
         }
         if zemax::looks_like(t) {
             return Some(Format::ZemaxBsdf);
+        }
+        if mueller::looks_like(t) {
+            return Some(Format::MuellerCsv);
         }
         return t.contains("theta_i").then_some(Format::V1Csv);
     }
@@ -241,6 +248,7 @@ pub fn load_with_progress(
         Format::AltaText => alta::parse_reader(reader, &file, opts, progress),
         Format::ZemaxBsdf => zemax::parse_reader(reader, &file, opts, progress),
         Format::AstmE1392 => astm::parse_reader(reader, &file, opts, progress),
+        Format::MuellerCsv => mueller::parse_reader(reader, &file, opts, progress),
         Format::V1Csv => Dataset::parse_reader(reader, &file, opts, progress),
     }
 }
@@ -254,6 +262,7 @@ pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Datas
         Some(Format::AltaText) => alta::parse_reader(bytes, file, opts, &mut |_| {}),
         Some(Format::ZemaxBsdf) => zemax::parse_reader(bytes, file, opts, &mut |_| {}),
         Some(Format::AstmE1392) => astm::parse_reader(bytes, file, opts, &mut |_| {}),
+        Some(Format::MuellerCsv) => mueller::parse_reader(bytes, file, opts, &mut |_| {}),
         Some(Format::V1Csv) => Dataset::parse_reader(bytes, file, opts, &mut |_| {}),
         None => match by_extension(Path::new(file), &bytes[..bytes.len().min(4096)]) {
             Format::MerlBinary => merl::parse(bytes, file, opts),
@@ -266,7 +275,7 @@ pub fn parse_bytes(bytes: &[u8], file: &str, opts: &ReadOptions) -> Result<Datas
 
 /// A v1 error for a file that matched no format: say the other formats were tried too.
 fn unrecognised(e: DataError) -> DataError {
-    const HINT: &str = " (nor is the file recognisable as ALTA text, a MERL table, an RGL .bsdf, a Zemax BSDF or an ASTM E1392 file)";
+    const HINT: &str = " (nor is the file recognisable as ALTA text, a MERL table, an RGL .bsdf, a Zemax BSDF, an ASTM E1392 file or a Mueller-matrix BRDF CSV)";
     match e {
         DataError::File { file, msg } => DataError::File {
             file,
