@@ -505,6 +505,13 @@ def real_astm(name, rows=18):
     return "\n".join(head + body) + "\n"
 
 
+def real_mueller(name, rows=30):
+    """A vendored NIST Mueller-matrix table cut to its header and first `rows` rows."""
+    with open(os.path.join(REAL, name), newline="") as f:
+        lines = f.read().split("\n")
+    return "\n".join(lines[: rows + 1]) + "\n"
+
+
 def real_seeds():
     zemax = {
         "real-imaging-sphere-brdf.bsdf": real_zemax("zemax_planesymmetric_brdf.bsdf"),
@@ -538,6 +545,8 @@ def main():
         ("astm-btdf-uncertainty.astm", astm["btdf-uncertainty.astm"]),
         ("zemax-real-imaging-sphere-brdf.bsdf", real_zemax_seeds["real-imaging-sphere-brdf.bsdf"]),
         ("astm-real-cornell-acryl-blue.astm", real_astm_seeds["real-cornell-acryl-blue.astm"]),
+        ("mueller-real-nist-ptfe.csv", real_mueller("PTFE.data.csv")),
+        ("mueller-real-nist-ptfe-random.csv", real_mueller("PTFE.data.random.csv")),
     ]:
         write("any", name, data)
     total = 0
