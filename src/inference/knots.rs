@@ -590,9 +590,65 @@ pub fn body_bands(
         .collect()
 }
 
+/// The largest standard uncertainty of a knot's logarithm at which the data determine the
+/// factor there: its value known within a factor e^0.5 ≈ 1.65 either way.
+pub const DETERMINED_LN_SD: f64 = 0.5;
+
+/// The knots the data determine, per tabulated factor of a fit: (the knots' stem, the
+/// channel of a Fresnel curve, the angles in degrees of the knots that are measured —
+/// the data see the factor there, [`MEASURED_SIGNAL`] — with σ(ln) ≤ [`DETERMINED_LN_SD`]
+/// under the covariance with the prior's information). A knot the prior alone holds, or
+/// one fixed by the factor's definition (the body's ρ(0) = 1), never counts. None
+/// without the prior's covariance.
+pub fn determined_knots(
+    model: &Model,
+    data: &Dataset,
+    flat: &[f64],
+    cov: &Covariance,
+) -> Option<Vec<(String, Option<usize>, Vec<f64>)>> {
+    cov.with_prior.as_ref()?;
+    let keep = |measured: bool, sd: Option<f64>| {
+        measured && sd.is_some_and(|s| s > 0.0 && s <= DETERMINED_LN_SD)
+    };
+    let mut out = Vec::new();
+    for (name, rows) in bands(model, data, flat, cov) {
+        let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_d));
+        out.push((name, None, at.map(|r| r.theta_deg).collect()));
+    }
+    for (name, c, rows) in fresnel_bands(model, data, flat, cov) {
+        let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_f));
+        out.push((name, Some(c), at.map(|r| r.theta_deg).collect()));
+    }
+    for (name, rows) in body_bands(model, data, flat, cov) {
+        let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_rho));
+        out.push((name, None, at.map(|r| r.theta_deg).collect()));
+    }
+    Some(out)
+}
+
+/// Whether flat parameter `name` is a knot of the factor whose knots' stem is `stem`
+/// (`lobe.fresnel3[0]` of `lobe.fresnel`, `ndf_c5` of `ndf_c`, not of `ndf`).
+pub fn is_knot_of(name: &str, stem: &str) -> bool {
+    name.strip_prefix(stem).is_some_and(|rest| {
+        let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+        digits > 0 && (rest.len() == digits || rest[digits..].starts_with('['))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn knots_belong_to_their_own_stem_only() {
+        assert!(is_knot_of("lobe.fresnel3[0]", "lobe.fresnel"));
+        assert!(is_knot_of("ndf_c5", "ndf_c"));
+        assert!(is_knot_of("ndf12", "ndf"));
+        assert!(!is_knot_of("ndf_c5", "ndf"));
+        assert!(!is_knot_of("lobe.ndf1", "ndf"));
+        assert!(!is_knot_of("base.body", "base.body"));
+        assert!(!is_knot_of("fresnel_c1[0]", "fresnel"));
+    }
 
     /// Replicas whose knots alternate ± δ about the fit give each knot's logarithm the
     /// spread δ √(n/(n − 1)): the NDF's through its table, each Fresnel channel's its own

@@ -304,6 +304,9 @@ fn new_params_determined(
     if new.idx.is_empty() {
         return (true, String::new(), String::new());
     }
+    if let Some(judged) = new.factor_determined(data) {
+        return judged;
+    }
     if new.idx.iter().any(|&j| new.determined(&fit.cov, j)) {
         return (true, String::new(), new.loose_note());
     }
@@ -331,6 +334,56 @@ impl<'a> NewParams<'a> {
             decls: fit.model.flat_decls(),
             idx: new_param_indices(old, &fit.model),
         }
+    }
+
+    /// Where every new parameter is a knot of a tabulated factor (`+ndf`, `+fresnel`,
+    /// `+body`): (determined, why not, note), judged knot by knot under the covariance
+    /// with the smoothness prior's information, not by [`Covariance::std`]. The prior
+    /// keeps every knot finite, so a factor counts as determined only where the data see
+    /// it: at least one of its measured knots (not set by the prior) known to
+    /// σ(ln) ≤ [`crate::inference::knots::DETERMINED_LN_SD`]. Judged by `std`, a factor
+    /// on a lobe whose other parameters the data leave free (a broad coat's k_c and α_c
+    /// trade with its curve) had every knot "undetermined" however well the data fix the
+    /// curve itself. None for other extensions, or without the prior's covariance.
+    fn factor_determined(&self, data: &Dataset) -> Option<(bool, String, String)> {
+        use crate::inference::knots::{determined_knots, is_knot_of, DETERMINED_LN_SD};
+        if !self.idx.iter().all(|&j| self.decls[j].knot) {
+            return None;
+        }
+        let fit = self.fit;
+        let factors = determined_knots(&fit.model, data, &fit.flat, &fit.cov)?;
+        let new: Vec<&(String, Option<usize>, Vec<f64>)> = factors
+            .iter()
+            .filter(|(stem, ..)| self.idx.iter().any(|&j| is_knot_of(&self.names[j], stem)))
+            .collect();
+        let label = |stem: &str, c: Option<usize>| match c {
+            Some(c) => format!("{stem} (channel {c})"),
+            None => stem.to_string(),
+        };
+        let seen: Vec<String> = new
+            .iter()
+            .filter(|(.., at)| !at.is_empty())
+            .map(|(stem, c, at)| {
+                let deg: Vec<String> = at.iter().map(|d| format!("{d:.1}°")).collect();
+                format!("{} at {}", label(stem, *c), deg.join(", "))
+            })
+            .collect();
+        if seen.is_empty() {
+            let stems: Vec<String> = new.iter().map(|(s, c, _)| label(s, *c)).collect();
+            return Some((
+                false,
+                format!(
+                    "no knot of {} is both measured (the data see the factor there) and known to σ(ln) ≤ {DETERMINED_LN_SD}: the smoothness prior sets its shape",
+                    stems.join(", ")
+                ),
+                String::new(),
+            ));
+        }
+        Some((
+            true,
+            String::new(),
+            format!("knots determined by the data: {}", seen.join("; ")),
+        ))
     }
 
     /// Parameter `j`'s standard uncertainty under `cov`, as a share of its unit box.
