@@ -319,7 +319,7 @@ mod tests {
         assert!(e.contains("t.csv:3:") && e.contains("thetar = 95"), "{e}");
         let text = format!("{HEAD}0.532,-45,0,40,0,abc,0.01\n");
         let e = parse(&text, "t.csv", &opts()).unwrap_err().to_string();
-        assert!(e.contains("t.csv:2:17") && e.contains("value"), "{e}");
+        assert!(e.contains("t.csv:2:18") && e.contains("value"), "{e}");
         let text = format!("{HEAD}0.532,-45,0,40,0,0.35\n");
         let e = parse(&text, "t.csv", &opts()).unwrap_err().to_string();
         assert!(e.contains("expected 7 cells"), "{e}");
