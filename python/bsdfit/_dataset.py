@@ -36,7 +36,8 @@ class Dataset:
         sample_geometry: Optional[str] = None,
     ) -> "Dataset":
         """Read a data file: bsdfit v1 CSV, ALTA text, a MERL binary table, an RGL .bsdf
-        material, a Zemax tabular BSDF or ASTM E1392 text (by content; docs/data-formats.md).
+        material, a Zemax tabular BSDF, ASTM E1392 text or a NIST Mueller-matrix BRDF table
+        (by content; docs/data-formats.md).
 
         The keywords are the command line's data options: ``wavelengths`` keeps the channels
         nearest these wavelengths (nm), ``band`` averages ±band nm around each,
