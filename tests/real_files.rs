@@ -398,12 +398,18 @@ fn anisotropic_candidates(steps: &serde_json::Value) -> Vec<serde_json::Value> {
     aniso
 }
 
-/// One diagnosis step from `fa(lambert)` (see [`refused_anisotropy`]) on `backend`: its
-/// stdout and its steps (`candidates.json`), after asserting that anisotropy is not named.
-fn one_step(file: &Path, extra: &[&str], backend: &str) -> (String, serde_json::Value) {
+/// One diagnosis step from `start` on a real file (`extra`: how to read it) on `backend`,
+/// with no bootstrap and no backtracking: its stdout, its steps (`candidates.json`) and
+/// its diagnosis (`diagnosis.json`).
+fn diagnose_one_step(
+    file: &Path,
+    start: &str,
+    extra: &[&str],
+    backend: &str,
+) -> (String, serde_json::Value, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let report = dir.path().join("report");
-    let mut args = vec!["diagnose", p(file), "--model", "fa(lambert)"];
+    let mut args = vec!["diagnose", p(file), "--model", start];
     args.extend_from_slice(extra);
     args.extend_from_slice(&["--backend", backend, "--bootstrap", "0", "--max-steps", "1"]);
     args.extend_from_slice(&["--no-backtrack", "--report", p(&report)]);
@@ -412,14 +418,23 @@ fn one_step(file: &Path, extra: &[&str], backend: &str) -> (String, serde_json::
     let read = |f: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
     };
-    let steps = read("candidates.json");
-    let diagnosis = read("diagnosis.json");
+    (
+        text(&out.stdout),
+        read("candidates.json"),
+        read("diagnosis.json"),
+    )
+}
+
+/// One diagnosis step from `fa(lambert)` (see [`refused_anisotropy`]) on `backend`: its
+/// stdout and its steps (`candidates.json`), after asserting that anisotropy is not named.
+fn one_step(file: &Path, extra: &[&str], backend: &str) -> (String, serde_json::Value) {
+    let (stdout, steps, diagnosis) = diagnose_one_step(file, "fa(lambert)", extra, backend);
     let effects = diagnosis["effects"].as_array().unwrap();
     assert!(
         !effects.iter().any(|e| e == "anisotropy"),
         "anisotropy named: {effects:?}"
     );
-    (text(&out.stdout), steps)
+    (stdout, steps)
 }
 
 /// The Cornell acrylic is an isotropic surface measured at one incidence azimuth (φi =
@@ -678,19 +693,9 @@ fn the_nist_ptfe_at_incidence_azimuths_all_round_shows_no_anisotropy() {
 /// the smoothness prior.
 #[test]
 fn the_nist_ptfe_grid_adopts_the_data_driven_fresnel_curve_the_data_fix() {
-    let dir = tempfile::tempdir().unwrap();
-    let report = dir.path().join("report");
-    let file = real("PTFE.data.csv");
-    let mut args = vec!["diagnose", p(&file), "--model", "fa(vmf)+coat"];
-    args.extend_from_slice(&[PTFE_READ[0], PTFE_READ[1], "--wavelengths", "532"]);
-    args.extend_from_slice(&["--backend", "simd", "--bootstrap", "0", "--max-steps", "1"]);
-    args.extend_from_slice(&["--no-backtrack", "--report", p(&report)]);
-    let out = bsdfit(&args);
-    assert_ok(&out, "diagnose");
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(report.join(f)).unwrap()).unwrap()
-    };
-    let steps = read("candidates.json");
+    let extra = [PTFE_READ[0], PTFE_READ[1], "--wavelengths", "532"];
+    let (_, steps, diagnosis) =
+        diagnose_one_step(&real("PTFE.data.csv"), "fa(vmf)+coat", &extra, "simd");
     let fresnel = steps
         .as_array()
         .unwrap()
@@ -699,7 +704,6 @@ fn the_nist_ptfe_grid_adopts_the_data_driven_fresnel_curve_the_data_fix() {
         .find(|c| c["effect"] == "highlight_fresnel")
         .expect("the data-driven round tried the Fresnel curve");
     assert_eq!(fresnel["identifiable"], true, "{fresnel}");
-    let diagnosis = read("diagnosis.json");
     let effects = diagnosis["effects"].as_array().unwrap();
     assert!(
         effects.iter().any(|e| e == "highlight_fresnel"),
