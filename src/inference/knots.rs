@@ -594,10 +594,20 @@ pub fn body_bands(
 /// factor there: its value known within a factor e^0.5 ≈ 1.65 either way.
 pub const DETERMINED_LN_SD: f64 = 0.5;
 
-/// The knots the data determine, per tabulated factor of a fit: (the knots' stem, the
-/// channel of a Fresnel curve, the angles in degrees of the knots that are measured —
-/// the data see the factor there, [`MEASURED_SIGNAL`] — with σ(ln) ≤ [`DETERMINED_LN_SD`]
-/// under the covariance with the prior's information). A knot the prior alone holds, or
+/// The knots of one tabulated factor that the data determine ([`determined_knots`]).
+#[derive(Clone, Debug)]
+pub struct DeterminedKnots {
+    /// The knots' stem (`lobe.fresnel`, `ndf_c`, `base.body`, …).
+    pub stem: String,
+    /// The channel of a Fresnel curve.
+    pub channel: Option<usize>,
+    /// The angles (degrees) of the knots determined.
+    pub degrees: Vec<f64>,
+}
+
+/// The knots the data determine, per tabulated factor of a fit: those that are measured
+/// (the data see the factor there, [`MEASURED_SIGNAL`]) with σ(ln) ≤ [`DETERMINED_LN_SD`]
+/// under the covariance with the prior's information. A knot the prior alone holds, or
 /// one fixed by the factor's definition (the body's ρ(0) = 1), never counts. None
 /// without the prior's covariance.
 pub fn determined_knots(
@@ -605,23 +615,30 @@ pub fn determined_knots(
     data: &Dataset,
     flat: &[f64],
     cov: &Covariance,
-) -> Option<Vec<(String, Option<usize>, Vec<f64>)>> {
+) -> Option<Vec<DeterminedKnots>> {
     cov.with_prior.as_ref()?;
     let keep = |measured: bool, sd: Option<f64>| {
         measured && sd.is_some_and(|s| s > 0.0 && s <= DETERMINED_LN_SD)
     };
     let mut out = Vec::new();
+    let mut push = |stem: String, channel: Option<usize>, degrees: Vec<f64>| {
+        out.push(DeterminedKnots {
+            stem,
+            channel,
+            degrees,
+        })
+    };
     for (name, rows) in bands(model, data, flat, cov) {
         let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_d));
-        out.push((name, None, at.map(|r| r.theta_deg).collect()));
+        push(name, None, at.map(|r| r.theta_deg).collect());
     }
     for (name, c, rows) in fresnel_bands(model, data, flat, cov) {
         let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_f));
-        out.push((name, Some(c), at.map(|r| r.theta_deg).collect()));
+        push(name, Some(c), at.map(|r| r.theta_deg).collect());
     }
     for (name, rows) in body_bands(model, data, flat, cov) {
         let at = rows.iter().filter(|r| keep(r.measured, r.sigma_ln_rho));
-        out.push((name, None, at.map(|r| r.theta_deg).collect()));
+        push(name, None, at.map(|r| r.theta_deg).collect());
     }
     Some(out)
 }

@@ -95,7 +95,7 @@ pub fn parse_reader<R: BufRead>(
     let mut wavelengths: Vec<f64> = Vec::new();
     while let Some(text) = lines.next_line()? {
         let line = lines.line;
-        if line % PROGRESS_EVERY_LINES == 0 {
+        if line.is_multiple_of(PROGRESS_EVERY_LINES) {
             progress(ReadProgress {
                 bytes: lines.bytes,
                 rows: b.len(),
@@ -157,7 +157,8 @@ pub fn parse_reader<R: BufRead>(
                 ));
             }
         }
-        if !(x[0] > 0.0) {
+        // (Finite: `number` refused the others.)
+        if x[0] <= 0.0 {
             return Err(DataError::at(
                 file,
                 line,

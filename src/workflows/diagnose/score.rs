@@ -346,30 +346,36 @@ impl<'a> NewParams<'a> {
     /// trade with its curve) had every knot "undetermined" however well the data fix the
     /// curve itself. None for other extensions, or without the prior's covariance.
     fn factor_determined(&self, data: &Dataset) -> Option<(bool, String, String)> {
-        use crate::inference::knots::{determined_knots, is_knot_of, DETERMINED_LN_SD};
+        use crate::inference::knots::{
+            determined_knots, is_knot_of, DeterminedKnots, DETERMINED_LN_SD,
+        };
         if !self.idx.iter().all(|&j| self.decls[j].knot) {
             return None;
         }
         let fit = self.fit;
         let factors = determined_knots(&fit.model, data, &fit.flat, &fit.cov)?;
-        let new: Vec<&(String, Option<usize>, Vec<f64>)> = factors
+        let new: Vec<&DeterminedKnots> = factors
             .iter()
-            .filter(|(stem, ..)| self.idx.iter().any(|&j| is_knot_of(&self.names[j], stem)))
+            .filter(|f| {
+                self.idx
+                    .iter()
+                    .any(|&j| is_knot_of(&self.names[j], &f.stem))
+            })
             .collect();
-        let label = |stem: &str, c: Option<usize>| match c {
-            Some(c) => format!("{stem} (channel {c})"),
-            None => stem.to_string(),
+        let label = |f: &DeterminedKnots| match f.channel {
+            Some(c) => format!("{} (channel {c})", f.stem),
+            None => f.stem.clone(),
         };
         let seen: Vec<String> = new
             .iter()
-            .filter(|(.., at)| !at.is_empty())
-            .map(|(stem, c, at)| {
-                let deg: Vec<String> = at.iter().map(|d| format!("{d:.1}°")).collect();
-                format!("{} at {}", label(stem, *c), deg.join(", "))
+            .filter(|f| !f.degrees.is_empty())
+            .map(|f| {
+                let deg: Vec<String> = f.degrees.iter().map(|d| format!("{d:.1}°")).collect();
+                format!("{} at {}", label(f), deg.join(", "))
             })
             .collect();
         if seen.is_empty() {
-            let stems: Vec<String> = new.iter().map(|(s, c, _)| label(s, *c)).collect();
+            let stems: Vec<String> = new.iter().map(|f| label(f)).collect();
             return Some((
                 false,
                 format!(
