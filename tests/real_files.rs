@@ -386,16 +386,21 @@ fn refused_anisotropy(file: &Path, extra: &[&str]) -> (String, Vec<serde_json::V
 
 /// The anisotropic candidates of a diagnosis' steps (at least one).
 fn anisotropic_candidates(steps: &serde_json::Value) -> Vec<serde_json::Value> {
-    let aniso: Vec<serde_json::Value> = steps
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|s| s["candidates"].as_array().unwrap())
+    let aniso: Vec<serde_json::Value> = candidates(steps)
         .filter(|c| c["effect"] == "anisotropy")
         .cloned()
         .collect();
     assert!(!aniso.is_empty(), "no anisotropic candidate was tried");
     aniso
+}
+
+/// Every candidate of a diagnosis' rounds (`candidates.json`), in order.
+fn candidates(steps: &serde_json::Value) -> impl Iterator<Item = &serde_json::Value> {
+    steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|s| s["candidates"].as_array().unwrap())
 }
 
 /// One diagnosis step from `start` on a real file (`extra`: how to read it) on `backend`,
@@ -633,12 +638,9 @@ fn the_nist_ptfe_grid_is_a_diffuser_with_a_forward_lobe_at_grazing() {
     assert!(fwd > 1.3 * back, "forward {fwd} against backward {back}");
 }
 
-/// The candidates of the first step whose effect is `effect`.
+/// The first candidate of a diagnosis' rounds (`candidates.json`) whose effect is `effect`.
 fn candidate<'a>(steps: &'a serde_json::Value, effect: &str) -> &'a serde_json::Value {
-    steps[0]["candidates"]
-        .as_array()
-        .unwrap()
-        .iter()
+    candidates(steps)
         .find(|c| c["effect"] == effect)
         .unwrap_or_else(|| panic!("no {effect} candidate"))
 }
@@ -696,13 +698,7 @@ fn the_nist_ptfe_grid_adopts_the_data_driven_fresnel_curve_the_data_fix() {
     let extra = [PTFE_READ[0], PTFE_READ[1], "--wavelengths", "532"];
     let (_, steps, diagnosis) =
         diagnose_one_step(&real("PTFE.data.csv"), "fa(vmf)+coat", &extra, "simd");
-    let fresnel = steps
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|s| s["candidates"].as_array().unwrap())
-        .find(|c| c["effect"] == "highlight_fresnel")
-        .expect("the data-driven round tried the Fresnel curve");
+    let fresnel = candidate(&steps, "highlight_fresnel");
     assert_eq!(fresnel["identifiable"], true, "{fresnel}");
     let effects = diagnosis["effects"].as_array().unwrap();
     assert!(
