@@ -328,10 +328,17 @@ fn round_bootstrap(opts: &DiagnoseOptions) -> BootstrapOptions {
     }
 }
 
+/// What decides, between two calibrations of a round, which waiting candidate is
+/// calibrated next (None: none need be, the others may have been deferred): called with
+/// the indices of those that still need the bootstrap, neither run nor deferred.
+pub(super) type NextCalibration<'a> =
+    &'a mut dyn FnMut(&mut [Scored], &[usize], &mut dyn FnMut(String)) -> Option<usize>;
+
 /// Calibrate by the parametric bootstrap the p-value of every candidate whose null is
-/// irregular and whose verdict depends on it ([`Scored::needs_calibration`]); the others
-/// keep the nominal F test and say why. The null's refits to the replicates are shared by
-/// the round's candidates, grown as far as the most demanding one needs.
+/// irregular and whose verdict depends on it ([`Scored::needs_calibration`]), one at a
+/// time in the order `next` gives, until it names none; the others keep the nominal F test
+/// and say why. The null's refits to the replicates are shared by the round's candidates,
+/// grown as far as the most demanding one needs.
 pub(super) fn calibrate_round(
     scored: &mut [Scored],
     data: &Dataset,
@@ -339,9 +346,9 @@ pub(super) fn calibrate_round(
     opts: &DiagnoseOptions,
     current: &FitResult,
     log: &mut dyn FnMut(String),
+    next: NextCalibration,
 ) {
     let boot = round_bootstrap(opts);
-    let mut nulls = None;
     for s in scored
         .iter_mut()
         .filter(|s| s.irregular.is_some() && !s.is_deferred())
@@ -355,12 +362,24 @@ pub(super) fn calibrate_round(
                 )
             };
             s.p_test = PTest::FNominal(why);
-            continue;
-        }
-        if boot.replicates == 0 {
+        } else if boot.replicates == 0 {
             s.p_test = PTest::FNominal("--bootstrap 0".into());
-            continue;
         }
+    }
+    if boot.replicates == 0 {
+        return;
+    }
+    let mut run = vec![false; scored.len()];
+    let mut nulls = None;
+    loop {
+        let waiting: Vec<usize> = (0..scored.len())
+            .filter(|&i| !run[i] && scored[i].needs_calibration() && !scored[i].is_deferred())
+            .collect();
+        let Some(i) = next(scored, &waiting, log).filter(|i| waiting.contains(i)) else {
+            return;
+        };
+        run[i] = true;
+        let s = &mut scored[i];
         let fit = s.fit.as_ref().expect("needs_calibration implies a fit");
         if nulls.is_none() {
             log(format!(

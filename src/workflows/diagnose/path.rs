@@ -479,8 +479,16 @@ fn score_round(
         .collect();
     test_frames(&mut scored, data, backend, opts, log, cache);
     let scored_at = std::time::Instant::now();
-    defer_undeciding(&mut scored, data.len(), opts, log);
-    calibrate_round(&mut scored, data, backend, opts, current, log);
+    let samples = data.len();
+    calibrate_round(
+        &mut scored,
+        data,
+        backend,
+        opts,
+        current,
+        log,
+        &mut |scored, waiting, log| next_to_calibrate(scored, waiting, samples, opts, log),
+    );
     let seconds = RoundSeconds {
         fits: (fitted - t0).as_secs_f64(),
         scoring: (scored_at - fitted).as_secs_f64(),
@@ -556,39 +564,47 @@ fn test_frames(
     }
 }
 
-/// Race the round before its bootstraps: where the round adopts the same candidate whether
-/// the candidates that need
-/// a bootstrap all turn out significant or none does, their tests cannot change the path,
-/// and they are deferred ([`Scored::defer`]). Checking the two extremes suffices: adding
-/// adoptable candidates can change the choice only by being chosen, by raising the best
-/// share of flagged misfit removed (which would have changed one extreme), or by being a
-/// rival (which the optimistic extreme sees).
+/// The round's choice were the candidates `pending` all significant or all not (a spec,
+/// or why the round stops).
+fn outcome_if(
+    scored: &[Scored],
+    pending: &[usize],
+    significant: bool,
+    samples: usize,
+) -> std::result::Result<String, String> {
+    let mut v = scored.to_vec();
+    for &i in pending {
+        v[i].significant = significant;
+    }
+    pick(&v, samples).map(|s| s.candidate.spec.clone())
+}
+
+/// Race the round before each of its bootstraps: where the round adopts the same candidate
+/// whether the candidates still `pending` a bootstrap all turn out significant or none
+/// does, their tests cannot change the path, and they are deferred ([`Scored::defer`]).
+/// Checking the two extremes suffices: adding adoptable candidates can change the choice
+/// only by being chosen, by raising the best share of flagged misfit removed (which would
+/// have changed one extreme), or by being a rival (which the optimistic extreme sees).
 fn defer_undeciding(
     scored: &mut [Scored],
+    pending: &[usize],
     samples: usize,
     opts: &DiagnoseOptions,
     log: &mut dyn FnMut(String),
 ) {
-    let pending: Vec<usize> = (0..scored.len())
-        .filter(|&i| scored[i].needs_calibration())
-        .collect();
     if pending.is_empty() || opts.bootstrap.replicates == 0 || opts.calibrate_all {
         return;
     }
-    let outcome = |significant: bool| {
-        let mut v = scored.to_vec();
-        for &i in &pending {
-            v[i].significant = significant;
-        }
-        pick(&v, samples).map(|s| s.candidate.spec.clone())
-    };
-    let (Ok(with), Ok(without)) = (outcome(true), outcome(false)) else {
+    let (Ok(with), Ok(without)) = (
+        outcome_if(scored, pending, true, samples),
+        outcome_if(scored, pending, false, samples),
+    ) else {
         return;
     };
     if with != without {
         return;
     }
-    for &i in &pending {
+    for &i in pending {
         log(format!(
             "    bootstrap of {} deferred: the round adopts {with} whether or not it is significant",
             scored[i].candidate.spec
@@ -597,6 +613,33 @@ fn defer_undeciding(
             "the round adopts `{with}` whether or not this candidate is significant (calibrated if a backtrack needs it)"
         ));
     }
+}
+
+/// The round's next bootstrap, one at a time ([`calibrate_round`]): the candidates
+/// `waiting` for one whose verdict can no longer change the round's choice are deferred
+/// first ([`defer_undeciding`]); of the rest, the one the round would adopt were they all
+/// significant goes first, so that once it is shown significant its rivals of the same
+/// effect (forms whose tests share one null, often all near the same T) need no test of
+/// their own. Where no extreme names a winner, the first waiting.
+fn next_to_calibrate(
+    scored: &mut [Scored],
+    waiting: &[usize],
+    samples: usize,
+    opts: &DiagnoseOptions,
+    log: &mut dyn FnMut(String),
+) -> Option<usize> {
+    defer_undeciding(scored, waiting, samples, opts, log);
+    let waiting: Vec<usize> = waiting
+        .iter()
+        .copied()
+        .filter(|&i| !scored[i].is_deferred())
+        .collect();
+    let optimistic = outcome_if(scored, &waiting, true, samples).ok();
+    waiting
+        .iter()
+        .copied()
+        .find(|&i| optimistic.as_deref() == Some(scored[i].candidate.spec.as_str()))
+        .or(waiting.first().copied())
 }
 
 /// The round's candidate table in the log: each candidate's fit, test, BIC, share of the

@@ -61,8 +61,22 @@ fn scored(spec: &str, effect: Effect, pending: bool, dbic: f64, removal: f64, ch
     }
 }
 
+/// The candidates of a round that need a bootstrap.
+fn waiting(round: &[Scored]) -> Vec<usize> {
+    (0..round.len())
+        .filter(|&i| round[i].needs_calibration())
+        .collect()
+}
+
 fn deferred_after(mut round: Vec<Scored>) -> Vec<bool> {
-    defer_undeciding(&mut round, 1000, &DiagnoseOptions::default(), &mut |_| {});
+    let pending = waiting(&round);
+    defer_undeciding(
+        &mut round,
+        &pending,
+        1000,
+        &DiagnoseOptions::default(),
+        &mut |_| {},
+    );
     round.iter().map(|s| s.is_deferred()).collect()
 }
 
@@ -84,7 +98,14 @@ fn only_tests_that_cannot_change_the_choice_are_deferred() {
     let behind = || scored("on", Effect::Backscatter, true, -20.0, 0.1, 400.0);
     assert_eq!(deferred_after(vec![winner(), behind()]), [false, true]);
     let mut round = vec![winner(), behind()];
-    defer_undeciding(&mut round, 1000, &DiagnoseOptions::default(), &mut |_| {});
+    let pending = waiting(&round);
+    defer_undeciding(
+        &mut round,
+        &pending,
+        1000,
+        &DiagnoseOptions::default(),
+        &mut |_| {},
+    );
     assert!(!round[1].significant && !round[1].adoptable());
     assert!(
         round[1].verdict.contains("adopts `fa(lambert)`"),
@@ -107,8 +128,51 @@ fn only_tests_that_cannot_change_the_choice_are_deferred() {
         ..Default::default()
     };
     let mut round = vec![winner(), behind()];
-    defer_undeciding(&mut round, 1000, &all, &mut |_| {});
+    let pending = waiting(&round);
+    defer_undeciding(&mut round, &pending, 1000, &all, &mut |_| {});
     assert!(!round[1].is_deferred());
+}
+
+/// The round's bootstraps run one at a time, the likely winner first: three forms of one
+/// effect all waiting (on, eon, vmf over one null), the best by BIC is calibrated first;
+/// once it is significant the round adopts it whatever the other two's tests say, so they
+/// are deferred and no more bootstraps run. Had it failed, the next best would be next.
+#[test]
+fn the_likely_winner_is_calibrated_first_and_its_rivals_of_one_effect_deferred() {
+    let forms = || {
+        vec![
+            scored("on", Effect::Backscatter, true, -20.0, 0.5, 90.0),
+            scored("eon", Effect::Backscatter, true, -25.0, 0.5, 89.0),
+            scored("vmf", Effect::Backscatter, true, -22.0, 0.5, 89.5),
+        ]
+    };
+    let opts = DiagnoseOptions::default();
+    let mut round = forms();
+    let all = waiting(&round);
+    let first = next_to_calibrate(&mut round, &all, 1000, &opts, &mut |_| {});
+    assert_eq!(first, Some(1), "the best by BIC first");
+    assert!(
+        round.iter().all(|s| !s.is_deferred()),
+        "nothing decided yet"
+    );
+    // Its bootstrap says significant: the other two cannot change the choice.
+    round[1].p_test = PTest::F;
+    let rest = [0, 2];
+    assert_eq!(
+        next_to_calibrate(&mut round, &rest, 1000, &opts, &mut |_| {}),
+        None
+    );
+    assert!(round[0].is_deferred() && round[2].is_deferred());
+    assert_eq!(pick(&round, 1000).unwrap().candidate.spec, "eon");
+    // Its bootstrap says not significant: the next best is tested.
+    let mut round = forms();
+    round[1].significant = false;
+    round[1].p_test = PTest::F;
+    assert_eq!(
+        next_to_calibrate(&mut round, &rest, 1000, &opts, &mut |_| {}),
+        Some(2)
+    );
+    assert!(!round[0].is_deferred(), "on could still be the winner");
 }
 
 /// A backtrack that would try a deferred candidate runs its bootstrap first: Lambertian

@@ -292,6 +292,7 @@ pub(super) fn backtrack_alternative(
                 opts,
                 current,
                 log,
+                &mut |_, waiting, _| waiting.first().copied(),
             );
         }
         if scored[i].adoptable() {
