@@ -68,15 +68,14 @@ fn waiting(round: &[Scored]) -> Vec<usize> {
         .collect()
 }
 
+/// The race before a round's bootstraps, over every candidate that needs one.
+fn race(round: &mut [Scored], opts: &DiagnoseOptions) {
+    let pending = waiting(round);
+    defer_undeciding(round, &pending, 1000, opts, &mut |_| {});
+}
+
 fn deferred_after(mut round: Vec<Scored>) -> Vec<bool> {
-    let pending = waiting(&round);
-    defer_undeciding(
-        &mut round,
-        &pending,
-        1000,
-        &DiagnoseOptions::default(),
-        &mut |_| {},
-    );
+    race(&mut round, &DiagnoseOptions::default());
     round.iter().map(|s| s.is_deferred()).collect()
 }
 
@@ -98,14 +97,7 @@ fn only_tests_that_cannot_change_the_choice_are_deferred() {
     let behind = || scored("on", Effect::Backscatter, true, -20.0, 0.1, 400.0);
     assert_eq!(deferred_after(vec![winner(), behind()]), [false, true]);
     let mut round = vec![winner(), behind()];
-    let pending = waiting(&round);
-    defer_undeciding(
-        &mut round,
-        &pending,
-        1000,
-        &DiagnoseOptions::default(),
-        &mut |_| {},
-    );
+    race(&mut round, &DiagnoseOptions::default());
     assert!(!round[1].significant && !round[1].adoptable());
     assert!(
         round[1].verdict.contains("adopts `fa(lambert)`"),
@@ -128,8 +120,7 @@ fn only_tests_that_cannot_change_the_choice_are_deferred() {
         ..Default::default()
     };
     let mut round = vec![winner(), behind()];
-    let pending = waiting(&round);
-    defer_undeciding(&mut round, &pending, 1000, &all, &mut |_| {});
+    race(&mut round, &all);
     assert!(!round[1].is_deferred());
 }
 
