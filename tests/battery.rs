@@ -289,6 +289,7 @@ fn misspecified_battery(
             seed,
             restarts: 6,
             max_steps: 2,
+            factors_past_max_steps: 0,
             backtrack: false,
             bootstrap: bsdfit::inference::bootstrap::BootstrapOptions {
                 replicates: 0,

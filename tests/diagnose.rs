@@ -494,6 +494,7 @@ fn controls_add_no_effect() {
             let forced = DiagnoseOptions {
                 stop_when_consistent: false,
                 max_steps: 1,
+                factors_past_max_steps: 0,
                 ..opts(40 + k as u64)
             };
             let d = diagnose(&data, spec, backend(), &forced, &mut |l| {
@@ -536,6 +537,7 @@ fn false_positives(cases: &[(&str, &str, &Vec<[f64; 4]>)], seeds: u64) -> (usize
             let forced = DiagnoseOptions {
                 stop_when_consistent: false,
                 max_steps: 1,
+                factors_past_max_steps: 0,
                 ..opts(seed)
             };
             let d = diagnose(&data, spec, backend(), &forced, &mut |_| {}).unwrap();

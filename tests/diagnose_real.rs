@@ -143,6 +143,7 @@ fn a_parameter_on_a_bound_is_information_not_a_veto() {
     );
     let opts = DiagnoseOptions {
         max_steps: 1,
+        factors_past_max_steps: 0,
         ..Default::default()
     };
     let d = run("bound", &data, "lambert", &opts);

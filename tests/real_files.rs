@@ -417,6 +417,7 @@ fn diagnose_one_step(
     let mut args = vec!["diagnose", p(file), "--model", start];
     args.extend_from_slice(extra);
     args.extend_from_slice(&["--backend", backend, "--bootstrap", "0", "--max-steps", "1"]);
+    args.extend_from_slice(&["--factors-past-max-steps", "0"]);
     args.extend_from_slice(&["--no-backtrack", "--report", p(&report)]);
     let out = bsdfit(&args);
     assert_ok(&out, "diagnose");

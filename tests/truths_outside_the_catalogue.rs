@@ -45,6 +45,7 @@ fn one_round(name: &str, data: &Dataset) -> Diagnosis {
         restarts: 8,
         seed: 7,
         max_steps: 2,
+        factors_past_max_steps: 0,
         backtrack: false,
         ..Default::default()
     };

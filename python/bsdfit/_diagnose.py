@@ -203,6 +203,7 @@ def diagnose(
     seed: int = _DIAGNOSE_DEFAULTS["seed"],
     alpha: float = _DIAGNOSE_DEFAULTS["alpha"],
     max_steps: int = _DIAGNOSE_DEFAULTS["max_steps"],
+    factors_past_max_steps: int = _DIAGNOSE_DEFAULTS["factors_past_max_steps"],
     bootstrap: int = _DIAGNOSE_DEFAULTS["bootstrap"],
     bootstrap_max: int = _DIAGNOSE_DEFAULTS["bootstrap_max"],
     bootstrap_restarts: int = _DIAGNOSE_DEFAULTS["bootstrap_restarts"],
@@ -228,8 +229,9 @@ def diagnose(
         raise TypeError("dataset: a bsdfit.Dataset (Dataset.read or Dataset.from_arrays)")
     weights = _old_weighting("diagnose", weights, weighting, _DIAGNOSE_DEFAULTS["weights"])
     options = _diagnose_options(
-        loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_max,
-        bootstrap_restarts, calibrate_all, backend, fix, bounds, prior, backtrack, explore,
+        loss, weights, optimizer, restarts, seed, alpha, max_steps, factors_past_max_steps,
+        bootstrap, bootstrap_max, bootstrap_restarts, calibrate_all, backend, fix, bounds, prior,
+        backtrack, explore,
     )
     with _Progress(progress) as reports:
         text, notes, record = _bsdfit.diagnose_json(
@@ -241,8 +243,8 @@ def diagnose(
 
 def _diagnose_options(
     loss: str, weights: str, optimizer: str, restarts: int, seed: int, alpha: float,
-    max_steps: int, bootstrap: int, bootstrap_max: int, bootstrap_restarts: int,
-    calibrate_all: bool, backend: str, fix: Any, bounds: Any, prior: Any, backtrack: bool,
+    max_steps: int, factors_past_max_steps: int, bootstrap: int, bootstrap_max: int,
+    bootstrap_restarts: int, calibrate_all: bool, backend: str, fix: Any, bounds: Any, prior: Any, backtrack: bool,
     explore: int,
 ) -> Dict[str, Any]:
     """The keywords of ``diagnose`` checked, as the native call takes them."""
@@ -254,6 +256,7 @@ def _diagnose_options(
         "seed": _int("seed", seed, 0),
         "alpha": _real("alpha", alpha),
         "max_steps": _int("max_steps", max_steps, 0),
+        "factors_past_max_steps": _int("factors_past_max_steps", factors_past_max_steps, 0),
         "bootstrap": _int("bootstrap", bootstrap, 0),
         "bootstrap_max": _int("bootstrap_max", bootstrap_max, 0),
         "bootstrap_restarts": _int("bootstrap_restarts", bootstrap_restarts, 0),
@@ -295,6 +298,7 @@ def diagnose_many(
     seed: int = _DIAGNOSE_DEFAULTS["seed"],
     alpha: float = _DIAGNOSE_DEFAULTS["alpha"],
     max_steps: int = _DIAGNOSE_DEFAULTS["max_steps"],
+    factors_past_max_steps: int = _DIAGNOSE_DEFAULTS["factors_past_max_steps"],
     bootstrap: int = _DIAGNOSE_DEFAULTS["bootstrap"],
     bootstrap_max: int = _DIAGNOSE_DEFAULTS["bootstrap_max"],
     bootstrap_restarts: int = _DIAGNOSE_DEFAULTS["bootstrap_restarts"],
@@ -324,8 +328,9 @@ def diagnose_many(
     if isinstance(paths, (str, bytes, os.PathLike)):
         paths = [paths]
     options = _diagnose_options(
-        loss, weights, optimizer, restarts, seed, alpha, max_steps, bootstrap, bootstrap_max,
-        bootstrap_restarts, calibrate_all, backend, fix, bounds, prior, backtrack, explore,
+        loss, weights, optimizer, restarts, seed, alpha, max_steps, factors_past_max_steps,
+        bootstrap, bootstrap_max, bootstrap_restarts, calibrate_all, backend, fix, bounds, prior,
+        backtrack, explore,
     )
     tasks = None if emit_slurm is None else _int("emit_slurm", emit_slurm, 1)
     binary = None if tasks is None else _slurm_binary(slurm_binary)

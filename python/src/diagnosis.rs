@@ -15,6 +15,7 @@ pub(crate) fn diagnose_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     dict.set_item("seed", d.seed)?;
     dict.set_item("alpha", d.alpha)?;
     dict.set_item("max_steps", d.max_steps)?;
+    dict.set_item("factors_past_max_steps", d.factors_past_max_steps)?;
     dict.set_item("bootstrap", d.bootstrap.replicates)?;
     dict.set_item("bootstrap_max", d.bootstrap.max_replicates)?;
     dict.set_item("bootstrap_restarts", d.bootstrap.restarts)?;
@@ -52,6 +53,7 @@ impl PyDiagnoseRequest {
                 "seed" => o.seed = value.extract()?,
                 "alpha" => o.alpha = value.extract()?,
                 "max_steps" => o.max_steps = value.extract()?,
+                "factors_past_max_steps" => o.factors_past_max_steps = value.extract()?,
                 "bootstrap" => o.bootstrap.replicates = value.extract()?,
                 "bootstrap_max" => o.bootstrap.max_replicates = value.extract()?,
                 "bootstrap_restarts" => o.bootstrap.restarts = value.extract()?,

@@ -361,6 +361,7 @@ BAD_ARGUMENTS = [
     ("diagnose", dict(restarts=-1), ValueError, "restarts must be ≥ 1, got -1"),
     ("diagnose", dict(seed=-5), ValueError, "seed must be ≥ 0, got -5"),
     ("diagnose", dict(max_steps=-1), ValueError, "max_steps must be ≥ 0"),
+    ("diagnose", dict(factors_past_max_steps=-2), ValueError, "factors_past_max_steps must be ≥ 0"),
     ("diagnose", dict(bootstrap=-1), ValueError, "bootstrap must be ≥ 0"),
     ("diagnose", dict(explore=-1), ValueError, "explore must be ≥ 0"),
     ("diagnose", dict(alpha="0.05"), TypeError, "alpha: expected a number"),

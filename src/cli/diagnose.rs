@@ -54,6 +54,11 @@ pub struct DiagnoseArgs {
     /// Most effects to add.
     #[arg(long, default_value_t = DiagnoseOptions::default().max_steps)]
     pub max_steps: usize,
+    /// Steps beyond --max-steps that a path whose last step took a data-driven factor
+    /// (+ndf, +fresnel, +body) may take, each one of the factors it lacks and nothing else
+    /// (0: stop at --max-steps whatever the last step was).
+    #[arg(long, value_name = "N", default_value_t = DiagnoseOptions::default().factors_past_max_steps)]
+    pub factors_past_max_steps: usize,
     /// Replicates of the parametric bootstrap that calibrates the p-value of an extension
     /// whose null is irregular (a new parameter's null value on a bound of its range, e.g.
     /// σ = 0 or k_s = 0, or new parameters the null does not identify, e.g. the lobe's α
@@ -138,7 +143,7 @@ pub struct DiagnoseArgs {
 
 /// The options that choose a collection's diagnosis, which a saved one (`--config`)
 /// already holds.
-const CHOOSES_THE_DIAGNOSIS: [&str; 33] = [
+const CHOOSES_THE_DIAGNOSIS: [&str; 34] = [
     "data",
     "model",
     "loss",
@@ -148,6 +153,7 @@ const CHOOSES_THE_DIAGNOSIS: [&str; 33] = [
     "seed",
     "alpha",
     "max_steps",
+    "factors_past_max_steps",
     "bootstrap",
     "bootstrap_max",
     "calibrate_all",
@@ -195,6 +201,7 @@ impl DiagnoseArgs {
             seed: self.seed,
             alpha: self.alpha,
             max_steps: self.max_steps,
+            factors_past_max_steps: self.factors_past_max_steps,
             parallel: self.parallel,
             backtrack: !self.no_backtrack,
             bootstrap: BootstrapOptions {

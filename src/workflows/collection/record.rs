@@ -174,6 +174,9 @@ impl CellRecord {
         let stop = match last.evidence.rsplit_once("Stopped: ") {
             _ if p >= d.alpha => format!("consistent with the uncertainties (p = {p:.3})"),
             Some((_, why)) => why.trim().to_string(),
+            None if d.steps.len() > max_steps + 1 => {
+                format!("reached the most effects ({max_steps}) and the factors past them")
+            }
             None if d.steps.len() > max_steps => format!("reached the most effects ({max_steps})"),
             None => "no significant extension left".to_string(),
         };

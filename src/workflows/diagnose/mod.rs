@@ -84,8 +84,12 @@ pub struct DiagnoseOptions {
     pub screen: usize,
     /// Significance level of the consistency test and (Bonferroni-corrected) of the F tests.
     pub alpha: f64,
-    /// Most effects to add.
+    /// Most effects to add (the search of the catalogue's effects is bounded by it).
     pub max_steps: usize,
+    /// Steps a path may take beyond `max_steps` when its last step took a data-driven
+    /// factor: only the factors it lacks (`+ndf`, `+fresnel`, `+body`), so the budget does
+    /// not cut a path between two factors. 0: the path stops at `max_steps` as any other.
+    pub factors_past_max_steps: usize,
     /// Stop as soon as χ²_red is consistent with the uncertainties (docs/diagnose.md). Turning it
     /// off makes every round fit and test the candidates anyway (used to measure the false
     /// positive rate of the F/BIC gates on their own).
@@ -127,6 +131,7 @@ impl Default for DiagnoseOptions {
             screen: 8,
             alpha: 0.01,
             max_steps: 4,
+            factors_past_max_steps: 2,
             stop_when_consistent: true,
             backtrack: true,
             parallel: false,

@@ -276,3 +276,67 @@ fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
     assert!(!round[0].is_deferred());
     assert_eq!(other_form.is_some(), round[0].adoptable());
 }
+
+/// A path of `effects` steps after its start, the last one `last`.
+fn path_ending(effects: usize, last: Effect) -> Vec<Step> {
+    let fit = scored("lambert", last, false, 0.0, 0.0, 400.0).fit.unwrap();
+    (0..=effects)
+        .map(|k| Step {
+            model: "lambert".into(),
+            effect: (k > 0).then_some(if k == effects {
+                last
+            } else {
+                Effect::SpecularLobe
+            }),
+            chi2_red: fit.chi2_red,
+            loss: fit.loss,
+            evidence: String::new(),
+            fit: fit.clone(),
+            candidates: vec![],
+            round_seconds: None,
+            removed: vec![],
+        })
+        .collect()
+}
+
+#[test]
+fn past_max_steps_only_a_path_that_just_took_a_factor_goes_on_and_only_for_the_factors_left() {
+    let opts = DiagnoseOptions {
+        max_steps: 4,
+        factors_past_max_steps: 2,
+        ..Default::default()
+    };
+    let factor = Effect::HighlightFresnel;
+    // Within the budget the ordinary rule applies (no factors-only round).
+    assert!(!factors_only(&path_ending(3, factor), &opts));
+    // At the budget: on after a factor, not after an analytic effect.
+    assert!(factors_only(&path_ending(4, factor), &opts));
+    assert!(!factors_only(&path_ending(4, Effect::Backscatter), &opts));
+    assert!(factors_only(&path_ending(5, Effect::BodyProfile), &opts));
+    // The extra budget spent, or switched off, or no factors at all: stop.
+    assert!(!factors_only(
+        &path_ending(6, Effect::HighlightShape),
+        &opts
+    ));
+    let none = DiagnoseOptions {
+        factors_past_max_steps: 0,
+        ..opts.clone()
+    };
+    assert!(!factors_only(&path_ending(4, factor), &none));
+    let analytic = DiagnoseOptions {
+        data_driven: false,
+        ..opts.clone()
+    };
+    assert!(!factors_only(&path_ending(4, factor), &analytic));
+    // The stop says which budget ended the path.
+    let mut steps = path_ending(6, Effect::HighlightShape);
+    let fit = steps[6].fit.clone();
+    assert_eq!(stop_before_round(&mut steps, &fit, &opts), Some(false));
+    assert!(
+        steps[6]
+            .evidence
+            .ends_with("Stopped after 6 effects (--max-steps 4 then factors only)"),
+        "{}",
+        steps[6].evidence
+    );
+}

@@ -3,8 +3,10 @@
 //! significant, so an analytic effect adopted earlier may only have stood in for the
 //! factor the catalogue lacked: a retroreflective lobe and its falloff for a body that
 //! darkens toward grazing, micrograins for a body that brightens there (measured on the
-//! bodies of `tests/data_driven_body.rs`). Each analytic step before the first
-//! data-driven one is undone in turn, latest first, and refitted from the current optimum;
+//! bodies of `tests/data_driven_body.rs`). Each analytic step before the last
+//! data-driven one is undone in turn, latest first, and refitted from the current optimum
+//! (one between two factors too: a backscatter base adopted after the body's profile may
+//! only stand in for the Fresnel curve that comes next);
 //! where the F test of the removed parameters is not significant at the diagnosis's
 //! level, the effect is dropped (stepwise regression's backward step). The path then
 //! ends with one more step that names what was dropped and why.
@@ -85,16 +87,16 @@ pub(super) fn prune(
     log: &mut dyn FnMut(String),
     mut steps: Vec<Step>,
 ) -> Result<Vec<Step>> {
-    let Some(first_driven) = steps
+    let Some(last_driven) = steps
         .iter()
-        .position(|s| s.effect.is_some_and(Effect::is_data_driven))
+        .rposition(|s| s.effect.is_some_and(Effect::is_data_driven))
     else {
         return Ok(steps);
     };
     let mut current: FitResult = steps.last().expect("a step").fit.clone();
     let (mut removed, mut verdicts) = (Vec::new(), Vec::new());
-    for i in (1..first_driven).rev() {
-        let Some(effect) = steps[i].effect else {
+    for i in (1..last_driven).rev() {
+        let Some(effect) = steps[i].effect.filter(|e| !e.is_data_driven()) else {
             continue;
         };
         let Some(spec) = without_step(current.spec(), &steps[i - 1].model, &steps[i].model) else {
