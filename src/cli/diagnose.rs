@@ -336,7 +336,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         &mut |line| {
             // The latest step or candidate line is what the periodic progress line repeats.
             if let Some(head) = line.split(" — ").next().filter(|h| !h.trim().is_empty()) {
-                progress.set_message(head.trim().chars().take(60).collect::<String>());
+                progress.set_message(progress_message(head));
             }
             progress.suspend(|| println!("{line}"))
         },
@@ -373,6 +373,21 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         eprintln!("wrote {}", dir.join("index.html").display());
     }
     Ok(())
+}
+
+/// A log line's head as the periodic progress line repeats it: without its parenthesised
+/// details (a bootstrap's planned replicates) and at most 72 characters, cut at a word
+/// with an ellipsis rather than mid-phrase.
+fn progress_message(head: &str) -> String {
+    let head = head.trim();
+    let head = head.split(" (").next().unwrap_or(head);
+    const MOST: usize = 72;
+    if head.chars().count() <= MOST {
+        return head.to_string();
+    }
+    let cut: String = head.chars().take(MOST).collect();
+    let cut = cut.rsplit_once(' ').map_or(cut.as_str(), |(a, _)| a);
+    format!("{cut}…")
 }
 
 #[cfg(test)]
@@ -414,5 +429,23 @@ mod tests {
             .request(library.options.constraints.clone())
             .expect("parses");
         assert_eq!(format!("{cli:?}"), format!("{library:?}"));
+    }
+
+    /// The progress line keeps a log line's words whole: no parenthesised details, no
+    /// phrase cut in its middle (it once read "… replicates drawn from )").
+    #[test]
+    fn progress_messages_are_whole_words() {
+        let bootstrap = "    bootstrap: refitting rmg(vmf)+coat to replicates drawn from its fit (planned 199, at most 799)";
+        assert_eq!(
+            progress_message(bootstrap),
+            "bootstrap: refitting rmg(vmf)+coat to replicates drawn from its fit"
+        );
+        assert_eq!(
+            progress_message("step 2: fa(lambert)+coat "),
+            "step 2: fa(lambert)+coat"
+        );
+        let long = format!("fitting {}", "word ".repeat(30));
+        let m = progress_message(&long);
+        assert!(m.ends_with("word…") && m.chars().count() <= 73, "{m}");
     }
 }
