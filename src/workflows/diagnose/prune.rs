@@ -5,8 +5,8 @@
 //! darkens toward grazing, micrograins for a body that brightens there (measured on the
 //! bodies of `tests/data_driven_body.rs`). Each analytic step before the last
 //! data-driven one is undone in turn, latest first, and refitted from the current optimum
-//! (one between two factors too: a backscatter base adopted after the body's profile may
-//! only stand in for the Fresnel curve that comes next);
+//! (one between two factors too: an analytic effect adopted after one factor may only
+//! stand in for the next);
 //! where the F test of the removed parameters is not significant at the diagnosis's
 //! level, the effect is dropped (stepwise regression's backward step). The path then
 //! ends with one more step that names what was dropped and why.
@@ -199,5 +199,72 @@ mod tests {
         );
         // Nothing added.
         assert_eq!(without_step("ggx+body", "ggx", "ggx"), None);
+    }
+
+    /// An analytic step between two data-driven factors is tried too. Data from a plain
+    /// Fresnel aggregate (`fa(lambert)`); a path that took the body's profile, then a
+    /// backscattering base (`fa(vmf)`), then the Fresnel curve: the vMF base adds nothing
+    /// the truth has, so beside the factors its removal is not significant and it is
+    /// dropped. Eliminating only before the first factor would never try it.
+    #[test]
+    fn an_analytic_step_between_two_factors_is_eliminated_when_it_adds_nothing() {
+        use super::super::{fit_model, DiagnoseOptions, Effect, Step};
+        use crate::bsdf::Model;
+        use crate::engine::simd::SimdBackend;
+        let mut rows = Vec::new();
+        for ti in [0.0, 20.0, 40.0, 60.0] {
+            for k in 0..=16 {
+                let to = -80.0 + 10.0 * k as f64;
+                rows.push([ti, 0.0, to, 0.0]);
+            }
+        }
+        let truth_model = Model::parse("fa(lambert)", 1).unwrap();
+        let truth = truth_model.defaults();
+        let noise = crate::workflows::synth::Noise {
+            rel: 0.01,
+            abs: 1e-3,
+        };
+        let data = crate::workflows::synth::synthesize(
+            &truth_model,
+            &truth,
+            &rows,
+            &[550.0],
+            noise,
+            3,
+            "fa(lambert)",
+        )
+        .unwrap();
+        let backend = SimdBackend::new();
+        let opts = DiagnoseOptions {
+            restarts: 4,
+            ..Default::default()
+        };
+        let last = Model::for_data("fa(vmf)+body+fresnel", &data).unwrap();
+        let fit = fit_model(&last, &data, &backend, &opts, &[]).unwrap();
+        let path = [
+            ("fa(lambert)", None),
+            ("fa(lambert)+body", Some(Effect::BodyProfile)),
+            ("fa(vmf)+body", Some(Effect::Backscatter)),
+            ("fa(vmf)+body+fresnel", Some(Effect::HighlightFresnel)),
+        ];
+        let steps: Vec<Step> = path
+            .iter()
+            .map(|&(model, effect)| Step {
+                model: model.into(),
+                effect,
+                chi2_red: fit.chi2_red,
+                loss: fit.loss,
+                evidence: String::new(),
+                fit: fit.clone(),
+                candidates: vec![],
+                round_seconds: None,
+                removed: vec![],
+            })
+            .collect();
+        let mut log = Vec::new();
+        let pruned = super::prune(&data, &backend, &opts, &mut |l| log.push(l), steps).unwrap();
+        let end = pruned.last().unwrap();
+        assert_eq!(end.removed, [Effect::Backscatter], "{log:#?}");
+        assert_eq!(end.model, "fa(lambert)+body+fresnel", "{log:#?}");
     }
 }
