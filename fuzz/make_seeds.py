@@ -30,6 +30,12 @@ and rewrites fuzz/seeds/. Standard library only.
   Cornell-style 31 wavelengths in radians, degrees declared by ANGLE_UNITS and in the
   names, a transmitted (BTDF) file, u_ columns, three angles, R G B, a WAVELENGTH
   keyword, CRLF, NaN cells.
+- mueller: NIST Mueller-matrix BRDF tables (a header of SCATMECH's column names, rows of
+  signed angles in degrees and the wavelength in micrometres): cuts of the vendored PTFE
+  grid and random set, and hand-shaped variants (only the six columns read, the other
+  spellings `phii` and `fr11`, columns reordered, CRLF and a byte-order mark, several
+  wavelengths, NaN and negative f_r11 cells, an angle past 90 degrees, a short row, a
+  header without f_r11).
 - any: one of each of the above (the sniffing entry point).
 """
 
@@ -512,6 +518,48 @@ def real_mueller(name, rows=30):
     return "\n".join(lines[: rows + 1]) + "\n"
 
 
+def mueller_row(names, lam, ti, pi, tr, pr, f):
+    """One row of a Mueller table in the column order of `names` (the normalised
+    elements written as small numbers, as NIST's files have them)."""
+    cells = {"lambda": lam, "thetai": ti, "phi": pi, "phii": pi, "thetar": tr, "phir": pr,
+             "f_r11": f, "fr11": f}
+    return ",".join(fmt_mueller(cells.get(n, 0.0123)) for n in names)
+
+
+def fmt_mueller(v):
+    return v if isinstance(v, str) else "%.6g" % v
+
+
+def mueller_table(names, rows, eol="\n", bom=False):
+    text = eol.join([",".join(names)] + [mueller_row(names, *r) for r in rows]) + eol
+    return ("\ufeff" if bom else "") + text
+
+
+def mueller_seeds():
+    full = ["lambda", "thetai", "phi", "thetar", "phir", "f_r11", "f_r12/f_r11",
+            "f_r13/f_r11", "f_r14/f_r11", "f_r44/f_r11"]
+    six = full[:6]
+    grid = [(0.532, -ti, 0, tr, pr, 0.30 + 0.001 * tr)
+            for ti in (0.001, 30, 60) for tr, pr in ((10, 0), (40, -45), (70, 180), (85, 90))]
+    seeds = {
+        "grid-full-columns.csv": mueller_table(full, grid),
+        "six-columns.csv": mueller_table(six, grid),
+        "other-spellings.csv": mueller_table(["lambda", "thetai", "phii", "thetar", "phir", "fr11"], grid),
+        "reordered.csv": mueller_table(["f_r11", "phir", "thetar", "phi", "thetai", "lambda"], grid),
+        "crlf-bom.csv": mueller_table(six, grid[:6], eol="\r\n", bom=True),
+        "wavelengths.csv": mueller_table(six, [(lam,) + r[1:] for lam in (0.351, 0.633, 1.064) for r in grid[:4]]),
+        "masked-cells.csv": mueller_table(six, grid[:4] + [(0.532, -30, 0, 20, 0, "NaN"), (0.532, -30, 0, 25, 0, -0.01)]),
+        "angle-past-90.csv": mueller_table(six, grid[:3] + [(0.532, -30, 0, 95, 0, 0.3)]),
+        "short-row.csv": mueller_table(six, grid[:3]) + "0.532,-30,0,20\n",
+        "no-f_r11.csv": mueller_table(six[:5] + ["f_r12/f_r11"], grid[:3]),
+        "real-nist-ptfe-grid.csv": real_mueller("PTFE.data.csv"),
+        "real-nist-ptfe-random.csv": real_mueller("PTFE.data.random.csv"),
+    }
+    for name, data in seeds.items():
+        write("mueller", name, data)
+    return seeds
+
+
 def real_seeds():
     zemax = {
         "real-imaging-sphere-brdf.bsdf": real_zemax("zemax_planesymmetric_brdf.bsdf"),
@@ -530,6 +578,7 @@ def main():
         shutil.rmtree(OUT)
     v1, alta, merl, rgl = v1_seeds(), alta_seeds(), merl_seeds(), rgl_seeds()
     zemax, astm = zemax_seeds(), astm_seeds()
+    mueller_seeds()
     real_zemax_seeds, real_astm_seeds = real_seeds()
     for name, data in [
         ("v1-" + "brdf-inplane-rgb.csv", v1["brdf-inplane-rgb.csv"]),

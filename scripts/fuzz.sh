@@ -3,7 +3,7 @@
 #
 #   scripts/fuzz.sh SECONDS [TARGET...]
 #
-# Runs each fuzz target of fuzz/ (default: v1 alta merl rgl zemax astm any) for SECONDS, one after
+# Runs each fuzz target of fuzz/ (default: v1 alta merl rgl zemax astm mueller any) for SECONDS, one after
 # the other, single process (no -jobs/-workers), from a fixed libFuzzer -seed, and prints
 # per target the inputs executed, the coverage (libFuzzer's cov: edges and ft: features)
 # and the crashes. Exits non-zero if any target crashed; the reproducer stays in
@@ -29,7 +29,7 @@ secs=$1
 shift
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(v1 alta merl rgl zemax astm any)
+    targets=(v1 alta merl rgl zemax astm mueller any)
 fi
 seed=${FUZZ_SEED:-1}
 sanitizer=${FUZZ_SANITIZER:-address}
