@@ -244,8 +244,8 @@ def diagnose(
 def _diagnose_options(
     loss: str, weights: str, optimizer: str, restarts: int, seed: int, alpha: float,
     max_steps: int, factors_past_max_steps: int, bootstrap: int, bootstrap_max: int,
-    bootstrap_restarts: int, calibrate_all: bool, backend: str, fix: Any, bounds: Any, prior: Any, backtrack: bool,
-    explore: int,
+    bootstrap_restarts: int, calibrate_all: bool, backend: str, fix: Any, bounds: Any,
+    prior: Any, backtrack: bool, explore: int,
 ) -> Dict[str, Any]:
     """The keywords of ``diagnose`` checked, as the native call takes them."""
     return {

@@ -170,14 +170,16 @@ impl CellRecord {
             })
             .collect();
         let p = last.fit.p_consistent();
+        // Effects the path adopted (a backward elimination's last step adds none).
+        let adopted = d.steps.iter().filter(|s| s.effect.is_some()).count();
         // The headline first: consistent, else the path's own words for its end.
         let stop = match last.evidence.rsplit_once("Stopped: ") {
             _ if p >= d.alpha => format!("consistent with the uncertainties (p = {p:.3})"),
             Some((_, why)) => why.trim().to_string(),
-            None if d.steps.len() > max_steps + 1 => {
+            None if adopted > max_steps => {
                 format!("reached the most effects ({max_steps}) and the factors past them")
             }
-            None if d.steps.len() > max_steps => format!("reached the most effects ({max_steps})"),
+            None if adopted == max_steps => format!("reached the most effects ({max_steps})"),
             None => "no significant extension left".to_string(),
         };
         CellRecord {

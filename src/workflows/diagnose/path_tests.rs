@@ -3,12 +3,13 @@
 use super::*;
 use crate::data::Kind;
 use crate::workflows::diagnose::score::PTest;
+use crate::workflows::diagnose::testdata;
 
 /// A scored candidate, laid out by hand: significant (decided) or waiting for a bootstrap
 /// (`pending`: an irregular null whose nominal p is not settled), its ΔBIC, share of the
 /// flagged misfit removed, and χ² with its parameter count.
 fn scored(spec: &str, effect: Effect, pending: bool, dbic: f64, removal: f64, chi2: f64) -> Scored {
-    let data = super::super::testdata::dataset(Kind::Brdf, &[[10.0, 0.0, 30.0, 0.0]], 1);
+    let data = testdata::dataset(Kind::Brdf, &[[10.0, 0.0, 30.0, 0.0]], 1);
     let model = Model::for_data(spec, &data).unwrap();
     let params = model.dim;
     let fit = FitResult {
@@ -173,33 +174,8 @@ fn the_likely_winner_is_calibrated_first_and_its_rivals_of_one_effect_deferred()
 fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
     use crate::engine::cpu::CpuBackend;
     use crate::workflows::diagnose::{fit_model, Candidate};
-    let mut rows = Vec::new();
-    for ti in [10.0, 40.0, 65.0] {
-        for k in 0..=16 {
-            let to = -80.0 + 10.0 * k as f64;
-            if (to - ti).abs() > 0.5 {
-                rows.push([ti, 0.0, to, 0.0]);
-            }
-        }
-    }
-    let truth_model = Model::parse("on", 1).unwrap();
-    let truth = truth_model
-        .params_from_assignments("rho=0.5,sigma=0.1")
-        .unwrap();
-    let noise = crate::workflows::synth::Noise {
-        rel: 0.02,
-        abs: 1e-4,
-    };
-    let data = crate::workflows::synth::synthesize(
-        &truth_model,
-        &truth,
-        &rows,
-        &[550.0],
-        noise,
-        5,
-        "synthetic on",
-    )
-    .unwrap();
+    let rows = testdata::in_plane_rows(&[10.0, 40.0, 65.0], true);
+    let data = testdata::synthesized("on", "rho=0.5,sigma=0.1", &rows, (0.02, 1e-4), 5);
     let backend = CpuBackend::new();
     let opts = DiagnoseOptions {
         restarts: 4,
@@ -281,20 +257,13 @@ fn a_backtrack_calibrates_a_deferred_candidate_before_trying_it() {
 fn path_ending(effects: usize, last: Effect) -> Vec<Step> {
     let fit = scored("lambert", last, false, 0.0, 0.0, 400.0).fit.unwrap();
     (0..=effects)
-        .map(|k| Step {
-            model: "lambert".into(),
-            effect: (k > 0).then_some(if k == effects {
+        .map(|k| {
+            let effect = (k > 0).then_some(if k == effects {
                 last
             } else {
                 Effect::SpecularLobe
-            }),
-            chi2_red: fit.chi2_red,
-            loss: fit.loss,
-            evidence: String::new(),
-            fit: fit.clone(),
-            candidates: vec![],
-            round_seconds: None,
-            removed: vec![],
+            });
+            testdata::step("lambert", effect, &fit)
         })
         .collect()
 }

@@ -208,32 +208,11 @@ mod tests {
     /// dropped. Eliminating only before the first factor would never try it.
     #[test]
     fn an_analytic_step_between_two_factors_is_eliminated_when_it_adds_nothing() {
-        use super::super::{fit_model, DiagnoseOptions, Effect, Step};
+        use super::super::{fit_model, testdata, DiagnoseOptions, Effect, Step};
         use crate::bsdf::Model;
         use crate::engine::simd::SimdBackend;
-        let mut rows = Vec::new();
-        for ti in [0.0, 20.0, 40.0, 60.0] {
-            for k in 0..=16 {
-                let to = -80.0 + 10.0 * k as f64;
-                rows.push([ti, 0.0, to, 0.0]);
-            }
-        }
-        let truth_model = Model::parse("fa(lambert)", 1).unwrap();
-        let truth = truth_model.defaults();
-        let noise = crate::workflows::synth::Noise {
-            rel: 0.01,
-            abs: 1e-3,
-        };
-        let data = crate::workflows::synth::synthesize(
-            &truth_model,
-            &truth,
-            &rows,
-            &[550.0],
-            noise,
-            3,
-            "fa(lambert)",
-        )
-        .unwrap();
+        let rows = testdata::in_plane_rows(&[0.0, 20.0, 40.0, 60.0], false);
+        let data = testdata::synthesized("fa(lambert)", "", &rows, (0.01, 1e-3), 3);
         let backend = SimdBackend::new();
         let opts = DiagnoseOptions {
             restarts: 4,
@@ -249,17 +228,7 @@ mod tests {
         ];
         let steps: Vec<Step> = path
             .iter()
-            .map(|&(model, effect)| Step {
-                model: model.into(),
-                effect,
-                chi2_red: fit.chi2_red,
-                loss: fit.loss,
-                evidence: String::new(),
-                fit: fit.clone(),
-                candidates: vec![],
-                round_seconds: None,
-                removed: vec![],
-            })
+            .map(|&(model, effect)| testdata::step(model, effect, &fit))
             .collect();
         let mut log = Vec::new();
         let pruned = super::prune(&data, &backend, &opts, &mut |l| log.push(l), steps).unwrap();
