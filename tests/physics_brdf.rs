@@ -283,12 +283,14 @@ fn check_albedo(spec: &str) {
 
 /// Run one check over every BRDF spec the registry derives (catalogue, plus each model
 /// outside it), so a new model is covered without editing this file; every failing spec
-/// is reported, not only the first.
+/// is reported, not only the first. The specs are checked in parallel: the albedo check
+/// outlasts every other test of this file, and alone it would leave a core idle.
 fn over_every_brdf(check: fn(&str)) {
+    use rayon::prelude::*;
     let specs = every_spec(Kind::Brdf);
     assert!(specs.len() >= 20, "catalogue shrank: {specs:?}");
     let failed: Vec<String> = specs
-        .iter()
+        .par_iter()
         .filter_map(|spec| {
             std::panic::catch_unwind(|| check(spec)).err().map(|e| {
                 let msg = e
