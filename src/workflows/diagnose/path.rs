@@ -285,11 +285,12 @@ fn extend_path(
         }
         let past_budget = factors_only(&steps, opts);
         if past_budget && driven.is_empty() {
-            let effects = steps.len() - 1;
-            steps.last_mut().unwrap().evidence.push_str(&format!(
-                ". Stopped after {effects} effects (--max-steps {}), no data-driven factor left to add",
-                opts.max_steps
-            ));
+            let stopped = stopped_by_budget(&steps, opts);
+            steps
+                .last_mut()
+                .unwrap()
+                .evidence
+                .push_str(&format!("{stopped}, no data-driven factor left to add"));
             return Ok((steps, consistency(&current, opts.alpha).0));
         }
         let cands = if analytic.is_empty() || past_budget {
@@ -455,20 +456,25 @@ fn stop_before_round(
         return Some(true);
     }
     if steps.len() > opts.max_steps && !factors_only(steps, opts) {
-        let effects = steps.len() - 1;
-        let budget = if effects > opts.max_steps {
-            format!("--max-steps {} then factors only", opts.max_steps)
-        } else {
-            "--max-steps".to_string()
-        };
-        steps
-            .last_mut()
-            .unwrap()
-            .evidence
-            .push_str(&format!(". Stopped after {effects} effects ({budget})"));
+        let stopped = stopped_by_budget(steps, opts);
+        steps.last_mut().unwrap().evidence.push_str(&stopped);
         return Some(consistency(current, opts.alpha).0);
     }
     None
+}
+
+/// The words a path that has used its step budget ends with: how many effects it took
+/// and which budget ended it (`--max-steps`, or the factors past it).
+fn stopped_by_budget(steps: &[Step], opts: &DiagnoseOptions) -> String {
+    let effects = steps.len() - 1;
+    if effects > opts.max_steps {
+        format!(
+            ". Stopped after {effects} effects (--max-steps {} then factors only)",
+            opts.max_steps
+        )
+    } else {
+        format!(". Stopped after {effects} effects (--max-steps)")
+    }
 }
 
 /// Fit and score every candidate extension of `current` against it, the p-values
