@@ -65,6 +65,12 @@ fn data_driven_ndfs_of_truths_outside_the_catalogue_come_back() {
             .map(|t| t.aic)
             .fold(f64::INFINITY, f64::min);
         assert_eq!(choice.chosen.aic, least, "{name}");
+        for t in &choice.tried {
+            eprintln!(
+                "  σ_s {}: χ² {:.1}, edf {:.1}, AIC {:.1}",
+                t.sd, t.chi2, t.effective_params, t.aic
+            );
+        }
         chosen.push(choice.chosen.sd);
 
         let all = bands(&ndf, &data, &driven.flat, &driven.cov);

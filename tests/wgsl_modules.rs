@@ -76,6 +76,31 @@ fn twins_read_parameters_only_through_generated_accessors() {
     assert!(offenders.is_empty(), "{}", offenders.join("\n"));
 }
 
+/// A run of knots is read in a loop through its first knot's `_run` accessor, which
+/// indexes from that knot: one per run (the NDF's, then the Fresnel curve's), none for
+/// the other knots.
+#[test]
+fn a_run_of_knots_gets_one_indexed_accessor_at_its_first_knot() {
+    let m = Model::parse("ggx+ndf+fresnel", 1).unwrap();
+    let lobe = m
+        .nodes()
+        .into_iter()
+        .find(|n| n.bsdf.wgsl().function == "ggx_ndf_fresnel_eval")
+        .expect("the lobe with both factors");
+    let src = bsdfit::engine::wgsl::accessors_source(lobe);
+    let names: Vec<&str> = lobe.bsdf.params().iter().map(|p| p.name).collect();
+    let at = |name: &str| names.iter().position(|&n| n == name).unwrap();
+    let run = |name: &str| {
+        format!(
+            "fn ggx_ndf_fresnel_{name}_run(o: u32, j: u32) -> f32 {{ return P[o + {}u + j]; }}",
+            at(name)
+        )
+    };
+    assert!(src.contains(&run("ndf1")), "{src}");
+    assert!(src.contains(&run("fresnel1")), "{src}");
+    assert_eq!(src.matches("_run(").count(), 2, "{src}");
+}
+
 #[test]
 fn a_single_vmf_node_is_prepared_once_per_candidate() {
     // dmg(vmf): the VMF base (offset 3 in the scalar view: tau0, beta, rho_g, then the

@@ -4,23 +4,10 @@
 
 // Parameters: alpha, eta, ndf1 .. ndf15.
 fn btdf_ndf_prepare(o: u32) {
-    ndf_build(&NDF_TABLE, btdf_ndf_alpha(o), array<f32, 15>(
-        btdf_ndf_ndf1(o),
-        btdf_ndf_ndf2(o),
-        btdf_ndf_ndf3(o),
-        btdf_ndf_ndf4(o),
-        btdf_ndf_ndf5(o),
-        btdf_ndf_ndf6(o),
-        btdf_ndf_ndf7(o),
-        btdf_ndf_ndf8(o),
-        btdf_ndf_ndf9(o),
-        btdf_ndf_ndf10(o),
-        btdf_ndf_ndf11(o),
-        btdf_ndf_ndf12(o),
-        btdf_ndf_ndf13(o),
-        btdf_ndf_ndf14(o),
-        btdf_ndf_ndf15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        NDF_TABLE.s[k] = btdf_ndf_ndf1_run(o, k - 1u);
+    }
+    ndf_build(&NDF_TABLE, btdf_ndf_alpha(o));
 }
 
 fn btdf_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {

@@ -77,14 +77,11 @@ fn ndf_facing_away(mu: f32, sw: f32, cm: f32, sm: f32) -> f32 {
     return 2.0 * (b * sqrt(max(1.0 - r * r, 0.0)) - a * (PI - psi));
 }
 
-// The table of alpha and the 15 free knots: 1/N and C(mu_j).
-fn ndf_build(tab: ptr<private, NdfTable>, alpha: f32, knots: array<f32, 15>) {
+// The table of alpha and the knots s[1] .. s[15] the caller has set (from its first
+// knot's generated `_run` accessor): 1/N and C(mu_j).
+fn ndf_build(tab: ptr<private, NdfTable>, alpha: f32) {
     (*tab).alpha = alpha;
     (*tab).s[0] = 0.0;
-    var free = knots;
-    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
-        (*tab).s[k] = free[k - 1u];
-    }
     for (var j = 0u; j < NDF_MU_POINTS; j = j + 1u) {
         (*tab).c[j] = 0.0;
     }
@@ -190,23 +187,10 @@ fn ndf_lobe(tab: ptr<private, NdfTable>, eta: f32, wi: vec3<f32>, wo: vec3<f32>)
 
 // `ggx` with the data-driven NDF. Parameters: ks, alpha, eta, ndf1 .. ndf15.
 fn ggx_ndf_prepare(o: u32) {
-    ndf_build(&NDF_TABLE, ggx_ndf_alpha(o), array<f32, 15>(
-        ggx_ndf_ndf1(o),
-        ggx_ndf_ndf2(o),
-        ggx_ndf_ndf3(o),
-        ggx_ndf_ndf4(o),
-        ggx_ndf_ndf5(o),
-        ggx_ndf_ndf6(o),
-        ggx_ndf_ndf7(o),
-        ggx_ndf_ndf8(o),
-        ggx_ndf_ndf9(o),
-        ggx_ndf_ndf10(o),
-        ggx_ndf_ndf11(o),
-        ggx_ndf_ndf12(o),
-        ggx_ndf_ndf13(o),
-        ggx_ndf_ndf14(o),
-        ggx_ndf_ndf15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        NDF_TABLE.s[k] = ggx_ndf_ndf1_run(o, k - 1u);
+    }
+    ndf_build(&NDF_TABLE, ggx_ndf_alpha(o));
 }
 
 fn ggx_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
@@ -221,23 +205,10 @@ fn ggx_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
 
 // `fa(B)` with the data-driven NDF. Parameters: lobe.alpha, lobe.eta, lobe.ks, lobe.ndf1 .. 15.
 fn fa_ndf_prepare(o: u32) {
-    ndf_build(&NDF_TABLE, fa_ndf_lobe_alpha(o), array<f32, 15>(
-        fa_ndf_lobe_ndf1(o),
-        fa_ndf_lobe_ndf2(o),
-        fa_ndf_lobe_ndf3(o),
-        fa_ndf_lobe_ndf4(o),
-        fa_ndf_lobe_ndf5(o),
-        fa_ndf_lobe_ndf6(o),
-        fa_ndf_lobe_ndf7(o),
-        fa_ndf_lobe_ndf8(o),
-        fa_ndf_lobe_ndf9(o),
-        fa_ndf_lobe_ndf10(o),
-        fa_ndf_lobe_ndf11(o),
-        fa_ndf_lobe_ndf12(o),
-        fa_ndf_lobe_ndf13(o),
-        fa_ndf_lobe_ndf14(o),
-        fa_ndf_lobe_ndf15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        NDF_TABLE.s[k] = fa_ndf_lobe_ndf1_run(o, k - 1u);
+    }
+    ndf_build(&NDF_TABLE, fa_ndf_lobe_alpha(o));
 }
 
 fn fa_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
@@ -254,23 +225,10 @@ fn fa_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
 
 // `M+coat` with a data-driven coat lobe. Parameters: kc, alpha_c, ndf_c1 .. ndf_c15.
 fn coat_ndf_prepare(o: u32) {
-    ndf_build(&COAT_NDF_TABLE, coat_ndf_alpha_c(o), array<f32, 15>(
-        coat_ndf_ndf_c1(o),
-        coat_ndf_ndf_c2(o),
-        coat_ndf_ndf_c3(o),
-        coat_ndf_ndf_c4(o),
-        coat_ndf_ndf_c5(o),
-        coat_ndf_ndf_c6(o),
-        coat_ndf_ndf_c7(o),
-        coat_ndf_ndf_c8(o),
-        coat_ndf_ndf_c9(o),
-        coat_ndf_ndf_c10(o),
-        coat_ndf_ndf_c11(o),
-        coat_ndf_ndf_c12(o),
-        coat_ndf_ndf_c13(o),
-        coat_ndf_ndf_c14(o),
-        coat_ndf_ndf_c15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        COAT_NDF_TABLE.s[k] = coat_ndf_ndf_c1_run(o, k - 1u);
+    }
+    ndf_build(&COAT_NDF_TABLE, coat_ndf_alpha_c(o));
 }
 
 fn coat_ndf_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {

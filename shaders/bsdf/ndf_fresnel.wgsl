@@ -13,23 +13,10 @@ fn ndf_fresnel_lobe(tab: ptr<private, NdfTable>, eta: f32, knots: array<f32, 9>,
 // `ggx` with a data-driven NDF and Fresnel curve. Parameters: ks, alpha, eta, ndf1 ..
 // ndf15, fresnel1 .. fresnel8.
 fn ggx_ndf_fresnel_prepare(o: u32) {
-    ndf_build(&NDF_TABLE, ggx_ndf_fresnel_alpha(o), array<f32, 15>(
-        ggx_ndf_fresnel_ndf1(o),
-        ggx_ndf_fresnel_ndf2(o),
-        ggx_ndf_fresnel_ndf3(o),
-        ggx_ndf_fresnel_ndf4(o),
-        ggx_ndf_fresnel_ndf5(o),
-        ggx_ndf_fresnel_ndf6(o),
-        ggx_ndf_fresnel_ndf7(o),
-        ggx_ndf_fresnel_ndf8(o),
-        ggx_ndf_fresnel_ndf9(o),
-        ggx_ndf_fresnel_ndf10(o),
-        ggx_ndf_fresnel_ndf11(o),
-        ggx_ndf_fresnel_ndf12(o),
-        ggx_ndf_fresnel_ndf13(o),
-        ggx_ndf_fresnel_ndf14(o),
-        ggx_ndf_fresnel_ndf15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        NDF_TABLE.s[k] = ggx_ndf_fresnel_ndf1_run(o, k - 1u);
+    }
+    ndf_build(&NDF_TABLE, ggx_ndf_fresnel_alpha(o));
 }
 
 fn ggx_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
@@ -57,23 +44,10 @@ fn ggx_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>) -> f32 {
 // lobe.alpha, lobe.eta, lobe.ks, lobe.ndf1 .. 15, lobe.fresnel1 .. 8; the base's
 // transmittance stays dielectric.
 fn fa_ndf_fresnel_prepare(o: u32) {
-    ndf_build(&NDF_TABLE, fa_ndf_fresnel_lobe_alpha(o), array<f32, 15>(
-        fa_ndf_fresnel_lobe_ndf1(o),
-        fa_ndf_fresnel_lobe_ndf2(o),
-        fa_ndf_fresnel_lobe_ndf3(o),
-        fa_ndf_fresnel_lobe_ndf4(o),
-        fa_ndf_fresnel_lobe_ndf5(o),
-        fa_ndf_fresnel_lobe_ndf6(o),
-        fa_ndf_fresnel_lobe_ndf7(o),
-        fa_ndf_fresnel_lobe_ndf8(o),
-        fa_ndf_fresnel_lobe_ndf9(o),
-        fa_ndf_fresnel_lobe_ndf10(o),
-        fa_ndf_fresnel_lobe_ndf11(o),
-        fa_ndf_fresnel_lobe_ndf12(o),
-        fa_ndf_fresnel_lobe_ndf13(o),
-        fa_ndf_fresnel_lobe_ndf14(o),
-        fa_ndf_fresnel_lobe_ndf15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        NDF_TABLE.s[k] = fa_ndf_fresnel_lobe_ndf1_run(o, k - 1u);
+    }
+    ndf_build(&NDF_TABLE, fa_ndf_fresnel_lobe_alpha(o));
 }
 
 fn fa_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
@@ -102,23 +76,10 @@ fn fa_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, base: f32) -> f32 {
 // `M+coat` whose coat lobe has a data-driven NDF and angular reflectance (no Fresnel
 // factor of its own). Parameters: kc, alpha_c, ndf_c1 .. 15, fresnel_c1 .. 8.
 fn coat_ndf_fresnel_prepare(o: u32) {
-    ndf_build(&COAT_NDF_TABLE, coat_ndf_fresnel_alpha_c(o), array<f32, 15>(
-        coat_ndf_fresnel_ndf_c1(o),
-        coat_ndf_fresnel_ndf_c2(o),
-        coat_ndf_fresnel_ndf_c3(o),
-        coat_ndf_fresnel_ndf_c4(o),
-        coat_ndf_fresnel_ndf_c5(o),
-        coat_ndf_fresnel_ndf_c6(o),
-        coat_ndf_fresnel_ndf_c7(o),
-        coat_ndf_fresnel_ndf_c8(o),
-        coat_ndf_fresnel_ndf_c9(o),
-        coat_ndf_fresnel_ndf_c10(o),
-        coat_ndf_fresnel_ndf_c11(o),
-        coat_ndf_fresnel_ndf_c12(o),
-        coat_ndf_fresnel_ndf_c13(o),
-        coat_ndf_fresnel_ndf_c14(o),
-        coat_ndf_fresnel_ndf_c15(o),
-    ));
+    for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
+        COAT_NDF_TABLE.s[k] = coat_ndf_fresnel_ndf_c1_run(o, k - 1u);
+    }
+    ndf_build(&COAT_NDF_TABLE, coat_ndf_fresnel_alpha_c(o));
 }
 
 fn coat_ndf_fresnel_eval(o: u32, wi: vec3<f32>, wo: vec3<f32>, inner: f32) -> f32 {

@@ -28,6 +28,9 @@
 //! (θ_k = 0, 0.36, 1.44, 3.24, 5.76, 9.01, 13.0, 17.7, 23.2, 29.5, 36.6, 44.7, 53.8, 64.2,
 //! 76.0 and 90 degrees), s a Catmull–Rom spline in x. 2 sin²(θ/2) = sin²θ / (1 + cos θ)
 //! is taken from the components (never 1 − cos θ, which loses the near-normal angles).
+//! K is one constant on each side ([`KNOTS`]; `NDF_KNOTS` in the twin, which reads the
+//! knots in a loop; the parameter names are made from it): 32 knots were tried and made a
+//! fit 5× slower for little gain on real data (docs/models.md, "Cost").
 //!
 //! Twin: `shaders/bsdf/ndf.wgsl`.
 
@@ -43,6 +46,7 @@ use crate::math::lanes::{Real, V3};
 use std::cell::RefCell;
 use std::f64::consts::PI;
 use std::rc::Rc;
+use std::sync::LazyLock;
 
 /// Knots of the deviation s, the first (the normal) fixed at 0.
 pub const KNOTS: usize = 16;
@@ -51,20 +55,18 @@ pub const MU_POINTS: usize = 65;
 
 pub(crate) const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
 
-/// The free knots' names, as `ggx+ndf` and the highlight of `fa(B)+ndf` declare them.
-pub(super) const NAMES: [&str; KNOTS - 1] = [
-    "ndf1", "ndf2", "ndf3", "ndf4", "ndf5", "ndf6", "ndf7", "ndf8", "ndf9", "ndf10", "ndf11",
-    "ndf12", "ndf13", "ndf14", "ndf15",
-];
-pub(super) const COAT_NAMES: [&str; KNOTS - 1] = [
-    "ndf_c1", "ndf_c2", "ndf_c3", "ndf_c4", "ndf_c5", "ndf_c6", "ndf_c7", "ndf_c8",
-    "ndf_c9", "ndf_c10", "ndf_c11", "ndf_c12", "ndf_c13", "ndf_c14", "ndf_c15",
-];
-pub(super) const LOBE_NAMES: [&str; KNOTS - 1] = [
-    "lobe.ndf1", "lobe.ndf2", "lobe.ndf3", "lobe.ndf4", "lobe.ndf5", "lobe.ndf6",
-    "lobe.ndf7", "lobe.ndf8", "lobe.ndf9", "lobe.ndf10", "lobe.ndf11", "lobe.ndf12",
-    "lobe.ndf13", "lobe.ndf14", "lobe.ndf15",
-];
+/// The free knots' names of each stem: `ndf1` … `ndf15` (`ggx+ndf`, `btdf(tr)+ndf`),
+/// `lobe.ndf1` … (the highlight of `fa(B)+ndf`), `ndf_c1` … (a coat's lobe). Made once and
+/// kept for the program's life: a declaration's name is `&'static str`.
+pub(super) static NAMES: LazyLock<[&'static str; KNOTS - 1]> = LazyLock::new(|| knot_names("ndf"));
+pub(super) static COAT_NAMES: LazyLock<[&'static str; KNOTS - 1]> =
+    LazyLock::new(|| knot_names("ndf_c"));
+pub(super) static LOBE_NAMES: LazyLock<[&'static str; KNOTS - 1]> =
+    LazyLock::new(|| knot_names("lobe.ndf"));
+
+fn knot_names(stem: &str) -> [&'static str; KNOTS - 1] {
+    std::array::from_fn(|k| &*Box::leak(format!("{stem}{}", k + 1).into_boxed_str()))
+}
 
 /// One knot's log-factor: s = 0 is GGX there. ±15 spans e^30 ≈ 10^13 of shape change,
 /// beyond what a measurement of a highlight over a diffuse floor can see.
@@ -78,8 +80,10 @@ const KNOT: ParamDecl = ParamDecl::shared(
 .neutral_at(0.0)
 .knot();
 
-pub(super) fn knots(names: &'static [&'static str]) -> impl Iterator<Item = ParamDecl> {
-    names.iter().map(|n| KNOT.renamed(n))
+pub(super) fn knots(
+    names: &'static LazyLock<[&'static str; KNOTS - 1]>,
+) -> impl Iterator<Item = ParamDecl> {
+    names.iter().map(|&n| KNOT.renamed(n))
 }
 
 /// The knot coordinate x ∈ [0, 15] of y = 2 sin²(θ/2) ∈ [0, 1]: knot k at x = k.
@@ -669,6 +673,7 @@ mod tests {
     fn knots_and_deviation() {
         let deg = knot_degrees();
         let doc = [0.0, 0.36, 1.44, 3.24, 5.76, 9.01, 13.0, 17.7, 23.2, 29.5, 36.6, 44.7, 53.8, 64.2, 76.0, 90.0];
+        assert_eq!(doc.len(), KNOTS);
         for (k, (&a, &b)) in deg.iter().zip(&doc).enumerate() {
             assert!((a - b).abs() < 0.06, "knot {k}: {a}° (docs say {b}°)");
             let (c, s2) = knot_angle(k);

@@ -132,16 +132,25 @@ pub fn eval_model_source(model: &Model) -> String {
 /// -> f32` returns the parameter `name` of the node whose scalar view starts at `o`, with
 /// `<prefix>` the node's WGSL function name without `_eval` and dots in role-prefixed
 /// names written as `_` (`fa_lobe_alpha`). The WGSL twins read their parameters only
-/// through these, so Rust and WGSL cannot disagree on the order.
+/// through these, so Rust and WGSL cannot disagree on the order. The first knot of a run
+/// (`ndf1` of `ndf1` … `ndf15`) also gets `fn <prefix>_<name>_run(o: u32, j: u32) -> f32`,
+/// the run's j-th knot from it: a table of knots is read in a loop.
 pub fn accessors_source(node: &Node) -> String {
     let w = node.bsdf.wgsl();
     let prefix = w.function.strip_suffix("_eval").unwrap_or(&w.function);
+    let stem = |name: &'static str| name.trim_end_matches(|c: char| c.is_ascii_digit());
     let mut src = String::new();
-    for (k, p) in node.bsdf.params().iter().enumerate() {
-        src += &format!(
-            "fn {prefix}_{}(o: u32) -> f32 {{ return P[o + {k}u]; }}\n",
-            p.name.replace('.', "_")
-        );
+    let params = node.bsdf.params();
+    for (k, p) in params.iter().enumerate() {
+        let name = p.name.replace('.', "_");
+        src += &format!("fn {prefix}_{name}(o: u32) -> f32 {{ return P[o + {k}u]; }}\n");
+        let starts_run =
+            p.knot && (k == 0 || !params[k - 1].knot || stem(params[k - 1].name) != stem(p.name));
+        if starts_run {
+            src += &format!(
+                "fn {prefix}_{name}_run(o: u32, j: u32) -> f32 {{ return P[o + {k}u + j]; }}\n"
+            );
+        }
     }
     src
 }
