@@ -187,6 +187,52 @@ pub(super) fn fit_all(
     }
 }
 
+/// The current model refitted from the optima of the round's candidates that beat it by
+/// more than one in χ² (the best three), each projected onto its parameters ([`embed`]
+/// the other way: a parameter takes the candidate's of its name, or its neutral value;
+/// what the candidate adds is dropped), and from its own optimum. Some where that lowers
+/// its χ² by more than one: its fit had missed its optimum (a narrow peak none of its
+/// starts found, which a candidate's fit did find), and the candidate would otherwise be
+/// credited with a gain that is the current model's own, on a null case a false effect.
+pub(super) fn refit_from_candidates(
+    current: &FitResult,
+    candidates: &[&FitResult],
+    data: &Dataset,
+    backend: &dyn Backend,
+    opts: &DiagnoseOptions,
+) -> Result<Option<(FitResult, Vec<String>)>> {
+    let mut better: Vec<&&FitResult> = candidates
+        .iter()
+        .filter(|c| c.chi2 < current.chi2 - MISSED_CHI2)
+        .collect();
+    better.sort_by(|a, b| a.chi2.total_cmp(&b.chi2));
+    better.truncate(3);
+    if better.is_empty() {
+        return Ok(None);
+    }
+    let mut seeds = vec![current.flat.clone()];
+    seeds.extend(
+        better
+            .iter()
+            .map(|c| embed(&c.model, &c.flat, &current.model)),
+    );
+    // One random restart besides the seeds: this fit looks where the candidates found a
+    // basin; the first fit already searched at random.
+    let once = DiagnoseOptions {
+        restarts: 1,
+        ..opts.clone()
+    };
+    let refit = fit_model_holding(&current.model, data, backend, &once, &seeds, Some(current))
+        .with_context(|| format!("refitting {} from its candidates' optima", current.spec()))?;
+    let from = better.iter().map(|c| c.spec().to_string()).collect();
+    Ok((refit.chi2 < current.chi2 - MISSED_CHI2).then_some((refit, from)))
+}
+
+/// The fall in χ² that shows a fit missed its model's optimum ([`refit_from_candidates`]):
+/// more than one, the size of a single parameter's share; a smaller one is the optimizer's
+/// tolerance.
+const MISSED_CHI2: f64 = 1.0;
+
 /// Starting points for a candidate that adds a lobe, from where the residuals say the
 /// current model misses (the effect's `lobe_around`): its new width parameters at the
 /// widths of the flagged regions around that direction (half, once and twice: a misfit
@@ -459,4 +505,74 @@ pub(super) fn conditional_covariance(
         &fit.flat,
         &space,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::cpu::CpuBackend;
+    use crate::workflows::diagnose::testdata;
+
+    /// A coat lobe of roughness 0.005 over a Lambertian base, in-plane at 2° steps that
+    /// pass 1° beside the mirror directions (its peak seen only in its flanks); `current`
+    /// is `lambert+coat` at the Lambertian optimum with the coat off (a fit whose starts all
+    /// missed the peak), `on+coat` a candidate that found it (started at the truth, as is
+    /// the full fit of `lambert+coat` it is compared with). (This model's refit finds the
+    /// peak from the current point too; the battery's null case `btdf(beckmann)+aniso`
+    /// is where only the candidates' optima lead to it: `tests/battery.rs`.)
+    #[test]
+    fn a_candidate_that_found_the_missed_peak_refits_the_current_model() {
+        let mut rows = Vec::new();
+        for ti in [20.0, 45.0] {
+            for k in 0..80 {
+                rows.push([ti, 0.0, -79.0 + 2.0 * k as f64, 0.0]);
+            }
+        }
+        let truth = "kc=0.3,alpha_c=0.005,rho=0.4";
+        let data = testdata::synthesized("lambert+coat", truth, &rows, (0.02, 1e-3), 3);
+        let backend = CpuBackend::new();
+        let opts = DiagnoseOptions {
+            restarts: 8,
+            ..Default::default()
+        };
+        let coat = Model::for_data("lambert+coat", &data).unwrap();
+        let at_truth = coat.params_from_assignments(truth).unwrap();
+        let fit = |spec: &str, seeds: &[Vec<f64>]| {
+            let model = Model::for_data(spec, &data).unwrap();
+            super::fit_model(&model, &data, &backend, &opts, seeds).unwrap()
+        };
+        let lambert = fit("lambert", &[]);
+        let full = fit("lambert+coat", std::slice::from_ref(&at_truth));
+        let on_coat = Model::for_data("on+coat", &data).unwrap();
+        let on = fit("on+coat", &[embed(&coat, &at_truth, &on_coat)]);
+        assert!(full.chi2_red < 1.5, "the coat fits: {}", full.chi2_red);
+        let missed = FitResult {
+            flat: embed(&lambert.model, &lambert.flat, &coat),
+            chi2: lambert.chi2,
+            ..full.clone()
+        };
+        assert!(
+            missed.chi2 > full.chi2 + 100.0,
+            "{} vs {}",
+            missed.chi2,
+            full.chi2
+        );
+        let (refit, from) = refit_from_candidates(&missed, &[&on], &data, &backend, &opts)
+            .unwrap()
+            .expect("the refit finds the coat");
+        assert_eq!(from, ["on+coat"]);
+        assert!(
+            refit.chi2 <= full.chi2 + 1e-6 * full.chi2,
+            "refit χ² {} against the full fit's {}",
+            refit.chi2,
+            full.chi2
+        );
+        // A current fit at its optimum is kept, and no candidate that beats it: nothing to do.
+        assert!(refit_from_candidates(&full, &[&on], &data, &backend, &opts)
+            .unwrap()
+            .is_none());
+        assert!(refit_from_candidates(&missed, &[], &data, &backend, &opts)
+            .unwrap()
+            .is_none());
+    }
 }
