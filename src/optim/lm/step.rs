@@ -1,6 +1,7 @@
 //! One Levenberg–Marquardt iteration of every active restart: each solves its damped
-//! normal equations for a step within the unit box, the trial points go to the
-//! objective in one batch, and each restart accepts or rejects its step and updates λ.
+//! normal equations for a step within the unit box, the trial points' Σr² go to the
+//! objective in one batch, each restart accepts or rejects its step and updates λ, and
+//! the accepted points' normal equations go in a second batch.
 
 use super::state::{LmState, RestartState};
 use super::termination::{Outcome, Termination};
@@ -20,6 +21,12 @@ impl LmState {
     /// One iteration: every running restart with a finite Σr² solves its damped system,
     /// and those whose step could show a gain evaluate it, all in one batch. Returns
     /// false, having evaluated nothing, when no restart has a step left to take.
+    ///
+    /// The trial points' Σr² come first, one evaluation each, and only the accepted
+    /// points' Jacobians (P more each) after: a rejected step keeps the Jacobian it
+    /// already has, so evaluating its neighbours with it would be thrown away. Rejections
+    /// are frequent where λ is still being found (515 of 1,162 iterations of a
+    /// data-driven NDF fit of a real file, 44 % of its evaluations before this split).
     pub(super) fn step(
         &mut self,
         obj: &mut dyn BatchResiduals,
@@ -33,12 +40,34 @@ impl LmState {
         if moving.is_empty() {
             return Ok(false);
         }
-        // One batch: the trial points with their neighbours (the backend may reduce the
-        // normal equations where it evaluates the residuals).
         let p = self.dim;
-        let normal = obj.normal_equations_of(&moving, &trial, &fd_steps(&trial, opts.fd_step))?;
-        for (ne, (a, &i)) in normal.into_iter().zip(moving.iter().enumerate()) {
-            self.restarts[i].take_step(ne, &trial[a * p..(a + 1) * p], opts);
+        let ss = obj.sum_squares_of(&moving, &trial)?;
+        let lower = |a: usize| sanitize(ss[a]) < self.restarts[moving[a]].ss;
+        let accepted: Vec<usize> = (0..moving.len()).filter(|&a| lower(a)).collect();
+        let owners: Vec<usize> = accepted.iter().map(|&a| moving[a]).collect();
+        let points: Vec<f64> = accepted
+            .iter()
+            .flat_map(|&a| trial[a * p..(a + 1) * p].iter().copied())
+            .collect();
+        // One batch: the accepted points with their neighbours (the backend may reduce
+        // the normal equations where it evaluates the residuals).
+        let mut normal = if owners.is_empty() {
+            Vec::new()
+        } else {
+            obj.normal_equations_of(&owners, &points, &fd_steps(&points, opts.fd_step))?
+        }
+        .into_iter();
+        for (a, &i) in moving.iter().enumerate() {
+            let x_new = &trial[a * p..(a + 1) * p];
+            let s = &mut self.restarts[i];
+            if accepted.contains(&a) {
+                let ne = normal
+                    .next()
+                    .expect("one set of normal equations per accepted point");
+                s.accept(ne, x_new, opts);
+            } else {
+                s.reject(x_new, opts);
+            }
         }
         Ok(true)
     }
@@ -105,36 +134,50 @@ impl RestartState {
         })
     }
 
-    /// Accept the step to `x_new` (whose normal equations are `ne`) if it lowers Σr²,
-    /// λ falling, else reject it, λ rising; then stop if the iteration says so.
-    fn take_step(&mut self, ne: NormalEquations, x_new: &[f64], opts: &LmOptions) {
+    /// Accept the step to `x_new`, whose Σr² was lower and whose normal equations are
+    /// `ne` (their Σr² is the trial's, up to the rounding of another reduction order):
+    /// λ falls; then stop if the iteration says so.
+    fn accept(&mut self, ne: NormalEquations, x_new: &[f64], opts: &LmOptions) {
         let p = x_new.len();
         self.iterations += 1;
-        self.evaluations += p + 1;
+        self.evaluations += p + 2;
         let ss_new = sanitize(ne.ss);
-        let length: f64 = x_new
+        let length = self.distance_to(x_new);
+        let gain = (self.ss - ss_new) / self.ss.max(1e-300);
+        self.x.copy_from_slice(x_new);
+        for j in 0..p {
+            let d = ne.jtj[j * p + j];
+            if d.is_finite() {
+                self.scale[j] = self.scale[j].max(d);
+            }
+        }
+        self.ss = ss_new;
+        self.normal = ne;
+        self.lambda = (self.lambda / 3.0).max(1e-12);
+        self.conclude(Outcome::Accepted { gain, length }, opts);
+    }
+
+    /// Reject the step to `x_new`, whose Σr² was not lower (or not finite): nothing moves
+    /// but λ, which rises; then stop if the iteration says so.
+    fn reject(&mut self, x_new: &[f64], opts: &LmOptions) {
+        self.iterations += 1;
+        self.evaluations += 1;
+        let length = self.distance_to(x_new);
+        self.lambda *= 4.0;
+        self.conclude(Outcome::Rejected { length }, opts);
+    }
+
+    /// The step's Euclidean length in the unit box.
+    fn distance_to(&self, x_new: &[f64]) -> f64 {
+        x_new
             .iter()
             .zip(&self.x)
             .map(|(a, b)| (a - b) * (a - b))
             .sum::<f64>()
-            .sqrt();
-        let outcome = if ss_new < self.ss {
-            let gain = (self.ss - ss_new) / self.ss.max(1e-300);
-            self.x.copy_from_slice(x_new);
-            for j in 0..p {
-                let d = ne.jtj[j * p + j];
-                if d.is_finite() {
-                    self.scale[j] = self.scale[j].max(d);
-                }
-            }
-            self.ss = ss_new;
-            self.normal = ne;
-            self.lambda = (self.lambda / 3.0).max(1e-12);
-            Outcome::Accepted { gain, length }
-        } else {
-            self.lambda *= 4.0;
-            Outcome::Rejected { length }
-        };
+            .sqrt()
+    }
+
+    fn conclude(&mut self, outcome: Outcome, opts: &LmOptions) {
         if let Some(why) = self.termination(outcome, opts) {
             self.stop_for(why);
         }
@@ -303,8 +346,9 @@ mod tests {
         let old = ne([1.0, 0.0, 0.0, 1.0], [0.1, 0.1], 10.0);
         let opts = LmOptions::default();
         let mut s = restart([0.5, 0.5], old.clone(), 0.3, [1.0, 1.0]);
-        // The new diagonal of JᵀJ (4, 2) raises the running scale (1, 1) where larger.
-        s.take_step(
+        // The new diagonal of JᵀJ (4, 2) raises the running scale (1, 1) where larger;
+        // the trial point and its two neighbours were evaluated (3 + 1 + 3).
+        s.accept(
             ne([4.0, 0.0, 0.0, 2.0], [0.2, 0.0], 6.0),
             &[0.8, 0.1],
             &opts,
@@ -313,29 +357,19 @@ mod tests {
         assert_eq!((s.ss, s.normal.ss, s.normal.jtr[0]), (6.0, 6.0, 0.2));
         assert!((s.lambda - 0.1).abs() < 1e-15, "{}", s.lambda);
         assert_eq!(s.scale, [4.0, 2.0]);
-        assert_eq!((s.iterations, s.evaluations, s.stop), (1, 6, None));
-        // Rejected (Σr² not lower): nothing moves but λ, times 4.
-        s.take_step(
-            ne([9.0, 0.0, 0.0, 9.0], [0.0, 0.0], 6.0),
-            &[0.7, 0.2],
-            &opts,
-        );
+        assert_eq!((s.iterations, s.evaluations, s.stop), (1, 7, None));
+        // Rejected: nothing moves but λ, times 4; the trial point alone was evaluated.
+        s.reject(&[0.7, 0.2], &opts);
         assert_eq!(
             (s.x.as_slice(), s.ss, s.normal.jtj[0]),
             (&[0.8, 0.1][..], 6.0, 4.0)
         );
         assert!((s.lambda - 0.4).abs() < 1e-15, "{}", s.lambda);
         assert_eq!(s.scale, [4.0, 2.0]);
-        assert_eq!((s.iterations, s.evaluations), (2, 9));
-        // A NaN Σr² is a rejection; λ never falls below 1e-12.
-        s.take_step(
-            ne([1.0, 0.0, 0.0, 1.0], [0.0, 0.0], f64::NAN),
-            &[0.6, 0.2],
-            &opts,
-        );
-        assert_eq!((s.x.as_slice(), s.ss), (&[0.8, 0.1][..], 6.0));
+        assert_eq!((s.iterations, s.evaluations), (2, 8));
+        // A NaN diagonal leaves its scale; λ never falls below 1e-12.
         s.lambda = 1e-12;
-        s.take_step(
+        s.accept(
             ne([f64::NAN, 0.0, 0.0, 1.0], [0.0, 0.0], 3.0),
             &[0.6, 0.2],
             &opts,
@@ -358,7 +392,11 @@ mod tests {
                 1e-3,
                 [1.0; 2],
             );
-            s.take_step(ne([1.0, 0.0, 0.0, 1.0], [0.0; 2], ss_new), &to, &opts);
+            if ss_new < s.ss {
+                s.accept(ne([1.0, 0.0, 0.0, 1.0], [0.0; 2], ss_new), &to, &opts);
+            } else {
+                s.reject(&to, &opts);
+            }
             s.stop
         };
         // Gains 5e-11 and 2e-10 of Σr² = 10.
@@ -470,5 +508,54 @@ mod tests {
             s.stop_for(Termination::MaxIterations);
         }
         assert!(!state.step(&mut Shifted, &opts).unwrap());
+    }
+
+    /// [`Shifted`], counting the points whose residuals it evaluates.
+    struct Counted(usize);
+    impl BatchObjective for Counted {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn costs(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
+            self.0 += pts.len() / 2;
+            Shifted.costs(pts)
+        }
+    }
+    impl BatchResiduals for Counted {
+        fn residuals(&mut self, pts: &[f64]) -> anyhow::Result<Vec<f64>> {
+            self.0 += pts.len() / 2;
+            Shifted.residuals(pts)
+        }
+        fn residual_count(&self) -> usize {
+            2
+        }
+    }
+
+    /// A rejected step costs its trial point alone; an accepted one its trial point, then
+    /// the point and its P neighbours for the normal equations.
+    #[test]
+    fn a_rejected_step_evaluates_its_trial_point_only() {
+        let opts = LmOptions::default();
+        let mut obj = Counted(0);
+        let mut state = LmState::start(&mut obj, &[vec![0.5, 0.5], vec![0.1, 0.2]], &opts).unwrap();
+        assert_eq!(obj.0, 6);
+        // The first restart's gradient turned uphill: its step raises Σr² and is rejected.
+        let s = &mut state.restarts[0];
+        s.normal.jtr = s.normal.jtr.iter().map(|g| -g).collect();
+        obj.0 = 0;
+        assert!(state.step(&mut obj, &opts).unwrap());
+        assert_eq!(
+            obj.0,
+            2 + 3,
+            "two trial points, then one accepted point's three"
+        );
+        let r = &state.restarts;
+        assert_eq!(
+            (r[0].x.as_slice(), r[0].evaluations),
+            (&[0.5, 0.5][..], 3 + 1)
+        );
+        assert_ne!(r[1].x, [0.1, 0.2]);
+        assert_eq!(r[1].evaluations, 3 + 4);
+        assert!(r[0].lambda > r[1].lambda);
     }
 }
