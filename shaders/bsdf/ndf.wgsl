@@ -1,5 +1,5 @@
 // The data-driven NDF of a GGX lobe (`+ndf`): D = D_GGX(alpha) exp(s(theta_m)) / N with s a
-// Catmull-Rom spline through 16 knots (s = 0 at the normal), and the Smith G1 = mu / (mu +
+// Catmull-Rom spline through NDF_KNOTS knots (s = 0 at the normal), and the Smith G1 = mu / (mu +
 // C(mu)) of that same D, C read from a 65-entry table at mu_j = (j/64)^2. f32 twin of
 // src/bsdf/ndf.rs, which documents the distribution, the knots and the quadrature. A
 // candidate's table is built by its node's prepare function after the candidate is loaded
@@ -8,27 +8,29 @@
 
 const NDF_KNOTS: u32 = 16u;
 const NDF_MU_POINTS: u32 = 65u;
+// The last knot's coordinate: the knot coordinate runs over [0, NDF_KNOTS - 1].
+const NDF_LAST: f32 = f32(NDF_KNOTS - 1u);
 
 struct NdfTable {
     alpha: f32,
     inv_norm: f32,
-    s: array<f32, 16>,
-    c: array<f32, 65>,
+    s: array<f32, NDF_KNOTS>,
+    c: array<f32, NDF_MU_POINTS>,
 }
 
 // The table of the highlight (ggx or fa) and of a coat lobe: a model has at most one of each.
 var<private> NDF_TABLE: NdfTable;
 var<private> COAT_NDF_TABLE: NdfTable;
 
-// The knot coordinate x in [0, 15] of y = 2 sin^2(theta/2): knot k at x = k.
+// The knot coordinate x in [0, NDF_LAST] of y = 2 sin^2(theta/2): knot k at x = k.
 fn ndf_knot_coordinate(y: f32) -> f32 {
-    return 15.0 * sqrt(sqrt(max(y, 0.0)));
+    return NDF_LAST * sqrt(sqrt(max(y, 0.0)));
 }
 
 // s at knot coordinate x: the Catmull-Rom spline through the knots, even through the
 // normal (s_-1 = s_1) and linear past the last knot.
 fn ndf_deviation(tab: ptr<private, NdfTable>, x: f32) -> f32 {
-    let xc = clamp(x, 0.0, 15.0);
+    let xc = clamp(x, 0.0, NDF_LAST);
     let k = min(u32(xc), NDF_KNOTS - 2u);
     let t = xc - f32(k);
     var p0 = (*tab).s[1];
@@ -46,9 +48,9 @@ fn ndf_deviation(tab: ptr<private, NdfTable>, x: f32) -> f32 {
     return 0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)));
 }
 
-// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) at knot coordinate x (y = (x/15)^4).
+// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) at knot coordinate x (y = (x/NDF_LAST)^4).
 fn ndf_knot_t(x: f32, alpha: f32) -> f32 {
-    let r = x / 15.0;
+    let r = x / NDF_LAST;
     let y = r * r * r * r;
     let c = 1.0 - y;
     let s2 = y * (2.0 - y);
@@ -77,7 +79,7 @@ fn ndf_facing_away(mu: f32, sw: f32, cm: f32, sm: f32) -> f32 {
     return 2.0 * (b * sqrt(max(1.0 - r * r, 0.0)) - a * (PI - psi));
 }
 
-// The table of alpha and the knots s[1] .. s[15] the caller has set (from its first
+// The table of alpha and the knots s[1] .. s[NDF_KNOTS - 1] the caller has set (from its first
 // knot's generated `_run` accessor): 1/N and C(mu_j).
 fn ndf_build(tab: ptr<private, NdfTable>, alpha: f32) {
     (*tab).alpha = alpha;

@@ -573,6 +573,23 @@ mod tests {
         DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
     }
 
+    /// The twin's sizes are its own constants (it has no other source of them): they must
+    /// be this file's, or the twin reads other parameters as knots.
+    #[test]
+    fn the_twin_declares_the_same_knot_and_table_sizes() {
+        let declared = |name: &str| -> usize {
+            let line = NDF_WGSL
+                .1
+                .lines()
+                .find(|l| l.starts_with(&format!("const {name}: u32 = ")))
+                .unwrap_or_else(|| panic!("{name} is not declared in the twin"));
+            let value = line.rsplit(' ').next().unwrap().trim_end_matches("u;");
+            value.parse().unwrap()
+        };
+        assert_eq!(declared("NDF_KNOTS"), KNOTS);
+        assert_eq!(declared("NDF_MU_POINTS"), MU_POINTS);
+    }
+
     /// A random deviation: smooth-ish knots in [−3, 3] (a walk), s[0] = 0.
     fn random_knots(rng: &mut impl Rng) -> [f64; KNOTS] {
         let mut s = [0.0; KNOTS];
