@@ -1,7 +1,7 @@
 //! The path search: adopt the best significant candidate of each round, continue greedily,
 //! and revisit the steps of a path that ends inconsistent ([`diagnose`]).
 
-use super::fit::{calibrate_round, fit_all, refit_from_candidates};
+use super::fit::calibrate_round;
 use super::regions::flagged_regions;
 use super::score::{consistency, score};
 use super::symmetry::frame_test;
@@ -15,7 +15,9 @@ use crate::engine::Backend;
 use crate::inference::stats::format_p;
 use anyhow::Result;
 
+mod round;
 mod search;
+use round::{fit_round, refit_missed};
 use search::{analytic_search, note_choice, with_factors};
 #[cfg(test)]
 use search::{backtrack_alternative, Instead};
@@ -312,7 +314,7 @@ fn extend_path(
         ));
         let t0 = std::time::Instant::now();
         fit_round(data, backend, opts, cache, &current, &cands);
-        let current = refit_missed(data, backend, opts, log, cache, &mut steps, &cands)?;
+        let current = refit_missed(data, backend, opts, log, cache, &mut steps, &cands);
         let fits = t0.elapsed().as_secs_f64();
         let (scored, mut seconds) = score_round(data, backend, opts, log, cache, &current, cands);
         seconds.fits += fits;
@@ -530,62 +532,6 @@ fn score_round(
         bootstraps: scored_at.elapsed().as_secs_f64(),
     };
     (scored, seconds)
-}
-
-/// Fit the candidates `cands` of the round after `current` that the cache lacks.
-fn fit_round(
-    data: &Dataset,
-    backend: &dyn Backend,
-    opts: &DiagnoseOptions,
-    cache: &mut FitCache,
-    current: &FitResult,
-    cands: &[Candidate],
-) {
-    let flagged = flagged_regions(data, &current.z);
-    let todo: Vec<Candidate> = cands
-        .iter()
-        .filter(|c| !cache.contains_key(&c.spec))
-        .cloned()
-        .collect();
-    let fits = fit_all(&todo, data, backend, opts, current, &flagged);
-    for (c, f) in todo.iter().zip(fits) {
-        cache.insert(c.spec.clone(), f.map_err(|e| format!("{e:#}")));
-    }
-}
-
-/// The path's last fit, or its refit where the round's candidates show it had missed its
-/// optimum ([`refit_from_candidates`]); the step then says so and holds the refit.
-fn refit_missed(
-    data: &Dataset,
-    backend: &dyn Backend,
-    opts: &DiagnoseOptions,
-    log: &mut dyn FnMut(String),
-    cache: &FitCache,
-    steps: &mut [Step],
-    cands: &[Candidate],
-) -> Result<FitResult> {
-    let step = steps.last_mut().expect("a step");
-    let fitted: Vec<&FitResult> = cands
-        .iter()
-        .filter_map(|c| cache.get(&c.spec)?.as_ref().ok())
-        .collect();
-    let Some((refit, from)) = refit_from_candidates(&step.fit, &fitted, data, backend, opts)?
-    else {
-        return Ok(step.fit.clone());
-    };
-    let words = format!(
-        "the fits of {} went below its fit, which had missed its optimum: refitted from their optima without what they add, χ²_red {:.3} → {:.3}",
-        from.join(", "),
-        step.chi2_red,
-        refit.chi2_red
-    );
-    log(format!("  {} — {words}", step.model));
-    let (_, now) = consistency(&refit, opts.alpha);
-    step.evidence += &format!(" Then {words}; now {now}.");
-    step.chi2_red = refit.chi2_red;
-    step.loss = refit.loss;
-    step.fit = refit;
-    Ok(step.fit.clone())
 }
 
 /// Test whether each anisotropic candidate that could be adopted does better than an
