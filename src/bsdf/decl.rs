@@ -206,6 +206,13 @@ impl ParamDecl {
         ParamDecl { name, ..self }
     }
 
+    /// The name without its knot number (`body3` → `body`, `lobe.ndf12` → `lobe.ndf`): one
+    /// tabulated function's knots share it, so consecutive knots of one stem are one run
+    /// (two functions side by side, `fa(B)+fresnel+body`, are two runs).
+    pub fn knot_stem(&self) -> &'static str {
+        self.name.trim_end_matches(|c: char| c.is_ascii_digit())
+    }
+
     /// Unit-box coordinate → physical value.
     pub fn from_unit(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);

@@ -138,14 +138,13 @@ pub fn eval_model_source(model: &Model) -> String {
 pub fn accessors_source(node: &Node) -> String {
     let w = node.bsdf.wgsl();
     let prefix = w.function.strip_suffix("_eval").unwrap_or(&w.function);
-    let stem = |name: &'static str| name.trim_end_matches(|c: char| c.is_ascii_digit());
     let mut src = String::new();
     let params = node.bsdf.params();
     for (k, p) in params.iter().enumerate() {
         let name = p.name.replace('.', "_");
         src += &format!("fn {prefix}_{name}(o: u32) -> f32 {{ return P[o + {k}u]; }}\n");
         let starts_run =
-            p.knot && (k == 0 || !params[k - 1].knot || stem(params[k - 1].name) != stem(p.name));
+            p.knot && (k == 0 || !params[k - 1].knot || params[k - 1].knot_stem() != p.knot_stem());
         if starts_run {
             src += &format!(
                 "fn {prefix}_{name}_run(o: u32, j: u32) -> f32 {{ return P[o + {k}u + j]; }}\n"

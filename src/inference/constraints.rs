@@ -288,15 +288,9 @@ fn smoothness_rows(decls: &[ParamDecl]) -> Vec<Vec<(usize, f64)>> {
             j += 1;
             continue;
         }
-        // One tabulated function's knots share a stem (`body3` → `body`): two functions
-        // side by side (`fa(B)+fresnel+body`: the highlight's, then the base's) are two runs.
-        let stem = |d: &ParamDecl| {
-            d.name
-                .trim_end_matches(|c: char| c.is_ascii_digit())
-                .to_string()
-        };
+        // One run per tabulated function ([`ParamDecl::knot_stem`]).
         let start = j;
-        while j < decls.len() && decls[j].knot && stem(&decls[j]) == stem(&decls[start]) {
+        while j < decls.len() && decls[j].knot && decls[j].knot_stem() == decls[start].knot_stem() {
             j += 1;
         }
         let width = decls[start..j]

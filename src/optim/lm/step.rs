@@ -19,8 +19,8 @@ pub(super) fn fd_steps(points: &[f64], h: f64) -> Vec<f64> {
 
 impl LmState {
     /// One iteration: every running restart with a finite Σr² solves its damped system,
-    /// and those whose step could show a gain evaluate it, all in one batch. Returns
-    /// false, having evaluated nothing, when no restart has a step left to take.
+    /// and those whose step could show a gain evaluate it. Returns false, having
+    /// evaluated nothing, when no restart has a step left to take.
     ///
     /// The trial points' Σr² come first, one evaluation each, and only the accepted
     /// points' Jacobians (P more each) after: a rejected step keeps the Jacobian it
@@ -42,12 +42,13 @@ impl LmState {
         }
         let p = self.dim;
         let ss = obj.sum_squares_of(&moving, &trial)?;
-        let lower = |a: usize| sanitize(ss[a]) < self.restarts[moving[a]].ss;
-        let accepted: Vec<usize> = (0..moving.len()).filter(|&a| lower(a)).collect();
-        let owners: Vec<usize> = accepted.iter().map(|&a| moving[a]).collect();
+        let lower: Vec<bool> = (0..moving.len())
+            .map(|a| sanitize(ss[a]) < self.restarts[moving[a]].ss)
+            .collect();
+        let accepted = (0..moving.len()).filter(|&a| lower[a]);
+        let owners: Vec<usize> = accepted.clone().map(|a| moving[a]).collect();
         let points: Vec<f64> = accepted
-            .iter()
-            .flat_map(|&a| trial[a * p..(a + 1) * p].iter().copied())
+            .flat_map(|a| trial[a * p..(a + 1) * p].iter().copied())
             .collect();
         // One batch: the accepted points with their neighbours (the backend may reduce
         // the normal equations where it evaluates the residuals).
@@ -60,7 +61,7 @@ impl LmState {
         for (a, &i) in moving.iter().enumerate() {
             let x_new = &trial[a * p..(a + 1) * p];
             let s = &mut self.restarts[i];
-            if accepted.contains(&a) {
+            if lower[a] {
                 let ne = normal
                     .next()
                     .expect("one set of normal equations per accepted point");

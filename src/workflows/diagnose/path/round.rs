@@ -9,7 +9,8 @@ use super::FitCache;
 use crate::data::Dataset;
 use crate::engine::Backend;
 
-/// Fit the candidates `cands` of the round after `current` that the cache lacks.
+/// Fit the candidates `cands` of the round after `current` that the cache lacks (none
+/// where the round was fitted already: `score_round` asks again).
 pub(super) fn fit_round(
     data: &Dataset,
     backend: &dyn Backend,
@@ -18,12 +19,15 @@ pub(super) fn fit_round(
     current: &FitResult,
     cands: &[Candidate],
 ) {
-    let flagged = flagged_regions(data, &current.z);
     let todo: Vec<Candidate> = cands
         .iter()
         .filter(|c| !cache.contains_key(&c.spec))
         .cloned()
         .collect();
+    if todo.is_empty() {
+        return;
+    }
+    let flagged = flagged_regions(data, &current.z);
     let fits = fit_all(&todo, data, backend, opts, current, &flagged);
     for (c, f) in todo.iter().zip(fits) {
         cache.insert(c.spec.clone(), f.map_err(|e| format!("{e:#}")));
