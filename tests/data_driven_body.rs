@@ -12,7 +12,7 @@ mod common;
 
 use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
-use bsdfit::inference::knots::{body_bands, MEASURED_SIGNAL};
+use bsdfit::inference::knots::{body_bands, is_measured};
 use bsdfit::workflows::diagnose::embed;
 use common::truths::{chi2_red, diagnose_truth, fit_truth, fresnel, ggx, measure, Isotropic, RHO};
 use std::f64::consts::PI;
@@ -93,7 +93,7 @@ fn non_lambertian_bodies_come_back() {
                 knot.signal
             );
             assert!(knot.rho.is_finite() && knot.rho > 0.0 && sigma.is_finite());
-            assert_eq!(knot.measured, knot.signal >= MEASURED_SIGNAL);
+            assert_eq!(knot.measured, is_measured(knot.signal, knot.data_share));
             if knot.measured && knot.theta_deg > 0.0 {
                 measured += 1;
                 assert!(

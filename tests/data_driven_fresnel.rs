@@ -12,7 +12,7 @@ use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
 use bsdfit::inference::fit::Conclusions;
-use bsdfit::inference::knots::{fresnel_bands, MEASURED_SIGNAL};
+use bsdfit::inference::knots::{fresnel_bands, is_measured};
 use bsdfit::math::fresnel_dielectric as dielectric;
 use bsdfit::workflows::diagnose::embed;
 use common::truths::{
@@ -98,7 +98,7 @@ fn a_conductors_fresnel_curve_comes_back() {
                 knot.theta_deg, knot.f, knot.signal
             );
             assert!(knot.f.is_finite() && knot.f > 0.0 && sigma.is_finite());
-            assert_eq!(knot.measured, knot.signal >= MEASURED_SIGNAL);
+            assert_eq!(knot.measured, is_measured(knot.signal, knot.data_share));
             if knot.measured {
                 measured += 1;
                 assert!(

@@ -16,7 +16,7 @@ use bsdfit::bsdf::fresnel::{knot_coordinate, log_factor, KNOTS};
 use bsdfit::bsdf::Model;
 use bsdfit::data::Dataset;
 use bsdfit::inference::fit::{Conclusions, Optimizer};
-use bsdfit::inference::knots::{bands, body_bands, fresnel_bands, MEASURED_SIGNAL};
+use bsdfit::inference::knots::{bands, body_bands, fresnel_bands, is_measured, MEASURED_SIGNAL};
 use bsdfit::math::fresnel_dielectric as dielectric;
 use bsdfit::workflows::diagnose::embed;
 use common::truths::{
@@ -65,23 +65,23 @@ fn resolution(f: impl Fn(f64) -> f64, max_deg: f64) -> f64 {
 /// Asserts the fitted value positive with a finite band, and at a measured knot
 /// |ln(fitted / want)| within 3σ + `slack`; counts the measured knots.
 /// A knot as the band tables give it: θ (degrees), the fitted value, σ of its logarithm,
-/// the signal and whether it is measured.
-type Knot = (f64, f64, Option<f64>, f64, bool);
+/// the signal, the data share and whether it is measured.
+type Knot = (f64, f64, Option<f64>, f64, Option<f64>, bool);
 
 fn check(
     what: &str,
-    (theta, fitted, sigma, signal, measured): Knot,
+    (theta, fitted, sigma, signal, share, measured): Knot,
     want: f64,
     slack: f64,
 ) -> usize {
     let sigma = sigma.expect("a band with the prior on");
     let diff = (fitted / want).ln();
-    eprintln!("  {what} {theta:>5.1}°: ln ratio {diff:+.4} σ {sigma:.4} signal {signal:.1}");
+    eprintln!("  {what} {theta:>5.1}°: ln ratio {diff:+.4} σ {sigma:.4} signal {signal:.1} share {share:.2?}");
     assert!(
         fitted.is_finite() && fitted > 0.0 && sigma.is_finite(),
         "{what} at {theta:.1}°: {fitted}"
     );
-    assert_eq!(measured, signal >= MEASURED_SIGNAL);
+    assert_eq!(measured, is_measured(signal, share));
     if !measured {
         return 0;
     }
@@ -196,7 +196,14 @@ fn all_three_factors_come_back_together() {
         let want = minnaert(k.theta_deg.to_radians().cos()).exp();
         measured += check(
             "ρ",
-            (k.theta_deg, k.rho, k.sigma_ln_rho, k.signal, k.measured),
+            (
+                k.theta_deg,
+                k.rho,
+                k.sigma_ln_rho,
+                k.signal,
+                k.data_share,
+                k.measured,
+            ),
             want,
             slack,
         );
@@ -216,7 +223,14 @@ fn check_ndf(model: &Model, data: &Dataset, fit: &Conclusions, core: f64) {
         let core_knot = k.measured && k.signal >= core;
         asserted += check(
             "D",
-            (k.theta_deg, k.d, k.sigma_ln_d, k.signal, k.measured),
+            (
+                k.theta_deg,
+                k.d,
+                k.sigma_ln_d,
+                k.signal,
+                k.data_share,
+                k.measured,
+            ),
             want,
             if core_knot { 0.0 } else { f64::INFINITY },
         ) * usize::from(core_knot);
@@ -242,6 +256,7 @@ fn check_fresnel(model: &Model, data: &Dataset, fit: &Conclusions) {
                     knot.f,
                     knot.sigma_ln_f,
                     knot.signal,
+                    knot.data_share,
                     knot.measured,
                 ),
                 want,

@@ -46,6 +46,15 @@ pub struct Covariance {
     /// parameters in their own units). For the tabulated functions' bands
     /// ([`crate::inference::knots::bands`]).
     pub with_prior: Option<Vec<Vec<f64>>>,
+    /// With the smoothness prior on: each flat parameter's data share, B_data,jj /
+    /// (B_data,jj + B_prior,jj), the part of its information with the others held that the
+    /// data give (1 without a prior row on it, 0 for fixed ones). A knot whose share is
+    /// below ½ is held more by its neighbours through the prior than by the data, and the
+    /// prior's pull sets its value ([`crate::inference::knots::MEASURED_SHARE`]). (The
+    /// diagonal of (B_data + B_prior)⁻¹ B_data, whose trace is the effective number of
+    /// parameters, is not a share per parameter: with correlated parameters its terms
+    /// leave [0, 1], e.g. −0.6 and 1.5 at neighbouring knots of a fitted NDF.)
+    pub data_share: Option<Vec<f64>>,
 }
 
 /// One weakly determined direction ([`Covariance::ridges`]).
@@ -220,6 +229,7 @@ pub fn covariance(
         ridges: vec![],
         effective_params: None,
         with_prior: None,
+        data_share: None,
     };
     let slopes = unit_slopes(free, flat, decls);
     let (inv, singular) = match pseudo_inverse(&jtj, &slopes) {
@@ -277,21 +287,30 @@ pub fn covariance(
     let cov = &inv * &meat * &inv * birge;
     let with_prior = (space.smooth_sd.is_some()).then(|| {
         let scaled = jacobi_scaled_inverse(&jtj);
-        &scaled * &meat * &scaled * birge
+        let share: Vec<f64> = (0..p)
+            .map(|a| match jtj[(a, a)] {
+                b if b > 0.0 => data_jtj[(a, a)] / b,
+                _ => 0.0,
+            })
+            .collect();
+        (&scaled * &meat * &scaled * birge, share)
     });
     out.ridges = ridges(&jtj, birge, free, &slopes);
     set_std_and_correlation(&mut out, &cov, &undetermined);
     let warnings = determinacy_warnings(&out, &singular, &names, &free_decls);
     out.warnings.extend(warnings);
     let mut out = expand(out, free, model.dim);
-    if let Some(full) = with_prior {
+    if let Some((full, share)) = with_prior {
         let mut m = vec![vec![0.0; model.dim]; model.dim];
+        let mut shares = vec![0.0; model.dim];
         for (a, &ja) in free.iter().enumerate() {
+            shares[ja] = share[a];
             for (b, &jb) in free.iter().enumerate() {
                 m[ja][jb] = full[(a, b)];
             }
         }
         out.with_prior = Some(m);
+        out.data_share = Some(shares);
     }
     out.warnings
         .extend(one_azimuth_warnings(model, data, flat, &out.std, free));
@@ -662,6 +681,7 @@ fn expand(free_cov: Covariance, free: &[usize], dim: usize) -> Covariance {
         ridges: free_cov.ridges,
         effective_params: free_cov.effective_params,
         with_prior: None,
+        data_share: None,
     };
     for (a, &ja) in free.iter().enumerate() {
         out.std[ja] = free_cov.std[a];

@@ -347,6 +347,7 @@ fn empty(p: usize) -> Covariance {
         ridges: vec![],
         effective_params: None,
         with_prior: None,
+        data_share: None,
     }
 }
 

@@ -227,6 +227,20 @@ impl Factor {
         }
     }
 
+    /// Each knot's data share ([`Covariance::data_share`]); None for the first knot (fixed
+    /// at 0 by the factor's definition) and without the prior's covariance.
+    fn shares(&self, cov: &Covariance) -> Vec<Option<f64>> {
+        let knots = match &self.inputs {
+            Inputs::Ndf { knots, .. } | Inputs::Fresnel { knots, .. } | Inputs::Body { knots } => {
+                knots
+            }
+        };
+        let share = |j: usize| cov.data_share.as_ref().map(|v| v[j]);
+        std::iter::once(None)
+            .chain(knots.iter().map(|&j| share(j)))
+            .collect()
+    }
+
     /// The knots' angles in degrees (θm, θd or θ).
     pub fn degrees(&self) -> Vec<f64> {
         match self.kind {
@@ -323,9 +337,15 @@ pub struct KnotBand {
     /// vector lies between the knot's neighbours, f_lobe the highlight's part of the
     /// fitted value.
     pub signal: f64,
-    /// Whether that signal is at least [`MEASURED_SIGNAL`]: the data see the lobe at this
-    /// knot. Else the smoothness prior sets it (no half vectors there, or a lobe too faint
-    /// against the uncertainties), and D there is not measured.
+    /// The knot's data share ([`Covariance::data_share`]): None for the first knot, fixed
+    /// by the factor's definition, and without the prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_share: Option<f64>,
+    /// Whether the data set the knot ([`is_measured`]): the lobe's signal is at least
+    /// [`MEASURED_SIGNAL`] and the knot's data share at least [`MEASURED_SHARE`]. Else the
+    /// smoothness prior sets it (no half vectors there, a lobe too faint against the
+    /// uncertainties, or data that see the knot only with its neighbours), and D there is
+    /// not measured.
     pub measured: bool,
     /// The spread of D(θ_k) over Monte Carlo replicas (`fit --mc N`; absent without).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -337,6 +357,20 @@ pub struct KnotBand {
 /// lobe shows a signal of about 1 to 3, the square root of the few degrees of freedom it
 /// took.)
 pub const MEASURED_SIGNAL: f64 = 3.0;
+
+/// The data share ([`Covariance::data_share`]) from which a knot counts as measured: the
+/// data give at least half of its information with its neighbours held, so they, not the
+/// prior's pull toward its neighbours, set its value. (A lobe seen at 3σ near a knot can
+/// still leave the knot to the prior under a strong prior, at the edge of the measured
+/// range: there the prior's smoothing bias is largest, and the band does not carry it.)
+pub const MEASURED_SHARE: f64 = 0.5;
+
+/// Whether a knot counts as measured: the factor's signal near it is at least
+/// [`MEASURED_SIGNAL`] and, where the knot is a fitted parameter with the prior's
+/// covariance, its data share at least [`MEASURED_SHARE`].
+pub fn is_measured(signal: f64, share: Option<f64>) -> bool {
+    signal >= MEASURED_SIGNAL && share.is_none_or(|s| s >= MEASURED_SHARE)
+}
 
 /// The signal near each knot: √Σ z² over the samples whose angle (`angles` picks the
 /// sample's one or two angles, degrees) lies between the knot's neighbours.
@@ -381,12 +415,14 @@ pub fn bands(
                 .into_iter()
                 .zip(f.degrees())
                 .zip(signal)
-                .map(|(((d, sigma), theta_deg), signal)| KnotBand {
+                .zip(f.shares(cov))
+                .map(|((((d, sigma), theta_deg), signal), share)| KnotBand {
                     theta_deg,
                     d,
                     sigma_ln_d: sigma,
                     signal,
-                    measured: signal >= MEASURED_SIGNAL,
+                    data_share: share,
+                    measured: is_measured(signal, share),
                     mc: None,
                 })
                 .collect();
@@ -479,7 +515,11 @@ pub struct FresnelBand {
     /// The lobe's own signal in this channel near the knot: √Σ (f_lobe/u)² over the
     /// channel's samples whose θd lies between the knot's neighbours.
     pub signal: f64,
-    /// Whether that signal is at least [`MEASURED_SIGNAL`].
+    /// The knot's data share ([`Covariance::data_share`]): None for the first knot, fixed
+    /// by the factor's definition, and without the prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_share: Option<f64>,
+    /// Whether the data set the knot ([`is_measured`]).
     pub measured: bool,
     /// The spread of f over Monte Carlo replicas, as [`KnotBand::mc`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -519,12 +559,14 @@ pub fn fresnel_bands(
                 .into_iter()
                 .zip(f.degrees())
                 .zip(signal)
-                .map(|(((v, sigma), theta_deg), signal)| FresnelBand {
+                .zip(f.shares(cov))
+                .map(|((((v, sigma), theta_deg), signal), share)| FresnelBand {
                     theta_deg,
                     f: v,
                     sigma_ln_f: sigma,
                     signal,
-                    measured: signal >= MEASURED_SIGNAL,
+                    data_share: share,
+                    measured: is_measured(signal, share),
                     mc: None,
                 })
                 .collect();
@@ -549,7 +591,11 @@ pub struct BodyBand {
     /// θo lies between the knot's neighbours, f_body the diffuse base's part of the
     /// fitted value (f − f at the base's albedo 0).
     pub signal: f64,
-    /// Whether that signal is at least [`MEASURED_SIGNAL`].
+    /// The knot's data share ([`Covariance::data_share`]): None for the first knot, fixed
+    /// by the factor's definition, and without the prior.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_share: Option<f64>,
+    /// Whether the data set the knot ([`is_measured`]).
     pub measured: bool,
     /// The spread of ρ over Monte Carlo replicas, as [`KnotBand::mc`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -576,12 +622,14 @@ pub fn body_bands(
                 .into_iter()
                 .zip(f.degrees())
                 .zip(signal)
-                .map(|(((rho, sigma), theta_deg), signal)| BodyBand {
+                .zip(f.shares(cov))
+                .map(|((((rho, sigma), theta_deg), signal), share)| BodyBand {
                     theta_deg,
                     rho,
                     sigma_ln_rho: sigma,
                     signal,
-                    measured: signal >= MEASURED_SIGNAL,
+                    data_share: share,
+                    measured: is_measured(signal, share),
                     mc: None,
                 })
                 .collect();

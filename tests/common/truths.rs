@@ -275,7 +275,7 @@ pub fn chi2_red(c: &bsdfit::inference::fit::Conclusions) -> f64 {
 
 /// Checks a fitted NDF's knots (`bsdfit::inference::knots::bands`, one lobe) against the
 /// truth's D: each row printed, finite, marked measured exactly where its signal reaches
-/// `MEASURED_SIGNAL`; at each measured knot that `tolerance(truth's D)` holds (Some(t)),
+/// `MEASURED_SIGNAL` and its data share `MEASURED_SHARE`; at each measured knot that `tolerance(truth's D)` holds (Some(t)),
 /// ln(D / D_truth) within 3σ + t. Returns how many knots were held.
 pub fn check_knots(
     name: &str,
@@ -290,13 +290,13 @@ pub fn check_knots(
         let sigma = knot.sigma_ln_d.expect("a band with the prior on");
         let diff = (knot.d / truth).ln();
         eprintln!(
-            "  {:>5.2}°: D {:.4e} (truth {truth:.4e}) ln ratio {diff:+.4} σ {sigma:.4} signal {:.1}",
-            knot.theta_deg, knot.d, knot.signal
+            "  {:>5.2}°: D {:.4e} (truth {truth:.4e}) ln ratio {diff:+.4} σ {sigma:.4} signal {:.1} share {:.2?}",
+            knot.theta_deg, knot.d, knot.signal, knot.data_share
         );
         assert!(knot.d.is_finite() && knot.d >= 0.0 && sigma.is_finite());
         assert_eq!(
             knot.measured,
-            knot.signal >= bsdfit::inference::knots::MEASURED_SIGNAL
+            bsdfit::inference::knots::is_measured(knot.signal, knot.data_share)
         );
         if let (true, Some(t)) = (knot.measured, tolerance(truth)) {
             held += 1;

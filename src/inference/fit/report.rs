@@ -224,10 +224,11 @@ pub(super) fn make_report(
             .collect();
         if !unseen.is_empty() {
             knot_warnings.push(format!(
-                "{}: D at θm = {} is set by the smoothness prior, not measured (no half vectors there, or the lobe below {}σ of the data); its band there is the prior's",
+                "{}: D at θm = {} is set by the smoothness prior, not measured (no half vectors there, the lobe below {}σ of the data, or the data's share of the knot below {}); its band there is the prior's",
                 n.lobe,
                 unseen.join(", "),
-                crate::inference::knots::MEASURED_SIGNAL
+                crate::inference::knots::MEASURED_SIGNAL,
+                crate::inference::knots::MEASURED_SHARE
             ));
         }
     }
