@@ -275,8 +275,9 @@ pub fn chi2_red(c: &bsdfit::inference::fit::Conclusions) -> f64 {
 
 /// Checks a fitted NDF's knots (`bsdfit::inference::knots::bands`, one lobe) against the
 /// truth's D: each row printed, finite, marked measured exactly where its signal reaches
-/// `MEASURED_SIGNAL` and its data share `MEASURED_SHARE`; at each measured knot that `tolerance(truth's D)` holds (Some(t)),
-/// ln(D / D_truth) within 3σ + t. Returns how many knots were held.
+/// `MEASURED_SIGNAL` and its data share `MEASURED_SHARE`; at each measured knot that
+/// `tolerance(truth's D)` holds (Some(t)), ln(D / D_truth) within 3σ + t. Returns how
+/// many knots were held.
 pub fn check_knots(
     name: &str,
     rows: &[bsdfit::inference::knots::KnotBand],
