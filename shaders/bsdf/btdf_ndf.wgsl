@@ -2,7 +2,7 @@
 // transmission (btdf.wgsl) with D and the Smith G1/|mu| of the NDF table (ndf.wgsl, in
 // NDF_TABLE: a BTDF model has one lobe). f32 twin of src/bsdf/btdf_ndf.rs.
 
-// Parameters: alpha, eta, ndf1 .. ndf15.
+// Parameters: alpha, eta, ndf1 .. ndf31.
 fn btdf_ndf_prepare(o: u32) {
     for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
         NDF_TABLE.s[k] = btdf_ndf_ndf1_run(o, k - 1u);

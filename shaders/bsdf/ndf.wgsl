@@ -6,7 +6,7 @@
 // (into NDF_TABLE for the highlight of ggx or fa or the lobe of btdf(tr), COAT_NDF_TABLE
 // for a coat: a model has at most one of each); without the prepared constant, per record.
 
-const NDF_KNOTS: u32 = 16u;
+const NDF_KNOTS: u32 = 32u;
 const NDF_MU_POINTS: u32 = 65u;
 // The last knot's coordinate: the knot coordinate runs over [0, NDF_KNOTS - 1].
 const NDF_LAST: f32 = f32(NDF_KNOTS - 1u);
@@ -24,7 +24,11 @@ var<private> COAT_NDF_TABLE: NdfTable;
 
 // The knot coordinate x in [0, NDF_LAST] of y = 2 sin^2(theta/2): knot k at x = k.
 fn ndf_knot_coordinate(y: f32) -> f32 {
-    return NDF_LAST * sqrt(sqrt(max(y, 0.0)));
+    // pow is undefined at 0 in WGSL; y = 0 is the normal, knot 0.
+    if (y <= 0.0) {
+        return 0.0;
+    }
+    return NDF_LAST * pow(y, 1.0 / 3.0);
 }
 
 // s at knot coordinate x: the Catmull-Rom spline through the knots, even through the
@@ -48,10 +52,10 @@ fn ndf_deviation(tab: ptr<private, NdfTable>, x: f32) -> f32 {
     return 0.5 * (2.0 * p1 + t * ((p2 - p0) + t * (a + t * b)));
 }
 
-// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) at knot coordinate x (y = (x/NDF_LAST)^4).
+// t = alpha cos / sqrt(alpha^2 cos^2 + sin^2) at knot coordinate x (y = (x/NDF_LAST)^3).
 fn ndf_knot_t(x: f32, alpha: f32) -> f32 {
     let r = x / NDF_LAST;
-    let y = r * r * r * r;
+    let y = r * r * r;
     let c = 1.0 - y;
     let s2 = y * (2.0 - y);
     return alpha * c / sqrt(alpha * alpha * c * c + s2);
@@ -187,7 +191,7 @@ fn ndf_lobe(tab: ptr<private, NdfTable>, eta: f32, wi: vec3<f32>, wo: vec3<f32>)
     return fresnel_dielectric(h.w, eta) * ndf_reflection(tab, wi, wo, h.xyz);
 }
 
-// `ggx` with the data-driven NDF. Parameters: ks, alpha, eta, ndf1 .. ndf15.
+// `ggx` with the data-driven NDF. Parameters: ks, alpha, eta, ndf1 .. ndf31.
 fn ggx_ndf_prepare(o: u32) {
     for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
         NDF_TABLE.s[k] = ggx_ndf_ndf1_run(o, k - 1u);

@@ -11,7 +11,7 @@ fn ndf_fresnel_lobe(tab: ptr<private, NdfTable>, eta: f32, knots: array<f32, 9>,
 }
 
 // `ggx` with a data-driven NDF and Fresnel curve. Parameters: ks, alpha, eta, ndf1 ..
-// ndf15, fresnel1 .. fresnel8.
+// ndf31, fresnel1 .. fresnel8.
 fn ggx_ndf_fresnel_prepare(o: u32) {
     for (var k = 1u; k < NDF_KNOTS; k = k + 1u) {
         NDF_TABLE.s[k] = ggx_ndf_fresnel_ndf1_run(o, k - 1u);

@@ -1,5 +1,5 @@
 //! `btdf(tr)+ndf`: the transmission lobe of `btdf(tr)` with the data-driven NDF of
-//! [`super::ndf`] (D = D_GGX(α) e^{s(θm)} / N on 16 knots, Smith masking from the same D),
+//! [`super::ndf`] (D = D_GGX(α) e^{s(θm)} / N on 32 knots, Smith masking from the same D),
 //! which `+ndf` puts in place of the TR lobe. Walter's transmission (Eq. 1 of
 //! [`super::btdf`]) is unchanged but for D and G1; the other distributions (Beckmann, GTR,
 //! GG) are not GGX at zero deviation, so `+ndf` does not take them (they would not embed).
@@ -17,7 +17,7 @@ use crate::math::lanes::Real;
 
 const BTDF_NDF_WGSL: (&str, &str) = ("btdf_ndf", include_str!("../../shaders/bsdf/btdf_ndf.wgsl"));
 
-/// `btdf(tr)` with the data-driven NDF: α, η, ndf1 … ndf15. Walter's transmission (Eq. 1
+/// `btdf(tr)` with the data-driven NDF: α, η, ndf1 … ndf31. Walter's transmission (Eq. 1
 /// of [`super::btdf`]) with D from the table and the Smith G1(ω)/|μ| = 1/(|μ| + C(|μ|)) of
 /// the same D, the masking of a direction below the surface taken at its |μ| (the
 /// microsurface seen from the other side, as the analytic lobes take it). At s = 0 it is

@@ -3,8 +3,8 @@
 //!
 //!   D(m) = D_GGX(m; α) · exp(s(θm)) / N(α, s),   N = ∫ D_GGX e^s cos θm dω_m,
 //!
-//! where s is a Catmull–Rom spline through K = 16 knots in θm, dense near the normal, with
-//! s = 0 at the normal and one free value `ndf1` … `ndf15` at each other knot: any
+//! where s is a Catmull–Rom spline through K = 32 knots in θm, dense near the normal, with
+//! s = 0 at the normal and one free value `ndf1` … `ndf31` at each other knot: any
 //! isotropic NDF is GGX times a positive factor, and the knots tabulate that factor's
 //! logarithm (the tabulated NDF in the spirit of Dupuy et al. 2015's data-driven
 //! microfacet distributions; Lavoué et al. 2021 found such lobes the closest fits of
@@ -24,13 +24,17 @@
 //! relative for θi, θo ≤ 86° at every α in bounds (tested): the table is part of the
 //! model's definition, the same in both twins.
 //!
-//! The knots: x = 15 · (2 sin²(θm/2))^(1/4) is the knot coordinate, knot k at x = k
-//! (θ_k = 0, 0.36, 1.44, 3.24, 5.76, 9.01, 13.0, 17.7, 23.2, 29.5, 36.6, 44.7, 53.8, 64.2,
-//! 76.0 and 90 degrees), s a Catmull–Rom spline in x. 2 sin²(θ/2) = sin²θ / (1 + cos θ)
+//! The knots: x = 31 · (2 sin²(θm/2))^(1/3) is the knot coordinate, knot k at x = k
+//! (θ_k = 0, 0.47, 1.33, 2.44, 3.76, 5.25, 6.9, 8.7, 10.6, 12.7, 14.9, 17.2, 19.6, 22.1,
+//! 24.8, 27.5, 30.4, 33.4, 36.5, 39.7, 43.0, 46.4, 50.0, 53.7, 57.6, 61.6, 65.8, 70.2,
+//! 74.7, 79.6, 84.6 and 90 degrees: spacing from 0.5° at the normal to 5°), s a
+//! Catmull–Rom spline in x. The cube root spreads 32 knots as the fourth root spread 16
+//! (whose first knot sat at 0.36°); a fourth root at 32 would put the first at 0.08°,
+//! below any goniometer's angular resolution. 2 sin²(θ/2) = sin²θ / (1 + cos θ)
 //! is taken from the components (never 1 − cos θ, which loses the near-normal angles).
 //! K is one constant on each side ([`KNOTS`]; `NDF_KNOTS` in the twin, which reads the
-//! knots in a loop; the parameter names are made from it): 32 knots were tried and made a
-//! fit 5× slower for little gain on real data (docs/models.md, "Cost").
+//! knots in a loop; the parameter names are made from it). 16 knots were the first
+//! choice: 32 cost a `+ndf` fit about 5× the time (docs/models.md, "Cost").
 //!
 //! Twin: `shaders/bsdf/ndf.wgsl`.
 
@@ -49,13 +53,13 @@ use std::rc::Rc;
 use std::sync::LazyLock;
 
 /// Knots of the deviation s, the first (the normal) fixed at 0.
-pub const KNOTS: usize = 16;
+pub const KNOTS: usize = 32;
 /// Cosines of the masking table: μ_j = (j / (MU_POINTS − 1))².
 pub const MU_POINTS: usize = 65;
 
 pub(crate) const NDF_WGSL: (&str, &str) = ("ndf", include_str!("../../shaders/bsdf/ndf.wgsl"));
 
-/// The free knots' names of each stem: `ndf1` … `ndf15` (`ggx+ndf`, `btdf(tr)+ndf`),
+/// The free knots' names of each stem: `ndf1` … `ndf31` (`ggx+ndf`, `btdf(tr)+ndf`),
 /// `lobe.ndf1` … (the highlight of `fa(B)+ndf`), `ndf_c1` … (a coat's lobe). Made once and
 /// kept for the program's life: a declaration's name is `&'static str`.
 pub(super) static NAMES: LazyLock<[&'static str; KNOTS - 1]> = LazyLock::new(|| knot_names("ndf"));
@@ -86,17 +90,17 @@ pub(super) fn knots(
     names.iter().map(|&n| KNOT.renamed(n))
 }
 
-/// The knot coordinate x ∈ [0, 15] of y = 2 sin²(θ/2) ∈ [0, 1]: knot k at x = k.
+/// The knot coordinate x ∈ [0, K − 1] of y = 2 sin²(θ/2) ∈ [0, 1]: knot k at x = k.
 #[inline]
 fn knot_coordinate(y: f64) -> f64 {
-    (KNOTS - 1) as f64 * y.max(0.0).sqrt().sqrt()
+    (KNOTS - 1) as f64 * y.max(0.0).cbrt()
 }
 
-/// (cos θ, sin² θ) at knot coordinate x: y = (x/15)⁴, cos θ = 1 − y, sin² θ = y (2 − y)
+/// (cos θ, sin² θ) at knot coordinate x: y = (x/(K − 1))³, cos θ = 1 − y, sin² θ = y (2 − y)
 /// (the inverse of [`knot_coordinate`]).
 fn angle_at(x: f64) -> (f64, f64) {
     let r = x / (KNOTS - 1) as f64;
-    let y = r * r * r * r;
+    let y = r * r * r;
     (1.0 - y, y * (2.0 - y))
 }
 
@@ -139,7 +143,7 @@ pub(super) fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, t: f64) -> f64 {
 /// The quadrature pieces of the knot interval between knots of values a and b: one per
 /// 4 units of |b − a|, 1 to 4. 8 Gauss points integrate e^(r u) over a piece (u ∈ [0, 1])
 /// to 2e-4 relative for r ≤ 4, the spline's overshoot aside; the cap keeps a candidate's
-/// table within a GPU invocation's loop budget (at most 15 · 4 · 8 nodes).
+/// table within a GPU invocation's loop budget (at most 31 · 4 · 8 nodes).
 #[inline]
 fn pieces(a: f64, b: f64) -> usize {
     (((b - a).abs() / 4.0).ceil() as usize).clamp(1, 4)
@@ -346,7 +350,7 @@ pub fn table(alpha: f64, free: impl Fn(usize) -> f64) -> Rc<NdfTable> {
 // Nodes: the data-driven form of each GGX highlight. Their entries are not registered
 // (the spec names them as `M+ndf`); each carries its GGX model's name, kind and role.
 
-/// `ggx` with the data-driven NDF: k_s, α, η, ndf1 … ndf15.
+/// `ggx` with the data-driven NDF: k_s, α, η, ndf1 … ndf31.
 #[derive(Debug, Clone, Copy)]
 pub struct GgxNdf;
 
@@ -392,7 +396,7 @@ impl Bsdf for GgxNdf {
     }
 }
 
-/// `fa(B)` with a data-driven highlight: lobe.α, lobe.η, lobe.k_s, lobe.ndf1 … 15.
+/// `fa(B)` with a data-driven highlight: lobe.α, lobe.η, lobe.k_s, lobe.ndf1 … 31.
 #[derive(Debug, Clone, Copy)]
 pub struct FaNdf;
 
@@ -449,7 +453,7 @@ impl Bsdf for FaNdf {
     }
 }
 
-/// `M+coat` with a data-driven coat lobe: k_c, α_c, ndf_c1 … ndf_c15.
+/// `M+coat` with a data-driven coat lobe: k_c, α_c, ndf_c1 … ndf_c31.
 #[derive(Debug, Clone, Copy)]
 pub struct CoatNdf;
 
@@ -513,7 +517,7 @@ pub const ENTRY: Entry = Entry::suffix(
     "ndf",
     None,
     InCatalogue::No,
-    "data-driven NDFs of the GGX lobes (ggx, fa, +coat, btdf(tr)): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 16 knots, Smith masking from the same D",
+    "data-driven NDFs of the GGX lobes (ggx, fa, +coat, btdf(tr)): D = D_GGX(alpha) exp(s(theta_m)) / N, s on 32 knots, Smith masking from the same D",
     build,
 )
 // s = 0 is GGX: M embeds in M+ndf (diagnose's F test). Offered once no analytic effect is.
@@ -689,7 +693,8 @@ mod tests {
     #[test]
     fn knots_and_deviation() {
         let deg = knot_degrees();
-        let doc = [0.0, 0.36, 1.44, 3.24, 5.76, 9.01, 13.0, 17.7, 23.2, 29.5, 36.6, 44.7, 53.8, 64.2, 76.0, 90.0];
+        let doc = [0.0, 0.469, 1.33, 2.44, 3.76, 5.25, 6.9, 8.7, 10.6, 12.7, 14.9, 17.2, 19.6, 22.1, 24.8, 27.5,
+            30.4, 33.4, 36.5, 39.7, 43.0, 46.4, 50.0, 53.7, 57.6, 61.6, 65.8, 70.2, 74.7, 79.6, 84.6, 90.0];
         assert_eq!(doc.len(), KNOTS);
         for (k, (&a, &b)) in deg.iter().zip(&doc).enumerate() {
             assert!((a - b).abs() < 0.06, "knot {k}: {a}° (docs say {b}°)");
@@ -701,7 +706,7 @@ mod tests {
         let s: [f64; KNOTS] = std::array::from_fn(|k| (k * k) as f64);
         assert_eq!(deviation(&s, 3.0), 9.0);
         assert!((deviation(&s, 3.25) - 3.25 * 3.25).abs() < 1e-12);
-        assert_eq!(deviation(&s, 20.0), 225.0);
+        assert_eq!(deviation(&s, 40.0), 961.0);
         let t: [f64; KNOTS] = std::array::from_fn(|k| ((k as f64) * 0.7).sin());
         for k in 0..KNOTS {
             assert!((deviation(&t, k as f64) - t[k]).abs() < 1e-12);

@@ -133,7 +133,7 @@ pub fn eval_model_source(model: &Model) -> String {
 /// `<prefix>` the node's WGSL function name without `_eval` and dots in role-prefixed
 /// names written as `_` (`fa_lobe_alpha`). The WGSL twins read their parameters only
 /// through these, so Rust and WGSL cannot disagree on the order. The first knot of a run
-/// (`ndf1` of `ndf1` … `ndf15`) also gets `fn <prefix>_<name>_run(o: u32, j: u32) -> f32`,
+/// (`ndf1` of `ndf1` … `ndf31`) also gets `fn <prefix>_<name>_run(o: u32, j: u32) -> f32`,
 /// the run's j-th knot from it: a table of knots is read in a loop.
 pub fn accessors_source(node: &Node) -> String {
     let w = node.bsdf.wgsl();

@@ -66,7 +66,7 @@ impl std::str::FromStr for Smoothness {
 /// previous optimum). The weakest still holds knots without data (σ_s = 30 lets a second
 /// difference reach e^30), so no fit of the choice leaves a knot undetermined; a fit
 /// without the prior is `Off`.
-pub const GRID: [f64; 6] = [0.1, 0.3, 1.0, 3.0, 10.0, 30.0];
+pub const GRID: [f64; 7] = [0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0];
 
 /// One fit of the choice.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
