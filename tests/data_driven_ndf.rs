@@ -79,7 +79,7 @@ fn data_driven_ndfs_of_truths_outside_the_catalogue_come_back() {
         let all = bands(&ndf, &data, &driven.flat, &driven.cov);
         assert_eq!(all.len(), 1);
         assert_eq!(all[0].0, "lobe.ndf");
-        let measured = check_knots(name, &all[0].1, d, |_| Some(0.0));
+        let measured = check_knots(name, &all[0].1, d);
         // The lobe is seen from near the normal into its tail.
         assert!(
             measured.len() >= 9,
@@ -196,7 +196,7 @@ fn a_knot_the_prior_holds_more_than_the_data_is_not_measured() {
         let o = fit_outcome(&ndf, &data, loss, &backend, &opts, &mut |_| {}).unwrap();
         let rows = &bands(&ndf, &data, &o.flat, &o.cov)[0].1;
         eprintln!("σ_s = {sd}:");
-        let measured = check_knots("beckmann", rows, d, |_| Some(0.0));
+        let measured = check_knots("beckmann", rows, d);
         let held = measured.len();
         assert_bands_cover(&measured);
         let mut prior_held = 0;

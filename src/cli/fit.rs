@@ -71,7 +71,7 @@ pub struct FitArgs {
     pub mc_restarts: usize,
     /// The smoothness prior of a data-driven factor's knots (`+ndf`, `+fresnel`, `+body`), a χ²
     /// term on their second differences: `auto` chooses its σ from the data (the smallest χ² + 2·
-    /// effective parameters among 0.1, 0.3, 1, 3, 10, 30; reported), `off`, or a σ.
+    /// effective parameters among 0.03, 0.1, 0.3, 1, 3, 10, 30; reported), `off`, or a σ.
     /// Needs the chi2 loss unless off; models without knots ignore it.
     #[arg(
         long,

@@ -82,7 +82,7 @@ pub fn fit_model(
 
 /// [`fit_model`], the smoothness prior of the knots held at the σ_s that `held`'s fit
 /// chose for them (an analytic effect added to a model with a data-driven factor: the
-/// same knots, so no new choice; it would cost six fits of every candidate).
+/// same knots, so no new choice; it would cost seven fits of every candidate).
 fn fit_model_holding(
     model: &Model,
     data: &Dataset,
