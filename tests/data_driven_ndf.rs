@@ -4,7 +4,9 @@
 //! `common/truths.rs`) over a Fresnel-transmitted Lambertian body, measured with 1 % noise
 //! at one incidence azimuth, come back: the best GGX aggregate misfits, the data-driven
 //! one reaches χ²_red within the noise, and at every knot where the data see the lobe the
-//! fitted D agrees with the truth's within 3 propagated standard uncertainties.
+//! fitted D agrees with the truth's within its propagated standard uncertainties (3 of
+//! them, or the family-wise bound over the test's knots where that is larger;
+//! `common::truths::assert_bands_cover`).
 
 mod common;
 
@@ -97,7 +99,7 @@ fn data_driven_ndfs_of_truths_outside_the_catalogue_come_back() {
 /// linearised band: on a Beckmann lobe (outside GGX's family) the linearised band is never
 /// less than half the replicas' spread where the data see the lobe (it does not
 /// under-cover), the two agree within a factor 2 (the replicas' own sampling error for 24
-/// of them being about 15 %) from the third knot on (θm ≥ 2.4°), and the truth lies
+/// of them being about 15 %) from the third free knot on (θm ≥ 2.4°), and the truth lies
 /// within 3 Monte Carlo standard deviations there. At the two knots nearest the normal
 /// (0.47° and 1.33°, few half vectors each, inside a peak that is flat for θm ≪ α) the
 /// linearised band is 2.7 and 3.6 times the replicas' spread: conservative there.
@@ -141,7 +143,8 @@ fn knot_bands_by_monte_carlo_agree_with_the_linearised_ones() {
         if knot.measured {
             compared += 1;
             let ratio = spread.sd_ln / linear;
-            let lowest = if k >= 3 { 0.5 } else { 0.0 };
+            // Rows 1 and 2 are the knots at 0.47° and 1.33° (row 0 is the normal).
+            let lowest = if k > 2 { 0.5 } else { 0.0 };
             if !(lowest..=2.0).contains(&ratio) {
                 bad.push(format!(
                     "at {:.2}°: MC σ {:.4} against linear {linear:.4}",
